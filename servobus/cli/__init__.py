@@ -1,0 +1,1 @@
+"""The ``servobus`` command: one small module per command group (see main.COMMAND_MODULES)."""

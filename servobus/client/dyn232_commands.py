@@ -1,0 +1,238 @@
+"""Pure DYN232M commands: ``make_*`` build a Command; an executor sends it and parses the reply.
+
+No I/O here. Every argument is range-checked against the one table (codec HOST_SPECS and
+drive.params) before a byte exists, so bad input never reaches the wire. The broadcast id
+127 is only reachable through :func:`broadcast` and the interpolation builders.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Any
+
+from servobus.codec import dyn232 as c
+from servobus.drive import params as P
+from servobus.drive.registers import DriveConfig, DriveStatus
+from servobus.errors import ArgumentRangeError
+
+H = c.HostFunction
+GR = c.GeneralReadSelector
+
+
+def _identity(v: int) -> int:
+    return v
+
+
+@dataclass(frozen=True)
+class Command:
+    """One host packet plus what to expect back. ``parse`` maps the reply value."""
+
+    drive_id: int
+    function: c.HostFunction
+    value: int = 0
+    reply: c.DriveFunction | None = None
+    kind: c.Kind = c.Kind.ACTION
+    parse: Callable[[int], Any] = _identity
+    param: str | None = None
+
+    def to_bytes(self) -> bytes:
+        return c.encode(self.drive_id, self.function, self.value)
+
+    @property
+    def expects_reply(self) -> bool:
+        return self.reply is not None
+
+    @property
+    def retry_safe(self) -> bool:
+        """Only reads are ever re-sent; motion and settings never are."""
+        return self.kind is c.Kind.READ
+
+
+def check_drive_id(drive_id: int) -> int:
+    if isinstance(drive_id, bool) or not isinstance(drive_id, int):
+        raise ArgumentRangeError(f"drive id must be an integer, got {drive_id!r}")
+    if not 0 <= drive_id <= c.MAX_DRIVE_ID:
+        raise ArgumentRangeError(
+            f"drive id {drive_id} is outside 0..{c.MAX_DRIVE_ID} "
+            f"(127 is broadcast: use broadcast(); 64..126 are reserved)"
+        )
+    return drive_id
+
+
+def _check_value(function: c.HostFunction, value: int, what: str) -> int:
+    spec = c.HOST_SPECS[function]
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ArgumentRangeError(f"{what} must be an integer, got {value!r}")
+    if not spec.minimum <= value <= spec.maximum:
+        raise ArgumentRangeError(
+            f"{what}={value} is outside the allowed range {spec.minimum}..{spec.maximum}"
+        )
+    return value
+
+
+def _cmd(drive_id: int, function: c.HostFunction, value: int = 0, **kw: Any) -> Command:
+    spec = c.HOST_SPECS[function]
+    return Command(check_drive_id(drive_id), function, value,
+                   reply=kw.pop("reply", spec.reply), kind=spec.kind, **kw)
+
+
+# ------------------------------------------------------------------ motion
+def make_move_absolute(drive_id: int, position: int) -> Command:
+    return _cmd(drive_id, H.GO_ABSOLUTE_POS, _check_value(H.GO_ABSOLUTE_POS, position, "position"))
+
+
+def make_move_relative(drive_id: int, distance: int) -> Command:
+    return _cmd(drive_id, H.GO_RELATIVE_POS, _check_value(H.GO_RELATIVE_POS, distance, "distance"))
+
+
+def make_turn_const_speed(drive_id: int, rpm: int) -> Command:
+    return _cmd(drive_id, H.TURN_CONST_SPEED, _check_value(H.TURN_CONST_SPEED, rpm, "rpm"))
+
+
+def make_square_wave(drive_id: int, amplitude: int) -> Command:
+    return _cmd(drive_id, H.SQUARE_WAVE, _check_value(H.SQUARE_WAVE, amplitude, "amplitude"))
+
+
+def make_sine_wave(drive_id: int, amplitude: int) -> Command:
+    return _cmd(drive_id, H.SIN_WAVE, _check_value(H.SIN_WAVE, amplitude, "amplitude"))
+
+
+def make_wave_frequency(drive_id: int, hz: int) -> Command:
+    return _cmd(drive_id, H.SS_FREQUENCY, _check_value(H.SS_FREQUENCY, hz, "frequency"))
+
+
+def make_set_origin(drive_id: int) -> Command:
+    return _cmd(drive_id, H.SET_ORIGIN)
+
+
+def _check_feedrate(feedrate: int, allow_negative: bool) -> int:
+    lo = -127 if allow_negative else 1
+    if isinstance(feedrate, bool) or not isinstance(feedrate, int) or not (
+        lo <= feedrate <= 127 and feedrate != 0
+    ):
+        raise ArgumentRangeError(f"feedrate={feedrate!r} is outside {lo}..127 (not 0)")
+    return feedrate
+
+
+def make_linear_line(dx: int, dy: int, dz: int, feedrate: int) -> list[Command]:
+    """Example 7: four broadcast packets dX, dY, dZ, feedrate (1..127)."""
+    _check_feedrate(feedrate, allow_negative=False)
+    words = [_check_value(H.MAKE_LINEAR_LINE, v, n) for v, n in ((dx, "dx"), (dy, "dy"),
+                                                                   (dz, "dz"))]
+    return [Command(c.BROADCAST_ID, H.MAKE_LINEAR_LINE, v, kind=c.Kind.MOTION)
+            for v in [*words, feedrate]]
+
+
+def make_circular_arc(
+    start: tuple[int, int], end: tuple[int, int], *, plane: int = 0, feedrate: int = 1
+) -> list[Command]:
+    """Example 8: start and end relative to the centre, then (plane << 8) + feedrate.
+
+    plane 0 = XY, 1 = YZ, 2 = ZX; positive feedrate CW, negative CCW. Servobus packs a
+    negative feedrate as plane*256 + F (two's complement addition), decoded symmetrically.
+    """
+    if plane not in (0, 1, 2):
+        raise ArgumentRangeError(f"plane={plane!r} must be 0 (XY), 1 (YZ) or 2 (ZX)")
+    _check_feedrate(feedrate, allow_negative=True)
+    words = [_check_value(H.MAKE_CIRCULAR_ARC, v, "arc coordinate") for v in (*start, *end)]
+    return [Command(c.BROADCAST_ID, H.MAKE_CIRCULAR_ARC, v, kind=c.Kind.MOTION)
+            for v in [*words, pack_arc_word(plane, feedrate)]]
+
+
+def pack_arc_word(plane: int, feedrate: int) -> int:
+    return plane * 256 + feedrate
+
+
+def unpack_arc_word(word: int) -> tuple[int, int]:
+    """Inverse of :func:`pack_arc_word`: (plane, feedrate) with feedrate in -127..127."""
+    plane = (word + 128) // 256
+    return plane, word - plane * 256
+
+
+# ------------------------------------------------------------------ actions (no reply)
+def make_reset(drive_id: int) -> Command:
+    """Drive reset (counts as a power cycle: clears a latched alarm)."""
+    return Command(check_drive_id(drive_id), H.GENERAL_READ, int(GR.RESET), kind=c.Kind.ACTION)
+
+
+def make_enable(drive_id: int) -> Command:
+    return Command(check_drive_id(drive_id), H.GENERAL_READ, int(GR.ENABLE), kind=c.Kind.ACTION)
+
+
+def make_disable(drive_id: int) -> Command:
+    return Command(check_drive_id(drive_id), H.GENERAL_READ, int(GR.DISABLE), kind=c.Kind.ACTION)
+
+
+# ------------------------------------------------------------------ settings (EEPROM)
+def make_set_param(drive_id: int, name: str, value: int) -> Command:
+    spec = P.spec(name)
+    set_fn, _ = _param_functions(spec.name)
+    return _cmd(drive_id, set_fn, spec.check(value), param=spec.name)
+
+
+def make_set_config(drive_id: int, config: DriveConfig | int) -> Command:
+    value = config.to_byte() if isinstance(config, DriveConfig) else config
+    return _cmd(drive_id, H.SET_DRIVE_CONFIG, _check_value(H.SET_DRIVE_CONFIG, value, "config"))
+
+
+def make_assign_id(drive_id: int, new_id: int) -> Command:
+    return _cmd(drive_id, H.ASSIGN_DRIVE_ID, _check_value(H.ASSIGN_DRIVE_ID, new_id, "new id"))
+
+
+# ------------------------------------------------------------------ reads
+def make_read_param(drive_id: int, name: str) -> Command:
+    spec = P.spec(name)
+    _, read_fn = _param_functions(spec.name)
+    return _cmd(drive_id, read_fn, param=spec.name)
+
+
+def make_read_status(drive_id: int) -> Command:
+    return _cmd(drive_id, H.READ_DRIVE_STATUS, parse=DriveStatus.from_byte)
+
+
+def make_read_config(drive_id: int) -> Command:
+    return _cmd(drive_id, H.READ_DRIVE_CONFIG, parse=DriveConfig.from_byte)
+
+
+def make_read_id(drive_id: int) -> Command:
+    return _cmd(drive_id, H.READ_DRIVE_ID)
+
+
+def _general_read(drive_id: int, selector: c.GeneralReadSelector) -> Command:
+    return _cmd(drive_id, H.GENERAL_READ, int(selector),
+                reply=c.GENERAL_READ_REPLIES[selector])
+
+
+def make_read_position(drive_id: int) -> Command:
+    """Absolute position in encoder counts (65,536 per revolution)."""
+    return _general_read(drive_id, GR.POSITION)
+
+
+def make_read_speed(drive_id: int) -> Command:
+    """Motor speed in rpm."""
+    return _general_read(drive_id, GR.SPEED)
+
+
+def make_read_torque(drive_id: int) -> Command:
+    """Torque current, DYN232M relative unit."""
+    return _general_read(drive_id, GR.TORQUE)
+
+
+def broadcast(command: Command) -> Command:
+    """Re-target a no-reply command to every drive (id 127). Reads cannot be broadcast."""
+    if command.expects_reply:
+        raise ArgumentRangeError(
+            f"{command.function.name} expects a reply; replies from several drives would collide"
+        )
+    return replace(command, drive_id=c.BROADCAST_ID)
+
+
+def _param_functions(name: str) -> tuple[c.HostFunction, c.HostFunction]:
+    try:
+        return c.PARAM_FUNCTIONS[name]
+    except KeyError:
+        raise ArgumentRangeError(
+            f"parameter {name!r} is not reachable over DYN232M; "
+            f"available: {', '.join(c.PARAM_FUNCTIONS)}"
+        ) from None

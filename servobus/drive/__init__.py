@@ -1,0 +1,1 @@
+"""The drive model both sides share: parameter table, registers, units, profile math."""

@@ -1,0 +1,53 @@
+"""Typed errors. Every failure a caller can act on has its own class."""
+
+from __future__ import annotations
+
+
+class ServobusError(Exception):
+    """Base class of every servobus error."""
+
+
+class ProtocolError(ServobusError):
+    """Bytes or frames that do not follow the protocol."""
+
+
+class FramingError(ProtocolError):
+    """A packet is malformed (wrong start byte, length, or truncated)."""
+
+
+class ChecksumError(ProtocolError):
+    """A packet failed its checksum; its value is never used."""
+
+    def __init__(self, message: str, raw: bytes = b"") -> None:
+        super().__init__(message)
+        self.raw = raw
+
+
+class DriveTimeout(ServobusError, TimeoutError):
+    """No valid reply arrived before the deadline (after the bounded retries)."""
+
+
+class DriveAlarm(ServobusError):
+    """The drive reports an alarm; it ignores commands until reset or power cycle."""
+
+    def __init__(self, message: str, code: int = 0, drive_id: int | None = None) -> None:
+        super().__init__(message)
+        self.code = code
+        self.drive_id = drive_id
+
+
+class ArgumentRangeError(ServobusError, ValueError):
+    """An argument is outside the range the manual allows; nothing was sent."""
+
+
+class EepromGuardError(ServobusError):
+    """Parameter writes exceed the configured EEPROM write rate; nothing was sent."""
+
+
+class DriveError(ServobusError):
+    """The drive answered with an explicit error (e.g. DYN CAN Drive Error 0xFF)."""
+
+    def __init__(self, message: str, code: int = 0, drive_id: int | None = None) -> None:
+        super().__init__(message)
+        self.code = code
+        self.drive_id = drive_id
