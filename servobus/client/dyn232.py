@@ -1,0 +1,390 @@
+"""DYN232M host client: executes pure ``make_*`` Commands over any ByteStream.
+
+Transaction rules (the manual gives none; these are servobus decisions):
+
+* One transaction at a time per line (asyncio lock): RS485 has one master and replies carry
+  no sequence number.
+* A reply matches when its drive id AND its ``Is_*`` function match the request. Anything
+  else is traced, counted in ``stats.unmatched`` and dropped; the framer keeps sync across
+  garbage and truncated packets. The host's own echo on a 2-wire RS485 adapter never
+  matches (no host function code equals the reply code it asks for).
+* Reply deadline per attempt = wire time of request + longest reply (7 bytes) at the baud
+  rate + ``turnaround_s`` (default 25 ms: the drive answers in well under 1 ms, the margin
+  covers OS scheduling and USB-serial latency timers, 16 ms on FTDI by default).
+  ``timeout=`` overrides the whole per-attempt deadline.
+* Only reads (``Command.retry_safe``) are re-sent, at most ``retries`` times (default 2),
+  after discarding pending input. Motion, settings and actions are written exactly once and
+  never wait for anything (the drive sends nothing back for them).
+* A reply that fails its checksum is counted in ``stats.checksum_errors`` and traced, never
+  parsed; the read is retried. When every attempt failed, the last failure is raised:
+  ChecksumError if the last reply was corrupt, otherwise DriveTimeout.
+* Query pacing: ``query_interval_s`` is the minimum time between the starts of two queries
+  (commands with a reply). NOTES.md: real drives may drop queries above about 50/s, so 0.02
+  is the safe value on hardware; the default 0 is for simulators and fast links. A dropped
+  query is still detected (deadline) and retried.
+* EEPROM settings (parameters, config, id) pass the EepromGuard before a byte is sent.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+from servobus.client import dyn232_commands as cmds
+from servobus.client.axis import AsyncAxis, AxisTraceHook
+from servobus.client.dyn232_commands import Command
+from servobus.client.eeprom_guard import EepromGuard
+from servobus.codec import dyn232 as c
+from servobus.drive.registers import DriveConfig, DriveStatus
+from servobus.errors import (
+    ArgumentRangeError,
+    ChecksumError,
+    DriveTimeout,
+    FramingError,
+    ProtocolError,
+)
+from servobus.transport.base import ByteStream, Direction
+
+DEFAULT_TURNAROUND_S = 0.025
+DEFAULT_RETRIES = 2
+
+
+@dataclass
+class LineStats:
+    """Counters of one line (all drives on it)."""
+
+    sent: int = 0
+    replies: int = 0
+    retries: int = 0
+    timeouts: int = 0
+    checksum_errors: int = 0
+    framing_errors: int = 0
+    unmatched: int = 0
+
+
+class AsyncDyn232Client:
+    """Executes DYN232M Commands on one line (one ByteStream, any number of drives)."""
+
+    def __init__(
+        self,
+        stream: ByteStream,
+        *,
+        baud: int = c.BAUD,
+        retries: int = DEFAULT_RETRIES,
+        turnaround_s: float = DEFAULT_TURNAROUND_S,
+        timeout: float | None = None,
+        query_interval_s: float = 0.0,
+        eeprom_guard: EepromGuard | None = None,
+    ) -> None:
+        if retries < 0:
+            raise ArgumentRangeError(f"retries={retries} must be >= 0")
+        if baud <= 0:
+            raise ArgumentRangeError(f"baud={baud} must be positive")
+        self.stream = stream
+        self.baud = baud
+        self.retries = retries
+        self.turnaround_s = turnaround_s
+        self.timeout = timeout
+        self.query_interval_s = query_interval_s
+        self.guard = eeprom_guard if eeprom_guard is not None else EepromGuard()
+        self.stats = LineStats()
+        self._framer = c.Framer()
+        self._events: deque[c.FramerEvent] = deque()
+        self._lock = asyncio.Lock()
+        self._hooks: list[AxisTraceHook] = []
+        self._last_query = -1e9
+        self._closed = False
+
+    # ------------------------------------------------------------- tracing
+    def add_trace(self, hook: AxisTraceHook) -> None:
+        """``hook(direction, item, t)``: every packet sent/received (decoded) and every error."""
+        self._hooks.append(hook)
+
+    def _trace(self, direction: Direction, item: object) -> None:
+        t = time.monotonic()
+        for hook in self._hooks:
+            hook(direction, item, t)
+
+    # ------------------------------------------------------------- deadlines
+    def reply_deadline_s(self, request_len: int = c.MIN_PACKET) -> float:
+        """Per-attempt deadline: request + longest reply on the wire + turnaround."""
+        if self.timeout is not None:
+            return self.timeout
+        return c.wire_time_s(request_len + c.MAX_PACKET, self.baud) + self.turnaround_s
+
+    def worst_case_s(self, request_len: int = c.MIN_PACKET) -> float:
+        """Longest a read can take before DriveTimeout (all attempts), pacing excluded."""
+        return self.reply_deadline_s(request_len) * (self.retries + 1)
+
+    # ------------------------------------------------------------- execution
+    async def execute(self, command: Command, *, retries: int | None = None,
+                      timeout: float | None = None) -> Any:
+        """Send ``command``; for reads return the parsed reply, else None."""
+        if self._closed:
+            raise ConnectionError("client is closed")
+        if command.kind is c.Kind.INTERNAL:
+            raise ArgumentRangeError(f"{command.function.name} is internal to DMM; never sent")
+        raw = command.to_bytes()
+        if command.kind is c.Kind.SETTING:
+            self.guard.check(command.drive_id, _guard_item(command))
+        async with self._lock:
+            if not command.expects_reply:
+                await self._send(raw)
+                return None
+            return await self._transact(command, raw, retries, timeout)
+
+    async def execute_all(self, commands: list[Command]) -> None:
+        """Send no-reply commands back to back without another transaction in between."""
+        for command in commands:
+            if command.expects_reply:
+                raise ArgumentRangeError("execute_all is for commands without a reply")
+            command.to_bytes()
+        async with self._lock:
+            for command in commands:
+                await self._send(command.to_bytes())
+
+    async def _send(self, raw: bytes) -> None:
+        if self._hooks:
+            self._trace(Direction.TX, c.decode(raw))
+        self.stats.sent += 1
+        await self.stream.write(raw)
+
+    async def _transact(self, command: Command, raw: bytes, retries: int | None,
+                        timeout: float | None) -> Any:
+        n_retries = (self.retries if retries is None else retries) if command.retry_safe else 0
+        per_try = timeout if timeout is not None else self.reply_deadline_s(len(raw))
+        last: ProtocolError | DriveTimeout | None = None
+        for attempt in range(n_retries + 1):
+            if attempt:
+                self.stats.retries += 1
+            await self._pace()
+            self._discard_pending()
+            await self._send(raw)
+            try:
+                packet = await self._await_reply(command, per_try)
+            except (ChecksumError, DriveTimeout) as exc:
+                last = exc
+                continue
+            self.stats.replies += 1
+            return command.parse(packet.reply_value())
+        assert last is not None
+        if isinstance(last, DriveTimeout):
+            raise DriveTimeout(
+                f"no reply from drive {command.drive_id} to {command.function.name} "
+                f"after {n_retries + 1} attempt(s) of {per_try * 1000:.1f} ms"
+            )
+        raise last
+
+    async def _pace(self) -> None:
+        loop = asyncio.get_running_loop()
+        if self.query_interval_s > 0:
+            wait = self._last_query + self.query_interval_s - loop.time()
+            if wait > 0:
+                await asyncio.sleep(wait)
+        self._last_query = loop.time()
+
+    def _discard_pending(self) -> None:
+        """Stale bytes (late replies, noise) must not answer the next request."""
+        self.stream.discard_input()
+        self._framer.reset()
+        for event in self._events:
+            self._note_stray(event)
+        self._events.clear()
+
+    def _note_stray(self, event: c.FramerEvent) -> None:
+        self._trace(Direction.RX, event)
+        if isinstance(event, ChecksumError):
+            self.stats.checksum_errors += 1
+        elif isinstance(event, ProtocolError):
+            self.stats.framing_errors += 1
+        else:
+            self.stats.unmatched += 1
+
+    async def _await_reply(self, command: Command, per_try: float) -> c.Packet:
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + per_try
+        want_fn = c.reply_function(command.function, command.value)
+        while True:
+            while self._events:
+                event = self._events.popleft()
+                if isinstance(event, c.Packet):
+                    if event.drive_id == command.drive_id and event.function == want_fn:
+                        if self._hooks:
+                            self._trace(Direction.RX, event)
+                        return event
+                    self._note_stray(event)
+                elif isinstance(event, ChecksumError):
+                    self._note_stray(event)
+                    raise event
+                else:
+                    self._note_stray(event)  # framing: keep waiting, the framer resyncs
+            remaining = deadline - loop.time()
+            if remaining <= 0:
+                raise self._timeout(command, per_try)
+            try:
+                async with asyncio.timeout(remaining):
+                    data = await self.stream.read()
+            except TimeoutError:
+                raise self._timeout(command, per_try) from None
+            self._events.extend(self._framer.iter_feed(data))
+
+    def _timeout(self, command: Command, per_try: float) -> DriveTimeout:
+        self.stats.timeouts += 1
+        exc = DriveTimeout(f"no reply from drive {command.drive_id} to "
+                           f"{command.function.name} within {per_try * 1000:.1f} ms")
+        self._trace(Direction.RX, exc)
+        return exc
+
+    async def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        await self.stream.close()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    # ------------------------------------------------------------- broadcast / interpolation
+    async def broadcast(self, command: Command) -> None:
+        """Send a no-reply command to every drive on the line (id 127)."""
+        await self.execute(cmds.broadcast(command))
+
+    async def linear_line(self, dx: int, dy: int, dz: int, feedrate: int) -> None:
+        """Coordinated 3-axis line (broadcast, drives X/Y/Z = ids 1/2/3 by default)."""
+        await self.execute_all(cmds.make_linear_line(dx, dy, dz, feedrate))
+
+    async def circular_arc(self, start: tuple[int, int], end: tuple[int, int], *,
+                           plane: int = 0, feedrate: int = 1) -> None:
+        await self.execute_all(cmds.make_circular_arc(start, end, plane=plane,
+                                                      feedrate=feedrate))
+
+
+def _guard_item(command: Command) -> str:
+    if command.param is not None:
+        return command.param
+    if command.function is c.HostFunction.SET_DRIVE_CONFIG:
+        return "config"
+    if command.function is c.HostFunction.ASSIGN_DRIVE_ID:
+        return "drive_id"
+    return command.function.name.lower()
+
+
+class Dyn232Axis(AsyncAxis):
+    """One DYN2/DC2/DYN4 drive on a DYN232M line."""
+
+    def __init__(self, client: AsyncDyn232Client, drive_id: int, *,
+                 owns_client: bool = True) -> None:
+        self.client = client
+        self._id = cmds.check_drive_id(drive_id)
+        self._owns_client = owns_client
+
+    @property
+    def drive_id(self) -> int:
+        return self._id
+
+    @property
+    def protocol(self) -> str:
+        return "dyn232"
+
+    async def _run(self, command: Command, **kw: Any) -> Any:
+        return await self.client.execute(command, **kw)
+
+    # ------------------------------------------------------------- motion
+    async def _send_move_to(self, position: int) -> None:
+        await self._run(cmds.make_move_absolute(self._id, position))
+
+    async def _send_move_by(self, distance: int) -> None:
+        await self._run(cmds.make_move_relative(self._id, distance))
+
+    async def turn(self, rpm: int) -> None:
+        await self._run(cmds.make_turn_const_speed(self._id, rpm))
+
+    async def square_wave(self, amplitude: int) -> None:
+        await self._run(cmds.make_square_wave(self._id, amplitude))
+
+    async def sine_wave(self, amplitude: int) -> None:
+        await self._run(cmds.make_sine_wave(self._id, amplitude))
+
+    async def wave_frequency(self, hz: int) -> None:
+        await self._run(cmds.make_wave_frequency(self._id, hz))
+
+    async def set_origin(self) -> None:
+        await self._run(cmds.make_set_origin(self._id))
+
+    async def enable(self) -> None:
+        await self._run(cmds.make_enable(self._id))
+
+    async def disable(self) -> None:
+        await self._run(cmds.make_disable(self._id))
+
+    async def reset(self) -> None:
+        await self._run(cmds.make_reset(self._id))
+
+    # ------------------------------------------------------------- registers and readouts
+    async def status(self) -> DriveStatus:
+        result: DriveStatus = await self._run(cmds.make_read_status(self._id))
+        return result
+
+    async def config(self) -> DriveConfig:
+        result: DriveConfig = await self._run(cmds.make_read_config(self._id))
+        return result
+
+    async def set_config(self, cfg: DriveConfig) -> None:
+        await self._run(cmds.make_set_config(self._id, cfg))
+
+    async def position(self) -> int:
+        return int(await self._run(cmds.make_read_position(self._id)))
+
+    async def speed(self) -> int:
+        return int(await self._run(cmds.make_read_speed(self._id)))
+
+    async def torque(self) -> int:
+        return int(await self._run(cmds.make_read_torque(self._id)))
+
+    # ------------------------------------------------------------- parameters and id
+    def _check_param(self, name: str, value: int) -> None:
+        cmds.make_set_param(self._id, name, value)  # range + reachable over DYN232M
+
+    async def read_param(self, name: str) -> int:
+        return int(await self._run(cmds.make_read_param(self._id, name)))
+
+    async def write_param(self, name: str, value: int) -> None:
+        await self._run(cmds.make_set_param(self._id, name, value))
+
+    async def read_id(self) -> int:
+        return int(await self._run(cmds.make_read_id(self._id)))
+
+    async def assign_id(self, new_id: int) -> None:
+        """Assign_Drive_ID takes effect at once; this axis then addresses ``new_id``."""
+        await self._run(cmds.make_assign_id(self._id, new_id))
+        self.client.guard.rename_drive(self._id, new_id)
+        self._id = new_id
+
+    async def ping(self, timeout: float = 0.05) -> bool:
+        """One status read without retry. A corrupt reply still proves something answered."""
+        try:
+            await self.client.execute(cmds.make_read_status(self._id), retries=0,
+                                      timeout=timeout)
+        except DriveTimeout:
+            return False
+        except (ChecksumError, FramingError):
+            return True
+        return True
+
+    # ------------------------------------------------------------- connection
+    async def sibling(self, drive_id: int) -> Dyn232Axis:
+        return Dyn232Axis(self.client, drive_id, owns_client=False)
+
+    async def add_trace(self, hook: AxisTraceHook) -> None:
+        self.client.add_trace(hook)
+
+    async def close(self) -> None:
+        if self._owns_client:
+            await self.client.close()
+
+    def __repr__(self) -> str:
+        return f"<Dyn232Axis id {self._id}>"
