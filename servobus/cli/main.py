@@ -14,6 +14,11 @@ from servobus.errors import ServobusError
 #: Command-group modules; each defines ``register(group: click.Group) -> None``.
 COMMAND_MODULES: list[str] = [
     "servobus.cli.sim_cmd",
+    "servobus.cli.decode_cmd",
+    "servobus.cli.drive_cmds",
+    "servobus.cli.params_cmd",
+    "servobus.cli.scan_cmd",
+    "servobus.cli.demo_cmd",
 ]
 
 

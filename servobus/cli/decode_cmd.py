@@ -1,0 +1,211 @@
+"""``servobus decode HEX...`` and ``servobus sniff``: DYN232M packets in human terms.
+
+Both print one line per packet (raw bytes, then the meaning) and one line per checksum error
+or run of garbage; direction is inferred as documented in :mod:`servobus.cli.line_decoder`.
+``decode`` exits with status 1 when the bytes contained errors (like ``cmp``), 0 otherwise.
+"""
+
+from __future__ import annotations
+
+import socket
+import sys
+import time
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from typing import Any, BinaryIO, Protocol
+
+import click
+
+from servobus.cli.context import CliContext, pass_cli
+from servobus.cli.line_decoder import (
+    ErrorEvent,
+    LineDecoder,
+    LineEvent,
+    PacketEvent,
+    decode_stream,
+    parse_hex,
+)
+from servobus.cli.open_axis import emit_json, note
+
+RAW_WIDTH = 21  # "xx " x 7 bytes
+
+
+def format_event(event: LineEvent, prefix: str = "") -> list[str]:
+    """Text lines for one event; an ambiguous packet gets a second line with the alternative."""
+    if isinstance(event, ErrorEvent):
+        label = "checksum error" if event.kind == "checksum" else "garbage"
+        return [f"{prefix}{event.raw.hex(' '):<{RAW_WIDTH}}{label}: {event.message}"]
+    lines = [f"{prefix}{event.raw.hex(' '):<{RAW_WIDTH}}{event.text}"]
+    if event.ambiguous:
+        lines[0] += "   [direction ambiguous]"
+        lines.append(f"{prefix}{'':<{RAW_WIDTH}}or {event.alternative}")
+    return lines
+
+
+@click.command("decode")
+@click.argument("hex_bytes", nargs=-1, required=True, metavar="HEX...")
+@pass_cli
+def decode_cmd(ctx: CliContext, hex_bytes: tuple[str, ...]) -> None:
+    """Decode DYN232M packets from hex bytes in any spacing.
+
+    Example: servobus decode 03 a3 ff 88 ad   (Go_Relative_Pos -120 to id 3)
+    """
+    try:
+        data = parse_hex(hex_bytes)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="HEX") from None
+    events = list(decode_stream([data]))
+    if ctx.json:
+        emit_json([e.as_dict() for e in events])
+    else:
+        for event in events:
+            for line in format_event(event):
+                click.echo(line)
+    if any(isinstance(e, ErrorEvent) for e in events):
+        sys.exit(1)
+
+
+class _Source(Protocol):
+    def read(self) -> bytes | None:
+        """Bytes received within a short poll interval; b"" if none yet; None at end."""
+
+    def close(self) -> None: ...
+
+
+POLL_S = 0.05
+
+
+class _FileSource:
+    def __init__(self, stream: BinaryIO, as_hex: bool) -> None:
+        self._stream, self._hex = stream, as_hex
+
+    def read(self) -> bytes | None:
+        if self._hex:
+            text = self._stream.read().decode("ascii", "replace")
+            data = parse_hex(text.split())
+            self._hex = False  # read once; the next read() sees EOF
+            return data or None
+        chunk = self._stream.read1(4096) if hasattr(self._stream, "read1") else \
+            self._stream.read(4096)
+        return chunk or None
+
+    def close(self) -> None:
+        if self._stream is not sys.stdin.buffer:
+            self._stream.close()
+
+
+class _TcpSource:
+    """A plain TCP client, e.g. for the simulator's tap ``tcp://127.0.0.1:PORT``."""
+
+    def __init__(self, host: str, port: int) -> None:
+        self._sock = socket.create_connection((host, port), timeout=5.0)
+        self._sock.settimeout(POLL_S)
+
+    def read(self) -> bytes | None:
+        try:
+            data = self._sock.recv(4096)
+        except TimeoutError:
+            return b""
+        return data or None
+
+    def close(self) -> None:
+        self._sock.close()
+
+
+class _SerialSource:
+    def __init__(self, url: str, baud: int) -> None:
+        import serial
+
+        self._port: Any = serial.serial_for_url(url, baudrate=baud, timeout=POLL_S)
+
+    def read(self) -> bytes | None:
+        waiting = max(1, int(self._port.in_waiting or 0))
+        return bytes(self._port.read(waiting))
+
+    def close(self) -> None:
+        self._port.close()
+
+
+def _open_source(ctx: CliContext, tap: str | None, from_file: str | None,
+                 as_hex: bool) -> tuple[_Source, bool]:
+    """The byte source and whether it is live (timestamps make sense)."""
+    if from_file is not None:
+        stream = sys.stdin.buffer if from_file == "-" else Path(from_file).open("rb")  # noqa: SIM115
+        return _FileSource(stream, as_hex), False
+    url = tap or ctx.port
+    if url is None:
+        raise click.UsageError("sniff needs --tap URL, --from-file FILE|- or the global --port URL")
+    try:
+        if url.startswith("tcp://"):
+            host, _, port = url[len("tcp://"):].rpartition(":")
+            return _TcpSource(host or "127.0.0.1", int(port)), True
+        return _SerialSource(url, ctx.baud), True
+    except (OSError, ValueError) as exc:
+        raise click.ClickException(f"cannot open {url}: {exc}") from None
+
+
+def _chunks(source: _Source, deadline: float | None) -> Iterator[bytes]:
+    while deadline is None or time.monotonic() < deadline:
+        data = source.read()
+        if data is None:
+            return
+        if data:
+            yield data
+
+
+@click.command("sniff")
+@click.option("--tap", metavar="URL", default=None,
+              help="tap to read, e.g. tcp://127.0.0.1:PORT from `servobus sim dyn2 --tap`; "
+                   "default: the global --port (a pyserial port/URL on the RS485 line)")
+@click.option("--from-file", "from_file", metavar="FILE", default=None,
+              help="decode raw bytes from FILE ('-' = stdin) instead of a live line")
+@click.option("--hex", "as_hex", is_flag=True, help="with --from-file: the file holds hex text")
+@click.option("--count", type=click.IntRange(min=1), default=None,
+              help="stop after N packets")
+@click.option("--duration", type=click.FloatRange(min=0), default=None,
+              help="stop after S seconds")
+@pass_cli
+def sniff_cmd(ctx: CliContext, tap: str | None, from_file: str | None, as_hex: bool,
+              count: int | None, duration: float | None) -> None:
+    """Print the packets on a live DYN232M line (or in a capture) as they pass.
+
+    Direction is inferred (a reply follows the host's read with the expected Is_* code from
+    the same id); when both readings fit, both are printed.
+    """
+    source, live = _open_source(ctx, tap, from_file, as_hex)
+    start = time.monotonic()
+    deadline = None if duration is None else start + duration
+    packets = errors = 0
+    try:
+        for event in _events(source, deadline):
+            if isinstance(event, PacketEvent):
+                packets += 1
+            else:
+                errors += 1
+            t = time.monotonic() - start
+            if ctx.json:
+                record = event.as_dict()
+                if live:
+                    record["t"] = round(t, 6)
+                emit_json(record)
+            else:
+                for line in format_event(event, f"{t:9.4f}  " if live else ""):
+                    click.echo(line)
+            if count is not None and packets >= count:
+                break
+    finally:
+        source.close()
+        if not ctx.json:
+            note(f"{packets} packet(s), {errors} error(s)")
+
+
+def _events(source: _Source, deadline: float | None) -> Iterable[LineEvent]:
+    decoder = LineDecoder()
+    for chunk in _chunks(source, deadline):
+        yield from decoder.iter_feed(chunk)
+    yield from decoder.finish()
+
+
+def register(group: click.Group) -> None:
+    group.add_command(decode_cmd)
+    group.add_command(sniff_cmd)

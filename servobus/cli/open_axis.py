@@ -1,0 +1,79 @@
+"""Shared plumbing of the drive commands: open the Axis the global options name, print results.
+
+Every command goes through :func:`open_axis`, so ``--port``, ``--id``, ``--baud``, ``--can``
+and ``--timeout`` mean the same thing everywhere, and DYN CAN works wherever DYN232M does.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
+from typing import TYPE_CHECKING, Any
+
+import click
+from rich.console import Console
+from rich.table import Table
+
+from servobus.cli.context import CliContext
+
+if TYPE_CHECKING:
+    from servobus.client.axis import Axis
+
+
+@contextmanager
+def open_axis(ctx: CliContext, drive_id: int | None = None) -> Iterator[Axis]:
+    """Connect to the drive (or the embedded virtual drive) and close it afterwards."""
+    from servobus.client import connect  # lazy: keeps `servobus decode` free of the client
+
+    axis = connect(ctx.port, drive_id=ctx.drive_id if drive_id is None else drive_id,
+                   baud=ctx.baud, can=ctx.can, timeout=ctx.timeout)
+    try:
+        yield axis
+    finally:
+        axis.close()
+
+
+def connection_label(ctx: CliContext) -> str:
+    if ctx.can:
+        return f"DYN CAN {ctx.can}, id {ctx.drive_id}"
+    return f"{ctx.url}, id {ctx.drive_id}"
+
+
+def console(err: bool = False) -> Console:
+    """A rich console on the *current* stdout/stderr (so click's CliRunner captures it)."""
+    return Console(file=sys.stderr if err else sys.stdout, highlight=False, soft_wrap=True)
+
+
+def emit_json(data: object) -> None:
+    click.echo(json.dumps(data, indent=None, sort_keys=False))
+
+
+def emit(ctx: CliContext, data: object, render: Callable[[Console], None]) -> None:
+    """``--json``: dump ``data``; otherwise let ``render`` draw on a rich console."""
+    if ctx.json:
+        emit_json(data)
+    else:
+        render(console())
+
+
+def kv_table(title: str, rows: Mapping[str, Any]) -> Table:
+    table = Table(title=title, show_header=False, title_justify="left", box=None,
+                  padding=(0, 2))
+    table.add_column(style="bold")
+    table.add_column()
+    for key, value in rows.items():
+        table.add_row(key, _fmt(value))
+    return table
+
+
+def _fmt(value: object) -> str:
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    return str(value)
+
+
+def note(message: str) -> None:
+    """A remark for humans on stderr; never mixes into --json output."""
+    click.echo(message, err=True)

@@ -1,0 +1,156 @@
+"""``servobus params`` (show / --save / --load / --diff) and ``servobus set NAME VALUE``.
+
+Decisions: ``--load`` writes only the parameters whose value differs from the drive's (each
+write costs an EEPROM cycle) and reads them back to confirm; ``--diff`` exits with status 1
+when the drive differs from the file (like ``diff``). ``--json params`` prints the backup
+format itself, so ``servobus --json params > backup.json`` is a valid backup. Files are
+validated before any connection is opened.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import click
+from rich.console import Console
+from rich.table import Table
+
+from servobus.cli import params_file as PF
+from servobus.cli.context import CliContext, pass_cli
+from servobus.cli.open_axis import console, emit, emit_json, note, open_axis
+from servobus.drive import params as P
+
+
+def params_table(values: dict[str, int], title: str) -> Table:
+    table = Table(title=title, title_justify="left")
+    table.add_column("parameter", style="bold")
+    table.add_column("value", justify="right")
+    table.add_column("range", justify="right")
+    table.add_column("unit")
+    table.add_column("meaning")
+    for name, value in values.items():
+        s = P.spec(name)
+        table.add_row(name, str(value), f"{s.minimum}..{s.maximum}", s.unit, s.doc)
+    return table
+
+
+def _show(ctx: CliContext) -> None:
+    with open_axis(ctx) as axis:
+        values = axis.read_params(P.DYN_PARAMS)
+        backup = PF.ParamsBackup(axis.protocol, axis.drive_id, dict(values))
+    emit(ctx, backup.to_json(),
+         lambda con: con.print(params_table(backup.params, f"parameters of drive {ctx.drive_id}")))
+
+
+def _save(ctx: CliContext, path: str) -> None:
+    with open_axis(ctx) as axis:
+        values = axis.read_params(P.DYN_PARAMS)
+        backup = PF.ParamsBackup(axis.protocol, axis.drive_id, dict(values))
+    PF.save(path, backup)
+    emit(ctx, {"saved": path, **backup.to_json()},
+         lambda con: con.print(f"saved {len(values)} parameters of drive {backup.drive_id} "
+                               f"({backup.protocol}) to {path}"))
+
+
+def _load(ctx: CliContext, path: str) -> None:
+    backup = PF.load(path)  # validated before anything is opened or sent
+    if backup.drive_id != ctx.drive_id:
+        note(f"note: {path} was saved from drive {backup.drive_id}; restoring onto drive "
+             f"{ctx.drive_id}")
+    with open_axis(ctx) as axis:
+        before = axis.read_params(list(backup.params))
+        changes = PF.diff(backup.params, before)
+        if changes:
+            axis.write_params({name: wanted for name, wanted, _ in changes})
+        after = axis.read_params(list(backup.params))
+    failed = PF.diff(backup.params, after)
+    rows = [{"name": n, "before": before[n], "after": after[n], "wanted": v}
+            for n, v in backup.params.items()]
+
+    def render(con: Console) -> None:
+        table = Table(title=f"restore {path} -> drive {ctx.drive_id}", title_justify="left")
+        for col in ("parameter", "before", "after", ""):
+            table.add_column(col, justify="left" if col in ("parameter", "") else "right")
+        for r in rows:
+            state = ("unchanged" if r["before"] == r["wanted"] else
+                     "written" if r["after"] == r["wanted"] else "[red]NOT APPLIED[/red]")
+            table.add_row(str(r["name"]), str(r["before"]), str(r["after"]), state)
+        con.print(table)
+        con.print(f"{len(changes)} written, {len(rows) - len(changes)} unchanged")
+
+    emit(ctx, {"restored": path, "written": [n for n, _, _ in changes], "params": rows}, render)
+    if failed:
+        names = ", ".join(n for n, _, _ in failed)
+        raise click.ClickException(f"drive did not take: {names}")
+
+
+def _diff(ctx: CliContext, path: str) -> None:
+    backup = PF.load(path)
+    with open_axis(ctx) as axis:
+        actual = axis.read_params(list(backup.params))
+    changes = PF.diff(backup.params, actual)
+    if ctx.json:
+        emit_json({"file": path, "identical": not changes,
+                   "differences": [{"name": n, "file": f, "drive": d} for n, f, d in changes]})
+    elif changes:
+        table = Table(title=f"{path} vs drive {ctx.drive_id}", title_justify="left")
+        table.add_column("parameter", style="bold")
+        table.add_column("file", justify="right")
+        table.add_column("drive", justify="right")
+        for name, wanted, have in changes:
+            table.add_row(name, str(wanted), str(have))
+        console().print(table)
+    else:
+        click.echo(f"drive {ctx.drive_id} matches {path} ({len(backup.params)} parameters)")
+    if changes:
+        sys.exit(1)
+
+
+@click.command("params")
+@click.option("--save", "save_path", metavar="FILE", default=None,
+              help="back the parameters up to FILE (JSON)")
+@click.option("--load", "load_path", metavar="FILE", default=None,
+              help="restore the parameters from FILE (only changed values are written)")
+@click.option("--diff", "diff_path", metavar="FILE", default=None,
+              help="compare the drive with FILE (exit status 1 when they differ)")
+@pass_cli
+def params_cmd(ctx: CliContext, save_path: str | None, load_path: str | None,
+               diff_path: str | None) -> None:
+    """Show the eight drive parameters, or back them up / restore / compare them."""
+    chosen = [p for p in (save_path, load_path, diff_path) if p is not None]
+    if len(chosen) > 1:
+        raise click.UsageError("use only one of --save, --load, --diff")
+    if save_path is not None:
+        _save(ctx, save_path)
+    elif load_path is not None:
+        _load(ctx, load_path)
+    elif diff_path is not None:
+        _diff(ctx, diff_path)
+    else:
+        _show(ctx)
+
+
+@click.command("set")
+@click.argument("name", type=click.Choice(list(P.BY_NAME)), metavar="NAME")
+@click.argument("value", type=int)
+@pass_cli
+def set_cmd(ctx: CliContext, name: str, value: int) -> None:
+    """Write one parameter (checked against its range first) and read it back.
+
+    NAME is one of: main_gain speed_gain int_gain trq_cons max_speed max_accel on_range
+    gear_num.
+    """
+    P.spec(name).check(value)  # ArgumentRangeError before any connection
+    with open_axis(ctx) as axis:
+        old = axis.read_param(name)
+        axis.write_param(name, value)
+        new = axis.read_param(name)
+    emit(ctx, {"name": name, "old": old, "new": new},
+         lambda con: con.print(f"{name}: {old} -> {new}"))
+    if new != value:
+        raise click.ClickException(f"drive reports {name}={new} after writing {value}")
+
+
+def register(group: click.Group) -> None:
+    group.add_command(params_cmd)
+    group.add_command(set_cmd)
