@@ -1,0 +1,223 @@
+"""DYN232M protocol front end: one RS485 line of VirtualDrives (DYN2 manual section 7).
+
+Pure-ish: no I/O and no clock. ``Dyn232Line.receive(data)`` takes host bytes in any
+chunking and returns the bytes the drives send back; the caller advances the drives' time
+first (servers via :mod:`servobus.sim.realtime`, tests via ``VirtualDrive.advance``).
+Pacing lives in :mod:`servobus.sim.pacing`, sockets in :mod:`servobus.sim.dyn232_server`.
+
+Decisions where the manual is silent (kept here, in one place):
+
+* **Addressing.** A drive executes packets whose start byte holds its id or the broadcast
+  id 127, and answers with its own id (NOTES.md). Packets for ids nobody has get silence.
+* **Several answers to one packet** (a broadcast read with more than one drive on the line,
+  or two drives sharing an id): on a real line the replies collide and the host receives
+  garbage that fails its checksum. The simulator models that as *silence*: every addressed
+  drive still executes the read (so a status read still clears its checksum notice), but no
+  reply is sent. A broadcast read with exactly one drive on the line is answered; that is
+  how a host finds the id of a single unknown drive.
+* **Bad checksum.** The packet is not executed and alarm code 4 is set on the drive(s) that
+  its start byte addresses (a drive decides by the first byte alone, manual 7.8; a corrupted
+  id byte is therefore attributed to whichever drive it names, as a real line would). The
+  next status read reports code 4 and clears it (``VirtualDrive.note_checksum_error``).
+  Framing errors (truncated packets, stray bytes) are dropped without any alarm: no packet
+  was received, so there was nothing to check.
+* **Parameter and register writes** (Set_MainGain .. Set_GearNumber, Set_Drive_Config,
+  Assign_Drive_ID): a 1-byte value is read as 7-bit unsigned (the ranges are 1..127 and the
+  manual lists these as one byte, as DMM's library sends them); longer values are signed.
+  Out-of-range writes are ignored silently: ``VirtualDrive.set_param`` rejects them against
+  the one parameter table, nothing is stored, nothing is sent (these functions never reply).
+  Assign_Drive_ID accepts 0..63 only (64..126 are reserved, 127 is broadcast).
+* **Readouts that do not fit the packet.** The position readout is the low 28 bits of the
+  drive's position counter, as two's complement (the wire carries 28-bit signed data).
+* ForMotorDefine (0x0F) is DMM-internal and ignored; unknown General_Read selectors are
+  ignored (no reply).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Sequence
+
+from servobus.codec import dyn232 as c
+from servobus.errors import ChecksumError, ProtocolError
+from servobus.sim.drive import VirtualDrive
+
+H = c.HostFunction
+GR = c.GeneralReadSelector
+
+_WRAP = 1 << 28
+
+
+def wrap28(value: int) -> int:
+    """Low 28 bits of ``value`` as two's complement (the packet's data range)."""
+    return ((value - c.VALUE_MIN) % _WRAP) + c.VALUE_MIN
+
+
+def host_value(packet: c.Packet) -> int:
+    """Value of a host packet: 1-byte register/parameter writes are 7-bit unsigned."""
+    try:
+        spec = c.HOST_SPECS[H(packet.function)]
+    except ValueError:
+        return packet.value
+    if spec.kind is c.Kind.SETTING and len(packet.data) == 1:
+        return packet.unsigned
+    return packet.value
+
+
+Handler = Callable[[VirtualDrive, int], "int | None"]
+
+
+class Dyn232Line:
+    """Several VirtualDrives sharing one DYN232M RS485 line."""
+
+    def __init__(self, drives: Sequence[VirtualDrive]) -> None:
+        self.drives: list[VirtualDrive] = list(drives)
+        self.framer = c.Framer()
+        self.packets = 0  # valid packets seen on the line (any id)
+        self.checksum_errors = 0
+        self.framing_errors = 0
+        self.collisions = 0  # replies suppressed because several drives would answer
+        self._handlers: dict[H, Handler] = _build_handlers()
+
+    # ------------------------------------------------------------------ byte level
+    def receive(self, data: bytes | bytearray) -> bytes:
+        """Feed host bytes (any chunking); return what the drives send back."""
+        out = bytearray()
+        for event in self.framer.iter_feed(data):
+            out += self.handle(event)
+        return bytes(out)
+
+    def events(
+        self, data: bytes | bytearray, framer: c.Framer | None = None
+    ) -> Iterator[tuple[int, c.FramerEvent]]:
+        """Lazily frame ``data``, yielding (index of the byte that completed it, event).
+
+        The pacing layer uses the index to execute each packet only once its last byte
+        could have arrived on the wire. ``framer`` lets several host ports share one line.
+        """
+        fr = self.framer if framer is None else framer
+        for i in range(len(data)):
+            for event in fr.iter_feed(data[i : i + 1]):
+                yield i, event
+
+    # ------------------------------------------------------------------ packet level
+    def handle(self, event: c.FramerEvent) -> bytes:
+        """Execute one framer event; return the reply bytes (possibly empty)."""
+        if isinstance(event, ChecksumError):
+            self.checksum_errors += 1
+            if event.raw and not event.raw[0] & 0x80:
+                for drive in self.addressed(event.raw[0] & 0x7F):
+                    drive.note_checksum_error()
+            return b""
+        if isinstance(event, ProtocolError):
+            self.framing_errors += 1
+            return b""
+        return self.execute(event)
+
+    def addressed(self, drive_id: int) -> list[VirtualDrive]:
+        if drive_id == c.BROADCAST_ID:
+            return list(self.drives)
+        return [d for d in self.drives if d.drive_id == drive_id]
+
+    def execute(self, packet: c.Packet) -> bytes:
+        """Run a valid host packet on every drive it addresses; return the reply bytes."""
+        self.packets += 1
+        try:
+            function = H(packet.function)
+        except ValueError:  # pragma: no cover - every 5-bit code is a HostFunction
+            return b""
+        handler = self._handlers.get(function)
+        if handler is None:
+            return b""
+        value = host_value(packet)
+        reply_fn = c.reply_function(function, value)
+        replies: list[bytes] = []
+        for drive in self.addressed(packet.drive_id):
+            result = handler(drive, value)
+            if reply_fn is not None and result is not None:
+                replies.append(c.encode_reply(drive.drive_id, reply_fn, result))
+        if len(replies) > 1:  # several drives answering at once collide: see module doc
+            self.collisions += 1
+            return b""
+        return replies[0] if replies else b""
+
+
+# ---------------------------------------------------------------------- function table
+def _build_handlers() -> dict[H, Handler]:
+    """HostFunction -> handler(drive, value) -> reply value or None (no reply)."""
+
+    def motion(method: Callable[[VirtualDrive, int], bool]) -> Handler:
+        def run(drive: VirtualDrive, value: int) -> None:
+            method(drive, value)  # False = ignored by the drive (alarm, free, ...): silent
+
+        return run
+
+    def set_origin(drive: VirtualDrive, value: int) -> None:
+        drive.set_origin()
+
+    def assign_id(drive: VirtualDrive, value: int) -> None:
+        spec = c.HOST_SPECS[H.ASSIGN_DRIVE_ID]
+        if spec.minimum <= value <= spec.maximum:
+            drive.assign_id(value)
+
+    def set_config(drive: VirtualDrive, value: int) -> None:
+        drive.set_config(value)
+
+    def general_read(drive: VirtualDrive, value: int) -> int | None:
+        try:
+            selector = GR(value)
+        except ValueError:
+            return None
+        if selector is GR.POSITION:
+            return wrap28(drive.position)
+        if selector is GR.SPEED:
+            return wrap28(round(drive.speed_rpm))
+        if selector is GR.TORQUE:
+            return wrap28(int(drive.torque_current))
+        if selector is GR.RESET:
+            drive.reset()
+        elif selector is GR.ENABLE:
+            drive.enable()
+        elif selector is GR.DISABLE:
+            drive.disable()
+        return None
+
+    table: dict[H, Handler] = {
+        H.SET_ORIGIN: set_origin,
+        H.GO_ABSOLUTE_POS: motion(VirtualDrive.move_absolute),
+        H.GO_RELATIVE_POS: motion(VirtualDrive.move_relative),
+        H.MAKE_LINEAR_LINE: motion(VirtualDrive.linear_line_word),
+        H.MAKE_CIRCULAR_ARC: motion(VirtualDrive.circular_arc_word),
+        H.TURN_CONST_SPEED: motion(VirtualDrive.turn_const_speed),
+        H.SQUARE_WAVE: motion(VirtualDrive.square_wave),
+        H.SIN_WAVE: motion(VirtualDrive.sine_wave),
+        H.SS_FREQUENCY: motion(VirtualDrive.set_wave_frequency),
+        H.ASSIGN_DRIVE_ID: assign_id,
+        H.READ_DRIVE_ID: lambda d, v: d.drive_id,
+        H.SET_DRIVE_CONFIG: set_config,
+        H.READ_DRIVE_CONFIG: lambda d, v: d.read_config().to_byte(),
+        H.READ_DRIVE_STATUS: lambda d, v: d.read_status().to_byte(),
+        H.GENERAL_READ: general_read,
+        # H.FOR_MOTOR_DEFINE: DMM-internal, deliberately absent (ignored).
+    }
+    for spec in c.HOST_SPECS.values():  # parameter set/read pairs come from the codec table
+        if spec.param is None:
+            continue
+        if spec.kind is c.Kind.SETTING:
+            table[spec.function] = _param_writer(spec.param)
+        elif spec.kind is c.Kind.READ:
+            table[spec.function] = _param_reader(spec.param)
+    return table
+
+
+def _param_writer(name: str) -> Handler:
+    def write(drive: VirtualDrive, value: int) -> None:
+        drive.set_param(name, value)  # out of range: ignored by the drive, nothing sent
+
+    return write
+
+
+def _param_reader(name: str) -> Handler:
+    def read(drive: VirtualDrive, value: int) -> int:
+        return drive.get_param(name)
+
+    return read

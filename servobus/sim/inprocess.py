@@ -1,0 +1,189 @@
+"""In-process virtual DYN232M line as a ByteStream: what ``sim://dyn2`` URLs open.
+
+``open_sim_stream()`` builds drives, a :class:`Dyn232Line` and a :class:`LineRunner` on the
+current event loop (started lazily on first use, so it may be created before the loop runs)
+and returns a :class:`SimByteStream`. The stream behaves like a serial port wired to the line:
+paced at 38400 8N1 unless ``paced=False`` (``fast=1``), drives in wall-clock time.
+
+URL form (parsed by :func:`parse_sim_url`)::
+
+    sim://dyn2                      one drive, factory id 0, paced
+    sim://dyn2?ids=1,2,3&fast=1     three drives, unpaced
+    sim://dyn2?state=/tmp/e.json    EEPROM kept in a JSON file (see EepromStore)
+    sim://dyn2?model=DYN2-T1        motor/drive model (servobus.drive.units.MODELS)
+
+``dc2`` and ``dyn4`` are accepted as aliases of ``dyn2`` (same protocol, NOTES.md).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from urllib.parse import parse_qs, urlsplit
+
+from servobus.codec import dyn232 as c
+from servobus.drive import units as U
+from servobus.errors import ArgumentRangeError
+from servobus.sim.drive import VirtualDrive
+from servobus.sim.dyn232_line import Dyn232Line
+from servobus.sim.eeprom import EepromStore
+from servobus.sim.pacing import HostPort, LineRunner
+from servobus.transport.base import Direction, TraceHook
+
+SIM_KINDS = ("dyn2", "dc2", "dyn4")
+_TRUE = ("1", "true", "yes", "on")
+_FALSE = ("0", "false", "no", "off")
+
+
+@dataclass(frozen=True)
+class SimUrl:
+    kind: str = "dyn2"
+    ids: tuple[int, ...] = (c.FACTORY_ID,)
+    paced: bool = True
+    state: str | None = None
+    model: str = U.DEFAULT_MODEL
+
+
+def parse_ids(text: str) -> tuple[int, ...]:
+    """``"1,2,3"`` -> (1, 2, 3); each 0..63, no duplicates."""
+    try:
+        ids = tuple(int(part) for part in text.split(",") if part.strip())
+    except ValueError:
+        raise ArgumentRangeError(f"drive ids must be integers, got {text!r}") from None
+    if not ids:
+        raise ArgumentRangeError("at least one drive id is needed")
+    bad = [i for i in ids if not 0 <= i <= c.MAX_DRIVE_ID]
+    if bad:
+        raise ArgumentRangeError(f"drive ids {bad} are outside 0..{c.MAX_DRIVE_ID}")
+    if len(set(ids)) != len(ids):
+        raise ArgumentRangeError(f"duplicate drive ids in {text!r}")
+    return ids
+
+
+def _flag(name: str, text: str) -> bool:
+    low = text.lower()
+    if low in _TRUE:
+        return True
+    if low in _FALSE:
+        return False
+    raise ArgumentRangeError(f"{name}={text!r}: expected 1/0, true/false")
+
+
+def parse_sim_url(url: str) -> SimUrl:
+    """Parse ``sim://dyn2?ids=1,2&fast=1&state=FILE&model=NAME``."""
+    parts = urlsplit(url)
+    if parts.scheme != "sim":
+        raise ArgumentRangeError(f"not a sim:// URL: {url!r}")
+    kind = (parts.netloc or parts.path.lstrip("/") or "dyn2").lower()
+    if kind not in SIM_KINDS:
+        raise ArgumentRangeError(f"unknown virtual drive {kind!r} in {url!r}; known: "
+                                 f"{', '.join(SIM_KINDS)}")
+    query = {k: v[-1] for k, v in parse_qs(parts.query, keep_blank_values=True).items()}
+    unknown = set(query) - {"ids", "fast", "paced", "state", "model"}
+    if unknown:
+        raise ArgumentRangeError(f"unknown sim URL option(s) {sorted(unknown)} in {url!r}")
+    paced = True
+    if "paced" in query:
+        paced = _flag("paced", query["paced"])
+    if "fast" in query:
+        paced = not _flag("fast", query["fast"])
+    model = query.get("model", U.DEFAULT_MODEL)
+    if model not in U.MODELS:
+        raise ArgumentRangeError(f"unknown model {model!r}; known: {', '.join(U.MODELS)}")
+    return SimUrl(kind=kind, ids=parse_ids(query["ids"]) if "ids" in query else (c.FACTORY_ID,),
+                  paced=paced, state=query.get("state") or None, model=model)
+
+
+def make_drives(ids: Sequence[int], *, state: str | None = None,
+                model: str = U.DEFAULT_MODEL) -> list[VirtualDrive]:
+    """One VirtualDrive per id; with ``state`` each keeps its EEPROM under key str(id)."""
+    return [VirtualDrive(i, model=model,
+                         eeprom=EepromStore(state, key=str(i)) if state else None)
+            for i in ids]
+
+
+class SimByteStream:
+    """A ByteStream wired to an in-process virtual line (``transport.base.ByteStream``)."""
+
+    def __init__(self, runner: LineRunner) -> None:
+        self.runner = runner
+        self.line = runner.line
+        self.drives: list[VirtualDrive] = runner.line.drives
+        self._buf = bytearray()
+        self._ready = asyncio.Event()
+        self._closed = False
+        self._traces: list[TraceHook] = []
+        self._port: HostPort = runner.open_port(self._on_reply)
+
+    def _on_reply(self, data: bytes) -> None:
+        now = time.monotonic()
+        for hook in self._traces:
+            hook(Direction.RX, data, now)
+        self._buf += data
+        self._ready.set()
+
+    async def write(self, data: bytes) -> None:
+        if self._closed:
+            raise ConnectionError("sim stream is closed")
+        data = bytes(data)
+        now = time.monotonic()
+        for hook in self._traces:
+            hook(Direction.TX, data, now)
+        self.runner.start()
+        self.runner.submit(self._port, data)
+
+    async def read(self, max_bytes: int = 4096) -> bytes:
+        while not self._buf:
+            if self._closed:
+                raise ConnectionError("sim stream is closed")
+            self._ready.clear()
+            self.runner.start()
+            await self._ready.wait()
+        out = bytes(self._buf[:max_bytes])
+        del self._buf[:max_bytes]
+        return out
+
+    def discard_input(self) -> None:
+        self._buf.clear()
+
+    async def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        self._port.closed = True
+        self._ready.set()  # wake a pending read so it raises ConnectionError
+        await self.runner.close()
+
+    def add_trace(self, hook: TraceHook) -> None:
+        self._traces.append(hook)
+
+    @property
+    def in_waiting(self) -> int:
+        return len(self._buf)
+
+
+def open_sim_stream(
+    kind: str = "dyn2",
+    *,
+    ids: Sequence[int] = (c.FACTORY_ID,),
+    paced: bool = True,
+    drives: Sequence[VirtualDrive] | None = None,
+    state: str | None = None,
+    model: str = U.DEFAULT_MODEL,
+) -> SimByteStream:
+    """An in-process virtual line. ``drives`` (if given) replaces ``ids``/``state``/``model``."""
+    if kind.lower() not in SIM_KINDS:
+        raise ArgumentRangeError(f"unknown virtual drive {kind!r}; known: {', '.join(SIM_KINDS)}")
+    if drives is None:
+        parse_ids(",".join(str(i) for i in ids))  # same validation as URLs
+        drives = make_drives(ids, state=state, model=model)
+    return SimByteStream(LineRunner(Dyn232Line(drives), paced=paced))
+
+
+def open_sim_url(url: str, *, drives: Sequence[VirtualDrive] | None = None) -> SimByteStream:
+    """``open_sim_stream`` from a ``sim://`` URL."""
+    u = parse_sim_url(url)
+    return open_sim_stream(u.kind, ids=u.ids, paced=u.paced, drives=drives, state=u.state,
+                           model=u.model)

@@ -1,0 +1,215 @@
+"""38400 8N1 wire-time model of one DYN232M line, and the async runner that applies it.
+
+Model (both directions, full duplex as the manual's 7.1 table says):
+
+* Host -> drives: a chunk handed over at monotonic time ``t`` starts on the wire at
+  ``max(t, wire free)``; byte ``i`` has fully arrived ``(i + 1) x 260.4 us`` later. Each packet
+  is executed at the instant its last byte arrived, in the drives' simulated time.
+* Drives -> host: a reply starts when its packet was executed (or when the previous reply has
+  left) and is handed to the host once its last byte has left: never faster than 260.4 us/byte.
+
+Implementation: times are computed against a monotonic wire clock, never by sleeping per
+byte. A packet is executed as soon as it is framed, with the drives advanced to its wire
+arrival time (which may lie up to the queued wire time ahead of the wall clock). Nobody can
+observe the difference: the only way to see the drives is a reply, and replies are released
+only when their wire time has come. So the runner waits once per reply, with a precise wait:
+an asyncio sleep for all but the last ``coarse_s`` (event loops using epoll wake only to the
+millisecond), a blocking ``time.sleep`` for most of the rest, then a short spin (``spin_s``)
+for the final microseconds. The loop is blocked at most ``coarse_s`` per reply; the line is
+serial anyway. ``paced=False`` (``--fast``) executes and answers at once.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import heapq
+import itertools
+import time
+from collections.abc import Callable
+
+from servobus.codec import dyn232 as c
+from servobus.sim.dyn232_line import Dyn232Line
+from servobus.sim.realtime import RealtimeClock
+from servobus.transport.base import Direction, TraceHook
+
+BYTE_TIME_S = c.wire_time_s(1)  # 10 bits at 38400 baud = 260.4 us
+COARSE_S = 0.0015  # epoll-based loops round timeouts up to 1 ms (+ wake-up jitter)
+FINE_COARSE_S = 0.0004  # for loops on a microsecond selector (the sim server uses select())
+SPIN_S = 0.00012  # time.sleep overshoots by ~50-100 us (timer slack): spin the last part
+
+
+class WireClock:
+    """One direction of an 8N1 wire: when each byte has passed."""
+
+    def __init__(self, byte_time_s: float = BYTE_TIME_S) -> None:
+        self.byte_time_s = byte_time_s
+        self.free_at = 0.0  # monotonic time the wire is next idle
+
+    def send(self, n_bytes: int, ready_at: float) -> tuple[float, float]:
+        """Occupy the wire with ``n_bytes`` ready at ``ready_at``; return (start, end)."""
+        start = max(ready_at, self.free_at)
+        self.free_at = start + n_bytes * self.byte_time_s
+        return start, self.free_at
+
+
+class HostPort:
+    """One host connection on the line (TCP client, PTY, in-process stream)."""
+
+    def __init__(self, deliver: Callable[[bytes], None]) -> None:
+        self.framer = c.Framer()  # per port: two hosts' packets never mix mid-packet
+        self._deliver = deliver
+        self.closed = False
+
+    def deliver(self, data: bytes) -> None:
+        if not self.closed:
+            self._deliver(data)
+
+
+class LineRunner:
+    """Drives a :class:`Dyn232Line` in wall-clock time, paced at 38400 8N1 or not."""
+
+    def __init__(
+        self,
+        line: Dyn232Line,
+        clock: RealtimeClock | None = None,
+        *,
+        paced: bool = True,
+        byte_time_s: float = BYTE_TIME_S,
+        coarse_s: float = COARSE_S,
+        spin_s: float = SPIN_S,
+    ) -> None:
+        self.line = line
+        self.clock = clock if clock is not None else RealtimeClock(line.drives)
+        self.paced = paced
+        self.rx = WireClock(byte_time_s)  # host -> drives
+        self.tx = WireClock(byte_time_s)  # drives -> host
+        self.coarse_s = coarse_s
+        self.spin_s = spin_s
+        self.taps: list[TraceHook] = []
+        self._heap: list[tuple[float, int, Callable[[], None]]] = []
+        self._seq = itertools.count()
+        self._task: asyncio.Task[None] | None = None
+        self._waiter: asyncio.Future[None] | None = None
+        self.max_late_s = 0.0  # worst lateness of a release (diagnostics / benchmarks)
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self) -> None:
+        """Start the clock ticker and the release task on the running loop (idempotent)."""
+        self.clock.start()
+        if self.paced and (self._task is None or self._task.done()):
+            self._task = asyncio.get_running_loop().create_task(self._release_loop(),
+                                                                name="sim-line")
+
+    async def close(self) -> None:
+        await self.clock.stop()
+        task, self._task = self._task, None
+        if task is not None:
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        self._heap.clear()
+
+    def open_port(self, deliver: Callable[[bytes], None]) -> HostPort:
+        return HostPort(deliver)
+
+    def add_tap(self, hook: TraceHook) -> None:
+        """``hook(direction, bytes, monotonic time)`` for every byte of the line, in order."""
+        self.taps.append(hook)
+
+    # ------------------------------------------------------------------ host bytes in
+    def submit(self, port: HostPort, data: bytes) -> None:
+        """Host bytes from ``port`` reached the line now (call on the loop's thread)."""
+        if not data:
+            return
+        now = time.monotonic()
+        if not self.paced:
+            self.clock.sync(now)
+            self._tap(Direction.TX, data, now)
+            for event in port.framer.iter_feed(data):
+                reply = self.line.handle(event)
+                if reply:
+                    self._tap(Direction.RX, reply, now)
+                    port.deliver(reply)
+            return
+        self.start()
+        self.clock.sync(now)
+        start, _ = self.rx.send(len(data), now)
+        bt = self.rx.byte_time_s
+        seg = 0
+        for i, event in self.line.events(data, port.framer):
+            t_done = start + (i + 1) * bt
+            self.clock.sync(t_done)  # the drives' time = arrival time of the last byte
+            if self.taps:
+                self._at(t_done, self._tap_cb(Direction.TX, data[seg : i + 1], t_done))
+                seg = i + 1
+            reply = self.line.handle(event)
+            if reply:
+                _, t_end = self.tx.send(len(reply), t_done)
+                self._at(t_end, self._release_cb(port, reply, t_end))
+        if self.taps and seg < len(data):
+            t_end = start + len(data) * bt
+            self._at(t_end, self._tap_cb(Direction.TX, data[seg:], t_end))
+
+    # ------------------------------------------------------------------ timed release
+    def _at(self, when: float, action: Callable[[], None]) -> None:
+        heapq.heappush(self._heap, (when, next(self._seq), action))
+        if self._waiter is not None and not self._waiter.done():
+            self._waiter.set_result(None)
+
+    def _release_cb(self, port: HostPort, reply: bytes, when: float) -> Callable[[], None]:
+        def release() -> None:
+            self.max_late_s = max(self.max_late_s, time.monotonic() - when)
+            self._tap(Direction.RX, reply, when)
+            port.deliver(reply)
+
+        return release
+
+    def _tap_cb(self, direction: Direction, data: bytes, when: float) -> Callable[[], None]:
+        return lambda: self._tap(direction, data, when)
+
+    def _tap(self, direction: Direction, data: bytes, when: float) -> None:
+        for hook in self.taps:
+            hook(direction, data, when)
+
+    async def _release_loop(self) -> None:
+        loop = asyncio.get_running_loop()
+        heap = self._heap
+        while True:
+            if not heap:
+                await self._wait(loop, None)
+                continue
+            when = heap[0][0]
+            remaining = when - time.monotonic()
+            if remaining > self.coarse_s:
+                await self._wait(loop, remaining - self.coarse_s)
+                continue  # something earlier may have been queued meanwhile
+            _precise_sleep_until(when, self.spin_s)
+            while heap and heap[0][0] <= time.monotonic():
+                heapq.heappop(heap)[2]()
+            await asyncio.sleep(0)  # let the transports move the bytes
+
+    async def _wait(self, loop: asyncio.AbstractEventLoop, timeout: float | None) -> None:
+        fut: asyncio.Future[None] = loop.create_future()
+        self._waiter = fut
+        handle = None if timeout is None else loop.call_later(timeout, _resolve, fut)
+        try:
+            await fut
+        finally:
+            self._waiter = None
+            if handle is not None:
+                handle.cancel()
+
+
+def _resolve(fut: asyncio.Future[None]) -> None:
+    if not fut.done():
+        fut.set_result(None)
+
+
+def _precise_sleep_until(deadline: float, spin_s: float) -> None:
+    """Block until ``deadline`` (monotonic): sleep, then spin the last ``spin_s``."""
+    remaining = deadline - time.monotonic()
+    if remaining > spin_s:
+        time.sleep(remaining - spin_s)
+    while time.monotonic() < deadline:
+        pass

@@ -1,0 +1,58 @@
+"""Run virtual drives in wall-clock time (servers and the in-process ``sim://`` line).
+
+The drives' simulated time is ``time.monotonic() - t0``. Front ends call ``sync(t)`` before
+each packet; a background task calls ``sync()`` every few milliseconds so motion, alarms and
+timeouts progress while the line is idle (and no single ``advance`` has to cover a long gap).
+
+``sync`` never moves a drive backwards: the paced line may already have advanced the drives
+to the (future) wire arrival time of a queued packet; see :mod:`servobus.sim.pacing`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from collections.abc import Sequence
+
+from servobus.sim.drive import VirtualDrive
+
+DEFAULT_TICK_S = 0.004  # background advance period (2-5 ms keeps each step short)
+
+
+class RealtimeClock:
+    """Maps monotonic wall-clock time onto the drives' simulated time."""
+
+    def __init__(self, drives: Sequence[VirtualDrive], *, tick_s: float = DEFAULT_TICK_S) -> None:
+        self.drives = drives
+        self.tick_s = tick_s
+        # Drives created earlier (or stepped by a test) keep their own time: start from it.
+        self.t0 = time.monotonic() - max((d.time for d in drives), default=0.0)
+        self._task: asyncio.Task[None] | None = None
+
+    def sim_time(self, mono: float | None = None) -> float:
+        return (time.monotonic() if mono is None else mono) - self.t0
+
+    def sync(self, mono: float | None = None) -> None:
+        """Advance every drive to the simulated time of monotonic instant ``mono`` (now)."""
+        t = self.sim_time(mono)
+        for drive in self.drives:
+            if t > drive.time:
+                drive.advance_to(t)
+
+    def start(self) -> None:
+        """Start the background ticker on the running event loop (idempotent)."""
+        if self._task is None or self._task.done():
+            self._task = asyncio.get_running_loop().create_task(self._run(), name="sim-clock")
+
+    async def _run(self) -> None:
+        while True:
+            self.sync()
+            await asyncio.sleep(self.tick_s)
+
+    async def stop(self) -> None:
+        task, self._task = self._task, None
+        if task is not None:
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
