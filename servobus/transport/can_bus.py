@@ -1,0 +1,271 @@
+"""CAN frames for asyncio over any python-can bus, plus a CAN bit-timing model.
+
+``open_can("INTERFACE:CHANNEL", **kwargs)`` opens ``can.Bus(interface=..., channel=...,
+**kwargs)`` exactly as python-can users write it ("pcan:PCAN_USBBUS1", "socketcan:can0",
+"slcan:/dev/ttyACM0", "virtual:bus0"). For socketcand the channel part is "HOST:PORT"
+(the daemon's address) and the CAN channel served there defaults to "can0" (override
+with ``channel=``). Frames are received through python-can's own ``can.Notifier`` running
+its listeners on the event loop; sending calls ``bus.send`` directly (every python-can
+backend's send returns quickly: it queues the frame in the adapter or the socket).
+
+Transports move frames only: this module knows nothing about DYN CAN function codes.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
+
+from servobus.errors import ArgumentRangeError
+from servobus.transport.base import Direction
+
+SOCKETCAND_DEFAULT_CHANNEL = "can0"
+NOTIFIER_POLL_S = 0.1  # python-can Notifier recv timeout: bounds close() latency
+
+
+@dataclass(frozen=True)
+class CanFrame:
+    """A CAN data frame as the transport moves it (11- or 29-bit identifier)."""
+
+    arbitration_id: int
+    data: bytes
+    timestamp: float = 0.0
+    is_extended_id: bool = False
+
+
+#: Called with every frame moved (TX or RX) and the monotonic time it moved.
+FrameTraceHook = Callable[[Direction, CanFrame, float], None]
+
+
+@runtime_checkable
+class FramePort(Protocol):
+    """What clients and virtual nodes need from a CAN medium (one event loop)."""
+
+    async def send(self, arbitration_id: int, data: bytes) -> None:
+        """Put one base-format data frame on the bus."""
+
+    async def recv(self, timeout: float | None = None) -> CanFrame | None:
+        """Next frame from the bus, or None when ``timeout`` passes.
+
+        Raises ``ConnectionError`` when the port is closed.
+        """
+
+    def add_trace(self, hook: FrameTraceHook) -> None:
+        """Call ``hook`` for every frame sent (TX) or received (RX)."""
+
+    async def close(self) -> None:
+        """Release the medium; idempotent."""
+
+
+# ------------------------------------------------------------------ bit timing
+@dataclass(frozen=True)
+class BitTiming:
+    """CAN 2.0A frame duration model.
+
+    A base data frame has 47 fixed bits + 8 per data byte (SOF, 11-bit id, RTR, IDE, r0,
+    DLC 4, CRC 15, CRC delimiter, ACK 2, EOF 7, intermission 3). Bit stuffing applies to
+    the 34 + 8n bits from SOF to the CRC; servobus estimates it with the worst case, one
+    stuff bit per 4 bits after the first ((34 + 8n - 1) // 4), so the model never promises
+    more bus capacity than a real bus has.
+    """
+
+    bitrate: int = 1_000_000
+
+    def frame_bits(self, dlc: int) -> int:
+        stuffed_region = 34 + 8 * dlc
+        return 47 + 8 * dlc + (stuffed_region - 1) // 4
+
+    def frame_time(self, dlc: int) -> float:
+        return self.frame_bits(dlc) / self.bitrate
+
+
+class BusPacer:
+    """Keeps a model of when the bus is free; delays sends so throughput matches the model.
+
+    asyncio sleeps are only millisecond-accurate, so the pacer lets short debts accumulate
+    and sleeps once the modelled bus runs more than ``slack`` ahead of the wall clock:
+    throughput and queueing follow the model, single-frame latency is within ``slack``.
+    """
+
+    def __init__(self, timing: BitTiming, slack: float = 0.001) -> None:
+        self.timing = timing
+        self.slack = slack
+        self.free_at = 0.0
+        self.busy_s = 0.0  # total modelled bus time, for load figures
+        self.frames = 0
+
+    def occupy(self, dlc: int, start: float | None = None) -> float:
+        """Account one frame starting no earlier than ``start``; returns its end time."""
+        now = time.monotonic() if start is None else start
+        t = self.timing.frame_time(dlc)
+        self.free_at = max(self.free_at, now) + t
+        self.busy_s += t
+        self.frames += 1
+        return self.free_at
+
+    async def wait_sent(self, dlc: int) -> None:
+        end = self.occupy(dlc)
+        ahead = end - time.monotonic()
+        if ahead > self.slack:
+            await asyncio.sleep(ahead)
+
+
+# ------------------------------------------------------------------ opening buses
+def parse_can_spec(spec: str, **options: Any) -> dict[str, Any]:
+    """"INTERFACE:CHANNEL" -> keyword arguments for ``can.Bus``.
+
+    socketcand: "socketcand:HOST:PORT" -> host, port, channel (default "can0").
+    """
+    interface, sep, rest = spec.partition(":")
+    if not sep or not interface:
+        raise ArgumentRangeError(
+            f"CAN bus {spec!r} must be INTERFACE:CHANNEL, e.g. 'pcan:PCAN_USBBUS1', "
+            "'virtual:bus0' or 'socketcand:127.0.0.1:29536'"
+        )
+    kwargs: dict[str, Any] = dict(options)
+    kwargs["interface"] = interface
+    if interface == "socketcand":
+        host, sep, port = rest.rpartition(":")
+        if not sep or not host or not port.isdigit():
+            raise ArgumentRangeError(f"socketcand address {rest!r} must be HOST:PORT")
+        kwargs["host"] = host
+        kwargs["port"] = int(port)
+        kwargs.setdefault("channel", SOCKETCAND_DEFAULT_CHANNEL)
+    else:
+        kwargs["channel"] = rest
+    return kwargs
+
+
+def open_bus(spec: str, **options: Any) -> Any:
+    """Blocking: ``can.Bus(**parse_can_spec(spec, **options))``."""
+    import can  # lazy: python-can is only needed for CAN work
+
+    return can.Bus(**parse_can_spec(spec, **options))
+
+
+class _QueueListener:
+    """python-can listener (duck-typed) feeding an asyncio queue on the loop thread."""
+
+    def __init__(self, port: AsyncCanBus) -> None:
+        self._port = port
+
+    def __call__(self, msg: Any) -> None:  # Notifier calls listeners on the loop thread
+        self._port._deliver(msg)
+
+    def on_error(self, exc: Exception) -> None:
+        self._port._fail(exc)
+
+    def stop(self) -> None:
+        pass
+
+
+class AsyncCanBus:
+    """A python-can bus as a :class:`FramePort`.
+
+    ``timing`` (a BitTiming) turns on the bus-time model for the simulator side: frames
+    received occupy the modelled bus, and each send waits for its slot.
+    """
+
+    def __init__(self, bus: Any, *, timing: BitTiming | None = None, owns_bus: bool = True
+                 ) -> None:
+        import can
+
+        self._can = can
+        self.bus = bus
+        self._owns_bus = owns_bus
+        self._queue: asyncio.Queue[CanFrame | BaseException] = asyncio.Queue()
+        self._traces: list[FrameTraceHook] = []
+        self._closed = False
+        self.pacer = BusPacer(timing) if timing is not None else None
+        self._notifier = can.Notifier(bus, [_QueueListener(self)], timeout=NOTIFIER_POLL_S,
+                                      loop=asyncio.get_running_loop())
+
+    @classmethod
+    async def open(cls, spec: str, *, timing: BitTiming | None = None, **options: Any
+                   ) -> AsyncCanBus:
+        """Open ``spec`` without blocking the loop (socketcand connects over TCP)."""
+        bus = await asyncio.to_thread(open_bus, spec, **options)
+        return cls(bus, timing=timing)
+
+    # -------------------------------------------------------------- receive side
+    def _deliver(self, msg: Any) -> None:
+        if self._closed or msg.is_error_frame or msg.is_remote_frame:
+            return
+        frame = CanFrame(msg.arbitration_id, bytes(msg.data), msg.timestamp,
+                         msg.is_extended_id)
+        now = time.monotonic()
+        if self.pacer is not None:
+            self.pacer.occupy(len(frame.data), now)
+        for hook in self._traces:
+            hook(Direction.RX, frame, now)
+        self._queue.put_nowait(frame)
+
+    def _fail(self, exc: BaseException) -> None:
+        self._queue.put_nowait(ConnectionError(f"CAN bus failed: {exc}"))
+
+    async def recv(self, timeout: float | None = None) -> CanFrame | None:
+        if self._closed and self._queue.empty():
+            raise ConnectionError("CAN bus is closed")
+        try:
+            item = self._queue.get_nowait()
+        except asyncio.QueueEmpty:
+            if timeout is not None and timeout <= 0:
+                return None
+            try:
+                item = await asyncio.wait_for(self._queue.get(), timeout)
+            except TimeoutError:
+                return None
+        if isinstance(item, BaseException):
+            raise item
+        return item
+
+    def recv_nowait(self) -> CanFrame | None:
+        try:
+            item = self._queue.get_nowait()
+        except asyncio.QueueEmpty:
+            return None
+        if isinstance(item, BaseException):
+            raise item
+        return item
+
+    def discard_input(self) -> None:
+        while not self._queue.empty():
+            self._queue.get_nowait()
+
+    # -------------------------------------------------------------- send side
+    async def send(self, arbitration_id: int, data: bytes) -> None:
+        if self._closed:
+            raise ConnectionError("CAN bus is closed")
+        if self.pacer is not None:
+            await self.pacer.wait_sent(len(data))
+        msg = self._can.Message(arbitration_id=arbitration_id, data=data, is_extended_id=False)
+        try:
+            self.bus.send(msg)
+        except self._can.CanError as exc:
+            raise ConnectionError(f"CAN send failed: {exc}") from exc
+        if self._traces:
+            frame = CanFrame(arbitration_id, bytes(data), time.time())
+            now = time.monotonic()
+            for hook in self._traces:
+                hook(Direction.TX, frame, now)
+
+    def add_trace(self, hook: FrameTraceHook) -> None:
+        self._traces.append(hook)
+
+    async def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        self._queue.put_nowait(ConnectionError("CAN bus is closed"))  # wake a waiting recv
+        await asyncio.to_thread(self._notifier.stop, NOTIFIER_POLL_S * 3)
+        if self._owns_bus:
+            await asyncio.to_thread(self.bus.shutdown)
+
+    async def __aenter__(self) -> AsyncCanBus:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
