@@ -3,7 +3,7 @@
 Runs on the embedded virtual drive by default. Because it moves the motor, running it on a
 real drive (``--port``/``--can``) needs ``--yes``. Steps: status, parameters, a 10-revolution
 point-to-point move with live position, constant speed then stop, a Max Speed change (the
-same move back is visibly slower), the original value restored, final status.
+same distance back is visibly slower), the original value restored, final status.
 
 Live readouts poll status + position every 0.1 s (20 queries/s), below the ~50 queries/s a
 real drive is known to drop silently (NOTES.md).
@@ -87,7 +87,7 @@ def run_demo(axis: Axis, script: _Script, label: str) -> None:
     values = axis.read_params(P.DYN_PARAMS)
     script.step("parameters", params=dict(values))
     if not script.as_json:
-        script.con.print(params_table(dict(values), "parameters"))
+        script.con.print(params_table(dict(values), "parameters", script.con.width))
 
     gear = values["gear_num"]
     command = round(U.counts_to_command(MOVE_REVS * U.COUNTS_PER_REV, gear))
@@ -121,12 +121,13 @@ def run_demo(axis: Axis, script: _Script, label: str) -> None:
     rec.update(speeds=speeds, stopped_speed=speed, held_position=held)
 
     original = values["max_speed"]
-    rec = script.step(f"parameter change: max_speed {original} -> {SLOW_MAX_SPEED}, move back to 0")
+    rec = script.step(f"parameter change: max_speed {original} -> {SLOW_MAX_SPEED}, "
+                      f"move_by({-command}) = {MOVE_REVS} rev back")
     axis.write_param("max_speed", SLOW_MAX_SPEED)
     readback = axis.read_param("max_speed")
     script.line(f"max_speed read back: {readback} -> cruise "
                 f"{U.profile_speed_rpm(readback, gear):.0f} rpm")
-    axis.move_to(0)
+    axis.move_by(-command)
     slow = _follow_move(axis, script, timeout=20.0)
     script.line(f"same distance took {slow['seconds']} s instead of {fast['seconds']} s")
     rec.update(readback=readback, **slow)

@@ -14,7 +14,7 @@ import click
 from rich.console import Console
 
 from servobus.cli.context import CliContext, pass_cli
-from servobus.cli.open_axis import connection_label, emit, kv_table, open_axis
+from servobus.cli.open_axis import connection_label, emit, kv_text, open_axis
 from servobus.drive.registers import DriveConfig, DriveStatus
 
 
@@ -27,10 +27,10 @@ def status_record(status: DriveStatus, config: DriveConfig, position: int,
 
 def render_status(con: Console, record: dict[str, object], title: str) -> None:
     status = {k: v for k, v in record.items() if k not in ("config", "drive_id", "protocol")}
-    con.print(kv_table(title, status))
     config = record["config"]
     assert isinstance(config, dict)
-    con.print(kv_table("config", config))
+    con.print(kv_text(title, status), markup=False)
+    con.print(kv_text("config", config), markup=False)
 
 
 @click.command("status")

@@ -14,7 +14,6 @@ from typing import TYPE_CHECKING, Any
 
 import click
 from rich.console import Console
-from rich.table import Table
 
 from servobus.cli.context import CliContext
 
@@ -58,14 +57,10 @@ def emit(ctx: CliContext, data: object, render: Callable[[Console], None]) -> No
         render(console())
 
 
-def kv_table(title: str, rows: Mapping[str, Any]) -> Table:
-    table = Table(title=title, show_header=False, title_justify="left", box=None,
-                  padding=(0, 2))
-    table.add_column(style="bold")
-    table.add_column()
-    for key, value in rows.items():
-        table.add_row(key, _fmt(value))
-    return table
+def kv_text(title: str, rows: Mapping[str, Any]) -> str:
+    """A titled two-column block (plain text: no padding, no markup surprises)."""
+    width = max((len(k) for k in rows), default=0) + 2
+    return "\n".join([title, *(f"  {k:<{width}}{_fmt(v)}" for k, v in rows.items())])
 
 
 def _fmt(value: object) -> str:

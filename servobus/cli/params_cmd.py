@@ -21,16 +21,20 @@ from servobus.cli.open_axis import console, emit, emit_json, note, open_axis
 from servobus.drive import params as P
 
 
-def params_table(values: dict[str, int], title: str) -> Table:
+def params_table(values: dict[str, int], title: str, width: int) -> Table:
+    """Parameter table; the explanation column only when the terminal is wide enough."""
+    wide = width >= 110
     table = Table(title=title, title_justify="left")
     table.add_column("parameter", style="bold")
     table.add_column("value", justify="right")
     table.add_column("range", justify="right")
     table.add_column("unit")
-    table.add_column("meaning")
+    if wide:
+        table.add_column("meaning")
     for name, value in values.items():
         s = P.spec(name)
-        table.add_row(name, str(value), f"{s.minimum}..{s.maximum}", s.unit, s.doc)
+        cells = [name, str(value), f"{s.minimum}..{s.maximum}", s.unit]
+        table.add_row(*cells, *([s.doc] if wide else []))
     return table
 
 
@@ -39,7 +43,8 @@ def _show(ctx: CliContext) -> None:
         values = axis.read_params(P.DYN_PARAMS)
         backup = PF.ParamsBackup(axis.protocol, axis.drive_id, dict(values))
     emit(ctx, backup.to_json(),
-         lambda con: con.print(params_table(backup.params, f"parameters of drive {ctx.drive_id}")))
+         lambda con: con.print(params_table(backup.params, f"parameters of drive {ctx.drive_id}",
+                                            con.width)))
 
 
 def _save(ctx: CliContext, path: str) -> None:
