@@ -224,3 +224,44 @@ def test_sniff_tap_stops_after_duration(tap_server: tuple[int, threading.Event])
 def test_sniff_without_source_is_a_usage_error() -> None:
     code, out = run("sniff")
     assert code == 2 and "--tap" in out
+
+
+def test_sniff_live_tap_of_the_simulator() -> None:
+    """End to end: `servobus sim dyn2 --tap`, a sniffer on the tap, a client on the line."""
+    from servobus.client import connect
+
+    sim = subprocess.Popen([SERVOBUS, "sim", "dyn2", "--fast", "--ids", "4", "--listen",
+                            "tcp://127.0.0.1:0", "--tap", "tcp://127.0.0.1:0",
+                            "--duration", "20"], stdout=subprocess.PIPE, text=True)
+    sniff = None
+    try:
+        assert sim.stdout is not None
+        ports: dict[str, str] = {}
+        while len(ports) < 2:
+            line = sim.stdout.readline()
+            assert line, "simulator ended before announcing its ports"
+            for key in ("listening on ", "tap on "):
+                if line.startswith(key):
+                    ports[key.split()[0]] = line.split()[-1]
+        sniff = subprocess.Popen([SERVOBUS, "--json", "sniff", "--tap", ports["tap"],
+                                  "--count", "3", "--duration", "15"],
+                                 stdout=subprocess.PIPE, text=True)
+        line_url = ports["listening"].replace("tcp://", "socket://")
+        with connect(line_url, drive_id=4) as axis:
+            # Traffic until the sniffer (which may still be connecting) has seen 3 packets.
+            while sniff.poll() is None:
+                axis.position()
+        out, _ = sniff.communicate(timeout=15)
+    finally:
+        for proc in (sniff, sim):
+            if proc is not None and proc.poll() is None:
+                proc.kill()
+                proc.wait(5)
+    records = [json.loads(line) for line in out.splitlines()]
+    assert sniff.returncode == 0 and len(records) == 3
+    # The tap may join between a request and its reply: the first full pair is what counts.
+    start = 0 if records[0]["function"] == "GENERAL_READ" else 1
+    request, reply = records[start:start + 2]
+    assert (request["function"], request["drive_id"]) == ("GENERAL_READ", 4)
+    assert (reply["function"], reply["basis"], reply["direction"]) == (
+        "IS_ABS_POS32", "reply", "drive->host")
