@@ -409,6 +409,16 @@ def drive_error(drive_id: int, code: DriveErrorCode) -> Frame:
     return Frame(drive_id, Function.DRIVE_ERROR, bytes((code,)))
 
 
+def expects_reply(frame: Frame) -> bool:
+    """Will the drive answer this request (General_Read: only the reading selectors)."""
+    spec = SPECS[Function(frame.function)]
+    if spec.reply is None:
+        return False
+    if frame.function == Function.GENERAL_READ:
+        return bool(frame.data) and frame.data[0] in {int(s) for s in GENERAL_READ_ANSWERED}
+    return True
+
+
 def is_reply_shape(frame: Frame) -> bool:
     """Does the frame's data length fit the table's reply (tells a reply from its request)."""
     try:

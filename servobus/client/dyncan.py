@@ -1,0 +1,524 @@
+"""DYN CAN host client over any python-can bus, and DynCanAxis (the shared Axis API).
+
+``open_can_axis("pcan:PCAN_USBBUS1", drive_id=1, bitrate=500000)`` opens the bus the way
+python-can users write it (extra keywords go to ``can.Bus``) and returns an AsyncAxis;
+``connect(can=...)`` calls it. One :class:`AsyncDynCanClient` per bus serves any number of
+drives (``axis.sibling(id)``, :meth:`AsyncDynCanClient.sync_move`, streaming).
+
+Transaction rules (servobus decisions; the manual gives none):
+
+* A reply matches a pending read when its identifier (drive id, function) and its data
+  length fit the table (a read request has a different length from its reply, so another
+  host's request on the same identifier is not taken for a reply). A read sent to the
+  broadcast id 0 accepts the first reply from any drive.
+* Reads to one drive run one at a time (replies carry no sequence number); different
+  drives are served concurrently. No-reply commands are sent at once.
+* Per-attempt deadline ``timeout`` (default 50 ms: a drive answers within about a
+  millisecond at 500 kbit/s; the margin covers USB adapters, socketcand over TCP and a
+  loaded host). Only reads are re-sent, at most ``retries`` times (default 2); motion and
+  settings are sent exactly once.
+* Drive Error 0xFF fails the read in flight to that drive, or is raised as DriveError by
+  that drive's next call (a no-reply command cannot be answered in-line).
+* Drive Error 0xEE (alarm push) calls every ``on_alarm`` callback at once and raises a
+  DriveAlarm on that drive's next call (once); Position Direct streaming stops on it.
+* EEPROM writes (config, id, parameter groups 1 and 3) pass the EepromGuard first. Group 2
+  (max speed / accel) is exempt: the drive keeps it in RAM after 10 saves per power-on.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from servobus.client import dyncan_commands as cmds
+from servobus.client.axis import AsyncAxis, AxisTraceHook
+from servobus.client.dyncan_commands import CanCommand
+from servobus.client.eeprom_guard import EepromGuard
+from servobus.codec import dyncan as c
+from servobus.drive import params as P
+from servobus.drive.registers import DriveConfig, DriveStatus
+from servobus.errors import ArgumentRangeError, DriveAlarm, DriveError, DriveTimeout, ServobusError
+from servobus.transport.base import Direction
+from servobus.transport.can_bus import AsyncCanBus, FramePort
+
+DEFAULT_TIMEOUT_S = 0.05
+DEFAULT_RETRIES = 2
+ID_REINIT_S = 0.010  # section 6: wait 10 ms for the drive to re-initialise its CAN port
+_GUARD_EXEMPT = frozenset({"max_speed", "max_accel"})
+
+AlarmCallback = Callable[[int], None]  # called with the alarming drive's id
+
+
+@dataclass
+class BusStats:
+    sent: int = 0
+    replies: int = 0
+    retries: int = 0
+    timeouts: int = 0
+    drive_errors: int = 0
+    alarms: int = 0
+    unmatched: int = 0
+
+
+@dataclass
+class StreamStats:
+    ticks: int = 0
+    frames: int = 0
+    late_ticks: int = 0  # ticks sent more than one period after their slot
+    max_lateness_s: float = 0.0
+
+
+@dataclass
+class _Waiter:
+    drive_id: int
+    function: int
+    future: asyncio.Future[c.Frame] = field(repr=False)
+
+
+class AsyncDynCanClient:
+    """Executes CanCommands on one CAN bus (any FramePort)."""
+
+    def __init__(self, port: FramePort, *, timeout: float | None = None,
+                 retries: int = DEFAULT_RETRIES, eeprom_guard: EepromGuard | None = None,
+                 on_alarm: AlarmCallback | None = None) -> None:
+        if retries < 0:
+            raise ArgumentRangeError(f"retries={retries} must be >= 0")
+        self.port = port
+        self.timeout = DEFAULT_TIMEOUT_S if timeout is None else timeout
+        if self.timeout <= 0:
+            raise ArgumentRangeError(f"timeout={timeout} must be positive")
+        self.retries = retries
+        self.guard = eeprom_guard if eeprom_guard is not None else EepromGuard()
+        self.stats = BusStats()
+        self._alarm_callbacks: list[AlarmCallback] = [on_alarm] if on_alarm else []
+        self._hooks: list[AxisTraceHook] = []
+        self._waiters: list[_Waiter] = []
+        self._locks: dict[int, asyncio.Lock] = {}
+        self._pending: dict[int, ServobusError] = {}
+        self._closed = False
+        self._rx_task = asyncio.get_running_loop().create_task(self._receive_loop(),
+                                                               name="dyncan-rx")
+
+    # ------------------------------------------------------------- hooks
+    def add_trace(self, hook: AxisTraceHook) -> None:
+        """``hook(direction, item, t)``: every Frame sent/received and every error met."""
+        self._hooks.append(hook)
+
+    def on_alarm(self, callback: AlarmCallback) -> None:
+        """``callback(drive_id)`` runs on the loop when a drive pushes Drive Error 0xEE."""
+        self._alarm_callbacks.append(callback)
+
+    def _trace(self, direction: Direction, item: object) -> None:
+        t = time.monotonic()
+        for hook in self._hooks:
+            hook(direction, item, t)
+
+    # ------------------------------------------------------------- receiving
+    async def _receive_loop(self) -> None:
+        while True:
+            try:
+                raw = await self.port.recv(None)
+            except ConnectionError as exc:
+                for w in self._waiters:
+                    if not w.future.done():
+                        w.future.set_exception(exc)
+                return
+            if raw is None:
+                continue
+            if raw.is_extended_id or raw.arbitration_id > c.MAX_ARBITRATION_ID:
+                self.stats.unmatched += 1
+                continue
+            self._dispatch(c.decode(raw.arbitration_id, raw.data[:c.MAX_DATA]))
+
+    def _dispatch(self, frame: c.Frame) -> None:
+        if self._hooks:
+            self._trace(Direction.RX, frame)
+        if frame.function == c.Function.DRIVE_ERROR and len(frame.data) == 1:
+            self._drive_error(frame.drive_id, frame.data[0])
+            return
+        for w in self._waiters:
+            if (w.function == frame.function and w.drive_id in (frame.drive_id, c.BROADCAST_ID)
+                    and not w.future.done() and c.is_reply_shape(frame)):
+                w.future.set_result(frame)
+                return
+        self.stats.unmatched += 1
+
+    def _drive_error(self, drive_id: int, code: int) -> None:
+        if code == c.DriveErrorCode.ALARM:
+            self.stats.alarms += 1
+            self._pending[drive_id] = DriveAlarm(
+                f"drive {drive_id} pushed an alarm (Drive Error 0xEE); read status() for the "
+                "code, reset() clears it", code=code, drive_id=drive_id)
+            for cb in list(self._alarm_callbacks):
+                cb(drive_id)
+            return
+        self.stats.drive_errors += 1
+        err = DriveError(f"drive {drive_id} answered Drive Error 0x{code:02x} (invalid data)",
+                         code=code, drive_id=drive_id)
+        for w in self._waiters:
+            if w.drive_id in (drive_id, c.BROADCAST_ID) and not w.future.done():
+                w.future.set_exception(err)
+                return
+        self._pending[drive_id] = err
+
+    def raise_pending(self, drive_id: int) -> None:
+        """Raise (once) an alarm push or Drive Error that arrived for ``drive_id``."""
+        if not self._pending:
+            return
+        if drive_id == c.BROADCAST_ID:
+            key = next(iter(self._pending))
+        elif drive_id in self._pending:
+            key = drive_id
+        else:
+            return
+        raise self._pending.pop(key)
+
+    # ------------------------------------------------------------- sending
+    async def _send(self, frame: c.Frame) -> None:
+        if self._hooks:
+            self._trace(Direction.TX, frame)
+        self.stats.sent += 1
+        await self.port.send(*c.encode(frame))
+
+    def _guard(self, command: CanCommand) -> None:
+        if command.kind is c.Kind.SETTING and command.guard_item:
+            for item in command.guard_item.split(","):
+                if item not in _GUARD_EXEMPT:
+                    self.guard.check(command.drive_id, item)
+
+    async def execute(self, command: CanCommand, *, retries: int | None = None,
+                      timeout: float | None = None) -> Any:
+        """Send ``command``; for reads return the parsed reply, else None."""
+        if self._closed:
+            raise ConnectionError("client is closed")
+        self.raise_pending(command.drive_id)
+        self._guard(command)
+        if not command.expects_reply:
+            await self._send(command.frame)
+            return None
+        lock = self._locks.get(command.drive_id)
+        if lock is None:
+            lock = self._locks[command.drive_id] = asyncio.Lock()
+        async with lock:
+            return await self._transact(command, retries, timeout)
+
+    async def _transact(self, command: CanCommand, retries: int | None,
+                        timeout: float | None) -> Any:
+        n_retries = (self.retries if retries is None else retries) if command.retry_safe else 0
+        per_try = self.timeout if timeout is None else timeout
+        loop = asyncio.get_running_loop()
+        for attempt in range(n_retries + 1):
+            if attempt:
+                self.stats.retries += 1
+            waiter = _Waiter(command.drive_id, command.function, loop.create_future())
+            self._waiters.append(waiter)
+            try:
+                await self._send(command.frame)
+                async with asyncio.timeout(per_try):
+                    reply = await waiter.future
+            except TimeoutError:
+                self.stats.timeouts += 1
+                if self._hooks:
+                    self._trace(Direction.RX, DriveTimeout(
+                        f"no reply from drive {command.drive_id} to {command.function.name} "
+                        f"within {per_try * 1000:.1f} ms"))
+                continue
+            finally:
+                self._waiters.remove(waiter)
+            self.stats.replies += 1
+            return command.parse(reply)
+        raise DriveTimeout(
+            f"no reply from drive {command.drive_id} to {command.function.name} after "
+            f"{n_retries + 1} attempt(s) of {per_try * 1000:.1f} ms"
+        )
+
+    async def execute_all(self, commands: Iterable[CanCommand]) -> None:
+        """Send no-reply commands back to back (checked and guarded first)."""
+        batch = list(commands)
+        for command in batch:
+            if command.expects_reply:
+                raise ArgumentRangeError("execute_all is for commands without a reply")
+            self.raise_pending(command.drive_id)
+        for command in batch:
+            self._guard(command)
+        for command in batch:
+            await self._send(command.frame)
+
+    # ------------------------------------------------------------- multi-axis helpers
+    async def sync_move(self, targets: Mapping[int, int], *, relative: bool = False) -> None:
+        """Load each drive's synchronized move, then start all with one broadcast trigger."""
+        loads = [cmds.make_sync_load(i, v, relative=relative) for i, v in targets.items()]
+        await self.execute_all([*loads, cmds.make_sync_trigger(relative=relative)])
+
+    async def stream_position_direct(self, steps: Mapping[int, Iterable[int]],
+                                     period: float) -> StreamStats:
+        """Send one Position Direct step per drive every ``period`` seconds.
+
+        Slots are ``t0 + k x period`` on the loop clock (no drift; asyncio sleeps are
+        millisecond-accurate, so single slots jitter but the rate holds). Each tick's values
+        are range-checked before any of its frames is sent; an alarm push or Drive Error
+        for a streamed drive stops the stream with that error.
+        """
+        if period <= 0:
+            raise ArgumentRangeError(f"period={period} must be positive")
+        iters = {cmds.check_drive_id(i, allow_broadcast=False): iter(s)
+                 for i, s in steps.items()}
+        stats = StreamStats()
+        loop = asyncio.get_running_loop()
+        t0 = loop.time()
+        while iters:
+            tick: list[CanCommand] = []
+            for drive_id, it in list(iters.items()):
+                try:
+                    tick.append(cmds.make_position_direct(drive_id, next(it)))
+                except StopIteration:
+                    del iters[drive_id]
+            if not tick:
+                break
+            due = t0 + stats.ticks * period
+            delay = due - loop.time()
+            if delay > 0:
+                await asyncio.sleep(delay)
+            elif -delay > period:
+                stats.late_ticks += 1
+            stats.max_lateness_s = max(stats.max_lateness_s, -delay)
+            for command in tick:
+                self.raise_pending(command.drive_id)
+            for command in tick:
+                await self._send(command.frame)
+            stats.frames += len(tick)
+            stats.ticks += 1
+        return stats
+
+    async def heartbeat(self, drive_id: int) -> int:
+        """One diagnostic-counter read (the counter steps by 1 per read, 255 -> 0)."""
+        result: int = await self.execute(cmds.make_read_counter(drive_id))
+        return result
+
+    def start_heartbeat(self, drive_id: int, period: float,
+                        on_lost: Callable[[int, BaseException], None]) -> Heartbeat:
+        hb = Heartbeat(self, drive_id, period, on_lost)
+        hb.start()
+        return hb
+
+    async def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        await self.port.close()
+        self._rx_task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await self._rx_task
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+
+class Heartbeat:
+    """Periodic diagnostic-counter reads; ``on_lost(drive_id, exc)`` when a read fails.
+
+    ``gaps`` counts readings that did not follow the previous one by exactly 1 (another
+    host reading the counter, or a drive restart).
+    """
+
+    def __init__(self, client: AsyncDynCanClient, drive_id: int, period: float,
+                 on_lost: Callable[[int, BaseException], None]) -> None:
+        self.client = client
+        self.drive_id = drive_id
+        self.period = period
+        self.on_lost = on_lost
+        self.beats = 0
+        self.gaps = 0
+        self.last: int | None = None
+        self._task: asyncio.Task[None] | None = None
+
+    def start(self) -> None:
+        self._task = asyncio.get_running_loop().create_task(self._run())
+
+    async def _run(self) -> None:
+        while True:
+            try:
+                value = await self.client.heartbeat(self.drive_id)
+            except (DriveTimeout, DriveError, DriveAlarm, ConnectionError) as exc:
+                self.on_lost(self.drive_id, exc)
+                if isinstance(exc, ConnectionError):
+                    return
+            else:
+                if self.last is not None and value != (self.last + 1) & 0xFF:
+                    self.gaps += 1
+                self.last = value
+                self.beats += 1
+            await asyncio.sleep(self.period)
+
+    async def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+
+
+class DynCanAxis(AsyncAxis):
+    """One DYN2/DYN4 drive on a DYN CAN bus."""
+
+    def __init__(self, client: AsyncDynCanClient, drive_id: int, *,
+                 owns_client: bool = True) -> None:
+        self.client = client
+        self._id = cmds.check_drive_id(drive_id)
+        self._owns_client = owns_client
+
+    @property
+    def drive_id(self) -> int:
+        return self._id
+
+    @property
+    def protocol(self) -> str:
+        return "dyncan"
+
+    async def _run(self, command: CanCommand, **kw: Any) -> Any:
+        return await self.client.execute(command, **kw)
+
+    # ------------------------------------------------------------- motion
+    async def _send_move_to(self, position: int) -> None:
+        await self._run(cmds.make_move_absolute(self._id, position))
+
+    async def _send_move_by(self, distance: int) -> None:
+        await self._run(cmds.make_move_relative(self._id, distance))
+
+    async def turn(self, rpm: int) -> None:
+        await self._run(cmds.make_turn_const_speed(self._id, rpm))
+
+    async def square_wave(self, amplitude: int) -> None:
+        await self._run(cmds.make_square_wave(self._id, amplitude))
+
+    async def sine_wave(self, amplitude: int) -> None:
+        await self._run(cmds.make_sine_wave(self._id, amplitude))
+
+    async def wave_frequency(self, hz: int) -> None:
+        await self._run(cmds.make_wave_frequency(self._id, hz))
+
+    async def position_direct(self, step: int) -> None:
+        await self._run(cmds.make_position_direct(self._id, step))
+
+    async def load_sync(self, value: int, *, relative: bool = False) -> None:
+        """Load a synchronized move; start it with ``client.sync_trigger`` / sync_move."""
+        await self._run(cmds.make_sync_load(self._id, value, relative=relative))
+
+    async def set_origin(self) -> None:
+        await self._run(cmds.make_set_origin(self._id))
+
+    async def enable(self) -> None:
+        await self._run(cmds.make_servo(self._id, enable=True))
+
+    async def disable(self) -> None:
+        await self._run(cmds.make_servo(self._id, enable=False))
+
+    async def reset(self) -> None:
+        await self._run(cmds.make_reset(self._id))
+
+    # ------------------------------------------------------------- registers and readouts
+    async def status(self) -> DriveStatus:
+        result: DriveStatus = await self._run(cmds.make_read_status(self._id))
+        return result
+
+    async def config(self) -> DriveConfig:
+        result: DriveConfig = await self._run(cmds.make_read_config(self._id))
+        return result
+
+    async def set_config(self, cfg: DriveConfig) -> None:
+        await self._run(cmds.make_set_config(self._id, cfg))
+
+    async def position(self) -> int:
+        return int(await self._run(cmds.make_read_position(self._id)))
+
+    async def speed(self) -> int:
+        return int(await self._run(cmds.make_read_motor_speed(self._id)))
+
+    async def torque(self) -> int:
+        """700 = peak current, positive = CCW (General_Read 0x1E)."""
+        return int(await self._run(cmds.make_read_torque(self._id)))
+
+    async def echo(self, data: bytes) -> bytes:
+        result: bytes = await self._run(cmds.make_echo(self._id, data))
+        return result
+
+    async def counter(self) -> int:
+        return await self.client.heartbeat(self._id)
+
+    # ------------------------------------------------------------- parameters and id
+    def _check_param(self, name: str, value: int) -> None:
+        cmds.make_set_param(self._id, name, value)  # range + reachable over CAN
+
+    async def read_param(self, name: str) -> int:
+        return int(await self._run(cmds.make_read_param(self._id, name)))
+
+    async def write_param(self, name: str, value: int) -> None:
+        await self._run(cmds.make_set_param(self._id, name, value))
+
+    async def read_params(self, names: Iterable[str] = P.DYN_PARAMS) -> dict[str, int]:
+        """One group read per group touched (at most three frames for all nine)."""
+        wanted = [P.spec(n).name for n in names]
+        groups = dict.fromkeys(cmds.group_of(n)[1] for n in wanted)
+        values: dict[str, int] = {}
+        for fn in groups:
+            values.update(await self._run(cmds.make_read_group(self._id, fn)))
+        return {n: values[n] for n in wanted}
+
+    async def write_params(self, values: Mapping[str, int]) -> None:
+        """One group write per group touched; the untouched fields travel as 0 (unchanged)."""
+        await self.client.execute_all(cmds.make_set_params(self._id, dict(values)))
+
+    async def read_id(self) -> int:
+        return int(await self._run(cmds.make_read_id(self._id)))
+
+    async def assign_id(self, new_id: int) -> None:
+        """Assign, wait the 10 ms re-initialisation, then address ``new_id``."""
+        await self._run(cmds.make_assign_id(self._id, new_id))
+        await asyncio.sleep(ID_REINIT_S)
+        self.client.guard.rename_drive(self._id, new_id)
+        self._id = new_id
+
+    async def ping(self, timeout: float = 0.05) -> bool:
+        try:
+            await self.client.execute(cmds.make_read_status(self._id), retries=0,
+                                      timeout=timeout)
+        except DriveTimeout:
+            return False
+        return True
+
+    # ------------------------------------------------------------- connection
+    async def sibling(self, drive_id: int) -> DynCanAxis:
+        return DynCanAxis(self.client, drive_id, owns_client=False)
+
+    async def add_trace(self, hook: AxisTraceHook) -> None:
+        self.client.add_trace(hook)
+
+    async def close(self) -> None:
+        if self._owns_client:
+            await self.client.close()
+
+    def __repr__(self) -> str:
+        return f"<DynCanAxis id {self._id}>"
+
+
+_CLIENT_OPTIONS = ("retries", "eeprom_guard", "on_alarm")
+
+
+async def open_can_client(can: str, *, timeout: float | None = None,
+                          **options: Any) -> AsyncDynCanClient:
+    """Open ``can`` ("INTERFACE:CHANNEL"); keywords other than the client's go to can.Bus."""
+    client_kw = {k: options.pop(k) for k in _CLIENT_OPTIONS if k in options}
+    port = await AsyncCanBus.open(can, **options)
+    return AsyncDynCanClient(port, timeout=timeout, **client_kw)
+
+
+async def open_can_axis(can: str, *, drive_id: int, timeout: float | None = None,
+                        **options: Any) -> AsyncAxis:
+    """Used by ``connect(can=...)``: the AsyncAxis of ``drive_id`` on bus ``can``."""
+    cmds.check_drive_id(drive_id)  # before opening anything
+    client = await open_can_client(can, timeout=timeout, **options)
+    return DynCanAxis(client, drive_id)

@@ -1,0 +1,276 @@
+"""Pure DYN CAN commands: ``make_*`` build a CanCommand; the client sends it and parses the reply.
+
+No I/O. Every argument is range-checked against the one table (codec SPECS and
+drive.params) before a frame exists, so out-of-range data never reaches the bus and the
+drive's Drive Error 0xFF only ever answers a foreign or corrupted request.
+
+Drive ids: 1..63 address one drive; 0 is the broadcast id. Commands without a reply may
+be broadcast (:func:`broadcast`); a read sent to id 0 is answered by every drive on its
+own identifier, which on a one-drive bus is how a host finds that drive (the client then
+accepts the first answer).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, replace
+from typing import Any
+
+from servobus.codec import dyncan as c
+from servobus.codec.dyn232 import GeneralReadSelector as GR
+from servobus.drive import params as P
+from servobus.drive.registers import DriveConfig, DriveStatus
+from servobus.errors import ArgumentRangeError
+
+F = c.Function
+Kind = c.Kind
+
+
+def _frame_value(frame: c.Frame) -> int:
+    return frame.value
+
+
+@dataclass(frozen=True)
+class CanCommand:
+    """One request frame plus how to read its reply."""
+
+    frame: c.Frame
+    kind: Kind
+    parse: Callable[[c.Frame], Any] = _frame_value
+    guard_item: str | None = None  # EEPROM item for the write guard (settings only)
+
+    @property
+    def drive_id(self) -> int:
+        return self.frame.drive_id
+
+    @property
+    def function(self) -> F:
+        return F(self.frame.function)
+
+    @property
+    def expects_reply(self) -> bool:
+        return c.expects_reply(self.frame)
+
+    @property
+    def retry_safe(self) -> bool:
+        """Only reads are ever re-sent; motion and settings never are."""
+        return self.kind is Kind.READ
+
+
+def check_drive_id(drive_id: int, *, allow_broadcast: bool = True) -> int:
+    lo = c.BROADCAST_ID if allow_broadcast else c.MIN_DRIVE_ID
+    if isinstance(drive_id, bool) or not isinstance(drive_id, int):
+        raise ArgumentRangeError(f"drive id must be an integer, got {drive_id!r}")
+    if not lo <= drive_id <= c.MAX_DRIVE_ID:
+        raise ArgumentRangeError(
+            f"DYN CAN drive id {drive_id} is outside {lo}..{c.MAX_DRIVE_ID} (0 = broadcast)"
+        )
+    return drive_id
+
+
+def check_value(function: F, value: int, what: str) -> int:
+    spec = c.SPECS[function]
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ArgumentRangeError(f"{what} must be an integer, got {value!r}")
+    if not spec.accepts(value):
+        allowed = (", ".join(f"0x{v:02x}" for v in spec.codes) if spec.codes
+                   else f"{spec.minimum}..{spec.maximum}")
+        raise ArgumentRangeError(f"{what}={value} is outside the allowed range {allowed}")
+    return value
+
+
+def _cmd(drive_id: int, function: F, value: int | None = None, *, what: str = "value",
+         parse: Callable[[c.Frame], Any] = _frame_value, guard_item: str | None = None,
+         raw: bytes | None = None) -> CanCommand:
+    spec = c.SPECS[function]
+    if spec.kind is Kind.INTERNAL:
+        raise ArgumentRangeError(f"{function.name} is internal to DMM; never sent")
+    check_drive_id(drive_id)
+    if value is not None:
+        check_value(function, value, what)
+    return CanCommand(c.request(drive_id, function, value, raw=raw), spec.kind, parse,
+                      guard_item)
+
+
+# ------------------------------------------------------------------ motion
+def make_move_absolute(drive_id: int, position: int) -> CanCommand:
+    return _cmd(drive_id, F.GO_ABSOLUTE_POS, position, what="position")
+
+
+def make_move_relative(drive_id: int, distance: int) -> CanCommand:
+    return _cmd(drive_id, F.GO_RELATIVE_POS, distance, what="distance")
+
+
+def make_linear_line_word(drive_id: int, value: int) -> CanCommand:
+    """One Make_LinearLine word (the CAN manual gives no word order; see DYN232M 7.5)."""
+    return _cmd(drive_id, F.MAKE_LINEAR_LINE, value, what="line word")
+
+
+def make_circular_arc_word(drive_id: int, value: int) -> CanCommand:
+    return _cmd(drive_id, F.MAKE_CIRCULAR_ARC, value, what="arc word")
+
+
+def make_turn_const_speed(drive_id: int, rpm: int) -> CanCommand:
+    return _cmd(drive_id, F.TURN_CONST_SPEED, rpm, what="rpm")
+
+
+def make_square_wave(drive_id: int, amplitude: int) -> CanCommand:
+    return _cmd(drive_id, F.SQUARE_WAVE, amplitude, what="amplitude")
+
+
+def make_sine_wave(drive_id: int, amplitude: int) -> CanCommand:
+    return _cmd(drive_id, F.SIN_WAVE, amplitude, what="amplitude")
+
+
+def make_wave_frequency(drive_id: int, hz: int) -> CanCommand:
+    return _cmd(drive_id, F.SS_FREQUENCY, hz, what="frequency")
+
+
+def make_sync_load(drive_id: int, value: int, *, relative: bool = False) -> CanCommand:
+    """Load a synchronized move (motion starts at the Sync_Trigger)."""
+    fn = F.GO_RELATIVE_POS_SYNC if relative else F.GO_ABSOLUTE_POS_SYNC
+    return _cmd(check_drive_id(drive_id, allow_broadcast=False), fn, value,
+                what="distance" if relative else "position")
+
+
+def make_sync_trigger(*, relative: bool = False, drive_id: int = c.BROADCAST_ID) -> CanCommand:
+    code = c.SyncTrigger.RELATIVE if relative else c.SyncTrigger.ABSOLUTE
+    return _cmd(drive_id, F.SYNC_TRIGGER, int(code))
+
+
+def make_position_direct(drive_id: int, step: int) -> CanCommand:
+    """Position Direct relative step, -16384..16384, no profile (0x1C)."""
+    return _cmd(drive_id, F.POSITION_DIRECT, step, what="position direct step")
+
+
+def make_set_origin(drive_id: int) -> CanCommand:
+    """Sent as one byte 0xFF (section 6); the node also accepts no data."""
+    return _cmd(drive_id, F.SET_ORIGIN, c.ORIGIN_CODE)
+
+
+# ------------------------------------------------------------------ actions
+def make_servo(drive_id: int, enable: bool) -> CanCommand:
+    code = c.ServoCommand.ENABLE if enable else c.ServoCommand.DISABLE
+    return _cmd(drive_id, F.SERVO_DISABLE, int(code))
+
+
+def make_reset(drive_id: int) -> CanCommand:
+    """General_Read 0x1C: drive reset, as on DYN232M (same firmware; not in the CAN manual)."""
+    return CanCommand(c.request(check_drive_id(drive_id), F.GENERAL_READ, int(GR.RESET)),
+                      Kind.ACTION)
+
+
+# ------------------------------------------------------------------ settings (EEPROM)
+def make_set_config(drive_id: int, config: DriveConfig | int) -> CanCommand:
+    value = config.to_byte() if isinstance(config, DriveConfig) else config
+    return _cmd(drive_id, F.SET_DRIVE_CONFIG, value, what="config", guard_item="config")
+
+
+def make_assign_id(drive_id: int, new_id: int) -> CanCommand:
+    """New ids are 1..63 (the drive accepts 0..64, but 0 is broadcast and 64 has no id bits)."""
+    check_drive_id(new_id, allow_broadcast=False)
+    return _cmd(check_drive_id(drive_id), F.ASSIGN_DRIVE_ID, new_id, what="new id",
+                guard_item="drive_id")
+
+
+def group_of(name: str) -> tuple[F, F, int]:
+    """(set function, read function, field index) of a parameter reachable over CAN."""
+    spec = P.spec(name)
+    try:
+        return c.PARAM_GROUPS[spec.name]
+    except KeyError:
+        raise ArgumentRangeError(
+            f"parameter {name!r} is not reachable over DYN CAN; "
+            f"available: {', '.join(c.PARAM_GROUPS)}"
+        ) from None
+
+
+def make_set_params(drive_id: int, values: Mapping[str, int]) -> list[CanCommand]:
+    """One group write per group touched; the other fields of a group are sent as 0
+    (= leave unchanged). Every value is checked before any frame is built."""
+    groups: dict[F, list[int]] = {}
+    names: dict[F, list[str]] = {}
+    for name, value in values.items():
+        set_fn, _, index = group_of(name)
+        P.spec(name).check(value)
+        fields = groups.setdefault(set_fn, [0] * len(c.SPECS[set_fn].fields))
+        fields[index] = value
+        names.setdefault(set_fn, []).append(P.spec(name).name)
+    check_drive_id(drive_id)
+    return [CanCommand(c.request(drive_id, fn, fields=tuple(vals)), Kind.SETTING,
+                       guard_item=",".join(names[fn]))
+            for fn, vals in groups.items()]
+
+
+def make_set_param(drive_id: int, name: str, value: int) -> CanCommand:
+    (command,) = make_set_params(drive_id, {name: value})
+    return command
+
+
+# ------------------------------------------------------------------ reads
+def make_read_group(drive_id: int, function: F) -> CanCommand:
+    spec = c.SPECS[function]
+    if not (spec.kind is Kind.READ and spec.fields):
+        raise ArgumentRangeError(f"{function.name} is not a parameter group read")
+    names = tuple(f.param for f in spec.fields)
+
+    def parse(frame: c.Frame) -> dict[str, int]:
+        return dict(zip(names, frame.fields(), strict=True))
+
+    return _cmd(drive_id, function, parse=parse)
+
+
+def make_read_param(drive_id: int, name: str) -> CanCommand:
+    _, read_fn, index = group_of(name)
+    group = make_read_group(drive_id, read_fn)
+    return replace(group, parse=lambda frame: frame.fields()[index])
+
+
+def _unsigned(frame: c.Frame) -> int:
+    return frame.unsigned
+
+
+def make_read_status(drive_id: int) -> CanCommand:
+    return _cmd(drive_id, F.READ_DRIVE_STATUS,
+                parse=lambda f: DriveStatus.from_byte(f.unsigned))
+
+
+def make_read_config(drive_id: int) -> CanCommand:
+    return _cmd(drive_id, F.READ_DRIVE_CONFIG,
+                parse=lambda f: DriveConfig.from_byte(f.unsigned & 0x3F))
+
+
+def make_read_id(drive_id: int) -> CanCommand:
+    return _cmd(drive_id, F.READ_DRIVE_ID, parse=_unsigned)
+
+
+def make_read_position(drive_id: int) -> CanCommand:
+    """General_Read 0x1B: absolute position, encoder counts (reply on 0x0E)."""
+    return _cmd(drive_id, F.GENERAL_READ, int(GR.POSITION))
+
+
+def make_read_torque(drive_id: int) -> CanCommand:
+    """General_Read 0x1E: torque, 700 = peak current, positive = CCW."""
+    return _cmd(drive_id, F.GENERAL_READ, int(GR.TORQUE))
+
+
+def make_read_motor_speed(drive_id: int) -> CanCommand:
+    """Read_Motor_Speed (0x1A): rpm, 2 bytes."""
+    return _cmd(drive_id, F.READ_MOTOR_SPEED)
+
+
+def make_read_counter(drive_id: int) -> CanCommand:
+    return _cmd(drive_id, F.DIAGNOSTIC_COUNTER, parse=_unsigned)
+
+
+def make_echo(drive_id: int, data: bytes) -> CanCommand:
+    if len(data) != 4:
+        raise ArgumentRangeError(f"echo takes exactly 4 bytes, got {len(data)}")
+    return _cmd(drive_id, F.ECHO, raw=bytes(data), parse=lambda f: f.data)
+
+
+def broadcast(command: CanCommand) -> CanCommand:
+    """Re-target a no-reply command to every drive (id 0)."""
+    if command.expects_reply:
+        raise ArgumentRangeError(f"{command.function.name} expects a reply: address one drive")
+    return replace(command, frame=replace(command.frame, drive_id=c.BROADCAST_ID))

@@ -1,0 +1,284 @@
+"""DYN CAN client against virtual nodes in-process on python-can's virtual bus."""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import itertools
+from collections.abc import AsyncIterator, Callable, Coroutine
+from contextlib import asynccontextmanager
+from dataclasses import dataclass
+from typing import Any
+
+import pytest
+
+from servobus.client import dyncan_commands as cmds
+from servobus.client.axis import AsyncAxis
+from servobus.client.dyncan import AsyncDynCanClient, DynCanAxis, open_can_axis, open_can_client
+from servobus.codec import dyncan as c
+from servobus.drive import units as U
+from servobus.drive.registers import AlarmCode, DriveConfig
+from servobus.errors import ArgumentRangeError, DriveAlarm, DriveError, DriveTimeout
+from servobus.sim.drive import VirtualDrive
+from servobus.sim.dyncan_node import DynCanNetwork, serve
+from servobus.sim.realtime import RealtimeClock
+from servobus.transport.base import Direction
+from servobus.transport.can_bus import AsyncCanBus, parse_can_spec
+
+_channels = itertools.count()
+pytestmark = pytest.mark.timeout(30)
+
+
+def arun(fn: Callable[[], Coroutine[Any, Any, None]]) -> Callable[[], None]:
+    """Run an async test on a fresh event loop (no pytest-asyncio in the venv)."""
+
+    @functools.wraps(fn)
+    def wrapper() -> None:
+        asyncio.run(fn())
+
+    return wrapper
+
+
+@dataclass
+class Harness:
+    network: DynCanNetwork
+    client: AsyncDynCanClient
+    spec: str
+
+    def axis(self, drive_id: int) -> DynCanAxis:
+        return DynCanAxis(self.client, drive_id, owns_client=False)
+
+
+@asynccontextmanager
+async def harness(*ids: int, realtime: bool = False, **client_kw: object
+                  ) -> AsyncIterator[Harness]:
+    spec = f"virtual:servobus-dyncan-test-{next(_channels)}"
+    network = DynCanNetwork([VirtualDrive(i) for i in ids])
+    node_port = await AsyncCanBus.open(spec)
+    clock = RealtimeClock(network.drives) if realtime else None
+    stop = asyncio.Event()
+    server = asyncio.create_task(serve(network, node_port, clock=clock, stop=stop))
+    client = await open_can_client(spec, **client_kw)  # type: ignore[arg-type]
+    try:
+        yield Harness(network, client, spec)
+    finally:
+        await client.close()
+        stop.set()
+        await server
+        await node_port.close()
+
+
+def test_parse_can_spec() -> None:
+    assert parse_can_spec("socketcand:127.0.0.1:29536") == {
+        "interface": "socketcand", "host": "127.0.0.1", "port": 29536, "channel": "can0"}
+    assert parse_can_spec("pcan:PCAN_USBBUS1", bitrate=500000) == {
+        "interface": "pcan", "channel": "PCAN_USBBUS1", "bitrate": 500000}
+    assert parse_can_spec("slcan:/dev/ttyACM0")["channel"] == "/dev/ttyACM0"
+    with pytest.raises(ArgumentRangeError):
+        parse_can_spec("nocolon")
+    with pytest.raises(ArgumentRangeError):
+        parse_can_spec("socketcand:localhost")
+
+
+@arun
+async def test_axis_api_reads_and_writes() -> None:
+    async with harness(1, 2) as h:
+        ax = h.axis(1)
+        assert ax.protocol == "dyncan"
+        assert await ax.read_id() == 1
+        st = await ax.status()
+        assert st.on_position and not st.servo_free
+        await ax.write_params({"main_gain": 55, "line_num": 1234, "gear_num": 2048})
+        params = await ax.read_params(["main_gain", "speed_gain", "line_num", "gear_num"])
+        d = h.network.node(1).drive
+        assert params == {"main_gain": 55, "speed_gain": d.get_param("speed_gain"),
+                          "line_num": 1234, "gear_num": 2048}
+        assert await ax.read_param("gear_num") == 2048
+        await ax.write_param("max_speed", 77)
+        assert await ax.read_param("max_speed") == 77  # frames are handled in order
+        await ax.set_config(DriveConfig(absolute=True))
+        assert (await ax.config()).absolute
+        assert await ax.echo(b"\x00\x7f\x80\xff") == b"\x00\x7f\x80\xff"
+        assert [await ax.counter() for _ in range(3)] == [0, 1, 2]
+        await ax.disable()
+        assert (await ax.status()).servo_free
+        await ax.enable()
+        other = await ax.sibling(2)
+        assert await other.read_id() == 2
+        assert h.network.node(2).drive.get_param("main_gain") != 55
+
+
+@arun
+async def test_range_checks_before_sending() -> None:
+    async with harness(1) as h:
+        ax = h.axis(1)
+        sent = h.client.stats.sent
+        for call in (ax.turn(20_001), ax.move_to(c.VALUE_MAX + 1), ax.write_param("gear_num", 1),
+                     ax.write_param("torque_limit", 100), ax.assign_id(64),
+                     ax.position_direct(16_385), ax.wave_frequency(51)):
+            with pytest.raises(ArgumentRangeError):
+                await call
+        assert h.client.stats.sent == sent
+
+
+@arun
+async def test_motion_and_readouts_in_realtime() -> None:
+    async with harness(1, realtime=True) as h:
+        ax = h.axis(1)
+        gear = await ax.read_param("gear_num")
+        window = U.onrange_to_counts(await ax.read_param("on_range"))
+        await ax.move_to(2000, wait=True, timeout=5)
+        assert abs(await ax.position() - U.command_to_counts(2000, gear)) <= window
+        await ax.turn(300)
+        await asyncio.sleep(0.3)
+        assert 250 <= await ax.speed() <= 300
+        assert -700 <= await ax.torque() <= 700
+        await ax.stop()
+        await ax.set_origin()
+        assert abs(await ax.position()) < 3000
+
+
+@arun
+async def test_assign_id_waits_and_readdresses() -> None:
+    async with harness(1) as h:
+        ax = h.axis(1)
+        loop = asyncio.get_running_loop()
+        t = loop.time()
+        await ax.assign_id(7)
+        assert loop.time() - t >= 0.010
+        assert ax.drive_id == 7 and await ax.read_id() == 7
+        assert h.network.nodes[0].drive_id == 7
+
+
+@arun
+async def test_read_timeout_is_bounded_and_retried() -> None:
+    async with harness(1, timeout=0.02, retries=2) as h:
+        ax = h.axis(9)  # nobody
+        loop = asyncio.get_running_loop()
+        t = loop.time()
+        with pytest.raises(DriveTimeout):
+            await ax.status()
+        assert 0.06 <= loop.time() - t < 1.0
+        assert h.client.stats.retries == 2
+        assert not await ax.ping(0.01)
+        assert await h.axis(1).ping()
+
+
+@arun
+async def test_drive_error_ff_fails_the_read_or_the_next_call() -> None:
+    async with harness(1) as h:
+        ax = h.axis(1)
+        # a foreign/corrupted request that skipped the client's checks
+        await h.client.port.send((1 << 5) | c.Function.TURN_CONST_SPEED,
+                                 (30_000).to_bytes(2, "big"))
+        with pytest.raises(DriveError) as info:
+            for _ in range(50):  # the error is raised by the next call once it has arrived
+                await ax.status()
+                await asyncio.sleep(0.005)
+        assert info.value.code == 0xFF and info.value.drive_id == 1
+        await ax.status()  # raised once
+
+
+@arun
+async def test_alarm_push_callback_and_next_call() -> None:
+    seen: list[int] = []
+    async with harness(1, 2, on_alarm=seen.append) as h:
+        got = asyncio.Event()
+        h.client.on_alarm(lambda i: got.set())
+        h.network.node(2).drive.trip(AlarmCode.OVERHEAT)
+        # the server pushes queued alarms from its outbox
+        await asyncio.wait_for(got.wait(), 2.0)
+        assert seen == [2]
+        await h.axis(1).status()  # other drive unaffected
+        with pytest.raises(DriveAlarm) as info:
+            await h.axis(2).status()
+        assert info.value.drive_id == 2
+        st = await h.axis(2).status()
+        assert st.alarm is AlarmCode.OVERHEAT and st.servo_free
+        with pytest.raises(DriveAlarm):
+            await h.axis(2).wait_idle(1.0)
+        await h.axis(2).reset()
+        assert (await h.axis(2).status()).alarm is AlarmCode.NONE
+
+
+@arun
+async def test_sync_move_starts_axes_within_one_control_period() -> None:
+    async with harness(1, 2, 3) as h:
+        drives = h.network.drives
+        await h.client.sync_move({1: 1000, 2: -2000, 3: 500})
+        for _ in range(200):
+            if all(n.motion_started_at is not None for n in h.network.nodes):
+                break
+            await asyncio.sleep(0.002)
+        starts = [n.motion_started_at for n in h.network.nodes]
+        assert None not in starts
+        assert max(starts) - min(starts) <= 1 / 4000  # type: ignore[type-var,operator]
+        for d in drives:
+            d.advance(1.0)
+        gear = drives[0].get_param("gear_num")
+        assert [d.position for d in drives] == [
+            round(U.command_to_counts(v, gear)) for v in (1000, -2000, 500)]
+
+
+@arun
+async def test_position_direct_stream_fixed_period() -> None:
+    async with harness(1, 2) as h:
+        loop = asyncio.get_running_loop()
+        t = loop.time()
+        stats = await h.client.stream_position_direct({1: [10] * 20, 2: [-5] * 10}, 0.005)
+        elapsed = loop.time() - t
+        assert stats.ticks == 20 and stats.frames == 30
+        assert elapsed >= 19 * 0.005
+        for _ in range(100):
+            if h.network.stats.frames >= 30:
+                break
+            await asyncio.sleep(0.002)
+        assert h.network.stats.frames == 30
+        with pytest.raises(ArgumentRangeError):
+            await h.client.stream_position_direct({1: [10, 20_000]}, 0.001)
+
+
+@arun
+async def test_heartbeat_monitor() -> None:
+    async with harness(1, timeout=0.02, retries=0) as h:
+        lost: list[int] = []
+        hb = h.client.start_heartbeat(1, 0.005, lambda i, e: lost.append(i))
+        for _ in range(200):
+            if hb.beats >= 5:
+                break
+            await asyncio.sleep(0.005)
+        assert hb.beats >= 5 and hb.gaps == 0 and not lost
+        h.network.nodes[0].drive.assign_id(9)  # drive vanishes from id 1
+        for _ in range(200):
+            if lost:
+                break
+            await asyncio.sleep(0.005)
+        await hb.stop()
+        assert lost and lost[0] == 1
+
+
+@arun
+async def test_trace_sees_frames() -> None:
+    async with harness(1) as h:
+        events: list[tuple[Direction, object]] = []
+        await h.axis(1).add_trace(lambda d, item, t: events.append((d, item)))
+        await h.axis(1).status()
+        assert events[0] == (Direction.TX, cmds.make_read_status(1).frame)
+        assert events[1][0] is Direction.RX and isinstance(events[1][1], c.Frame)
+
+
+@arun
+async def test_open_can_axis_and_broadcast_id_zero() -> None:
+    spec = f"virtual:servobus-dyncan-test-{next(_channels)}"
+    network = DynCanNetwork([VirtualDrive(5)])
+    node_port = await AsyncCanBus.open(spec)
+    stop = asyncio.Event()
+    server = asyncio.create_task(serve(network, node_port, stop=stop))
+    axis: AsyncAxis = await open_can_axis(spec, drive_id=0, timeout=0.1)
+    try:
+        assert await axis.read_id() == 5  # a read to id 0 finds the only drive
+    finally:
+        await axis.close()
+        stop.set()
+        await server
+        await node_port.close()
