@@ -265,3 +265,44 @@ def test_sniff_live_tap_of_the_simulator() -> None:
     assert (request["function"], request["drive_id"]) == ("GENERAL_READ", 4)
     assert (reply["function"], reply["basis"], reply["direction"]) == (
         "IS_ABS_POS32", "reply", "drive->host")
+
+
+# ------------------------------------------------------------------ DYN CAN frames
+def test_decode_can_frames_in_cansend_notation() -> None:
+    from servobus.codec import dyncan
+
+    ident = dyncan.arbitration_id(7, dyncan.Function.GENERAL_READ)
+    code, out = run("decode", f"{ident:03x}#1b", f"{ident:03x}#00010000")
+    lines = out.splitlines()
+    assert code == 0 and len(lines) == 2
+    assert lines[0].endswith("host -> id 7: GENERAL_READ 0x1b (POSITION)")
+    assert lines[1].endswith("drive id 7 -> host: GENERAL_READ 65536")
+    code, out = run("decode", "800#00")
+    assert code == 2 and "11-bit" in out
+
+
+def test_sniff_can_bus() -> None:
+    import can
+
+    from servobus.codec import dyncan
+
+    channel = "servobus-test-sniff"
+    ident = dyncan.arbitration_id(2, dyncan.Function.GENERAL_READ)
+    stop = threading.Event()
+
+    def send() -> None:
+        with can.Bus(interface="virtual", channel=channel) as bus:
+            while not stop.wait(0.02):  # until the sniffer has what it needs
+                bus.send(can.Message(arbitration_id=ident, data=b"\x1b", is_extended_id=False))
+
+    thread = threading.Thread(target=send, daemon=True)
+    thread.start()
+    try:
+        code, out = run("--can", f"virtual:{channel}", "--json", "sniff", "--count", "2",
+                        "--duration", "10")
+    finally:
+        stop.set()
+        thread.join(5)
+    records = [json.loads(line) for line in out.splitlines()]
+    assert code == 0 and len(records) == 2
+    assert records[0]["text"] == "host -> id 2: GENERAL_READ 0x1b (POSITION)"

@@ -10,7 +10,7 @@ from __future__ import annotations
 import socket
 import sys
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, BinaryIO, Protocol
 
@@ -18,11 +18,13 @@ import click
 
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.line_decoder import (
+    CanEvent,
     ErrorEvent,
     LineDecoder,
     LineEvent,
-    PacketEvent,
+    can_event,
     decode_stream,
+    parse_can_frame,
     parse_hex,
 )
 from servobus.cli.open_axis import emit_json, note
@@ -30,8 +32,13 @@ from servobus.cli.open_axis import emit_json, note
 RAW_WIDTH = 21  # "xx " x 7 bytes
 
 
-def format_event(event: LineEvent, prefix: str = "") -> list[str]:
+AnyEvent = LineEvent | CanEvent
+
+
+def format_event(event: AnyEvent, prefix: str = "") -> list[str]:
     """Text lines for one event; an ambiguous packet gets a second line with the alternative."""
+    if isinstance(event, CanEvent):
+        return [f"{prefix}{event.raw_text:<{RAW_WIDTH}}{event.text}"]
     if isinstance(event, ErrorEvent):
         label = "checksum error" if event.kind == "checksum" else "garbage"
         return [f"{prefix}{event.raw.hex(' '):<{RAW_WIDTH}}{label}: {event.message}"]
@@ -46,15 +53,19 @@ def format_event(event: LineEvent, prefix: str = "") -> list[str]:
 @click.argument("hex_bytes", nargs=-1, required=True, metavar="HEX...")
 @pass_cli
 def decode_cmd(ctx: CliContext, hex_bytes: tuple[str, ...]) -> None:
-    """Decode DYN232M packets from hex bytes in any spacing.
+    """Decode DYN232M packets from hex bytes in any spacing, or DYN CAN frames written ID#DATA.
 
-    Example: servobus decode 03 a3 ff 88 ad   (Go_Relative_Pos -120 to id 3)
+    Examples: servobus decode 03 a3 ff 88 ad   (Go_Relative_Pos -120 to id 3);
+    servobus decode 0ee#1b  (DYN CAN General_Read position from id 7)
     """
+    events: list[AnyEvent]
     try:
-        data = parse_hex(hex_bytes)
+        if any("#" in token for token in hex_bytes):
+            events = [can_event(*parse_can_frame(t)) for arg in hex_bytes for t in arg.split()]
+        else:
+            events = list(decode_stream([parse_hex(hex_bytes)]))
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="HEX") from None
-    events = list(decode_stream([data]))
     if ctx.json:
         emit_json([e.as_dict() for e in events])
     else:
@@ -156,7 +167,8 @@ def _chunks(source: _Source, deadline: float | None) -> Iterator[bytes]:
 @click.command("sniff")
 @click.option("--tap", metavar="URL", default=None,
               help="tap to read, e.g. tcp://127.0.0.1:PORT from `servobus sim dyn2 --tap`; "
-                   "default: the global --port (a pyserial port/URL on the RS485 line)")
+                   "default: the global --port (a pyserial port/URL on the RS485 line) "
+                   "or the global --can bus (DYN CAN frames)")
 @click.option("--from-file", "from_file", metavar="FILE", default=None,
               help="decode raw bytes from FILE ('-' = stdin) instead of a live line")
 @click.option("--hex", "as_hex", is_flag=True, help="with --from-file: the file holds hex text")
@@ -172,13 +184,19 @@ def sniff_cmd(ctx: CliContext, tap: str | None, from_file: str | None, as_hex: b
     Direction is inferred (a reply follows the host's read with the expected Is_* code from
     the same id); when both readings fit, both are printed.
     """
-    source, live = _open_source(ctx, tap, from_file, as_hex)
     start = time.monotonic()
     deadline = None if duration is None else start + duration
+    events: Iterator[AnyEvent]
+    if ctx.can is not None and tap is None and from_file is None:
+        source: _Source | None = None
+        events, live = _can_events(ctx.can, deadline), True
+    else:
+        source, live = _open_source(ctx, tap, from_file, as_hex)
+        events = _events(source, deadline)
     packets = errors = 0
     try:
-        for event in _events(source, deadline):
-            if isinstance(event, PacketEvent):
+        for event in events:
+            if not isinstance(event, ErrorEvent):
                 packets += 1
             else:
                 errors += 1
@@ -194,12 +212,32 @@ def sniff_cmd(ctx: CliContext, tap: str | None, from_file: str | None, as_hex: b
             if count is not None and packets >= count:
                 break
     finally:
-        source.close()
+        if source is not None:
+            source.close()
         if not ctx.json:
             note(f"{packets} packet(s), {errors} error(s)")
 
 
-def _events(source: _Source, deadline: float | None) -> Iterable[LineEvent]:
+def _can_events(spec: str, deadline: float | None) -> Iterator[AnyEvent]:
+    """Frames seen on a python-can bus (``--can INTERFACE:CHANNEL``), as DYN CAN events."""
+    from servobus.transport.can_bus import open_bus
+
+    bus = open_bus(spec)
+    try:
+        while deadline is None or time.monotonic() < deadline:
+            msg = bus.recv(POLL_S)
+            if msg is None:
+                continue
+            if msg.is_extended_id or msg.is_error_frame:
+                yield ErrorEvent("framing", f"not a DYN CAN frame: id 0x{msg.arbitration_id:x}",
+                                 bytes(msg.data))
+            else:
+                yield can_event(msg.arbitration_id, bytes(msg.data))
+    finally:
+        bus.shutdown()
+
+
+def _events(source: _Source, deadline: float | None) -> Iterator[LineEvent]:
     decoder = LineDecoder()
     for chunk in _chunks(source, deadline):
         yield from decoder.iter_feed(chunk)

@@ -27,6 +27,7 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
 from servobus.codec import dyn232 as c
+from servobus.codec import dyncan
 from servobus.drive import params as P
 from servobus.drive.registers import DriveConfig, DriveStatus
 from servobus.errors import ChecksumError, ProtocolError
@@ -231,3 +232,44 @@ def parse_hex(tokens: Iterable[str]) -> bytes:
             except ValueError:
                 raise ValueError(f"not hex: {part!r}") from None
     return bytes(out)
+
+
+# ------------------------------------------------------------------ DYN CAN frames
+@dataclass(frozen=True)
+class CanEvent:
+    """One DYN CAN frame; direction from the frame's shape (dyncan.describe: replies reuse the
+    request's identifier, so the data length against the function table tells them apart)."""
+
+    arbitration_id: int
+    data: bytes
+    text: str
+
+    @property
+    def raw_text(self) -> str:
+        """candump/cansend notation: ``0e3#1b``."""
+        return f"{self.arbitration_id:03x}#{self.data.hex()}"
+
+    def as_dict(self) -> dict[str, object]:
+        return {"id": self.arbitration_id, "data": self.data.hex(" "), "text": self.text}
+
+
+def can_event(arbitration_id: int, data: bytes) -> CanEvent | ErrorEvent:
+    try:
+        frame = dyncan.decode(arbitration_id, data)
+    except ProtocolError as exc:
+        return ErrorEvent("framing", str(exc), data)
+    return CanEvent(arbitration_id, bytes(data), dyncan.describe(frame))
+
+
+def parse_can_frame(token: str) -> tuple[int, bytes]:
+    """``ID#DATA`` as cansend writes it (``0e3#1b``, ``7#de.ad``); ValueError if malformed."""
+    ident, sep, data = token.partition("#")
+    if not sep:
+        raise ValueError(f"CAN frame {token!r} must be ID#DATA (hex)")
+    try:
+        arbitration_id = int(ident, 16)
+    except ValueError:
+        raise ValueError(f"CAN identifier {ident!r} is not hex") from None
+    if not 0 <= arbitration_id <= 0x7FF:
+        raise ValueError(f"CAN identifier 0x{arbitration_id:x} is not an 11-bit identifier")
+    return arbitration_id, parse_hex([data.replace(".", "")]) if data else b""
