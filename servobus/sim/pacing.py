@@ -26,7 +26,7 @@ import contextlib
 import heapq
 import itertools
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 from servobus.codec import dyn232 as c
 from servobus.sim.dyn232_line import Dyn232Line
@@ -36,6 +36,7 @@ from servobus.transport.base import Direction, TraceHook
 BYTE_TIME_S = c.wire_time_s(1)  # 10 bits at 38400 baud = 260.4 us
 COARSE_S = 0.0015  # epoll-based loops round timeouts up to 1 ms (+ wake-up jitter)
 FINE_COARSE_S = 0.0004  # for loops on a microsecond selector (the sim server uses select())
+MAX_PENDING_TAP = 4096  # host bytes held for the tap until their packet completes
 SPIN_S = 0.00012  # time.sleep overshoots by ~50-100 us (timer slack): spin the last part
 
 
@@ -59,6 +60,7 @@ class HostPort:
     def __init__(self, deliver: Callable[[bytes], None]) -> None:
         self.framer = c.Framer()  # per port: two hosts' packets never mix mid-packet
         self._deliver = deliver
+        self.tap_pending = bytearray()  # host bytes of a packet not yet complete
         self.closed = False
 
     def deliver(self, data: bytes) -> None:
@@ -119,14 +121,24 @@ class LineRunner:
 
     # ------------------------------------------------------------------ host bytes in
     def submit(self, port: HostPort, data: bytes) -> None:
-        """Host bytes from ``port`` reached the line now (call on the loop's thread)."""
+        """Host bytes from ``port`` reached the line now (call on the loop's thread).
+
+        Taps get host bytes a whole packet at a time (bytes of an incomplete packet wait in
+        the port until it completes), so packets of two host ports never interleave there.
+        """
         if not data:
             return
         now = time.monotonic()
         if not self.paced:
             self.clock.sync(now)
-            self._tap(Direction.TX, data, now)
-            for event in port.framer.iter_feed(data):
+            if not self.taps:
+                for event in port.framer.iter_feed(data):
+                    reply = self.line.handle(event)
+                    if reply:
+                        port.deliver(reply)
+                return
+            for _, chunk, event in self._segments(port, data):
+                self._tap(Direction.TX, chunk, now)
                 reply = self.line.handle(event)
                 if reply:
                     self._tap(Direction.RX, reply, now)
@@ -136,20 +148,33 @@ class LineRunner:
         self.clock.sync(now)
         start, _ = self.rx.send(len(data), now)
         bt = self.rx.byte_time_s
-        seg = 0
-        for i, event in self.line.events(data, port.framer):
-            t_done = start + (i + 1) * bt
+        for end, chunk, event in self._segments(port, data):
+            t_done = start + end * bt
             self.clock.sync(t_done)  # the drives' time = arrival time of the last byte
             if self.taps:
-                self._at(t_done, self._tap_cb(Direction.TX, data[seg : i + 1], t_done))
-                seg = i + 1
+                self._at(t_done, self._tap_cb(Direction.TX, chunk, t_done))
             reply = self.line.handle(event)
             if reply:
                 _, t_end = self.tx.send(len(reply), t_done)
                 self._at(t_end, self._release_cb(port, reply, t_end))
-        if self.taps and seg < len(data):
-            t_end = start + len(data) * bt
-            self._at(t_end, self._tap_cb(Direction.TX, data[seg:], t_end))
+
+    def _segments(
+        self, port: HostPort, data: bytes
+    ) -> Iterator[tuple[int, bytes, c.FramerEvent]]:
+        """Frame ``data``; yield (bytes of ``data`` used so far, bytes of the event, event).
+
+        The first chunk includes the port's bytes held from earlier calls; bytes of a packet
+        still incomplete at the end are held in ``port.tap_pending``.
+        """
+        seg = 0
+        for i, event in self.line.events(data, port.framer):
+            chunk = bytes(port.tap_pending) + data[seg : i + 1]
+            port.tap_pending.clear()
+            seg = i + 1
+            yield seg, chunk, event
+        if self.taps:  # bounded: a run of garbage is not kept forever
+            port.tap_pending += data[seg:]
+            del port.tap_pending[:-MAX_PENDING_TAP]
 
     # ------------------------------------------------------------------ timed release
     def _at(self, when: float, action: Callable[[], None]) -> None:

@@ -1,0 +1,75 @@
+"""``servobus sim dyn2``: a virtual DYN2 RS485 line on TCP (serial-to-TCP bridge) or a PTY.
+
+stdout gets one line per endpoint, flushed at once, so scripts and tests can read them::
+
+    listening on tcp://127.0.0.1:40123
+    pty /dev/pts/7
+    tap on tcp://127.0.0.1:40124
+
+Everything else (drive list, statistics) goes to stderr.
+"""
+
+from __future__ import annotations
+
+import click
+
+from servobus.codec.dyn232 import FACTORY_ID
+from servobus.drive import units as U
+from servobus.errors import ArgumentRangeError
+from servobus.sim.dyn232_server import parse_listen_url, run_server
+from servobus.sim.inprocess import make_drives, parse_ids
+
+
+def _tcp(option: str, value: str | None) -> tuple[str, int] | None:
+    if value is None:
+        return None
+    try:
+        return parse_listen_url(value)
+    except ArgumentRangeError as exc:
+        raise click.BadParameter(str(exc), param_hint=option) from None
+
+
+@click.command("dyn2")
+@click.option("--listen", metavar="tcp://HOST:PORT", default=None,
+              help="serve the line on TCP (pyserial socket://HOST:PORT connects); PORT 0 picks "
+                   "a free port; a missing host means 127.0.0.1  [default: tcp://127.0.0.1:0, "
+                   "or none with --pty]")
+@click.option("--ids", default=None, metavar="1,2,3",
+              help=f"drive ids on the line [default: one drive with the factory id {FACTORY_ID}]")
+@click.option("--pty", is_flag=True, help="serve the line on a pseudo-terminal; prints its path")
+@click.option("--fast", is_flag=True, help="no 38400-baud pacing: answer at once")
+@click.option("--state", metavar="FILE", default=None,
+              help="keep each drive's EEPROM (parameters, config, id) in this JSON file")
+@click.option("--tap", metavar="tcp://HOST:PORT", default=None,
+              help="also serve every byte of the line (both directions) for `servobus sniff`")
+@click.option("--model", type=click.Choice(sorted(U.MODELS)), default=U.DEFAULT_MODEL,
+              show_default=True, help="drive/motor model")
+@click.option("--duration", type=click.FloatRange(min=0.0), default=None, metavar="SECONDS",
+              help="stop by itself after this many seconds [default: run until Ctrl-C]")
+def sim_dyn2_cmd(listen: str | None, ids: str | None, pty: bool, fast: bool, state: str | None,
+                 tap: str | None, model: str, duration: float | None) -> None:
+    """Virtual DYN2/DC2 drives sharing one RS485 line (DYN232M protocol)."""
+    try:
+        drive_ids = parse_ids(ids) if ids is not None else (FACTORY_ID,)
+    except ArgumentRangeError as exc:
+        raise click.BadParameter(str(exc), param_hint="--ids") from None
+    endpoint = _tcp("--listen", listen)
+    if endpoint is None and not pty:
+        endpoint = ("127.0.0.1", 0)
+    tap_endpoint = _tcp("--tap", tap)
+    drives = make_drives(drive_ids, state=state, model=model)
+    pacing = "unpaced (--fast)" if fast else "paced at 38400 8N1"
+    click.echo(f"servobus sim dyn2: {len(drives)} {model} drive(s), ids "
+               f"{','.join(str(d.drive_id) for d in drives)}, {pacing}", err=True)
+    server = run_server(drives, listen=endpoint, pty=pty, tap=tap_endpoint, paced=not fast,
+                        duration=duration)
+    line = server.line
+    click.echo(f"stopped: {line.packets} packet(s), {line.checksum_errors} checksum error(s), "
+               f"{line.framing_errors} framing error(s)", err=True)
+
+
+def register(group: click.Group) -> None:
+    sim = group.commands.get("sim")
+    if not isinstance(sim, click.Group):
+        raise RuntimeError("servobus.cli.sim_cmd must be registered before sim_dyn2_cmd")
+    sim.add_command(sim_dyn2_cmd)
