@@ -30,6 +30,7 @@ from __future__ import annotations
 import asyncio
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -97,6 +98,7 @@ class AsyncDyn232Client:
         self._hooks: list[AxisTraceHook] = []
         self._last_query = -1e9
         self._closed = False
+        self._encoded: dict[Command, bytes] = {}
 
     # ------------------------------------------------------------- tracing
     def add_trace(self, hook: AxisTraceHook) -> None:
@@ -127,7 +129,12 @@ class AsyncDyn232Client:
             raise ConnectionError("client is closed")
         if command.kind is c.Kind.INTERNAL:
             raise ArgumentRangeError(f"{command.function.name} is internal to DMM; never sent")
-        raw = command.to_bytes()
+        if command.kind is c.Kind.READ:  # a handful of distinct reads: encode once
+            raw = self._encoded.get(command)
+            if raw is None:
+                raw = self._encoded[command] = command.to_bytes()
+        else:
+            raw = command.to_bytes()
         if command.kind is c.Kind.SETTING:
             self.guard.check(command.drive_id, _guard_item(command))
         async with self._lock:
@@ -281,6 +288,14 @@ class Dyn232Axis(AsyncAxis):
         self.client = client
         self._id = cmds.check_drive_id(drive_id)
         self._owns_client = owns_client
+        self._reads: dict[object, Command] = {}  # read commands are immutable: build once
+
+    def _read(self, factory: Callable[..., Command], *args: Any) -> Command:
+        key = (factory, *args)
+        command = self._reads.get(key)
+        if command is None:
+            command = self._reads[key] = factory(self._id, *args)
+        return command
 
     @property
     def drive_id(self) -> int:
@@ -326,48 +341,49 @@ class Dyn232Axis(AsyncAxis):
 
     # ------------------------------------------------------------- registers and readouts
     async def status(self) -> DriveStatus:
-        result: DriveStatus = await self._run(cmds.make_read_status(self._id))
+        result: DriveStatus = await self._run(self._read(cmds.make_read_status))
         return result
 
     async def config(self) -> DriveConfig:
-        result: DriveConfig = await self._run(cmds.make_read_config(self._id))
+        result: DriveConfig = await self._run(self._read(cmds.make_read_config))
         return result
 
     async def set_config(self, cfg: DriveConfig) -> None:
         await self._run(cmds.make_set_config(self._id, cfg))
 
     async def position(self) -> int:
-        return int(await self._run(cmds.make_read_position(self._id)))
+        return int(await self._run(self._read(cmds.make_read_position)))
 
     async def speed(self) -> int:
-        return int(await self._run(cmds.make_read_speed(self._id)))
+        return int(await self._run(self._read(cmds.make_read_speed)))
 
     async def torque(self) -> int:
-        return int(await self._run(cmds.make_read_torque(self._id)))
+        return int(await self._run(self._read(cmds.make_read_torque)))
 
     # ------------------------------------------------------------- parameters and id
     def _check_param(self, name: str, value: int) -> None:
         cmds.make_set_param(self._id, name, value)  # range + reachable over DYN232M
 
     async def read_param(self, name: str) -> int:
-        return int(await self._run(cmds.make_read_param(self._id, name)))
+        return int(await self._run(self._read(cmds.make_read_param, name)))
 
     async def write_param(self, name: str, value: int) -> None:
         await self._run(cmds.make_set_param(self._id, name, value))
 
     async def read_id(self) -> int:
-        return int(await self._run(cmds.make_read_id(self._id)))
+        return int(await self._run(self._read(cmds.make_read_id)))
 
     async def assign_id(self, new_id: int) -> None:
         """Assign_Drive_ID takes effect at once; this axis then addresses ``new_id``."""
         await self._run(cmds.make_assign_id(self._id, new_id))
         self.client.guard.rename_drive(self._id, new_id)
         self._id = new_id
+        self._reads.clear()
 
     async def ping(self, timeout: float = 0.05) -> bool:
         """One status read without retry. A corrupt reply still proves something answered."""
         try:
-            await self.client.execute(cmds.make_read_status(self._id), retries=0,
+            await self.client.execute(self._read(cmds.make_read_status), retries=0,
                                       timeout=timeout)
         except DriveTimeout:
             return False

@@ -1,0 +1,198 @@
+"""DYN232M client speed against the physical limits, measured in the same run.
+
+1. Position polls/s through the paced in-process line (38400 8N1) vs the wire limit for the
+   same bytes (baud / 10 / bytes per poll). Target >= 97 %.
+2. Full parameter read (8 parameters + config + status) on the paced line. Target <= 25 ms;
+   the wire time of the same bytes is printed beside it.
+3. Unpaced round trips/s over TCP to ``servobus sim dyn2 --fast`` (own process) vs a raw
+   socket echo server (own process, same event-loop type) answering the same byte counts.
+   Target >= 80 %.
+
+Run: ``python -m benchmarks`` (all) or ``python benchmarks/bench_dyn232_client.py``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+from servobus.client import connect_async
+from servobus.client.dyn232 import Dyn232Axis
+from servobus.codec import dyn232 as c
+from servobus.drive import params as P
+from servobus.transport.trace import ByteCounter
+
+POLL_SECONDS = 2.0
+PARAM_READS = 20
+TCP_ROUND_TRIPS = 3000
+
+_ECHO_SERVER = """
+import asyncio, sys
+async def handle(reader, writer):
+    try:
+        while data := await reader.read(4096):
+            writer.write(data)
+    except ConnectionError:
+        pass
+async def main():
+    server = await asyncio.start_server(handle, "127.0.0.1", 0)
+    print("listening on tcp://127.0.0.1:%d" % server.sockets[0].getsockname()[1], flush=True)
+    await asyncio.sleep(float(sys.argv[1]))
+asyncio.run(main())
+"""
+
+
+_REPLY_SERVER = """
+import asyncio, sys
+REPLY = bytes.fromhex(sys.argv[2])
+async def handle(reader, writer):
+    buf = b""
+    while data := await reader.read(4096):
+        buf += data
+        while len(buf) >= 4:
+            buf = buf[4:]
+            writer.write(REPLY)
+async def main():
+    server = await asyncio.start_server(handle, "127.0.0.1", 0)
+    print("listening on tcp://127.0.0.1:%d" % server.sockets[0].getsockname()[1], flush=True)
+    await asyncio.sleep(float(sys.argv[1]))
+asyncio.run(main())
+"""
+
+
+async def _open_paced() -> tuple[Dyn232Axis, ByteCounter]:
+    core = await connect_async("sim://dyn2")
+    assert isinstance(core, Dyn232Axis)
+    counter = ByteCounter()
+    core.client.stream.add_trace(counter)
+    return core, counter
+
+
+async def bench_position_polls() -> float:
+    core, counter = await _open_paced()
+    try:
+        await core.position()
+        tx0, rx0, n = counter.tx, counter.rx, 0
+        t0 = time.perf_counter()
+        while time.perf_counter() - t0 < POLL_SECONDS:
+            await core.position()
+            n += 1
+        elapsed = time.perf_counter() - t0
+    finally:
+        await core.close()
+    bytes_per_poll = (counter.tx - tx0 + counter.rx - rx0) / n
+    limit = c.BAUD / c.BITS_PER_BYTE / bytes_per_poll
+    rate = n / elapsed
+    ratio = rate / limit
+    print(f"position polls, paced 38400: {rate:7.1f}/s vs wire limit {limit:7.1f}/s "
+          f"({bytes_per_poll:.0f} bytes/poll) = {ratio:6.1%}  (target >= 97 %)")
+    return ratio
+
+
+async def bench_param_read() -> float:
+    core, counter = await _open_paced()
+    try:
+        await core.status()
+        best, total = float("inf"), 0.0
+        tx0, rx0 = counter.tx, counter.rx
+        for _ in range(PARAM_READS):
+            t0 = time.perf_counter()
+            await core.read_params(P.DYN_PARAMS)
+            await core.config()
+            await core.status()
+            dt = time.perf_counter() - t0
+            best, total = min(best, dt), total + dt
+    finally:
+        await core.close()
+    wire = c.wire_time_s((counter.tx - tx0 + counter.rx - rx0) // PARAM_READS)
+    mean = total / PARAM_READS
+    print(f"full parameter read (8 + config + status), paced 38400: mean {mean * 1e3:5.2f} ms, "
+          f"best {best * 1e3:5.2f} ms, wire time {wire * 1e3:5.2f} ms "
+          f"= {wire / mean:6.1%} of wire speed  (target <= 25 ms)")
+    return mean
+
+
+@contextmanager
+def _server(args: list[str]) -> Iterator[tuple[str, int]]:
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline().strip()
+        if not line.startswith("listening on tcp://"):
+            raise RuntimeError(f"server did not start: {line!r}")
+        host, port = line.split("tcp://", 1)[1].rsplit(":", 1)
+        yield host, int(port)
+    finally:
+        proc.terminate()
+        proc.wait(10)
+
+
+def _raw_echo_rate(host: str, port: int, request: bytes, reply_len: int) -> float:
+    with socket.create_connection((host, port)) as sock:
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        payload = request + b"\x00" * (reply_len - len(request)) if reply_len > len(request) \
+            else request
+        for _ in range(100):
+            sock.sendall(payload)
+            sock.recv(64)
+        t0 = time.perf_counter()
+        for _ in range(TCP_ROUND_TRIPS):
+            sock.sendall(payload)
+            got = 0
+            while got < len(payload):
+                got += len(sock.recv(64))
+        return TCP_ROUND_TRIPS / (time.perf_counter() - t0)
+
+
+async def _client_rate(host: str, port: int, transport: str) -> float:
+    core = await connect_async(f"socket://{host}:{port}", transport=transport,
+                               query_interval_s=0.0)
+    try:
+        for _ in range(100):
+            await core.status()
+        t0 = time.perf_counter()
+        for _ in range(TCP_ROUND_TRIPS):
+            await core.status()
+        return TCP_ROUND_TRIPS / (time.perf_counter() - t0)
+    finally:
+        await core.close()
+
+
+def bench_tcp_round_trips() -> float:
+    sim = [sys.executable, "-c", "from servobus.cli.main import main; main()", "sim", "dyn2",
+           "--fast", "--listen", "tcp://127.0.0.1:0", "--duration", "120"]
+    echo = [sys.executable, "-c", _ECHO_SERVER, "120"]
+    request = c.encode(0, c.HostFunction.READ_DRIVE_STATUS, 0)
+    reply_len = len(c.encode_reply(0, c.DriveFunction.IS_STATUS, 0))
+    reply = c.encode_reply(0, c.DriveFunction.IS_STATUS, 0)
+    canned = [sys.executable, "-c", _REPLY_SERVER, "120", reply.hex()]
+    with _server(echo) as (host, port):
+        raw = _raw_echo_rate(host, port, request, reply_len)
+    with _server(sim) as (host, port):
+        ours = asyncio.run(_client_rate(host, port, "tcp"))
+        via_pyserial = asyncio.run(_client_rate(host, port, "pyserial"))
+    with _server(canned) as (host, port):
+        client_only = asyncio.run(_client_rate(host, port, "tcp"))
+    ratio = ours / raw
+    print(f"unpaced status round trips over TCP: client + simulator {ours:7.0f}/s vs raw "
+          f"socket echo {raw:7.0f}/s = {ratio:6.1%}  (target >= 80 %)")
+    print(f"  same client, pyserial socket:// {via_pyserial:7.0f}/s = {via_pyserial / raw:6.1%}; "
+          f"same client vs a canned-reply server {client_only:7.0f}/s = {client_only / raw:6.1%} "
+          f"(client cost alone)")
+    return ratio
+
+
+def main() -> None:
+    print("== DYN232M client (benchmarks/bench_dyn232_client.py)")
+    asyncio.run(bench_position_polls())
+    asyncio.run(bench_param_read())
+    bench_tcp_round_trips()
+
+
+if __name__ == "__main__":
+    main()
