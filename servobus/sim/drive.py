@@ -6,27 +6,58 @@ they never touch its internals. Units at this API:
 * motion commands take *command units* (the protocol's numbers): point-to-point distance
   moves ``command x 4096 / GEAR_NUM x 4`` encoder counts;
 * ``position`` is in encoder counts (65,536 per revolution), ``speed_rpm`` in rpm,
-  ``torque_current`` in the DYN232M relative unit;
+  ``torque_current`` in the DYN232M relative unit (``current_a`` in amperes);
 * time is simulated seconds: ``advance(dt)`` steps as fast as the CPU allows (tests);
-  servers call ``advance_to(wall_clock - t0)`` to run in real time.
+  servers call ``advance_to(wall_clock - t0)`` to run in real time. One fixed control period
+  (``CONTROL_HZ``) runs underneath; commands take effect at the next period.
 
 Methods that command motion return False when the command was ignored (alarm latched,
-servo free, invalid value); the front end decides what the wire says about that.
+servo free, wrong servo/command mode, invalid value); the front end decides what the wire
+says about that. Motion commands are accepted in position servo mode with the RS232 command
+mode (manual 4.4: in pulse/analog modes the serial port only sets and reads parameters).
+
+Public additions beyond the DYN232M set (contract for the other front ends and tests):
+
+* ``move_direct(command) -> bool``: DYN CAN Position Direct (0x1C): relative to the current
+  target, no S-curve smoothing, limited by Max Speed / Max Accel.
+* ``set_speed_accel_group(max_speed, max_accel) -> bool``: DYN CAN Set_Param_Group2. 0 leaves
+  a value unchanged; any other value outside 1..127 rejects the whole write (False). The
+  first 10 such writes after power-on go to EEPROM, later ones to RAM only.
+* Inputs: ``input_pulses(count, seconds=0.0)`` (pulses spread over ``seconds``; 4 x GEAR_NUM
+  per rev; needs CW/CCW or Pulse/Dir command mode), ``input_pulse_levels(samples,
+  seconds=0.0)`` (signal-level (pin6, pin4) samples decoded per ``pulse_format``),
+  ``set_analog_input(volts)`` (speed 600 rpm/V, torque 1 or 2 A/V, position 0-10 V ->
+  0-90 deg x 4096/GEAR_NUM in Analog command mode; > 2.5 V reads as status b6),
+  ``set_enable_input(enabled)`` (JP3-11; disabled = free, commands and error cleared).
+* Outputs: ``onpos_output`` (None when JP3-9 is BKO), ``alarm_output``, ``zri_output``,
+  ``zri_count``, ``brake_released`` (BKO, only when OnRange was 127 at power-on, else None).
+* World: ``set_load(inertia=, friction=)``, ``set_disturbance(nm)``, ``set_blocked(bool)``,
+  ``set_bus_voltage(volts)`` (> 80 V trips over voltage), ``current_a``, ``heat_fraction``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import math
+from collections.abc import Callable, Iterable
 
+from servobus.codec.dyn232 import WAVE_AMPLITUDE_MAX, WAVE_FREQUENCY_MAX_HZ
 from servobus.drive import params as P
+from servobus.drive import profile as PR
 from servobus.drive import units as U
-from servobus.drive.registers import AlarmCode, DriveConfig, DriveStatus, ServoMode
+from servobus.drive.registers import AlarmCode, CommandMode, DriveConfig, DriveStatus, ServoMode
+from servobus.sim.core import constants as K
+from servobus.sim.core import interp
+from servobus.sim.core.engine import Gen, Ref, Servo, ServoEngine
+from servobus.sim.core.io import PulseDecoder, PulseFormat
 from servobus.sim.eeprom import EepromStore
 
 AlarmListener = Callable[["VirtualDrive", AlarmCode], None]
 
-CONTROL_HZ = 4_000  # fixed control period; see servobus.sim docs
+CONTROL_HZ = K.CONTROL_HZ  # fixed control period (see servobus.sim.core.constants)
 DEFAULT_AXIS_IDS = (1, 2, 3)  # drive ids of X, Y, Z for broadcast interpolation
+#: DYN232M torque readout: relative unit (manual example 10); decision: 1 unit = 1 mA.
+TORQUE_UNITS_PER_A = 1000.0
+_GAIN_PARAMS = ("main_gain", "speed_gain", "int_gain", "trq_cons", "torque_limit")
 
 
 class VirtualDrive:
@@ -46,27 +77,45 @@ class VirtualDrive:
         self.axis_ids = axis_ids
         self.alarm_listeners: list[AlarmListener] = []
         self.time = 0.0
+        self._engine = ServoEngine(self.model)
+        self._enable_input = True
+        self._analog_v = 0.0
+        self._decoder = PulseDecoder()
+        self.zri_count = 0
         self._power_on()
 
     # ---------------------------------------------------------------- lifecycle
     def _power_on(self) -> None:
-        """State at power-on: RAM from EEPROM, alarms cleared, relative position 0."""
+        """State at power-on: RAM from EEPROM, alarms cleared, position per config b2."""
+        eng = self._engine
         self._ram: dict[str, int] = dict(self.eeprom.params)
         self._config = DriveConfig.from_byte(self.eeprom.config)
         self._alarm = AlarmCode.NONE
         self._crc_notice = False
-        self._pos = 0.0  # motor position, counts
-        self._vel = 0.0  # counts/s
-        self._target = 0.0  # commanded end position, counts
-        self._speed_cmd: float | None = None  # counts/s in constant-speed mode
-        self._busy = False
         self._wave_amp = 0
-        self._wave_hz = 0
+        self._wave_square = False
+        self._wave_hz = 0  # SS_Frequency resets at power-off (DYN CAN 6)
         self._line_words: list[int] = []
         self._arc_words: list[int] = []
+        self._group2_writes = 0
+        self._feed_scale = 1.0
+        self._bko_mode = self._ram["on_range"] == 127  # 4.6: takes effect after power cycle
+        eng.power_on()
+        eng.servo = Servo.FREE
+        self._apply_params()
+        if self._config.absolute:
+            # 7.3 b2: back to the stored zero; the single-turn encoder knows the angle only
+            # within one revolution, so the nearest zero (-180..+180 deg) is used.
+            rel = (eng.p - self.eeprom.origin + U.COUNTS_PER_REV / 2) % U.COUNTS_PER_REV
+            self._origin = eng.p - (rel - U.COUNTS_PER_REV / 2)
+        else:
+            self._origin = eng.p  # relative mode: reads 0 after power-on
+        self._apply_servo()
+        if self._config.absolute and eng.servo == Servo.POSITION:
+            self._go(self._origin)
 
     def reset(self) -> None:
-        """Power cycle (also the DYN232M General_Read 0x1C selector)."""
+        """Power cycle (also the DYN232M General_Read 0x1C selector): clears a latched alarm."""
         self._power_on()
 
     # ---------------------------------------------------------------- identity
@@ -94,27 +143,64 @@ class VirtualDrive:
         return self._ram[P.spec(name).name]
 
     def set_param(self, name: str, value: int, *, ram_only: bool = False) -> bool:
-        """Write a parameter; out-of-range writes are ignored and return False."""
+        """Write a parameter; out-of-range writes are ignored and return False.
+
+        EEPROM wear: past 1,000,000 writes the value still takes effect (RAM) but no longer
+        survives a power cycle (see :mod:`servobus.sim.eeprom`)."""
         spec = P.spec(name)
-        if not spec.valid(value):
+        if isinstance(value, bool) or not isinstance(value, int) or not spec.valid(value):
             return False
         self._ram[spec.name] = value
         if not ram_only and spec.storage is P.Storage.EEPROM:
             self.eeprom.write_param(spec.name, value)
+        self._apply_params()
         return True
+
+    def set_speed_accel_group(self, max_speed: int, max_accel: int) -> bool:
+        """DYN CAN Set_Param_Group2 (see class docstring for the EEPROM quirk)."""
+        values = {"max_speed": max_speed, "max_accel": max_accel}
+        if any(v != 0 and not P.spec(n).valid(v) for n, v in values.items()):
+            return False
+        to_eeprom = self._group2_writes < K.GROUP2_EEPROM_WRITES
+        self._group2_writes += 1
+        for name, v in values.items():
+            if v:
+                self._ram[name] = v
+                if to_eeprom:
+                    self.eeprom.write_param(name, v)
+        self._apply_params()
+        return True
+
+    def _apply_params(self) -> None:
+        r = self._ram
+        self._engine.set_gains(*(r[n] for n in _GAIN_PARAMS))
+        self._engine.set_soft_start(U.soft_start_rise_s(r["max_accel"]))
+        self._apply_profile()
+
+    def _apply_profile(self) -> None:
+        g = self._ram["gear_num"]
+        self._engine.set_profile(PR.speed_counts_per_s(self._ram["max_speed"], g)
+                                 * self._feed_scale,
+                                 PR.accel_counts_per_s2(self._ram["max_accel"], g))
 
     # ---------------------------------------------------------------- registers
     def peek_status(self) -> DriveStatus:
         alarm = self._alarm
         if alarm is AlarmCode.NONE and self._crc_notice:
             alarm = AlarmCode.CHECKSUM
-        on_range = U.onrange_to_counts(self._ram["on_range"])
         return DriveStatus(
-            on_position=abs(self._target - self._pos) <= on_range and not self._busy,
+            on_position=self._on_position(),
             servo_free=self.servo_free,
             alarm=alarm,
-            motion_busy=self._busy,
+            motion_busy=self._engine.busy,
+            jp3_pin2=self._analog_v > K.JP3_PIN2_HIGH_V,
         )
+
+    def _on_position(self) -> bool:
+        eng = self._engine
+        if eng.busy or (eng.servo != Servo.FREE and eng.ref_moving):
+            return False
+        return abs(eng.ref - eng.p) <= U.onrange_to_counts(self._ram["on_range"])
 
     def read_status(self) -> DriveStatus:
         """Status as a status read reports it; the checksum notice clears once read."""
@@ -130,86 +216,159 @@ class VirtualDrive:
         return self._config
 
     def set_config(self, value: int) -> bool:
+        """Config byte (7.3); stored in EEPROM. b6 is TBD and dropped."""
         if not 0 <= value <= 0x7F:
             return False
         cfg = DriveConfig.from_byte(value & 0x3F)
         self._config = cfg
         self.eeprom.write_config(cfg.to_byte())
-        if cfg.free:
-            self._stop_motion()
+        self._apply_servo()
         return True
 
     @property
     def servo_free(self) -> bool:
-        return self._config.free or self._alarm.latching
+        return self._config.free or self._alarm.latching or not self._enable_input
 
     @property
     def alarm(self) -> AlarmCode:
         return self._alarm
 
     def enable(self) -> None:
-        self.set_config(self._config.to_byte() & ~0x20)
+        """Servo on (General_Read 0x20). Decision: RAM only, to spare the EEPROM."""
+        self._config = DriveConfig.from_byte(self._config.to_byte() & ~0x20)
+        self._apply_servo()
 
     def disable(self) -> None:
-        self.set_config(self._config.to_byte() | 0x20)
+        """Servo off, motor free (General_Read 0x21). RAM only, like enable()."""
+        self._config = DriveConfig.from_byte(self._config.to_byte() | 0x20)
+        self._apply_servo()
 
     def trip(self, code: AlarmCode) -> None:
         """Latch an alarm: motor free, commands ignored until reset()."""
         if self._alarm.latching or not code.latching:
             return
+        self._engine._trip(code)
+        self._latch(code)
+
+    def _latch(self, code: AlarmCode) -> None:
         self._alarm = code
-        self._stop_motion()
+        self._engine.trip_code = AlarmCode.NONE
+        self._apply_servo()
         for listener in list(self.alarm_listeners):
             listener(self, code)
 
+    def _servo_mode(self) -> Servo:
+        if self.servo_free:
+            return Servo.FREE
+        return {ServoMode.SPEED: Servo.SPEED, ServoMode.TORQUE: Servo.TORQUE}.get(
+            self._config.servo_mode, Servo.POSITION)
+
+    def _apply_servo(self) -> None:
+        eng = self._engine
+        mode = self._servo_mode()
+        if mode != eng.servo:
+            eng.servo = mode
+            eng.hold_here()
+            if mode == Servo.FREE:
+                eng.tq = eng.tq_cmd = 0.0
+            eng.speed_ref = 0.0
+            self._apply_analog()
+        eng.wake()
+
     # ---------------------------------------------------------------- motion
     def _accepts_motion(self) -> bool:
-        return not self.servo_free and self._config.servo_mode is ServoMode.POSITION
+        return (not self.servo_free and self._config.servo_mode is ServoMode.POSITION
+                and self._config.command_mode is CommandMode.RS232)
 
-    def _stop_motion(self) -> None:
-        self._speed_cmd = None
-        self._busy = False
-        self._target = self._pos
-        self._vel = 0.0
-        self._wave_amp = 0
+    def _counts(self, command: float) -> float:
+        return U.command_to_counts(command, self._ram["gear_num"])
+
+    def _smoothing(self, distance: float) -> float:
+        eng = self._engine
+        ta, tc, _ = PR.trapezoid_time(distance, eng.vmax, eng.amax)
+        return PR.smoothing_window(2 * ta + tc, ta)
+
+    def _ptp_limits(self) -> None:
+        if self._feed_scale != 1.0:
+            self._feed_scale = 1.0
+            self._apply_profile()
+
+    def _go(self, target: float, *, smooth: bool = True) -> None:
+        self._ptp_limits()
+        eng = self._engine
+        dist = abs(target - eng.ref)
+        eng.go_to(target, self._smoothing(dist) if smooth else 0.0)
 
     def set_origin(self) -> None:
-        self._target -= self._pos
-        self._pos = 0.0
+        """The current motor position becomes 0; stored as the absolute zero (EEPROM)."""
+        eng = self._engine
+        self._origin = eng.p
+        self.eeprom.write_origin(round(eng.p) % U.COUNTS_PER_REV)
 
     def move_absolute(self, command: int) -> bool:
         if not self._accepts_motion():
             return False
-        self._speed_cmd = None
-        self._target = U.command_to_counts(command, self._ram["gear_num"])
-        self._busy = True
+        self._go(self._origin + self._counts(command))
         return True
+
+    def _relative_base(self) -> float:
+        eng = self._engine
+        if eng.ref_mode == Ref.GEN and eng.path is None and eng.gen == Gen.POS:
+            return eng.gT  # DTPU: relative to the running target
+        return eng.ref
 
     def move_relative(self, command: int) -> bool:
         if not self._accepts_motion():
             return False
-        base = self._target if self._speed_cmd is None else self._pos
-        self._speed_cmd = None
-        self._target = base + U.command_to_counts(command, self._ram["gear_num"])
-        self._busy = True
+        self._go(self._relative_base() + self._counts(command))
+        return True
+
+    def move_direct(self, command: int) -> bool:
+        """DYN CAN Position Direct: relative, no S-curve smoothing, Max Speed/Accel limits."""
+        if not self._accepts_motion():
+            return False
+        self._go(self._relative_base() + self._counts(command), smooth=False)
         return True
 
     def turn_const_speed(self, rpm: int) -> bool:
+        """Ramp at Max Accel to ``rpm`` and hold it; 0 brakes at Max Accel and holds."""
         if not self._accepts_motion():
             return False
-        self._speed_cmd = U.rpm_to_counts_per_s(rpm)
-        self._busy = False
+        self._ptp_limits()
+        self._engine.run_speed(U.rpm_to_counts_per_s(rpm), 0.0)
         return True
 
     def square_wave(self, amplitude: int) -> bool:
-        return self._accepts_motion()  # deepened by the drive-core work
+        return self._wave(amplitude, square=True)
 
     def sine_wave(self, amplitude: int) -> bool:
-        return self._accepts_motion()
+        return self._wave(amplitude, square=False)
+
+    def _wave(self, amplitude: int, *, square: bool) -> bool:
+        """Amplitude 4096 = 180 deg peak; runs while SS_Frequency is not 0; 0 stops."""
+        if not 0 <= amplitude <= WAVE_AMPLITUDE_MAX or not self._accepts_motion():
+            return False
+        self._wave_amp, self._wave_square = amplitude, square
+        self._update_wave()
+        return True
 
     def set_wave_frequency(self, hz: int) -> bool:
+        """SS_Frequency in Hz (shared by both waves); 0 stops the wave."""
+        if not 0 <= hz <= WAVE_FREQUENCY_MAX_HZ:
+            return False
         self._wave_hz = hz
+        if self._accepts_motion():
+            self._update_wave()
         return True
+
+    def _update_wave(self) -> None:
+        eng = self._engine
+        if self._wave_amp and self._wave_hz:
+            self._ptp_limits()
+            eng.start_wave(self._wave_square, self._wave_amp * U.WAVE_COUNTS_PER_UNIT,
+                           self._wave_hz, None)
+        else:
+            eng.stop_wave(0.0)
 
     def linear_line_word(self, value: int) -> bool:
         """One of the four broadcast Make_LinearLine words (dX, dY, dZ, feedrate)."""
@@ -220,60 +379,200 @@ class VirtualDrive:
         axis = self.axis
         if axis is None:
             return True
-        return self.move_relative(words[axis])
+        if not self._accepts_motion():
+            return False
+        return self._run_path(interp.line_path(words, axis, self._counts(1)))
 
     def circular_arc_word(self, value: int) -> bool:
         """One of the five broadcast Make_CircularArc words."""
         self._arc_words.append(value)
         if len(self._arc_words) < 5:
             return True
-        self._arc_words = []
-        return True  # deepened by the drive-core work
+        words, self._arc_words = self._arc_words, []
+        axis = self.axis
+        if axis is None:
+            return True
+        if not self._accepts_motion():
+            return False
+        plane, _ = PR.unpack_arc_word(words[4])
+        if plane in interp.PLANES and axis not in interp.PLANES[plane]:
+            return True  # the third axis does not move
+        return self._run_path(interp.arc_path(words, axis, self._counts(1)))
+
+    def _run_path(self, path: interp.AxisPath | None) -> bool:
+        if path is None:
+            return False
+        eng = self._engine
+        self._feed_scale = path.feed_scale
+        self._apply_profile()
+        start = eng.ref
+        at = path.at
+
+        def to_counts(s: float) -> float:
+            return start + at(s)
+
+        eng.go_path(path.length, to_counts, self._smoothing(path.length))
+        return True
+
+    # ---------------------------------------------------------------- inputs (JP3)
+    @property
+    def pulse_format(self) -> PulseFormat:
+        return self._decoder.format
+
+    @pulse_format.setter
+    def pulse_format(self, fmt: PulseFormat | str) -> None:
+        """Pulse/Dir or A/B in command mode 2 (the config byte cannot tell them apart, DMMDRV
+        can); command mode 1 always decodes CW/CCW."""
+        self._decoder.format = PulseFormat(fmt)
+
+    def _accepts_pulses(self) -> bool:
+        return (not self.servo_free and self._config.servo_mode is ServoMode.POSITION
+                and self._config.command_mode in (CommandMode.CW_CCW, CommandMode.PULSE_DIR))
+
+    def input_pulses(self, count: int, seconds: float = 0.0) -> bool:
+        """``count`` signed pulses spread evenly over ``seconds`` (0 = all at once)."""
+        if not self._accepts_pulses():
+            return False
+        self._engine.ext_move(self._counts(count), seconds)
+        return True
+
+    def input_pulse_levels(self, samples: Iterable[tuple[bool, bool]],
+                           seconds: float = 0.0) -> int:
+        """Decode (pin 6, pin 4) level samples; returns the pulses taken (0 if ignored)."""
+        dec = self._decoder
+        if self._config.command_mode is CommandMode.CW_CCW:
+            saved, dec.format = dec.format, PulseFormat.CW_CCW
+            count = dec.feed(samples)
+            dec.format = saved
+        else:
+            count = dec.feed(samples)
+        return count if count and self.input_pulses(count, seconds) else 0
+
+    def set_analog_input(self, volts: float) -> None:
+        """JP3-2 analog reference (clamped to the +-12 V input limit)."""
+        self._analog_v = max(-12.0, min(12.0, float(volts)))
+        self._apply_analog()
+
+    def _apply_analog(self) -> None:
+        eng = self._engine
+        v = self._analog_v
+        if eng.servo == Servo.SPEED:
+            eng.speed_target = U.rpm_to_counts_per_s(v * U.ANALOG_SPEED_RPM_PER_V)
+        elif eng.servo == Servo.TORQUE:
+            eng.speed_target = v * self.model.torque_per_volt_a
+        elif (eng.servo == Servo.POSITION
+              and self._config.command_mode is CommandMode.ANALOG):
+            deg = max(0.0, min(10.0, v)) / 10.0 * U.ANALOG_POSITION_DEG_AT_10V
+            eng.ext_set(self._origin + deg / 360.0 * U.COUNTS_PER_REV
+                        * U.gear_ratio(self._ram["gear_num"]))
+        eng.wake()
+
+    def set_enable_input(self, enabled: bool) -> None:
+        """JP3-11 ENA: False = disabled (motor coasts, commands and position error cleared)."""
+        self._enable_input = bool(enabled)
+        self._apply_servo()
+
+    # ---------------------------------------------------------------- outputs (JP3)
+    @property
+    def onpos_output(self) -> bool | None:
+        """JP3-9 ONPOS: True (HIGH) when on position; None when the pin is BKO."""
+        return None if self._bko_mode else self._on_position()
+
+    @property
+    def brake_released(self) -> bool | None:
+        """JP3-9 BKO (OnRange 127 at power-on): True = ON/LOW = brake released (servo on)."""
+        return (not self.servo_free) if self._bko_mode else None
+
+    @property
+    def alarm_output(self) -> bool:
+        """JP3-8 ALM: True (transistor ON, LOW) while an alarm is latched."""
+        return self._alarm.latching
+
+    @property
+    def zri_output(self) -> bool:
+        """JP3-10 ZRI: True (LOW) while the shaft is at the encoder's zero index."""
+        a = self._engine.p % U.COUNTS_PER_REV
+        return min(a, U.COUNTS_PER_REV - a) <= K.ZRI_HALF_WIDTH_COUNTS
+
+    # ---------------------------------------------------------------- world (simulator)
+    def set_load(self, *, inertia: float | None = None, friction: float | None = None) -> None:
+        """Load reflected to the motor shaft: inertia (kg m^2), Coulomb friction (N m)."""
+        eng = self._engine
+        if inertia is not None:
+            eng.load_inertia = max(0.0, float(inertia))
+        if friction is not None:
+            eng.load_friction = max(0.0, float(friction))
+        self._apply_params()
+
+    def set_disturbance(self, torque_nm: float) -> None:
+        """External torque on the shaft, positive towards + (CW)."""
+        self._engine.disturbance = float(torque_nm)
+        self._engine.wake()
+
+    def set_blocked(self, blocked: bool) -> None:
+        """Mechanically block the shaft (it stops dead and cannot move)."""
+        self._engine.blocked = bool(blocked)
+        if blocked:
+            self._engine.w = 0.0
+        self._engine.wake()
+
+    @property
+    def bus_voltage(self) -> float:
+        return self._engine.bus_voltage
+
+    def set_bus_voltage(self, volts: float) -> None:
+        """DC bus; above 80 V the over-voltage alarm trips (2.5)."""
+        self._engine.bus_voltage = float(volts)
+        self._check_bus()
+
+    def _check_bus(self) -> None:
+        if self._engine.bus_voltage > U.OVER_VOLTAGE_V:
+            self.trip(AlarmCode.OVER_VOLTAGE)
 
     # ---------------------------------------------------------------- readouts
     @property
     def position(self) -> int:
-        return round(self._pos)
+        return round(self._engine.p - self._origin)
 
     @property
     def speed_rpm(self) -> float:
-        return U.counts_per_s_to_rpm(self._vel)
+        return U.counts_per_s_to_rpm(self._engine.w)
+
+    @property
+    def current_a(self) -> float:
+        """Motor current (torque producing), A; positive = torque towards + (CW)."""
+        return self._engine.current_a
 
     @property
     def torque_current(self) -> int:
-        return 0
+        return round(self.current_a * TORQUE_UNITS_PER_A)
+
+    @property
+    def heat_fraction(self) -> float:
+        """I^2 t thermal state relative to the over-power trip level (1.0 trips)."""
+        return self._engine.heat / self._engine.heat_trip
 
     # ---------------------------------------------------------------- time
     def advance(self, seconds: float) -> None:
         self.advance_to(self.time + seconds)
 
     def advance_to(self, t: float) -> None:
-        """Kinematic placeholder: trapezoidal tracking of the target / speed command."""
-        dt = t - self.time
-        if dt <= 0:
+        """Run every control period up to simulated time ``t``."""
+        if t <= self.time:
             return
         self.time = t
-        if self.servo_free:
+        eng = self._engine
+        n = math.floor(t * CONTROL_HZ + 1e-6) - eng.steps
+        if n <= 0:
             return
-        gear = self._ram["gear_num"]
-        vmax = U.rpm_to_counts_per_s(U.profile_speed_rpm(self._ram["max_speed"], gear))
-        amax = U.rpm_to_counts_per_s(U.profile_accel_rpm_s(self._ram["max_accel"], gear))
-        steps = max(1, int(dt * CONTROL_HZ))
-        h = dt / steps
-        for _ in range(steps):
-            if self._speed_cmd is not None:
-                dv = max(-amax * h, min(amax * h, self._speed_cmd - self._vel))
-                self._vel += dv
-                self._pos += self._vel * h
-                self._target = self._pos
-                continue
-            err = self._target - self._pos
-            stop_dist = self._vel * self._vel / (2 * amax)
-            want = vmax if abs(err) > stop_dist else (2 * amax * abs(err)) ** 0.5
-            want = want if err > 0 else -want
-            dv = max(-amax * h, min(amax * h, want - self._vel))
-            self._vel += dv
-            self._pos += self._vel * h
-            if abs(self._target - self._pos) < 0.5 and abs(self._vel) < amax * h * 2:
-                self._pos, self._vel = self._target, 0.0
-                self._busy = False
+        self._check_bus()
+        rev0 = math.floor(eng.p / U.COUNTS_PER_REV)
+        while n > 0:
+            before = eng.steps
+            eng.run(n)
+            n -= eng.steps - before
+            if eng.trip_code is not AlarmCode.NONE:
+                self._latch(eng.trip_code)
+            elif eng.steps == before:
+                break
+        self.zri_count += abs(math.floor(eng.p / U.COUNTS_PER_REV) - rev0)

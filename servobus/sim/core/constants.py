@@ -1,0 +1,70 @@
+"""Constants of the virtual drive core: control rate, loop scaling, alarm thresholds.
+
+Every number here is a servobus decision where the manuals are silent; the reason sits next
+to it. Unit factors from the manuals live in :mod:`servobus.drive.units`.
+"""
+
+from __future__ import annotations
+
+from servobus.drive import units as U
+
+#: Fixed control period. 4 kHz: the torque filter pole (26 x 127 = 3302 rad/s) and a speed loop
+#: of up to ~400 Hz are resolved (>= 2 samples per pole time constant), and 16 drives still fit
+#: in well under half a core of pure Python (benchmarks/bench_core.py).
+CONTROL_HZ = 4_000
+CONTROL_DT = 1.0 / CONTROL_HZ
+
+# ---------------------------------------------------------------- servo loop scaling
+#: Position loop gain per Main Gain unit (1/s). Default 40 -> 150 rad/s.
+KP_PER_MAIN_GAIN = 150.0 / 40
+#: Speed loop bandwidth per Speed Gain unit on the bare rotor (rad/s). The speed loop torque gain
+#: is rotor inertia x this x SpeedGain, so with load inertia J_L the bandwidth falls by
+#: J_m / (J_m + J_L): a heavier load needs a larger Speed Gain (manual 5.1, 5.2).
+SPEED_BW_PER_SPEED_GAIN = 800.0 / 40
+#: Speed loop integrator zero per Integration Gain unit (rad/s). Default 20 -> 150 rad/s.
+KI_PER_INT_GAIN = 150.0 / 20
+#: Manual 4.2: torque filter a/(s+a), a = 26 x TrqCons rad/s.
+TORQUE_FILTER_PER_UNIT = 26.0
+
+# ---------------------------------------------------------------- mechanics
+#: Coulomb friction is smoothed linearly below this speed (20 rpm) so a motor at rest is at a
+#: true equilibrium (no stick-slip hunting); the slope stays ~10x below the speed loop gain so
+#: it does not drag out settling. Viscous friction per model below.
+FRICTION_SMOOTH_CPS = U.rpm_to_counts_per_s(20.0)
+#: Viscous friction as a fraction of the Coulomb friction per 1000 rpm.
+VISCOUS_PER_1000RPM = 0.5
+
+# ---------------------------------------------------------------- alarms
+#: 7.3 / NOTES: |Pset - Pmotor| > 8192 (1/16384 rev) = 180 deg trips at once ...
+LOST_PHASE_FAST_COUNTS = U.LOST_PHASE_UNITS * U.COUNTS_PER_REV / U.ONRANGE_UNITS_PER_REV
+#: ... and >= 90 deg for about 2 s (4.1).
+LOST_PHASE_SLOW_COUNTS = LOST_PHASE_FAST_COUNTS / 2
+LOST_PHASE_SLOW_S = 2.0
+#: Over current (6.1: "cannot move to its command position and there is a backlog of
+#: current"): current at the peak limit, shaft stalled (< 1 rpm), for 1 s. A stall 90 deg or
+#: more out of position is classified as lost phase instead (4.1), so the two stay distinct.
+OVER_CURRENT_S = 1.0
+OVER_CURRENT_STALL_CPS = U.rpm_to_counts_per_s(1.0)
+#: Over power / overheat: first-order I^2 t model of the motor and power stage.
+THERMAL_TAU_S = 20.0
+#: Trips when the filtered I^2 exceeds (1.5 x rated current)^2: peak current (3x rated) trips
+#: after ~5.6 s, 2x rated after ~16.5 s, rated current never.
+THERMAL_TRIP_FACTOR = 1.5
+#: Bus voltage at power-on (rated 60 V DC, manual 1.1).
+DEFAULT_BUS_VOLTAGE = 60.0
+
+# ---------------------------------------------------------------- settling (quiescent path)
+#: A drive whose position error, speed and torque change are below these is at an exact
+#: equilibrium: stepping it changes nothing, so time is skipped in O(1).
+SETTLED_ERROR_COUNTS = 1e-3
+SETTLED_SPEED_CPS = 1e-3
+SETTLED_TORQUE_NM = 1e-7
+
+# ---------------------------------------------------------------- signals
+#: ZRI output is LOW while the shaft is within this many counts of the zero index.
+ZRI_HALF_WIDTH_COUNTS = 64
+#: JP3 pin 2 (status b6) reads high above this analog level (TTL threshold; decision).
+JP3_PIN2_HIGH_V = 2.5
+#: Set_Param_Group2 (DYN CAN): Max Speed / Max Accel go to EEPROM for this many writes after
+#: power-on, then to RAM only.
+GROUP2_EEPROM_WRITES = 10

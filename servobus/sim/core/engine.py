@@ -1,0 +1,604 @@
+"""The servo engine: reference generator, cascaded servo loop, motor + load physics, alarms.
+
+One instance per virtual drive. ``run(n)`` advances ``n`` fixed control periods; the hot
+loops keep all state in local variables and allocate nothing, which is what lets 16 drives
+run in real time in pure Python. Everything is in encoder counts (65,536 per rev), seconds
+and newton-metres.
+
+Per control period, in position servo mode:
+
+1. reference: S-curve generator (an online trapezoid: accelerate/cruise at Max Accel/Max
+   Speed, brake at the last moment so it lands exactly; a new target simply replaces the old
+   one, which is DTPU) -> moving-average smoothing -> optional path mapping (line/arc), or a
+   wave, or external pulses/analog;
+2. position loop P (Main Gain) with velocity feed-forward -> speed loop PI (Speed Gain,
+   Integration Gain) -> torque clamp (peak current x Kt, torque limit) -> torque filter
+   a/(s+a), a = 26 x TrqCons;
+3. mechanics: J dw/dt = torque - friction + disturbance (semi-implicit Euler), or a blocked
+   shaft;
+4. alarms: lost phase (> 180 deg at once, >= 90 deg for 2 s), over current (peak current
+   while stalled for 1 s), I^2 t over power.
+
+A drive at rest with nothing to do reaches an exact equilibrium; ``settled`` then lets time
+pass in O(1) until any input changes (every mutator calls :meth:`wake`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from enum import IntEnum
+
+from servobus.drive import units as U
+from servobus.drive.registers import AlarmCode
+from servobus.sim.core import constants as K
+
+TWO_PI = 2.0 * math.pi
+RAD_PER_COUNT = TWO_PI / U.COUNTS_PER_REV
+
+
+class Servo(IntEnum):
+    FREE = 0
+    POSITION = 1
+    SPEED = 2
+    TORQUE = 3
+
+
+class Ref(IntEnum):
+    """Source of the position reference."""
+
+    HOLD = 0
+    GEN = 1  # S-curve generator (PTP, constant speed, interpolation path)
+    SINE = 2
+    SQUARE = 3
+    EXT = 4  # pulse train / analog position input
+
+
+class Gen(IntEnum):
+    IDLE = 0
+    POS = 1  # go to target
+    VEL = 2  # run at a speed (ramped)
+
+
+PathMap = Callable[[float], float]
+
+
+class ServoEngine:
+    def __init__(self, model: U.MotorModel) -> None:
+        self.model = model
+        self.h = K.CONTROL_DT
+        # physical world (survives power cycles)
+        self.p = 0.0  # shaft position, counts
+        self.w = 0.0  # shaft speed, counts/s
+        self.load_inertia = 0.0  # kg m^2, reflected to the motor
+        self.load_friction = 0.0  # N m, Coulomb
+        self.disturbance = 0.0  # N m, positive pushes towards +counts (CW)
+        self.blocked = False
+        self.bus_voltage = K.DEFAULT_BUS_VOLTAGE
+        self.heat = 0.0  # filtered I^2, A^2 (thermal state persists like a warm motor)
+        self.steps = 0
+        self.power_on()
+        self.set_gains(40, 40, 20, 127, 127)
+        self.set_profile(1.0, 1.0)
+
+    # ------------------------------------------------------------------ state
+    def power_on(self) -> None:
+        self.servo = Servo.POSITION
+        self.ref = self.p
+        self.ref_prev = self.p
+        self.integ = 0.0  # speed loop integrator, N m
+        self.vff = 0.0  # reference speed of the last period (feed-forward), counts/s
+        self.tq = 0.0  # filtered (actual) torque, N m
+        self.tq_cmd = 0.0
+        self.ref_mode = Ref.HOLD
+        self.gen = Gen.IDLE
+        self.gp = self.p  # generator coordinate (counts, or path units with a path)
+        self.gv = 0.0
+        self.gT = self.p
+        self.gvc = 0.0
+        self.sref = self.p  # smoothed generator coordinate
+        self.n_smooth = 1
+        self.buf: list[float] = [0.0]
+        self.bidx = 0
+        self.dsum = 0.0
+        self.idle_steps = 0
+        self.path: PathMap | None = None
+        self.busy = False  # b5: S-curve / line / arc running
+        self.wave_center = 0.0
+        self.wave_amp = 0.0
+        self.wave_phase = 0.0
+        self.wave_step = 0.0  # rad per control period
+        self.ext_step = 0.0
+        self.ext_left = 0
+        self.speed_target = 0.0  # counts/s (speed servo) or A (torque servo), before soft start
+        self.speed_ref = 0.0
+        self.lp_t = 0.0
+        self.oc_t = 0.0
+        self.trip_code = AlarmCode.NONE
+        self.settled = False
+
+    def wake(self) -> None:
+        self.settled = False
+
+    # ------------------------------------------------------------------ coefficients
+    def set_gains(self, main: int, speed: int, integ: int, trq: int, torque_limit: int) -> None:
+        m = self.model
+        self.gains = (main, speed, integ, trq, torque_limit)
+        j_total = m.rotor_inertia_kgm2 + self.load_inertia
+        self.inv_j = 1.0 / (j_total * RAD_PER_COUNT)  # counts/s^2 per N m
+        # Acceleration feed-forward with the inertia the drive's adaptive tuning (5.2) learns:
+        # N m per counts/s^2 per control period.
+        self.kaff = j_total * RAD_PER_COUNT
+        self.kp = K.KP_PER_MAIN_GAIN * main
+        # N m per counts/s: rotor inertia x bandwidth (rad/s) x rad/count
+        self.kv = m.rotor_inertia_kgm2 * K.SPEED_BW_PER_SPEED_GAIN * speed * RAD_PER_COUNT
+        self.ki_h = K.KI_PER_INT_GAIN * integ * self.h
+        self.alpha = 1.0 - math.exp(-K.TORQUE_FILTER_PER_UNIT * trq * self.h)
+        self.tmax = m.peak_current_a * m.torque_constant_nm_a * min(1.0, torque_limit / 127)
+        self.inv_kt = 1.0 / m.torque_constant_nm_a
+        self.fc = m.friction_nm + self.load_friction
+        self.fb = m.friction_nm * K.VISCOUS_PER_1000RPM / U.rpm_to_counts_per_s(1000.0)
+        self.inv_fs = 1.0 / K.FRICTION_SMOOTH_CPS
+        self.heat_beta = self.h / K.THERMAL_TAU_S
+        self.heat_trip = (K.THERMAL_TRIP_FACTOR * m.rated_current_a) ** 2
+        self.wake()
+
+    def set_profile(self, vmax: float, amax: float) -> None:
+        """Generator limits in generator units per s and per s^2."""
+        self.vmax = max(vmax, 1e-9)
+        self.amax = max(amax, 1e-9)
+        self.ah = self.amax * self.h
+        self.inv_ah2x2 = 2.0 / (self.ah * self.h)
+        self.wake()
+
+    def set_soft_start(self, rise_s: float) -> None:
+        """Speed/torque servo soft start: first-order filter with 10-90 % rise ``rise_s``."""
+        tau = rise_s / math.log(9.0)
+        self.ss_alpha = 1.0 - math.exp(-self.h / tau)
+        self.wake()
+
+    # ------------------------------------------------------------------ commands
+    def hold_here(self) -> None:
+        """Servo (re)starts: reference = shaft, errors and generator cleared."""
+        self.ref = self.ref_prev = self.p
+        self.integ = 0.0
+        self.tq_cmd = 0.0
+        self.vff = 0.0
+        self._reset_gen(self.p, 0.0)
+        self.ref_mode = Ref.HOLD
+        self.busy = False
+        self.ext_left = 0
+        self.lp_t = self.oc_t = 0.0
+        self.wake()
+
+    def _reset_gen(self, coord: float, speed: float) -> None:
+        """Generator at ``coord`` moving at ``speed``, as if it had been for a filter window
+        (so the smoothed reference speed is continuous)."""
+        n = self.n_smooth
+        d = speed * self.h
+        self.sref = coord
+        self.gp = self.gT = coord + d * (n - 1) / 2
+        self.gv = speed
+        self.gen = Gen.IDLE
+        for i in range(n):
+            self.buf[i] = d
+        self.dsum = d * n
+        self.idle_steps = 0
+        self.path = None
+
+    def _gen_speed_now(self) -> float:
+        """Reference speed (counts/s) the next generator motion continues from."""
+        if self.ref_mode == Ref.GEN and self.path is None:
+            return self.dsum / (self.n_smooth * self.h)
+        if self.ref_mode == Ref.SINE:
+            return self.wave_amp * self.wave_step / self.h * math.cos(self.wave_phase)
+        return 0.0
+
+    def _enter_gen(self, smoothing_s: float) -> None:
+        """Continue from the running S-curve (DTPU) or start one from the reference."""
+        if self.ref_mode == Ref.GEN and self.path is None:
+            return  # DTPU: same generator state, speed continuous
+        speed = self._gen_speed_now()
+        n = max(1, round(smoothing_s / self.h))
+        if n != self.n_smooth:
+            self.n_smooth = n
+            self.buf = [0.0] * n
+            self.bidx = 0
+        self._reset_gen(self.ref, speed)
+        self.ref_mode = Ref.GEN
+
+    def go_to(self, target: float, smoothing_s: float) -> None:
+        self._enter_gen(smoothing_s)
+        self.gT = target
+        self.gen = Gen.POS
+        self.busy = True
+        self.idle_steps = 0
+        self.wake()
+
+    def run_speed(self, speed: float, smoothing_s: float) -> None:
+        self._enter_gen(smoothing_s)
+        self.gvc = speed
+        self.gen = Gen.VEL
+        self.busy = False
+        self.idle_steps = 0
+        self.wake()
+
+    def go_path(self, length: float, path: PathMap, smoothing_s: float) -> None:
+        """Run the generator 0 -> ``length`` along ``path`` (maps coordinate -> counts)."""
+        n = max(1, round(smoothing_s / self.h))
+        if n != self.n_smooth:
+            self.n_smooth = n
+            self.buf = [0.0] * n
+        self.bidx = 0
+        self._reset_gen(0.0, 0.0)
+        self.path = path
+        self.gT = length
+        self.gen = Gen.POS
+        self.ref_mode = Ref.GEN
+        self.busy = True
+        self.wake()
+
+    def start_wave(self, square: bool, amp: float, hz: float, center: float | None) -> None:
+        if self.ref_mode not in (Ref.SINE, Ref.SQUARE) or center is not None:
+            self.wave_center = self.ref if center is None else center
+            self.wave_phase = 0.0
+        self.ref_mode = Ref.SQUARE if square else Ref.SINE
+        self.wave_amp = amp
+        self.wave_step = TWO_PI * hz * self.h
+        self.busy = False
+        self.wake()
+
+    def stop_wave(self, smoothing_s: float) -> None:
+        """Wave off: brake with the generator back to the wave centre, speed continuous."""
+        if self.ref_mode not in (Ref.SINE, Ref.SQUARE):
+            return
+        center = self.wave_center
+        if self.ref_mode == Ref.SQUARE:
+            self.ref_mode = Ref.HOLD
+        self._enter_gen(smoothing_s)
+        self.gT = center
+        self.gen = Gen.POS
+        self.wake()
+
+    def ext_move(self, counts: float, seconds: float) -> None:
+        """Pulse-train input: ``counts`` spread evenly over ``seconds`` (0 = at once)."""
+        if self.ref_mode != Ref.EXT:
+            self._reset_gen(self.ref, 0.0)
+            self.ref_mode = Ref.EXT
+            self.busy = False
+        steps = max(1, round(seconds / self.h))
+        if steps == 1:
+            self.ref += counts
+            self.ref_prev = self.ref
+            self.ext_left = 0
+        else:
+            pending = self.ext_step * self.ext_left
+            self.ext_left = steps
+            self.ext_step = (counts + pending) / steps
+        self.wake()
+
+    def ext_set(self, position: float) -> None:
+        """Analog position input: the reference jumps to ``position``."""
+        self._reset_gen(self.ref, 0.0)
+        self.ref_mode = Ref.EXT
+        self.ext_left = 0
+        self.busy = False
+        self.ref = self.ref_prev = position
+        self.wake()
+
+    @property
+    def ref_moving(self) -> bool:
+        m = self.ref_mode
+        if m == Ref.GEN:
+            return True
+        if m == Ref.EXT:
+            return self.ext_left > 0
+        return m != Ref.HOLD and self.wave_step != 0.0
+
+    # ------------------------------------------------------------------ readouts
+    @property
+    def current_a(self) -> float:
+        return self.tq * self.inv_kt if self.servo != Servo.FREE else 0.0
+
+    # ------------------------------------------------------------------ time
+    def run(self, n: int) -> int:
+        """Advance ``n`` control periods; returns how many ran before an alarm tripped."""
+        if n <= 0:
+            return 0
+        if self.settled:
+            self._skip(n)
+            return n
+        s = self.servo
+        if s == Servo.POSITION:
+            done = self._run_position(n)
+        elif s == Servo.FREE:
+            done = self._run_free(n)
+        else:
+            done = self._run_speed_torque(n)
+        self.steps += done
+        return done
+
+    def _skip(self, n: int) -> None:
+        """Settled: only the thermal state moves (closed form, cannot cross the trip level)."""
+        i2 = self.current_a ** 2
+        self.heat = i2 + (self.heat - i2) * math.exp(-n * self.heat_beta)
+        self.steps += n
+
+    def _settle_check(self) -> bool:
+        return (self.current_a ** 2 < self.heat_trip and self.lp_t == 0.0
+                and self.oc_t == 0.0)
+
+    def _trip(self, code: AlarmCode) -> None:
+        self.trip_code = code
+        self.servo = Servo.FREE
+        self.tq = self.tq_cmd = self.integ = 0.0
+        self.busy = False
+        self.ref_mode = Ref.HOLD
+        self.gen = Gen.IDLE
+        self.ext_left = 0
+
+    # The hot loop. Kept deliberately flat: locals only, no calls except sqrt/sin and the
+    # optional path map, no allocation.
+    def _run_position(self, n: int) -> int:
+        h = self.h
+        inv_h = 1.0 / h
+        sqrt = math.sqrt
+        sin = math.sin
+        p, w, ref = self.p, self.w, self.ref
+        integ, tq, tq_c, heat = self.integ, self.tq, self.tq_cmd, self.heat
+        kp, kv, ki_h, alpha, kaff = self.kp, self.kv, self.ki_h, self.alpha, self.kaff
+        vff = self.vff
+        tmax, inv_kt, inv_j = self.tmax, self.inv_kt, self.inv_j
+        fc, fb, inv_fs = self.fc, self.fb, self.inv_fs
+        dist, blocked = self.disturbance, self.blocked
+        beta, heat_trip = self.heat_beta, self.heat_trip
+        lp_fast, lp_slow = K.LOST_PHASE_FAST_COUNTS, K.LOST_PHASE_SLOW_COUNTS
+        lp_t, oc_t = self.lp_t, self.oc_t
+        oc_stall = K.OVER_CURRENT_STALL_CPS
+        mode = self.ref_mode
+        gen, gp, gv, g_t, gvc = self.gen, self.gp, self.gv, self.gT, self.gvc
+        sref, dsum, buf, bidx, nsm = self.sref, self.dsum, self.buf, self.bidx, self.n_smooth
+        inv_n = 1.0 / nsm
+        idle = self.idle_steps
+        path = self.path
+        vmax, ah, inv_ah2x2 = self.vmax, self.ah, self.inv_ah2x2
+        arrive = ah * h
+        w_amp, w_phase, w_step, w_center = (self.wave_amp, self.wave_phase, self.wave_step,
+                                            self.wave_center)
+        ext_step, ext_left = self.ext_step, self.ext_left
+        busy = self.busy
+        trip = AlarmCode.NONE
+        eps_e, eps_w, eps_t = K.SETTLED_ERROR_COUNTS, K.SETTLED_SPEED_CPS, K.SETTLED_TORQUE_NM
+        settled = False
+        k = 0
+        while k < n:
+            k += 1
+            ref_prev = ref
+            # ---- reference
+            if mode == 1:  # GEN
+                if gen == 1:
+                    e = g_t - gp
+                    ae = e if e >= 0.0 else -e
+                    if ae <= arrive and -2 * ah <= gv <= 2 * ah:
+                        d = e
+                        gv = 0.0
+                        gen = 0
+                    else:
+                        vs = ah * (sqrt(0.25 + ae * inv_ah2x2) - 0.5)
+                        if vs > vmax:
+                            vs = vmax
+                        if e < 0.0:
+                            vs = -vs
+                        dv = vs - gv
+                        if dv > ah:
+                            dv = ah
+                        elif dv < -ah:
+                            dv = -ah
+                        gv += dv
+                        d = gv * h
+                elif gen == 2:
+                    dv = gvc - gv
+                    if dv > ah:
+                        dv = ah
+                    elif dv < -ah:
+                        dv = -ah
+                    gv += dv
+                    d = gv * h
+                    if gv == 0.0 and gvc == 0.0:
+                        gen = 0
+                else:
+                    d = 0.0
+                gp += d
+                old = buf[bidx]
+                buf[bidx] = d
+                bidx += 1
+                if bidx == nsm:
+                    bidx = 0
+                dsum += d - old
+                sref += dsum * inv_n
+                if gen == 0:
+                    idle += 1
+                    if idle >= nsm:  # filter flushed: land exactly
+                        sref = gp
+                        dsum = 0.0
+                        mode = 0
+                        busy = False
+                        g_t = gp
+                else:
+                    idle = 0
+                ref = sref if path is None else path(sref)
+            elif mode == 2:  # SINE
+                w_phase += w_step
+                if w_phase >= TWO_PI:
+                    w_phase -= TWO_PI
+                ref = w_center + w_amp * sin(w_phase)
+            elif mode == 3:  # SQUARE
+                w_phase += w_step
+                if w_phase >= TWO_PI:
+                    w_phase -= TWO_PI
+                ref = w_center + (w_amp if w_phase < math.pi else -w_amp)
+                ref_prev = ref  # a step command: no feed-forward
+            elif mode == 4 and ext_left > 0:  # EXT pulses
+                ref += ext_step
+                ext_left -= 1
+            # ---- servo loop
+            e = ref - p
+            vff_prev = vff
+            vff = (ref - ref_prev) * inv_h
+            ev = vff + kp * e - w
+            tc = kv * ev + integ + (vff - vff_prev) * inv_h * kaff
+            if tc > tmax:
+                tc = tmax
+            elif tc < -tmax:
+                tc = -tmax
+            else:
+                integ += kv * ki_h * ev  # conditional integration = anti-windup
+            tq += (tc - tq) * alpha
+            # ---- mechanics
+            if blocked:
+                w = 0.0
+            else:
+                f = w * inv_fs
+                if f > 1.0:
+                    f = 1.0
+                elif f < -1.0:
+                    f = -1.0
+                w += (tq - fc * f - fb * w + dist) * inv_j * h
+                p += w * h
+            # ---- protection
+            i = tq * inv_kt
+            heat += (i * i - heat) * beta
+            if heat > heat_trip:
+                trip = AlarmCode.OVERHEAT
+                break
+            ae = e if e >= 0.0 else -e
+            if ae > lp_fast:
+                trip = AlarmCode.LOST_PHASE
+                break
+            if ae >= lp_slow:
+                lp_t += h
+                if lp_t >= K.LOST_PHASE_SLOW_S:
+                    trip = AlarmCode.LOST_PHASE
+                    break
+                oc_t = 0.0
+            else:
+                lp_t = 0.0
+                if (tc == tmax or tc == -tmax) and -oc_stall < w < oc_stall:
+                    oc_t += h
+                    if oc_t >= K.OVER_CURRENT_S:
+                        trip = AlarmCode.OVER_CURRENT
+                        break
+                else:
+                    oc_t = 0.0
+                if (mode == 0 or (mode == 4 and ext_left == 0)) and ae < eps_e \
+                        and -eps_w < w < eps_w and -eps_t < tc - tq < eps_t:
+                    settled = True
+                    break
+        tq_c = tc if k else tq_c
+        self.p, self.w, self.ref, self.ref_prev = p, w, ref, ref_prev if k else self.ref_prev
+        self.integ, self.tq, self.tq_cmd, self.heat = integ, tq, tq_c, heat
+        self.vff = vff
+        self.lp_t, self.oc_t = lp_t, oc_t
+        self.ref_mode = Ref(mode)
+        self.gen, self.gp, self.gv, self.gT = Gen(gen), gp, gv, g_t
+        self.sref, self.dsum, self.bidx, self.idle_steps = sref, dsum, bidx, idle
+        self.wave_phase = w_phase
+        self.ext_left = ext_left
+        self.busy = busy
+        if trip:
+            self._trip(trip)
+            return k
+        if settled and self._settle_check():
+            self.settled = True
+            self.ref_prev = self.ref
+            self._skip(n - k)
+            return k  # steps counted by _skip
+        return k
+
+    def _run_free(self, n: int) -> int:
+        """Servo off: the shaft coasts under friction and disturbance; current is zero."""
+        h = self.h
+        p, w, heat = self.p, self.w, self.heat
+        fc, fb, inv_fs, inv_j = self.fc, self.fb, self.inv_fs, self.inv_j
+        dist, blocked, beta = self.disturbance, self.blocked, self.heat_beta
+        if blocked or (dist == 0.0 and -K.SETTLED_SPEED_CPS < w < K.SETTLED_SPEED_CPS):
+            self.w = 0.0 if blocked else w
+            self.tq = 0.0
+            self.settled = True
+            self._skip(n)
+            return 0
+        for _ in range(n):
+            f = w * inv_fs
+            if f > 1.0:
+                f = 1.0
+            elif f < -1.0:
+                f = -1.0
+            w += (dist - fc * f - fb * w) * inv_j * h
+            p += w * h
+            heat -= heat * beta
+        self.p, self.w, self.heat, self.tq = p, w, heat, 0.0
+        self.ref = self.ref_prev = p
+        return n
+
+    def _run_speed_torque(self, n: int) -> int:
+        """Speed servo (analog speed reference) or torque servo (analog current reference)."""
+        h = self.h
+        p, w, integ, tq, heat = self.p, self.w, self.integ, self.tq, self.heat
+        kv, ki_h, alpha, tmax, inv_kt = self.kv, self.ki_h, self.alpha, self.tmax, self.inv_kt
+        fc, fb, inv_fs, inv_j = self.fc, self.fb, self.inv_fs, self.inv_j
+        dist, blocked, beta, heat_trip = self.disturbance, self.blocked, self.heat_beta, \
+            self.heat_trip
+        ss, target, sref = self.ss_alpha, self.speed_target, self.speed_ref
+        speed_mode = self.servo == Servo.SPEED
+        kt = self.model.torque_constant_nm_a
+        oc_t, oc_stall = self.oc_t, K.OVER_CURRENT_STALL_CPS
+        trip = AlarmCode.NONE
+        k = 0
+        tc = self.tq_cmd
+        while k < n:
+            k += 1
+            sref += (target - sref) * ss
+            if speed_mode:
+                ev = sref - w
+                tc = kv * ev + integ
+                if tc > tmax:
+                    tc = tmax
+                elif tc < -tmax:
+                    tc = -tmax
+                else:
+                    integ += kv * ki_h * ev
+            else:
+                tc = sref * kt
+                if tc > tmax:
+                    tc = tmax
+                elif tc < -tmax:
+                    tc = -tmax
+            tq += (tc - tq) * alpha
+            if blocked:
+                w = 0.0
+            else:
+                f = w * inv_fs
+                if f > 1.0:
+                    f = 1.0
+                elif f < -1.0:
+                    f = -1.0
+                w += (tq - fc * f - fb * w + dist) * inv_j * h
+                p += w * h
+            i = tq * inv_kt
+            heat += (i * i - heat) * beta
+            if heat > heat_trip:
+                trip = AlarmCode.OVERHEAT
+                break
+            if speed_mode and (tc == tmax or tc == -tmax) and -oc_stall < w < oc_stall:
+                oc_t += h
+                if oc_t >= K.OVER_CURRENT_S:
+                    trip = AlarmCode.OVER_CURRENT
+                    break
+            else:
+                oc_t = 0.0
+        self.p, self.w, self.integ, self.tq, self.tq_cmd, self.heat = p, w, integ, tq, tc, heat
+        self.speed_ref, self.oc_t = sref, oc_t
+        self.ref = self.ref_prev = p
+        if trip:
+            self._trip(trip)
+        return k
