@@ -1,0 +1,95 @@
+"""``servobus sim dyncan``: virtual DYN CAN drives on a CAN bus served over socketcand.
+
+stdout gets one line, flushed at once, so scripts and tests can read the port::
+
+    listening on socketcand 127.0.0.1:40123
+
+Connect with python-can (``interface="socketcand", host=..., port=..., channel="can0"``) or
+``servobus --can socketcand:127.0.0.1:40123 --id 1 status``. Everything else goes to stderr.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import signal
+import sys
+from collections.abc import Sequence
+
+import click
+
+from servobus.drive import units as U
+from servobus.errors import ArgumentRangeError
+from servobus.sim.drive import VirtualDrive
+from servobus.sim.dyncan_node import DynCanNetwork, serve
+from servobus.sim.inprocess import make_drives, parse_ids
+from servobus.sim.realtime import RealtimeClock
+from servobus.sim.socketcand_server import SocketcandHub, parse_socketcand_address
+from servobus.transport.can_bus import BitTiming
+
+
+async def run_socketcand_nodes(drives: Sequence[VirtualDrive], host: str, port: int, *,
+                               fast: bool = False, duration: float | None = None,
+                               bitrate: int = 1_000_000) -> DynCanNetwork:
+    """Serve ``drives`` as DYN CAN nodes until ``duration`` passes or SIGINT/SIGTERM."""
+    network = DynCanNetwork(drives)
+    hub = SocketcandHub(host, port)
+    host, port = await hub.start()
+    click.echo(f"listening on socketcand {host}:{port}")
+    sys.stdout.flush()
+    node_port = hub.open_port(timing=None if fast else BitTiming(bitrate))
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(NotImplementedError, RuntimeError):
+            loop.add_signal_handler(sig, stop.set)
+    if duration is not None:
+        loop.call_later(duration, stop.set)
+    try:
+        await serve(network, node_port, clock=RealtimeClock(network.drives), stop=stop)
+    finally:
+        await hub.close()
+    return network
+
+
+@click.command("dyncan")
+@click.option("--socketcand", "address", metavar="HOST:PORT", default="127.0.0.1:0",
+              show_default=True, help="serve the CAN bus over socketcand; PORT 0 picks a free port")
+@click.option("--ids", default="1", show_default=True, metavar="1,2,3",
+              help="drive ids on the bus (1..63)")
+@click.option("--fast", is_flag=True, help="no 1 Mbit/s bit-timing model: answer at once")
+@click.option("--bitrate", type=click.IntRange(10_000, 1_000_000), default=1_000_000,
+              show_default=True, help="bit rate of the timing model")
+@click.option("--state", metavar="FILE", default=None,
+              help="keep each drive's EEPROM (parameters, config, id) in this JSON file")
+@click.option("--model", type=click.Choice(sorted(U.MODELS)), default=U.DEFAULT_MODEL,
+              show_default=True, help="drive/motor model")
+@click.option("--duration", type=click.FloatRange(min=0.0), default=None, metavar="SECONDS",
+              help="stop by itself after this many seconds [default: run until Ctrl-C]")
+def sim_dyncan_cmd(address: str, ids: str, fast: bool, bitrate: int, state: str | None,
+                   model: str, duration: float | None) -> None:
+    """Virtual DYN2/DYN4 drives on one CAN bus (DYN CAN protocol, socketcand rawmode)."""
+    try:
+        drive_ids = parse_ids(ids)
+        host, port = parse_socketcand_address(address)
+    except ArgumentRangeError as exc:
+        raise click.BadParameter(str(exc)) from None
+    if 0 in drive_ids:
+        raise click.BadParameter("id 0 is the DYN CAN broadcast id; use 1..63",
+                                 param_hint="--ids")
+    drives = make_drives(drive_ids, state=state, model=model)
+    timing = "unpaced (--fast)" if fast else f"{bitrate / 1e6:g} Mbit/s timing model"
+    click.echo(f"servobus sim dyncan: {len(drives)} {model} drive(s), ids "
+               f"{','.join(str(d.drive_id) for d in drives)}, {timing}", err=True)
+    network = asyncio.run(run_socketcand_nodes(drives, host, port, fast=fast,
+                                               duration=duration, bitrate=bitrate))
+    s = network.stats
+    click.echo(f"stopped: {s.frames} frame(s), {s.replies} repl(ies), {s.drive_errors} drive "
+               f"error(s), {s.malformed} malformed, {s.alarms_pushed} alarm push(es)", err=True)
+
+
+def register(group: click.Group) -> None:
+    sim = group.commands.get("sim")
+    if not isinstance(sim, click.Group):
+        raise RuntimeError("servobus.cli.sim_cmd must be registered before sim_dyncan_cmd")
+    sim.add_command(sim_dyncan_cmd)
