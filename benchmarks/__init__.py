@@ -1,0 +1,1 @@
+"""Speed figures against physical limits; run them all with ``python -m benchmarks``."""
