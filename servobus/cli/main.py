@@ -21,6 +21,7 @@ COMMAND_MODULES: list[str] = [
     "servobus.cli.params_cmd",
     "servobus.cli.scan_cmd",
     "servobus.cli.demo_cmd",
+    "servobus.cli.profile_cmd",
 ]
 
 

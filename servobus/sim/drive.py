@@ -345,7 +345,11 @@ class VirtualDrive:
         return self._wave(amplitude, square=False)
 
     def _wave(self, amplitude: int, *, square: bool) -> bool:
-        """Amplitude 4096 = 180 deg peak; runs while SS_Frequency is not 0; 0 stops."""
+        """Runs while SS_Frequency is not 0; amplitude 0 stops.
+
+        Decision: the amplitude is the total swing (4096 = 180 deg, centred on the position
+        where the wave started), so the largest square-wave step is 180 deg, the lost-phase
+        limit; a +-180 deg reading would make every full-amplitude square wave trip it."""
         if not 0 <= amplitude <= WAVE_AMPLITUDE_MAX or not self._accepts_motion():
             return False
         self._wave_amp, self._wave_square = amplitude, square
@@ -365,7 +369,7 @@ class VirtualDrive:
         eng = self._engine
         if self._wave_amp and self._wave_hz:
             self._ptp_limits()
-            eng.start_wave(self._wave_square, self._wave_amp * U.WAVE_COUNTS_PER_UNIT,
+            eng.start_wave(self._wave_square, self._wave_amp * U.WAVE_COUNTS_PER_UNIT / 2,
                            self._wave_hz, None)
         else:
             eng.stop_wave(0.0)

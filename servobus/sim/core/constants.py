@@ -15,14 +15,17 @@ CONTROL_HZ = 4_000
 CONTROL_DT = 1.0 / CONTROL_HZ
 
 # ---------------------------------------------------------------- servo loop scaling
-#: Position loop gain per Main Gain unit (1/s). Default 40 -> 150 rad/s.
-KP_PER_MAIN_GAIN = 150.0 / 40
+#: Position loop gain per Main Gain unit (1/s). Default 40 -> 100 rad/s.
+KP_PER_MAIN_GAIN = 100.0 / 40
 #: Speed loop bandwidth per Speed Gain unit on the bare rotor (rad/s). The speed loop torque gain
 #: is rotor inertia x this x SpeedGain, so with load inertia J_L the bandwidth falls by
 #: J_m / (J_m + J_L): a heavier load needs a larger Speed Gain (manual 5.1, 5.2).
-SPEED_BW_PER_SPEED_GAIN = 800.0 / 40
-#: Speed loop integrator zero per Integration Gain unit (rad/s). Default 20 -> 150 rad/s.
-KI_PER_INT_GAIN = 150.0 / 20
+SPEED_BW_PER_SPEED_GAIN = 400.0 / 40
+#: Speed loop integrator zero per Integration Gain unit (rad/s). Default 20 -> 100 rad/s.
+#: The defaults keep position : speed bandwidth at 1 : 4 with the zero well below crossover,
+#: a well-damped step; raising Main Gain or Integration Gain towards the speed loop
+#: bandwidth brings overshoot and ringing, as 5.2 warns.
+KI_PER_INT_GAIN = 100.0 / 20
 #: Manual 4.2: torque filter a/(s+a), a = 26 x TrqCons rad/s.
 TORQUE_FILTER_PER_UNIT = 26.0
 
