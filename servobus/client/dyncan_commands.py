@@ -12,6 +12,7 @@ accepts the first answer).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
@@ -230,35 +231,42 @@ def _unsigned(frame: c.Frame) -> int:
     return frame.unsigned
 
 
+@functools.cache  # immutable result: built once per drive id (hot polling path)
 def make_read_status(drive_id: int) -> CanCommand:
     return _cmd(drive_id, F.READ_DRIVE_STATUS,
                 parse=lambda f: DriveStatus.from_byte(f.unsigned))
 
 
+@functools.cache  # immutable result: built once per drive id (hot polling path)
 def make_read_config(drive_id: int) -> CanCommand:
     return _cmd(drive_id, F.READ_DRIVE_CONFIG,
                 parse=lambda f: DriveConfig.from_byte(f.unsigned & 0x3F))
 
 
+@functools.cache  # immutable result: built once per drive id (hot polling path)
 def make_read_id(drive_id: int) -> CanCommand:
     return _cmd(drive_id, F.READ_DRIVE_ID, parse=_unsigned)
 
 
+@functools.cache  # immutable result: built once per drive id (hot polling path)
 def make_read_position(drive_id: int) -> CanCommand:
     """General_Read 0x1B: absolute position, encoder counts (reply on 0x0E)."""
     return _cmd(drive_id, F.GENERAL_READ, int(GR.POSITION))
 
 
+@functools.cache  # immutable result: built once per drive id (hot polling path)
 def make_read_torque(drive_id: int) -> CanCommand:
     """General_Read 0x1E: torque, 700 = peak current, positive = CCW."""
     return _cmd(drive_id, F.GENERAL_READ, int(GR.TORQUE))
 
 
+@functools.cache  # immutable result: built once per drive id (hot polling path)
 def make_read_motor_speed(drive_id: int) -> CanCommand:
     """Read_Motor_Speed (0x1A): rpm, 2 bytes."""
     return _cmd(drive_id, F.READ_MOTOR_SPEED)
 
 
+@functools.cache  # immutable result: built once per drive id (hot polling path)
 def make_read_counter(drive_id: int) -> CanCommand:
     return _cmd(drive_id, F.DIAGNOSTIC_COUNTER, parse=_unsigned)
 

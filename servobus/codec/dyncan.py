@@ -330,7 +330,7 @@ class Frame:
 
     @property
     def spec(self) -> FunctionSpec:
-        return SPECS[Function(self.function)]
+        return SPECS[self.function]  # type: ignore[index]  # IntEnum keys hash as ints
 
     @property
     def value(self) -> int:
@@ -409,26 +409,26 @@ def drive_error(drive_id: int, code: DriveErrorCode) -> Frame:
     return Frame(drive_id, Function.DRIVE_ERROR, bytes((code,)))
 
 
+_ANSWERED_CODES = frozenset(int(s) for s in GENERAL_READ_ANSWERED)
+_REPLY_LENGTHS: dict[int, tuple[int, int]] = {
+    int(f): s.returned for f, s in SPECS.items() if s.reply is not None}
+
+
 def expects_reply(frame: Frame) -> bool:
     """Will the drive answer this request (General_Read: only the reading selectors)."""
-    spec = SPECS[Function(frame.function)]
-    if spec.reply is None:
+    if frame.function not in _REPLY_LENGTHS:
         return False
     if frame.function == Function.GENERAL_READ:
-        return bool(frame.data) and frame.data[0] in {int(s) for s in GENERAL_READ_ANSWERED}
+        return bool(frame.data) and frame.data[0] in _ANSWERED_CODES
     return True
 
 
 def is_reply_shape(frame: Frame) -> bool:
     """Does the frame's data length fit the table's reply (tells a reply from its request)."""
-    try:
-        spec = SPECS[Function(frame.function)]
-    except ValueError:
+    lengths = _REPLY_LENGTHS.get(frame.function)
+    if lengths is None:
         return False
-    if spec.reply is None:
-        return False
-    lo, hi = spec.returned
-    return lo <= len(frame.data) <= hi
+    return lengths[0] <= len(frame.data) <= lengths[1]
 
 
 # ------------------------------------------------------------------ text

@@ -60,6 +60,23 @@ class FramePort(Protocol):
         """Release the medium; idempotent."""
 
 
+#: Push-style reception (optional on a FramePort): frames, then None when the port closes.
+FrameReceiver = Callable[["CanFrame | None"], None]
+
+
+def set_receiver(port: FramePort, receiver: FrameReceiver) -> bool:
+    """Ask ``port`` to push frames to ``receiver`` on the loop instead of queueing them.
+
+    Saves one task switch per frame (the client's receive path); ports without the
+    capability return False and the caller keeps calling ``recv``.
+    """
+    method = getattr(port, "set_receiver", None)
+    if method is None:
+        return False
+    method(receiver)
+    return True
+
+
 # ------------------------------------------------------------------ bit timing
 @dataclass(frozen=True)
 class BitTiming:
@@ -179,6 +196,7 @@ class AsyncCanBus:
         self._queue: asyncio.Queue[CanFrame | BaseException] = asyncio.Queue()
         self._traces: list[FrameTraceHook] = []
         self._closed = False
+        self._receiver: FrameReceiver | None = None
         self.pacer = BusPacer(timing) if timing is not None else None
         self._notifier = can.Notifier(bus, [_QueueListener(self)], timeout=NOTIFIER_POLL_S,
                                       loop=asyncio.get_running_loop())
@@ -201,10 +219,19 @@ class AsyncCanBus:
             self.pacer.occupy(len(frame.data), now)
         for hook in self._traces:
             hook(Direction.RX, frame, now)
-        self._queue.put_nowait(frame)
+        if self._receiver is not None:
+            self._receiver(frame)
+        else:
+            self._queue.put_nowait(frame)
 
     def _fail(self, exc: BaseException) -> None:
+        if self._receiver is not None:
+            self._receiver(None)
         self._queue.put_nowait(ConnectionError(f"CAN bus failed: {exc}"))
+
+    def set_receiver(self, receiver: FrameReceiver) -> None:
+        """Push every frame to ``receiver`` (on the loop) instead of the recv queue."""
+        self._receiver = receiver
 
     async def recv(self, timeout: float | None = None) -> CanFrame | None:
         if self._closed and self._queue.empty():
@@ -260,6 +287,8 @@ class AsyncCanBus:
             return
         self._closed = True
         self._queue.put_nowait(ConnectionError("CAN bus is closed"))  # wake a waiting recv
+        if self._receiver is not None:
+            self._receiver(None)
         await asyncio.to_thread(self._notifier.stop, NOTIFIER_POLL_S * 3)
         if self._owns_bus:
             await asyncio.to_thread(self.bus.shutdown)
