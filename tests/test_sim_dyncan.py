@@ -218,3 +218,26 @@ def test_alarm_push_ee() -> None:
     n.drives[0].trip(AlarmCode.OVER_CURRENT)
     assert n.take_outbox() == [c.drive_error(3, ERR.ALARM)]
     assert n.take_outbox() == []
+
+
+def test_torque_scale_700_peak_and_ccw_positive() -> None:
+    n = net(1)
+    d = n.drives[0]
+    n.handle(c.request(1, F.TURN_CONST_SPEED, 3000))
+    d.advance(0.01)  # accelerating CW: current positive (CW) in the core
+    assert d.current_a > 0
+    (tq,) = n.handle(c.request(1, F.GENERAL_READ, 0x1E))
+    assert tq.value < 0  # section 6: negative reading = torque applied CW
+    assert tq.value == round(-d.current_a / d.model.peak_current_a * U.CAN_TORQUE_FULL_SCALE)
+
+
+def test_group2_saves_to_eeprom_only_first_ten_times() -> None:
+    n = net(1)
+    d = n.drives[0]
+    for v in range(60, 71):  # 11 writes
+        n.handle(c.request(1, F.SET_PARAM_GROUP2, fields=(v, 0)))
+    assert d.get_param("max_speed") == 70
+    assert d.eeprom.params["max_speed"] == 69  # the 11th stayed in RAM
+    d.reset()
+    (g2,) = n.handle(c.request(1, F.READ_PARAM_GROUP2))
+    assert g2.fields()[0] == 69

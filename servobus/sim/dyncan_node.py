@@ -246,12 +246,7 @@ def _position_direct(node: DynCanNode, frame: c.Frame) -> None:
     value = _checked(frame)
     if value == _IGNORE:
         return
-    drive = node.drive
-    move_direct = getattr(drive, "move_direct", None)  # added by the drive-core work
-    if move_direct is not None:
-        node.started(bool(move_direct(value)))
-    else:
-        node.started(drive.move_relative(value))
+    node.started(node.drive.move_direct(value))
 
 
 def _general_read(node: DynCanNode, frame: c.Frame) -> c.Frame | None:
@@ -282,11 +277,10 @@ def _general_read_value(drive: VirtualDrive, code: int) -> int | None:
 
 
 def torque_can(drive: VirtualDrive) -> int:
-    """Torque on the CAN scale (700 = peak current, CCW positive per the manual)."""
-    fraction = getattr(drive, "torque_fraction", None)  # drive-core: share of peak current
-    if fraction is not None:
-        return max(-700, min(700, round(float(fraction) * U.CAN_TORQUE_FULL_SCALE)))
-    return max(-700, min(700, int(drive.torque_current)))
+    """Torque on the CAN scale: 700 = peak current; positive = CCW (section 6: the example's
+    negative reading is "applied in CW direction"), while ``current_a`` is positive CW."""
+    full = U.CAN_TORQUE_FULL_SCALE
+    return max(-full, min(full, round(-drive.current_a / drive.model.peak_current_a * full)))
 
 
 def _set_group(node: DynCanNode, frame: c.Frame) -> None:
@@ -295,11 +289,9 @@ def _set_group(node: DynCanNode, frame: c.Frame) -> None:
     if not all(c.field_valid(f, v) for f, v in zip(spec.fields, values, strict=True)):
         raise _Invalid
     drive = node.drive
-    if frame.function == F.SET_PARAM_GROUP2:
-        group = getattr(drive, "set_speed_accel_group", None)  # EEPROM quirk (drive core)
-        if group is not None:
-            group(values[0], values[1])
-            return
+    if frame.function == F.SET_PARAM_GROUP2:  # EEPROM only for the first 10 per power-on
+        drive.set_speed_accel_group(values[0], values[1])
+        return
     for f, v in zip(spec.fields, values, strict=True):
         if v:
             drive.set_param(f.param, v)
