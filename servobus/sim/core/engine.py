@@ -355,8 +355,9 @@ class ServoEngine:
         lp_fast, lp_slow = K.LOST_PHASE_FAST_COUNTS, K.LOST_PHASE_SLOW_COUNTS
         lp_t, oc_t = self.lp_t, self.oc_t
         oc_stall = K.OVER_CURRENT_STALL_CPS
-        mode = self.ref_mode
-        gen, gp, gv, g_t, gvc = self.gen, self.gp, self.gv, self.gT, self.gvc
+        mode = int(self.ref_mode)
+        gen = int(self.gen)
+        gp, gv, g_t, gvc = self.gp, self.gv, self.gT, self.gvc
         sref, dsum, buf, bidx, nsm = self.sref, self.dsum, self.buf, self.bidx, self.n_smooth
         inv_n = 1.0 / nsm
         idle = self.idle_steps
