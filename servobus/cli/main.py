@@ -14,8 +14,8 @@ from servobus.errors import ServobusError
 #: Command-group modules; each defines ``register(group: click.Group) -> None``.
 COMMAND_MODULES: list[str] = [
     "servobus.cli.sim_cmd",
-    "servobus.cli.sim_dyncan_cmd",
     "servobus.cli.sim_dyn2_cmd",
+    "servobus.cli.sim_dyncan_cmd",
     "servobus.cli.decode_cmd",
     "servobus.cli.drive_cmds",
     "servobus.cli.params_cmd",
