@@ -13,6 +13,8 @@ from typing import Any
 
 from servobus.codec import dyn232 as c
 from servobus.drive import params as P
+from servobus.drive.profile import pack_arc_word as pack_arc_word  # one home: drive.profile
+from servobus.drive.profile import unpack_arc_word as unpack_arc_word
 from servobus.drive.registers import DriveConfig, DriveStatus
 from servobus.errors import ArgumentRangeError
 
@@ -138,16 +140,6 @@ def make_circular_arc(
     words = [_check_value(H.MAKE_CIRCULAR_ARC, v, "arc coordinate") for v in (*start, *end)]
     return [Command(c.BROADCAST_ID, H.MAKE_CIRCULAR_ARC, v, kind=c.Kind.MOTION)
             for v in [*words, pack_arc_word(plane, feedrate)]]
-
-
-def pack_arc_word(plane: int, feedrate: int) -> int:
-    return plane * 256 + feedrate
-
-
-def unpack_arc_word(word: int) -> tuple[int, int]:
-    """Inverse of :func:`pack_arc_word`: (plane, feedrate) with feedrate in -127..127."""
-    plane = (word + 128) // 256
-    return plane, word - plane * 256
 
 
 # ------------------------------------------------------------------ actions (no reply)
