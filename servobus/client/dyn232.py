@@ -23,6 +23,14 @@ Transaction rules (the manual gives none; these are servobus decisions):
   is the safe value on hardware; the default 0 is for simulators and fast links. A dropped
   query is still detected (deadline) and retried.
 * EEPROM settings (parameters, config, id) pass the EepromGuard before a byte is sent.
+
+Hot path (a poll is a few hundred microseconds of wire time, so host overhead shows): each
+read Command gets a plan once (request bytes, the reply to match, the parser); replies of
+streams that push (TCP, ``sim://``; ``transport.base.PushByteStream``) are framed and
+matched in the transport's receive callback, which resolves the waiting future directly;
+the reply deadline is one lazily re-armed loop timer, not a timer per call; 1-byte register
+replies (status, config) parse once per distinct value (the results are frozen). Streams
+that only ``read()`` (pyserial, the pair) take the pull loop with the same rules.
 """
 
 from __future__ import annotations
@@ -47,10 +55,43 @@ from servobus.errors import (
     FramingError,
     ProtocolError,
 )
-from servobus.transport.base import ByteStream, Direction
+from servobus.transport.base import ByteStream, Direction, set_receiver
 
 DEFAULT_TURNAROUND_S = 0.025
 DEFAULT_RETRIES = 2
+MAX_PLANS = 256  # cached read plans per client (reads are a handful of distinct commands)
+#: Parsers that are pure and return frozen values: their results are memoised per value.
+_MEMO_PARSERS: frozenset[Callable[[int], Any]] = frozenset(
+    {DriveStatus.from_byte, DriveConfig.from_byte})
+
+
+class _Plan:
+    """What a transaction needs, computed once per read Command."""
+
+    __slots__ = ("command", "drive_id", "memo", "parse", "raw", "retry_safe", "want_fn")
+
+    def __init__(self, command: Command, raw: bytes) -> None:
+        self.command = command
+        self.raw = raw
+        self.drive_id = command.drive_id
+        want = c.reply_function(command.function, command.value)
+        self.want_fn = -1 if want is None else int(want)
+        self.retry_safe = command.retry_safe
+        parse = command.parse
+        self.parse: Callable[[int], Any] | None = None if parse is cmds._identity else parse
+        self.memo: dict[int, Any] | None = {} if parse in _MEMO_PARSERS else None
+
+    def result(self, value: int) -> Any:
+        parse = self.parse
+        if parse is None:
+            return value
+        memo = self.memo
+        if memo is None or not 0 <= value <= 0x7F:
+            return parse(value)
+        out = memo.get(value)
+        if out is None:
+            out = memo[value] = parse(value)
+        return out
 
 
 @dataclass
@@ -98,7 +139,14 @@ class AsyncDyn232Client:
         self._hooks: list[AxisTraceHook] = []
         self._last_query = -1e9
         self._closed = False
-        self._encoded: dict[Command, bytes] = {}
+        self._plans: dict[int, _Plan] = {}  # id(command) -> plan (identity checked)
+        # Push reception: the transaction waiting for a reply (future + plan), if any.
+        self._push = set_receiver(stream, self._on_data)
+        self._waiting: asyncio.Future[int | None] | None = None
+        self._waiting_plan: _Plan | None = None
+        self._deadline = 0.0
+        self._timer: asyncio.TimerHandle | None = None
+        self._timer_at = 0.0
 
     # ------------------------------------------------------------- tracing
     def add_trace(self, hook: AxisTraceHook) -> None:
@@ -127,21 +175,25 @@ class AsyncDyn232Client:
         """Send ``command``; for reads return the parsed reply, else None."""
         if self._closed:
             raise ConnectionError("client is closed")
-        if command.kind is c.Kind.INTERNAL:
-            raise ArgumentRangeError(f"{command.function.name} is internal to DMM; never sent")
-        if command.kind is c.Kind.READ:  # a handful of distinct reads: encode once
-            raw = self._encoded.get(command)
-            if raw is None:
-                raw = self._encoded[command] = command.to_bytes()
-        else:
+        plan = self._plans.get(id(command))
+        if plan is None or plan.command is not command:
+            if command.kind is c.Kind.INTERNAL:
+                raise ArgumentRangeError(f"{command.function.name} is internal to DMM; "
+                                         f"never sent")
             raw = command.to_bytes()
-        if command.kind is c.Kind.SETTING:
-            self.guard.check(command.drive_id, _guard_item(command))
-        async with self._lock:
+            if command.kind is c.Kind.SETTING:
+                self.guard.check(command.drive_id, _guard_item(command))
             if not command.expects_reply:
-                await self._send(raw)
+                async with self._lock:
+                    await self._send(raw)
                 return None
-            return await self._transact(command, raw, retries, timeout)
+            plan = _Plan(command, raw)
+            if command.kind is c.Kind.READ:  # a handful of distinct reads: plan once
+                if len(self._plans) >= MAX_PLANS:
+                    self._plans.clear()
+                self._plans[id(command)] = plan
+        async with self._lock:
+            return await self._transact(plan, retries, timeout)
 
     async def execute_all(self, commands: list[Command]) -> None:
         """Send no-reply commands back to back without another transaction in between."""
@@ -159,24 +211,31 @@ class AsyncDyn232Client:
         self.stats.sent += 1
         await self.stream.write(raw)
 
-    async def _transact(self, command: Command, raw: bytes, retries: int | None,
+    async def _transact(self, plan: _Plan, retries: int | None,
                         timeout: float | None) -> Any:
-        n_retries = (self.retries if retries is None else retries) if command.retry_safe else 0
-        per_try = timeout if timeout is not None else self.reply_deadline_s(len(raw))
+        command = plan.command
+        n_retries = (self.retries if retries is None else retries) if plan.retry_safe else 0
+        per_try = timeout if timeout is not None else self.reply_deadline_s(len(plan.raw))
         last: ProtocolError | DriveTimeout | None = None
         for attempt in range(n_retries + 1):
             if attempt:
                 self.stats.retries += 1
-            await self._pace()
+            if self.query_interval_s > 0:
+                await self._pace()
+            else:
+                self._last_query = time.monotonic()
             self._discard_pending()
-            await self._send(raw)
             try:
-                packet = await self._await_reply(command, per_try)
+                if self._push:
+                    value = await self._exchange(plan, per_try)
+                else:
+                    await self._send(plan.raw)
+                    value = (await self._await_reply(command, per_try)).reply_value()
             except (ChecksumError, DriveTimeout) as exc:
                 last = exc
                 continue
             self.stats.replies += 1
-            return command.parse(packet.reply_value())
+            return plan.result(value)
         assert last is not None
         if isinstance(last, DriveTimeout):
             raise DriveTimeout(
@@ -186,20 +245,95 @@ class AsyncDyn232Client:
         raise last
 
     async def _pace(self) -> None:
+        """Wait until ``query_interval_s`` has passed since the previous query started."""
+        wait = self._last_query + self.query_interval_s - time.monotonic()
+        if wait > 0:
+            await asyncio.sleep(wait)
+        self._last_query = time.monotonic()
+
+    # ------------------------------------------------------------- push reception
+    async def _exchange(self, plan: _Plan, per_try: float) -> int:
+        """Send the request; the stream's receive callback (:meth:`_on_data`) resolves the
+        future with the reply value (None: deadline passed)."""
         loop = asyncio.get_running_loop()
-        if self.query_interval_s > 0:
-            wait = self._last_query + self.query_interval_s - loop.time()
-            if wait > 0:
-                await asyncio.sleep(wait)
-        self._last_query = loop.time()
+        fut: asyncio.Future[int | None] = loop.create_future()
+        self._waiting, self._waiting_plan = fut, plan
+        try:
+            if self._hooks:
+                self._trace(Direction.TX, c.decode(plan.raw))
+            self.stats.sent += 1
+            await self.stream.write(plan.raw)  # an unpaced sim:// line answers in this call
+            if not fut.done():
+                self._deadline = deadline = loop.time() + per_try
+                if self._timer is None or self._timer_at > deadline:
+                    self._arm(loop, deadline)
+            value = await fut
+        finally:
+            self._waiting = self._waiting_plan = None
+        if value is None:
+            raise self._timeout(plan.command, per_try)
+        return value
+
+    def _arm(self, loop: asyncio.AbstractEventLoop, when: float) -> None:
+        """One timer serves every transaction: when it fires early (it was set for an
+        earlier transaction) it re-arms for the current deadline. Saves a timer per call."""
+        if self._timer is not None:
+            self._timer.cancel()
+        self._timer_at = when
+        self._timer = loop.call_at(when, self._on_timer, loop)
+
+    def _on_timer(self, loop: asyncio.AbstractEventLoop) -> None:
+        self._timer = None
+        fut = self._waiting
+        if fut is None or fut.done():
+            return
+        if loop.time() >= self._deadline:
+            fut.set_result(None)  # None = deadline passed
+        else:
+            self._arm(loop, self._deadline)
+
+    def _on_data(self, data: bytes | None) -> None:
+        """Receive callback of push streams. Bytes that arrive while no transaction waits
+        are dropped, as ``discard_input()`` drops them before the next request."""
+        fut = self._waiting
+        if fut is None or fut.done():
+            return
+        if data is None:
+            fut.set_exception(ConnectionError("stream closed while waiting for a reply"))
+            return
+        plan = self._waiting_plan
+        assert plan is not None
+        hit = self._framer.whole_reply(data)  # the usual case: the reply, in one chunk
+        if hit is not None and hit[0] == plan.drive_id and hit[1] == plan.want_fn:
+            if self._hooks:
+                self._trace(Direction.RX, c.decode(data))
+            fut.set_result(hit[2])
+            return
+        for event in self._framer.feed(data):
+            if fut.done():
+                self._events.append(event)  # after the reply: stray at the next request
+            elif type(event) is c.Packet:
+                if event.drive_id == plan.drive_id and event.function == plan.want_fn:
+                    if self._hooks:
+                        self._trace(Direction.RX, event)
+                    fut.set_result(event.reply_value())
+                else:
+                    self._note_stray(event)
+            elif isinstance(event, ChecksumError):
+                self._note_stray(event)
+                fut.set_exception(event)
+            else:
+                self._note_stray(event)  # framing: keep waiting, the framer resyncs
 
     def _discard_pending(self) -> None:
         """Stale bytes (late replies, noise) must not answer the next request."""
-        self.stream.discard_input()
+        if not self._push:  # a push stream buffers nothing; _on_data drops stale bytes
+            self.stream.discard_input()
         self._framer.reset()
-        for event in self._events:
-            self._note_stray(event)
-        self._events.clear()
+        if self._events:
+            for event in self._events:
+                self._note_stray(event)
+            self._events.clear()
 
     def _note_stray(self, event: c.FramerEvent) -> None:
         self._trace(Direction.RX, event)
@@ -249,6 +383,9 @@ class AsyncDyn232Client:
         if self._closed:
             return
         self._closed = True
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
         await self.stream.close()
 
     @property
@@ -341,31 +478,31 @@ class Dyn232Axis(AsyncAxis):
 
     # ------------------------------------------------------------- registers and readouts
     async def status(self) -> DriveStatus:
-        result: DriveStatus = await self._run(self._read(cmds.make_read_status))
+        result: DriveStatus = await self.client.execute(self._read(cmds.make_read_status))
         return result
 
     async def config(self) -> DriveConfig:
-        result: DriveConfig = await self._run(self._read(cmds.make_read_config))
+        result: DriveConfig = await self.client.execute(self._read(cmds.make_read_config))
         return result
 
     async def set_config(self, cfg: DriveConfig) -> None:
         await self._run(cmds.make_set_config(self._id, cfg))
 
     async def position(self) -> int:
-        return int(await self._run(self._read(cmds.make_read_position)))
+        return int(await self.client.execute(self._read(cmds.make_read_position)))
 
     async def speed(self) -> int:
-        return int(await self._run(self._read(cmds.make_read_speed)))
+        return int(await self.client.execute(self._read(cmds.make_read_speed)))
 
     async def torque(self) -> int:
-        return int(await self._run(self._read(cmds.make_read_torque)))
+        return int(await self.client.execute(self._read(cmds.make_read_torque)))
 
     # ------------------------------------------------------------- parameters and id
     def _check_param(self, name: str, value: int) -> None:
         cmds.make_set_param(self._id, name, value)  # range + reachable over DYN232M
 
     async def read_param(self, name: str) -> int:
-        return int(await self._run(self._read(cmds.make_read_param, name)))
+        return int(await self.client.execute(self._read(cmds.make_read_param, name)))
 
     async def write_param(self, name: str, value: int) -> None:
         await self._run(cmds.make_set_param(self._id, name, value))

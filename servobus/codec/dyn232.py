@@ -198,6 +198,9 @@ DRIVE_SPECS: dict[DriveFunction, DriveSpec] = {
     )
 }
 
+#: Reply function codes (plain ints) whose 1-byte data reads as 7-bit unsigned.
+_UNSIGNED_REPLIES = frozenset(int(f) for f, spec in DRIVE_SPECS.items() if spec.unsigned)
+
 #: General_Read selectors that are answered, and with which function.
 GENERAL_READ_REPLIES: dict[GeneralReadSelector, DriveFunction] = {
     GeneralReadSelector.POSITION: DriveFunction.IS_ABS_POS32,
@@ -253,13 +256,18 @@ class Packet:
 
     def reply_value(self) -> int:
         """Value of a drive reply: 7-bit unsigned for 1-byte register/parameter replies."""
-        try:
-            spec = DRIVE_SPECS[DriveFunction(self.function)]
-        except ValueError:
-            return self.value
-        if spec.unsigned and len(self.data) == 1:
-            return self.unsigned
-        return self.value
+        return reply_value_of(self.function, self.data) if self.data else self.value
+
+
+def reply_value_of(function: int, data: bytes | bytearray) -> int:
+    """:meth:`Packet.reply_value` of a reply's 1..4 data groups (their MSBs are ignored)."""
+    raw = 0
+    for b in data:
+        raw = (raw << 7) | (b & 0x7F)
+    if len(data) == 1 and function in _UNSIGNED_REPLIES:
+        return raw
+    sign = 1 << (7 * len(data) - 1)
+    return raw - (sign << 1) if raw & sign else raw
 
 
 def data_length(value: int) -> int:
@@ -312,12 +320,13 @@ def encode_reply(drive_id: int, function: DriveFunction, value: int) -> bytes:
 
 def decode(raw: bytes | bytearray) -> Packet:
     """Decode exactly one packet; raise FramingError or ChecksumError."""
-    raw = bytes(raw)
+    if type(raw) is not bytes:
+        raw = bytes(raw)
     if not MIN_PACKET <= len(raw) <= MAX_PACKET:
         raise FramingError(f"packet length {len(raw)} is outside 4..7: {raw.hex(' ')}")
     if raw[0] & 0x80:
         raise FramingError(f"first byte 0x{raw[0]:02x} is not a start byte")
-    if any(not b & 0x80 for b in raw[1:]):
+    if min(raw[1:]) < 0x80:
         raise FramingError(f"start byte inside packet: {raw.hex(' ')}")
     declared = 4 + ((raw[1] >> 5) & 0x03)
     if declared != len(raw):
@@ -326,7 +335,10 @@ def decode(raw: bytes | bytearray) -> Packet:
         raise ChecksumError(
             f"checksum 0x{raw[-1]:02x} != 0x{checksum(raw[:-1]):02x} in {raw.hex(' ')}", raw
         )
-    return Packet(raw[0], raw[1] & 0x1F, bytes(b & 0x7F for b in raw[2:-1]))
+    return Packet(raw[0], raw[1] & 0x1F, raw[2:-1].translate(_LOW7))
+
+
+_LOW7 = bytes(b & 0x7F for b in range(256))  # bytes.translate table: clear the MSB
 
 
 FramerEvent = Packet | ProtocolError
@@ -348,9 +360,39 @@ class Framer:
         self.discarded = 0
 
     def feed(self, data: bytes | bytearray | Iterable[int]) -> list[FramerEvent]:
+        if self._whole_packet(data):
+            assert isinstance(data, bytes | bytearray)
+            try:
+                return [decode(data)]
+            except ProtocolError as exc:
+                return [exc]
         return list(self.iter_feed(data))
 
+    def _whole_packet(self, data: object) -> bool:
+        """Fast path: ``data`` is exactly one packet and nothing is pending (the usual case:
+        transports deliver a short reply in one chunk). Same events as the byte loop."""
+        return (isinstance(data, bytes | bytearray) and not self._buf and not self._stray
+                and MIN_PACKET <= len(data) <= MAX_PACKET and data[0] < 0x80
+                and len(data) == 4 + ((data[1] >> 5) & 0x03) and min(data[1:]) >= 0x80)
+
+    def whole_reply(self, data: bytes | bytearray) -> tuple[int, int, int] | None:
+        """(drive id, function, reply value) when ``data`` is exactly one packet with a
+        good checksum and the framer holds nothing; else None and nothing changes (then
+        :meth:`feed` the data). The cheapest way to take a reply that came in one chunk."""
+        if not self._whole_packet(data) or (sum(data[:-1]) ^ data[-1]) & 0x7F:
+            return None
+        return data[0], data[1] & 0x1F, reply_value_of(data[1] & 0x1F, data[2:-1])
+
     def iter_feed(self, data: bytes | bytearray | Iterable[int]) -> Iterator[FramerEvent]:
+        if self._whole_packet(data):
+            assert isinstance(data, bytes | bytearray)
+            try:
+                packet = decode(data)
+            except ProtocolError as exc:
+                yield exc
+                return
+            yield packet
+            return
         buf = self._buf
         for b in data:
             if not b & 0x80:

@@ -30,7 +30,7 @@ from servobus.sim.drive import VirtualDrive
 from servobus.sim.dyn232_line import Dyn232Line
 from servobus.sim.eeprom import EepromStore
 from servobus.sim.pacing import HostPort, LineRunner
-from servobus.transport.base import Direction, TraceHook
+from servobus.transport.base import ByteReceiver, Direction, TraceHook
 
 SIM_KINDS = ("dyn2", "dc2", "dyn4")
 _TRUE = ("1", "true", "yes", "on")
@@ -105,7 +105,11 @@ def make_drives(ids: Sequence[int], *, state: str | None = None,
 
 
 class SimByteStream:
-    """A ByteStream wired to an in-process virtual line (``transport.base.ByteStream``)."""
+    """A ByteStream wired to an in-process virtual line (``transport.base.PushByteStream``).
+
+    With a receiver installed, each reply is handed to it at its release time, from the
+    line's release task (paced) or from within ``write()`` (unpaced): no reader to wake.
+    """
 
     def __init__(self, runner: LineRunner) -> None:
         self.runner = runner
@@ -115,24 +119,33 @@ class SimByteStream:
         self._ready = asyncio.Event()
         self._closed = False
         self._traces: list[TraceHook] = []
+        self._receiver: ByteReceiver | None = None
         self._port: HostPort = runner.open_port(self._on_reply)
 
     def _on_reply(self, data: bytes) -> None:
-        now = time.monotonic()
-        for hook in self._traces:
-            hook(Direction.RX, data, now)
+        if self._traces:
+            now = time.monotonic()
+            for hook in self._traces:
+                hook(Direction.RX, data, now)
+        receiver = self._receiver
+        if receiver is not None:
+            receiver(data)
+            return
         self._buf += data
         self._ready.set()
+
+    def set_receiver(self, receiver: ByteReceiver | None) -> None:
+        self._receiver = receiver
 
     async def write(self, data: bytes) -> None:
         if self._closed:
             raise ConnectionError("sim stream is closed")
         data = bytes(data)
-        now = time.monotonic()
-        for hook in self._traces:
-            hook(Direction.TX, data, now)
-        self.runner.start()
-        self.runner.submit(self._port, data)
+        if self._traces:
+            now = time.monotonic()
+            for hook in self._traces:
+                hook(Direction.TX, data, now)
+        self.runner.submit(self._port, data)  # starts the runner on first use
 
     async def read(self, max_bytes: int = 4096) -> bytes:
         while not self._buf:
@@ -154,6 +167,8 @@ class SimByteStream:
         self._closed = True
         self._port.closed = True
         self._ready.set()  # wake a pending read so it raises ConnectionError
+        if self._receiver is not None:
+            self._receiver(None)
         await self.runner.close()
 
     def add_trace(self, hook: TraceHook) -> None:

@@ -132,10 +132,11 @@ class LineRunner:
         if not self.paced:
             self.clock.sync(now)
             if not self.taps:
-                for event in port.framer.iter_feed(data):
+                for event in port.framer.feed(data):
                     reply = self.line.handle(event)
                     if reply:
                         port.deliver(reply)
+                self.start()
                 return
             for _, chunk, event in self._segments(port, data):
                 self._tap(Direction.TX, chunk, now)
@@ -143,6 +144,7 @@ class LineRunner:
                 if reply:
                     self._tap(Direction.RX, reply, now)
                     port.deliver(reply)
+            self.start()
             return
         self.start()
         self.clock.sync(now)

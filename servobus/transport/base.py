@@ -19,6 +19,10 @@ class Direction(Enum):
 #: Called with every chunk of bytes moved, and the monotonic time it moved.
 TraceHook = Callable[[Direction, bytes, float], None]
 
+#: Push-style reception (optional, see :class:`PushByteStream`): each received chunk, on the
+#: loop thread, after the RX trace hooks; then ``None`` once when the stream closes or fails.
+ByteReceiver = Callable[["bytes | None"], None]
+
 
 @runtime_checkable
 class ByteStream(Protocol):
@@ -41,3 +45,28 @@ class ByteStream(Protocol):
 
     def add_trace(self, hook: TraceHook) -> None:
         """Call ``hook`` for every chunk written (TX) or received (RX)."""
+
+
+@runtime_checkable
+class PushByteStream(ByteStream, Protocol):
+    """A ByteStream that can also push received bytes to a callback (optional capability).
+
+    A client that waits for replies saves a task switch and a buffer copy per reply: the
+    transport's receive callback hands the bytes straight to the client's framer. Streams
+    without it (pyserial, the fault-injecting pair) are read with ``read()``.
+    """
+
+    def set_receiver(self, receiver: ByteReceiver | None) -> None:
+        """Push every chunk received from now on to ``receiver`` instead of buffering it for
+        ``read()`` (``None`` reverts to ``read()``). Bytes buffered before are kept for
+        ``read()``/``discard_input()``. When the stream closes or fails, ``receiver(None)``
+        is called once."""
+
+
+def set_receiver(stream: ByteStream, receiver: ByteReceiver | None) -> bool:
+    """Install ``receiver`` on ``stream`` if it supports push reception; True if it does."""
+    method = getattr(stream, "set_receiver", None)
+    if method is None:
+        return False
+    method(receiver)
+    return True

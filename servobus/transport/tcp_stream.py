@@ -1,9 +1,11 @@
 """Raw TCP byte stream on asyncio (serial-to-TCP bridges, ``servobus sim --listen tcp://``).
 
 Used for ``socket://host:port`` URLs instead of pyserial's implementation: no reader thread
-and no thread hop per reply, so a round trip costs one event-loop wake-up (see
-benchmarks/bench_dyn232_client.py for the measured difference). TCP_NODELAY is set because
-every packet is a few bytes and Nagle's algorithm would hold the next request back.
+and no thread hop per reply. Built on an :class:`asyncio.Protocol` (no StreamReader): with a
+receiver installed (:meth:`TcpStream.set_receiver`) the bytes go from ``data_received``
+straight to the client, so a round trip costs one event-loop wake-up and no extra task step
+(see benchmarks/bench_dyn232_client.py). TCP_NODELAY is set because every packet is a few
+bytes and Nagle's algorithm would hold the next request back.
 """
 
 from __future__ import annotations
@@ -15,7 +17,9 @@ import time
 from urllib.parse import urlsplit
 
 from servobus.errors import ServobusError
-from servobus.transport.base import Direction, TraceHook
+from servobus.transport.base import ByteReceiver, Direction, TraceHook
+
+WRITE_HIGH_WATER = 65536  # wait for the socket to drain above this many queued bytes
 
 
 def parse_host_port(url: str) -> tuple[str, int]:
@@ -26,26 +30,100 @@ def parse_host_port(url: str) -> tuple[str, int]:
     return parts.hostname, parts.port
 
 
-class TcpStream:
-    """A connected TCP socket as a :class:`ByteStream`."""
+class _Protocol(asyncio.Protocol):
+    """Receive side of one connection; everything runs on the loop thread."""
 
-    def __init__(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        self._reader = reader
-        self._writer = writer
-        self._traces: list[TraceHook] = []
+    def __init__(self) -> None:
+        self.transport: asyncio.Transport | None = None
+        self.buf = bytearray()
+        self.traces: list[TraceHook] = []
+        self.receiver: ByteReceiver | None = None
+        self.lost = False
+        self.error: BaseException | None = None
+        self._waiter: asyncio.Future[None] | None = None
+        self._drained: asyncio.Future[None] | None = None
+        self.closed: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+
+    def data_received(self, data: bytes) -> None:
+        if self.traces:
+            t = time.monotonic()
+            for hook in self.traces:
+                hook(Direction.RX, data, t)
+        receiver = self.receiver
+        if receiver is not None:
+            receiver(data)
+            return
+        self.buf += data
+        self._wake()
+
+    def eof_received(self) -> bool | None:
+        return None  # close our side too: a serial bridge has no half-open state
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.lost = True
+        self.error = exc
+        self._wake()
+        if not self.closed.done():
+            self.closed.set_result(None)
+        drained, self._drained = self._drained, None
+        if drained is not None and not drained.done():
+            drained.set_result(None)
+        if self.receiver is not None:
+            self.receiver(None)
+
+    def pause_writing(self) -> None:
+        if self._drained is None:
+            self._drained = asyncio.get_running_loop().create_future()
+
+    def resume_writing(self) -> None:
+        drained, self._drained = self._drained, None
+        if drained is not None and not drained.done():
+            drained.set_result(None)
+
+    async def drain(self) -> None:
+        if self._drained is not None:
+            await self._drained
+
+    async def wait_data(self) -> None:
+        fut = asyncio.get_running_loop().create_future()
+        self._waiter = fut
+        try:
+            await fut
+        finally:
+            if self._waiter is fut:
+                self._waiter = None
+
+    def _wake(self) -> None:
+        waiter = self._waiter
+        if waiter is not None and not waiter.done():
+            waiter.set_result(None)
+
+
+class TcpStream:
+    """A connected TCP socket as a :class:`ByteStream` (and a ``PushByteStream``)."""
+
+    def __init__(self, transport: asyncio.Transport, protocol: _Protocol) -> None:
+        self._transport = transport
+        self._protocol = protocol
         self._closed = False
-        sock = writer.get_extra_info("socket")
+        sock = transport.get_extra_info("socket")
         if sock is not None:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 
     @classmethod
     async def connect(cls, host: str, port: int, *, timeout: float = 5.0) -> TcpStream:
+        loop = asyncio.get_running_loop()
         try:
-            reader, writer = await asyncio.wait_for(asyncio.open_connection(host, port),
-                                                    timeout)
+            transport, protocol = await asyncio.wait_for(
+                loop.create_connection(_Protocol, host, port), timeout)
         except (OSError, TimeoutError) as exc:
             raise ServobusError(f"cannot connect to {host}:{port}: {exc}") from exc
-        return cls(reader, writer)
+        assert isinstance(transport, asyncio.Transport)
+        return cls(transport, protocol)
 
     @classmethod
     async def open_url(cls, url: str, *, timeout: float = 5.0) -> TcpStream:
@@ -53,42 +131,47 @@ class TcpStream:
         return await cls.connect(host, port, timeout=timeout)
 
     def add_trace(self, hook: TraceHook) -> None:
-        self._traces.append(hook)
+        self._protocol.traces.append(hook)
 
-    def _trace(self, direction: Direction, data: bytes) -> None:
-        t = time.monotonic()
-        for hook in self._traces:
-            hook(direction, data, t)
+    def set_receiver(self, receiver: ByteReceiver | None) -> None:
+        self._protocol.receiver = receiver
 
     async def write(self, data: bytes) -> None:
-        if self._closed or self._writer.is_closing():
+        protocol = self._protocol
+        if self._closed or protocol.lost:
             raise ConnectionError("stream is closed")
-        if self._traces:
-            self._trace(Direction.TX, bytes(data))
-        self._writer.write(data)
-        if self._writer.transport.get_write_buffer_size() > 65536:
-            await self._writer.drain()
+        if protocol.traces:
+            t = time.monotonic()
+            chunk = bytes(data)
+            for hook in protocol.traces:
+                hook(Direction.TX, chunk, t)
+        self._transport.write(data)
+        if self._transport.get_write_buffer_size() > WRITE_HIGH_WATER:
+            await protocol.drain()
 
     async def read(self, max_bytes: int = 4096) -> bytes:
-        if self._closed:
-            raise ConnectionError("stream is closed")
-        data = await self._reader.read(max_bytes)
-        if not data:
-            raise ConnectionError("connection closed by peer")
-        if self._traces:
-            self._trace(Direction.RX, data)
-        return data
+        protocol = self._protocol
+        buf = protocol.buf
+        while True:
+            if self._closed:
+                raise ConnectionError("stream is closed")
+            if buf:
+                break
+            if protocol.lost:
+                raise ConnectionError("connection closed by peer")
+            await protocol.wait_data()
+        out = bytes(buf[:max_bytes])
+        del buf[:max_bytes]
+        return out
 
     def discard_input(self) -> None:
-        # StreamReader has no public flush; drop what it buffered (private but stable API).
-        buffer = getattr(self._reader, "_buffer", None)
-        if isinstance(buffer, bytearray):
-            buffer.clear()
+        self._protocol.buf.clear()
 
     async def close(self) -> None:
         if self._closed:
             return
         self._closed = True
-        self._writer.close()
-        with contextlib.suppress(ConnectionError, OSError):
-            await self._writer.wait_closed()
+        self._protocol._wake()  # a pending read() raises ConnectionError
+        self._transport.close()
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(asyncio.shield(self._protocol.closed), 2.0)
