@@ -163,6 +163,36 @@ async def _client_rate(host: str, port: int, transport: str) -> float:
         await core.close()
 
 
+class _FloorProtocol(asyncio.Protocol):
+    """The least an asyncio client can do per round trip: write, wake on data_received."""
+
+    def __init__(self) -> None:
+        self.waiter: asyncio.Future[None] | None = None
+
+    def data_received(self, data: bytes) -> None:
+        if self.waiter is not None and not self.waiter.done():
+            self.waiter.set_result(None)
+
+
+async def _asyncio_floor_rate(host: str, port: int, request: bytes) -> float:
+    """Round trips/s of a protocol-free asyncio client (one reply chunk per request): the
+    ceiling for any asyncio client against the same server on this machine."""
+    loop = asyncio.get_running_loop()
+    transport, protocol = await loop.create_connection(_FloorProtocol, host, port)
+    transport.get_extra_info("socket").setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    try:
+        t0 = 0.0
+        for i in range(100 + TCP_ROUND_TRIPS):
+            if i == 100:
+                t0 = time.perf_counter()
+            protocol.waiter = loop.create_future()
+            transport.write(request)
+            await protocol.waiter
+        return TCP_ROUND_TRIPS / (time.perf_counter() - t0)
+    finally:
+        transport.close()
+
+
 def bench_tcp_round_trips() -> float:
     sim = [sys.executable, "-c", "from servobus.cli.main import main; main()", "sim", "dyn2",
            "--fast", "--listen", "tcp://127.0.0.1:0", "--duration", "120"]
@@ -176,6 +206,7 @@ def bench_tcp_round_trips() -> float:
     with _server(sim) as (host, port):
         ours = asyncio.run(_client_rate(host, port, "tcp"))
         via_pyserial = asyncio.run(_client_rate(host, port, "pyserial"))
+        floor = asyncio.run(_asyncio_floor_rate(host, port, request))
     with _server(canned) as (host, port):
         client_only = asyncio.run(_client_rate(host, port, "tcp"))
     ratio = ours / raw
@@ -184,6 +215,8 @@ def bench_tcp_round_trips() -> float:
     print(f"  same client, pyserial socket:// {via_pyserial:7.0f}/s = {via_pyserial / raw:6.1%}; "
           f"same client vs a canned-reply server {client_only:7.0f}/s = {client_only / raw:6.1%} "
           f"(client cost alone)")
+    print(f"  protocol-free asyncio client + simulator (ceiling for any asyncio client) "
+          f"{floor:7.0f}/s = {floor / raw:6.1%}; this client = {ours / floor:6.1%} of it")
     return ratio
 
 

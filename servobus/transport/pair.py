@@ -20,7 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
 
-from servobus.transport.base import Direction, TraceHook
+from servobus.transport.base import ByteReceiver, Direction, TraceHook
 
 
 class Fault(Enum):
@@ -126,6 +126,7 @@ class PairStream:
         self._ready = asyncio.Event()
         self._closed = False
         self._traces: list[TraceHook] = []
+        self._receiver: ByteReceiver | None = None
         self._release_at = 0.0  # loop time before which nothing from this end is delivered
         self.bytes_written = 0
         self.bytes_received = 0
@@ -169,8 +170,15 @@ class PairStream:
             return
         self.bytes_received += len(data)
         self._trace(Direction.RX if self._is_host else Direction.TX, data)
+        if self._receiver is not None:
+            self._receiver(data)
+            return
         self._buf.extend(data)
         self._ready.set()
+
+    def set_receiver(self, receiver: ByteReceiver | None) -> None:
+        """Push received chunks to ``receiver`` (``transport.base.PushByteStream``)."""
+        self._receiver = receiver
 
     async def read(self, max_bytes: int = 4096) -> bytes:
         while not self._buf:
@@ -190,10 +198,16 @@ class PairStream:
             return
         self._closed = True
         self._ready.set()
+        self._hang_up()
         peer = self._peer
         if peer is not None and not peer._closed:
             peer._closed = True  # hang-up is seen at both ends
             peer._ready.set()
+            peer._hang_up()
+
+    def _hang_up(self) -> None:
+        if self._receiver is not None:
+            self._receiver(None)
 
     @property
     def closed(self) -> bool:
