@@ -360,7 +360,7 @@ class Framer:
         self.discarded = 0
 
     def feed(self, data: bytes | bytearray | Iterable[int]) -> list[FramerEvent]:
-        if self._whole_packet(data):
+        if self.whole_packet(data):
             assert isinstance(data, bytes | bytearray)
             try:
                 return [decode(data)]
@@ -368,7 +368,7 @@ class Framer:
                 return [exc]
         return list(self.iter_feed(data))
 
-    def _whole_packet(self, data: object) -> bool:
+    def whole_packet(self, data: object) -> bool:
         """Fast path: ``data`` is exactly one packet and nothing is pending (the usual case:
         transports deliver a short reply in one chunk). Same events as the byte loop."""
         return (isinstance(data, bytes | bytearray) and not self._buf and not self._stray
@@ -379,12 +379,12 @@ class Framer:
         """(drive id, function, reply value) when ``data`` is exactly one packet with a
         good checksum and the framer holds nothing; else None and nothing changes (then
         :meth:`feed` the data). The cheapest way to take a reply that came in one chunk."""
-        if not self._whole_packet(data) or (sum(data[:-1]) ^ data[-1]) & 0x7F:
+        if not self.whole_packet(data) or (sum(data[:-1]) ^ data[-1]) & 0x7F:
             return None
         return data[0], data[1] & 0x1F, reply_value_of(data[1] & 0x1F, data[2:-1])
 
     def iter_feed(self, data: bytes | bytearray | Iterable[int]) -> Iterator[FramerEvent]:
-        if self._whole_packet(data):
+        if self.whole_packet(data):
             assert isinstance(data, bytes | bytearray)
             try:
                 packet = decode(data)

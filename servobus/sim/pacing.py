@@ -168,6 +168,9 @@ class LineRunner:
         The first chunk includes the port's bytes held from earlier calls; bytes of a packet
         still incomplete at the end are held in ``port.tap_pending``.
         """
+        if not port.tap_pending and port.framer.whole_packet(data):
+            yield len(data), bytes(data), port.framer.feed(data)[0]  # one packet, one chunk
+            return
         seg = 0
         for i, event in self.line.events(data, port.framer):
             chunk = bytes(port.tap_pending) + data[seg : i + 1]
