@@ -40,10 +40,11 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 from servobus.client import dyn232_commands as cmds
-from servobus.client.axis import AsyncAxis, AxisTraceHook
+from servobus.client.axis import AxisTraceHook
+from servobus.client.command_axis import CommandAxis, CommandSet
 from servobus.client.dyn232_commands import Command
 from servobus.client.eeprom_guard import EepromGuard
 from servobus.codec import dyn232 as c
@@ -52,7 +53,6 @@ from servobus.errors import (
     ArgumentRangeError,
     ChecksumError,
     DriveTimeout,
-    FramingError,
     ProtocolError,
 )
 from servobus.transport.base import ByteStream, Direction, set_receiver
@@ -417,127 +417,8 @@ def _guard_item(command: Command) -> str:
     return command.function.name.lower()
 
 
-class Dyn232Axis(AsyncAxis):
-    """One DYN2/DC2/DYN4 drive on a DYN232M line."""
+class Dyn232Axis(CommandAxis):
+    """One DYN2/DC2/DYN4 drive on a DYN232M line (everything is CommandAxis)."""
 
-    def __init__(self, client: AsyncDyn232Client, drive_id: int, *,
-                 owns_client: bool = True) -> None:
-        self.client = client
-        self._id = cmds.check_drive_id(drive_id)
-        self._owns_client = owns_client
-        self._reads: dict[object, Command] = {}  # read commands are immutable: build once
-
-    def _read(self, factory: Callable[..., Command], *args: Any) -> Command:
-        key = (factory, *args)
-        command = self._reads.get(key)
-        if command is None:
-            command = self._reads[key] = factory(self._id, *args)
-        return command
-
-    @property
-    def drive_id(self) -> int:
-        return self._id
-
-    @property
-    def protocol(self) -> str:
-        return "dyn232"
-
-    async def _run(self, command: Command, **kw: Any) -> Any:
-        return await self.client.execute(command, **kw)
-
-    # ------------------------------------------------------------- motion
-    async def _send_move_to(self, position: int) -> None:
-        await self._run(cmds.make_move_absolute(self._id, position))
-
-    async def _send_move_by(self, distance: int) -> None:
-        await self._run(cmds.make_move_relative(self._id, distance))
-
-    async def turn(self, rpm: int) -> None:
-        await self._run(cmds.make_turn_const_speed(self._id, rpm))
-
-    async def square_wave(self, amplitude: int) -> None:
-        await self._run(cmds.make_square_wave(self._id, amplitude))
-
-    async def sine_wave(self, amplitude: int) -> None:
-        await self._run(cmds.make_sine_wave(self._id, amplitude))
-
-    async def wave_frequency(self, hz: int) -> None:
-        await self._run(cmds.make_wave_frequency(self._id, hz))
-
-    async def set_origin(self) -> None:
-        await self._run(cmds.make_set_origin(self._id))
-
-    async def enable(self) -> None:
-        await self._run(cmds.make_enable(self._id))
-
-    async def disable(self) -> None:
-        await self._run(cmds.make_disable(self._id))
-
-    async def reset(self) -> None:
-        await self._run(cmds.make_reset(self._id))
-
-    # ------------------------------------------------------------- registers and readouts
-    async def status(self) -> DriveStatus:
-        result: DriveStatus = await self.client.execute(self._read(cmds.make_read_status))
-        return result
-
-    async def config(self) -> DriveConfig:
-        result: DriveConfig = await self.client.execute(self._read(cmds.make_read_config))
-        return result
-
-    async def set_config(self, cfg: DriveConfig) -> None:
-        await self._run(cmds.make_set_config(self._id, cfg))
-
-    async def position(self) -> int:
-        return int(await self.client.execute(self._read(cmds.make_read_position)))
-
-    async def speed(self) -> int:
-        return int(await self.client.execute(self._read(cmds.make_read_speed)))
-
-    async def torque(self) -> int:
-        return int(await self.client.execute(self._read(cmds.make_read_torque)))
-
-    # ------------------------------------------------------------- parameters and id
-    def _check_param(self, name: str, value: int) -> None:
-        cmds.make_set_param(self._id, name, value)  # range + reachable over DYN232M
-
-    async def read_param(self, name: str) -> int:
-        return int(await self.client.execute(self._read(cmds.make_read_param, name)))
-
-    async def write_param(self, name: str, value: int) -> None:
-        await self._run(cmds.make_set_param(self._id, name, value))
-
-    async def read_id(self) -> int:
-        return int(await self._run(self._read(cmds.make_read_id)))
-
-    async def assign_id(self, new_id: int) -> None:
-        """Assign_Drive_ID takes effect at once; this axis then addresses ``new_id``."""
-        await self._run(cmds.make_assign_id(self._id, new_id))
-        self.client.guard.rename_drive(self._id, new_id)
-        self._id = new_id
-        self._reads.clear()
-
-    async def ping(self, timeout: float = 0.05) -> bool:
-        """One status read without retry. A corrupt reply still proves something answered."""
-        try:
-            await self.client.execute(self._read(cmds.make_read_status), retries=0,
-                                      timeout=timeout)
-        except DriveTimeout:
-            return False
-        except (ChecksumError, FramingError):
-            return True
-        return True
-
-    # ------------------------------------------------------------- connection
-    async def sibling(self, drive_id: int) -> Dyn232Axis:
-        return Dyn232Axis(self.client, drive_id, owns_client=False)
-
-    async def add_trace(self, hook: AxisTraceHook) -> None:
-        self.client.add_trace(hook)
-
-    async def close(self) -> None:
-        if self._owns_client:
-            await self.client.close()
-
-    def __repr__(self) -> str:
-        return f"<Dyn232Axis id {self._id}>"
+    commands: ClassVar[CommandSet] = cmds
+    protocol_name = "dyn232"

@@ -32,15 +32,15 @@ import contextlib
 import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 from servobus.client import dyncan_commands as cmds
 from servobus.client.axis import AsyncAxis, AxisTraceHook
+from servobus.client.command_axis import CommandAxis, CommandSet
 from servobus.client.dyncan_commands import CanCommand
 from servobus.client.eeprom_guard import EepromGuard
 from servobus.codec import dyncan as c
 from servobus.drive import params as P
-from servobus.drive.registers import DriveConfig, DriveStatus
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveError, DriveTimeout, ServobusError
 from servobus.transport.base import Direction
 from servobus.transport.can_bus import AsyncCanBus, CanFrame, FramePort, set_receiver
@@ -378,44 +378,16 @@ class Heartbeat:
                 await self._task
 
 
-class DynCanAxis(AsyncAxis):
-    """One DYN2/DYN4 drive on a DYN CAN bus."""
+class DynCanAxis(CommandAxis):
+    """One DYN2/DYN4 drive on a DYN CAN bus: CommandAxis plus what only CAN has.
 
-    def __init__(self, client: AsyncDynCanClient, drive_id: int, *,
-                 owns_client: bool = True) -> None:
-        self.client = client
-        self._id = cmds.check_drive_id(drive_id)
-        self._owns_client = owns_client
+    ``torque()`` reads General_Read 0x1E: 700 = peak current, positive = CCW.
+    """
 
-    @property
-    def drive_id(self) -> int:
-        return self._id
-
-    @property
-    def protocol(self) -> str:
-        return "dyncan"
-
-    async def _run(self, command: CanCommand, **kw: Any) -> Any:
-        return await self.client.execute(command, **kw)
-
-    # ------------------------------------------------------------- motion
-    async def _send_move_to(self, position: int) -> None:
-        await self._run(cmds.make_move_absolute(self._id, position))
-
-    async def _send_move_by(self, distance: int) -> None:
-        await self._run(cmds.make_move_relative(self._id, distance))
-
-    async def turn(self, rpm: int) -> None:
-        await self._run(cmds.make_turn_const_speed(self._id, rpm))
-
-    async def square_wave(self, amplitude: int) -> None:
-        await self._run(cmds.make_square_wave(self._id, amplitude))
-
-    async def sine_wave(self, amplitude: int) -> None:
-        await self._run(cmds.make_sine_wave(self._id, amplitude))
-
-    async def wave_frequency(self, hz: int) -> None:
-        await self._run(cmds.make_wave_frequency(self._id, hz))
+    commands: ClassVar[CommandSet] = cmds
+    protocol_name = "dyncan"
+    id_settle_s = ID_REINIT_S
+    client: AsyncDynCanClient
 
     async def position_direct(self, step: int) -> None:
         await self._run(cmds.make_position_direct(self._id, step))
@@ -424,56 +396,12 @@ class DynCanAxis(AsyncAxis):
         """Load a synchronized move; start it with ``client.sync_trigger`` / sync_move."""
         await self._run(cmds.make_sync_load(self._id, value, relative=relative))
 
-    async def set_origin(self) -> None:
-        await self._run(cmds.make_set_origin(self._id))
-
-    async def enable(self) -> None:
-        await self._run(cmds.make_servo(self._id, enable=True))
-
-    async def disable(self) -> None:
-        await self._run(cmds.make_servo(self._id, enable=False))
-
-    async def reset(self) -> None:
-        await self._run(cmds.make_reset(self._id))
-
-    # ------------------------------------------------------------- registers and readouts
-    async def status(self) -> DriveStatus:
-        result: DriveStatus = await self._run(cmds.make_read_status(self._id))
-        return result
-
-    async def config(self) -> DriveConfig:
-        result: DriveConfig = await self._run(cmds.make_read_config(self._id))
-        return result
-
-    async def set_config(self, cfg: DriveConfig) -> None:
-        await self._run(cmds.make_set_config(self._id, cfg))
-
-    async def position(self) -> int:
-        return int(await self._run(cmds.make_read_position(self._id)))
-
-    async def speed(self) -> int:
-        return int(await self._run(cmds.make_read_motor_speed(self._id)))
-
-    async def torque(self) -> int:
-        """700 = peak current, positive = CCW (General_Read 0x1E)."""
-        return int(await self._run(cmds.make_read_torque(self._id)))
-
     async def echo(self, data: bytes) -> bytes:
         result: bytes = await self._run(cmds.make_echo(self._id, data))
         return result
 
     async def counter(self) -> int:
         return await self.client.heartbeat(self._id)
-
-    # ------------------------------------------------------------- parameters and id
-    def _check_param(self, name: str, value: int) -> None:
-        cmds.make_set_param(self._id, name, value)  # range + reachable over CAN
-
-    async def read_param(self, name: str) -> int:
-        return int(await self._run(cmds.make_read_param(self._id, name)))
-
-    async def write_param(self, name: str, value: int) -> None:
-        await self._run(cmds.make_set_param(self._id, name, value))
 
     async def read_params(self, names: Iterable[str] = P.DYN_PARAMS) -> dict[str, int]:
         """One group read per group touched (at most three frames for all nine)."""
@@ -487,38 +415,6 @@ class DynCanAxis(AsyncAxis):
     async def write_params(self, values: Mapping[str, int]) -> None:
         """One group write per group touched; the untouched fields travel as 0 (unchanged)."""
         await self.client.execute_all(cmds.make_set_params(self._id, dict(values)))
-
-    async def read_id(self) -> int:
-        return int(await self._run(cmds.make_read_id(self._id)))
-
-    async def assign_id(self, new_id: int) -> None:
-        """Assign, wait the 10 ms re-initialisation, then address ``new_id``."""
-        await self._run(cmds.make_assign_id(self._id, new_id))
-        await asyncio.sleep(ID_REINIT_S)
-        self.client.guard.rename_drive(self._id, new_id)
-        self._id = new_id
-
-    async def ping(self, timeout: float = 0.05) -> bool:
-        try:
-            await self.client.execute(cmds.make_read_status(self._id), retries=0,
-                                      timeout=timeout)
-        except DriveTimeout:
-            return False
-        return True
-
-    # ------------------------------------------------------------- connection
-    async def sibling(self, drive_id: int) -> DynCanAxis:
-        return DynCanAxis(self.client, drive_id, owns_client=False)
-
-    async def add_trace(self, hook: AxisTraceHook) -> None:
-        self.client.add_trace(hook)
-
-    async def close(self) -> None:
-        if self._owns_client:
-            await self.client.close()
-
-    def __repr__(self) -> str:
-        return f"<DynCanAxis id {self._id}>"
 
 
 _CLIENT_OPTIONS = ("retries", "eeprom_guard", "on_alarm")

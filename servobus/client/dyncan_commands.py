@@ -155,6 +155,14 @@ def make_servo(drive_id: int, enable: bool) -> CanCommand:
     return _cmd(drive_id, F.SERVO_DISABLE, int(code))
 
 
+def make_enable(drive_id: int) -> CanCommand:
+    return make_servo(drive_id, True)
+
+
+def make_disable(drive_id: int) -> CanCommand:
+    return make_servo(drive_id, False)
+
+
 def make_reset(drive_id: int) -> CanCommand:
     """General_Read 0x1C: drive reset, as on DYN232M (same firmware; not in the CAN manual)."""
     return CanCommand(c.request(check_drive_id(drive_id), F.GENERAL_READ, int(GR.RESET)),
@@ -261,7 +269,7 @@ def make_read_torque(drive_id: int) -> CanCommand:
 
 
 @functools.cache  # immutable result: built once per drive id (hot polling path)
-def make_read_motor_speed(drive_id: int) -> CanCommand:
+def make_read_speed(drive_id: int) -> CanCommand:
     """Read_Motor_Speed (0x1A): rpm, 2 bytes."""
     return _cmd(drive_id, F.READ_MOTOR_SPEED)
 
