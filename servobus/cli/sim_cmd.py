@@ -12,3 +12,11 @@ def sim_group() -> None:
 
 def register(group: click.Group) -> None:
     group.add_command(sim_group)
+
+
+def add_sim_command(group: click.Group, command: click.Command) -> None:
+    """Attach ``servobus sim <command>``; sim_cmd must be registered first (COMMAND_MODULES)."""
+    sim = group.commands.get("sim")
+    if not isinstance(sim, click.Group):
+        raise RuntimeError(f"servobus.cli.sim_cmd must be registered before sim {command.name}")
+    sim.add_command(command)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import click
 
+from servobus.cli.sim_cmd import add_sim_command
 from servobus.codec.dyn232 import FACTORY_ID
 from servobus.drive import units as U
 from servobus.errors import ArgumentRangeError
@@ -69,7 +70,4 @@ def sim_dyn2_cmd(listen: str | None, ids: str | None, pty: bool, fast: bool, sta
 
 
 def register(group: click.Group) -> None:
-    sim = group.commands.get("sim")
-    if not isinstance(sim, click.Group):
-        raise RuntimeError("servobus.cli.sim_cmd must be registered before sim_dyn2_cmd")
-    sim.add_command(sim_dyn2_cmd)
+    add_sim_command(group, sim_dyn2_cmd)

@@ -18,6 +18,7 @@ from collections.abc import Sequence
 
 import click
 
+from servobus.cli.sim_cmd import add_sim_command
 from servobus.drive import units as U
 from servobus.errors import ArgumentRangeError
 from servobus.sim.drive import VirtualDrive
@@ -89,7 +90,4 @@ def sim_dyncan_cmd(address: str, ids: str, fast: bool, bitrate: int, state: str 
 
 
 def register(group: click.Group) -> None:
-    sim = group.commands.get("sim")
-    if not isinstance(sim, click.Group):
-        raise RuntimeError("servobus.cli.sim_cmd must be registered before sim_dyncan_cmd")
-    sim.add_command(sim_dyncan_cmd)
+    add_sim_command(group, sim_dyncan_cmd)
