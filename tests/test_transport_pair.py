@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-from servobus.transport.base import ByteStream, Direction
+from servobus.transport.base import ByteStream, Direction, PushByteStream, set_receiver
 from servobus.transport.pair import Fault, Manipulator, open_pair
 from servobus.transport.trace import ByteCounter, TraceRecorder, format_event
 
@@ -143,3 +143,27 @@ async def test_discard_input_drops_buffered_bytes() -> None:
     host.discard_input()
     await device.write(b"new")
     assert await read_exactly(host, 3) == b"new"
+
+
+@arun
+async def test_pull_only_pair_has_no_push_capability() -> None:
+    host, device = open_pair(push=False)
+    assert not isinstance(host, PushByteStream) and not hasattr(host, "set_receiver")
+    assert set_receiver(host, lambda data: None) is False
+    await device.write(b"\x01")
+    assert await read_exactly(host, 1) == b"\x01"
+
+
+@arun
+async def test_push_pair_pushes_keeps_earlier_bytes_and_hangs_up_once() -> None:
+    host, device = open_pair()
+    assert isinstance(host, PushByteStream)
+    await device.write(b"early")
+    got: list[bytes | None] = []
+    assert set_receiver(host, got.append) is True
+    await device.write(b"pushed")
+    assert got == [b"pushed"]
+    assert await read_exactly(host, 5) == b"early"  # buffered before the receiver came
+    await device.close()  # the far end hangs up
+    await host.close()
+    assert got == [b"pushed", None]

@@ -17,8 +17,6 @@ URL form (parsed by :func:`parse_sim_url`)::
 
 from __future__ import annotations
 
-import asyncio
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from urllib.parse import parse_qs, urlsplit
@@ -30,7 +28,8 @@ from servobus.sim.drive import VirtualDrive
 from servobus.sim.dyn232_line import Dyn232Line
 from servobus.sim.eeprom import EepromStore
 from servobus.sim.pacing import HostPort, LineRunner
-from servobus.transport.base import ByteReceiver, Direction, TraceHook
+from servobus.transport.base import Direction
+from servobus.transport.buffered import PushInput
 
 SIM_KINDS = ("dyn2", "dc2", "dyn4")
 _TRUE = ("1", "true", "yes", "on")
@@ -104,75 +103,38 @@ def make_drives(ids: Sequence[int], *, state: str | None = None,
             for i in ids]
 
 
-class SimByteStream:
+class SimByteStream(PushInput):
     """A ByteStream wired to an in-process virtual line (``transport.base.PushByteStream``).
 
     With a receiver installed, each reply is handed to it at its release time, from the
     line's release task (paced) or from within ``write()`` (unpaced): no reader to wake.
     """
 
+    closed_text = "sim stream is closed"
+
     def __init__(self, runner: LineRunner) -> None:
+        super().__init__()
         self.runner = runner
         self.line = runner.line
         self.drives: list[VirtualDrive] = runner.line.drives
-        self._buf = bytearray()
-        self._ready = asyncio.Event()
-        self._closed = False
-        self._traces: list[TraceHook] = []
-        self._receiver: ByteReceiver | None = None
-        self._port: HostPort = runner.open_port(self._on_reply)
-
-    def _on_reply(self, data: bytes) -> None:
-        if self._traces:
-            now = time.monotonic()
-            for hook in self._traces:
-                hook(Direction.RX, data, now)
-        receiver = self._receiver
-        if receiver is not None:
-            receiver(data)
-            return
-        self._buf += data
-        self._ready.set()
-
-    def set_receiver(self, receiver: ByteReceiver | None) -> None:
-        self._receiver = receiver
+        self._port: HostPort = runner.open_port(self._received)
 
     async def write(self, data: bytes) -> None:
         if self._closed:
             raise ConnectionError("sim stream is closed")
         data = bytes(data)
         if self._traces:
-            now = time.monotonic()
-            for hook in self._traces:
-                hook(Direction.TX, data, now)
+            self._trace(Direction.TX, data)
         self.runner.submit(self._port, data)  # starts the runner on first use
 
-    async def read(self, max_bytes: int = 4096) -> bytes:
-        while not self._buf:
-            if self._closed:
-                raise ConnectionError("sim stream is closed")
-            self._ready.clear()
-            self.runner.start()
-            await self._ready.wait()
-        out = bytes(self._buf[:max_bytes])
-        del self._buf[:max_bytes]
-        return out
-
-    def discard_input(self) -> None:
-        self._buf.clear()
+    def _before_wait(self) -> None:
+        self.runner.start()  # a read() before any write() still runs the line
 
     async def close(self) -> None:
-        if self._closed:
+        if not self._mark_closed():  # wakes a pending read (ConnectionError), the receiver
             return
-        self._closed = True
         self._port.closed = True
-        self._ready.set()  # wake a pending read so it raises ConnectionError
-        if self._receiver is not None:
-            self._receiver(None)
         await self.runner.close()
-
-    def add_trace(self, hook: TraceHook) -> None:
-        self._traces.append(hook)
 
     @property
     def in_waiting(self) -> int:

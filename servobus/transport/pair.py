@@ -14,13 +14,13 @@ from __future__ import annotations
 
 import asyncio
 import random
-import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
 
-from servobus.transport.base import ByteReceiver, Direction, TraceHook
+from servobus.transport.base import Direction
+from servobus.transport.buffered import BufferedInput, PushInput
 
 
 class Fault(Enum):
@@ -115,18 +115,18 @@ class Manipulator:
         return [(0.0, data), (0.0, data)]  # DUPLICATE
 
 
-class PairStream:
-    """One end of an in-process cable; implements :class:`ByteStream`."""
+class PairStream(BufferedInput):
+    """One end of an in-process cable; implements :class:`ByteStream`, read with ``read()``.
+
+    This class has no ``set_receiver``: it is a pull-only stream, as pyserial ports are.
+    :class:`PushPairStream` (the default of :func:`open_pair`) adds push reception.
+    """
 
     def __init__(self, is_host: bool, manipulator: Manipulator | None) -> None:
+        super().__init__()
         self._is_host = is_host
         self._manipulator = manipulator
         self._peer: PairStream | None = None
-        self._buf = bytearray()
-        self._ready = asyncio.Event()
-        self._closed = False
-        self._traces: list[TraceHook] = []
-        self._receiver: ByteReceiver | None = None
         self._release_at = 0.0  # loop time before which nothing from this end is delivered
         self.bytes_written = 0
         self.bytes_received = 0
@@ -134,15 +134,6 @@ class PairStream:
     @property
     def _out_direction(self) -> Direction:
         return Direction.TX if self._is_host else Direction.RX
-
-    def add_trace(self, hook: TraceHook) -> None:
-        self._traces.append(hook)
-
-    def _trace(self, direction: Direction, data: bytes) -> None:
-        if self._traces:
-            t = time.monotonic()
-            for hook in self._traces:
-                hook(direction, data, t)
 
     async def write(self, data: bytes) -> None:
         if self._closed:
@@ -169,53 +160,28 @@ class PairStream:
         if self._closed:
             return
         self.bytes_received += len(data)
-        self._trace(Direction.RX if self._is_host else Direction.TX, data)
-        if self._receiver is not None:
-            self._receiver(data)
-            return
-        self._buf.extend(data)
-        self._ready.set()
-
-    def set_receiver(self, receiver: ByteReceiver | None) -> None:
-        """Push received chunks to ``receiver`` (``transport.base.PushByteStream``)."""
-        self._receiver = receiver
-
-    async def read(self, max_bytes: int = 4096) -> bytes:
-        while not self._buf:
-            if self._closed:
-                raise ConnectionError("stream is closed")
-            self._ready.clear()
-            await self._ready.wait()
-        out = bytes(self._buf[:max_bytes])
-        del self._buf[:max_bytes]
-        return out
-
-    def discard_input(self) -> None:
-        self._buf.clear()
+        self._received(data, Direction.RX if self._is_host else Direction.TX)
 
     async def close(self) -> None:
-        if self._closed:
+        if not self._mark_closed():
             return
-        self._closed = True
-        self._ready.set()
-        self._hang_up()
         peer = self._peer
-        if peer is not None and not peer._closed:
-            peer._closed = True  # hang-up is seen at both ends
-            peer._ready.set()
-            peer._hang_up()
-
-    def _hang_up(self) -> None:
-        if self._receiver is not None:
-            self._receiver(None)
-
-    @property
-    def closed(self) -> bool:
-        return self._closed
+        if peer is not None:
+            peer._mark_closed()  # hang-up is seen at both ends
 
 
-def open_pair(manipulator: Manipulator | None = None) -> tuple[PairStream, PairStream]:
-    """(host end, device end) of a fresh in-process cable."""
-    host, device = PairStream(True, manipulator), PairStream(False, manipulator)
+class PushPairStream(PushInput, PairStream):
+    """A :class:`PairStream` end that also pushes received chunks (``PushByteStream``)."""
+
+
+def open_pair(manipulator: Manipulator | None = None, *,
+              push: bool = True) -> tuple[PairStream, PairStream]:
+    """(host end, device end) of a fresh in-process cable.
+
+    ``push=False`` gives pull-only ends (no ``set_receiver``): a client reads them with
+    ``read()``, the path pyserial streams take; the default ends offer both paths.
+    """
+    cls = PushPairStream if push else PairStream
+    host, device = cls(True, manipulator), cls(False, manipulator)
     host._peer, device._peer = device, host
     return host, device

@@ -13,29 +13,30 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import threading
-import time
 from typing import Any
 
 import serial
 
 from servobus.errors import ServobusError
-from servobus.transport.base import Direction, TraceHook
+from servobus.transport.base import Direction
+from servobus.transport.buffered import BufferedInput
 
 READ_POLL_S = 0.05  # reader-thread read timeout: bounds how long close() waits for it
 WRITE_TIMEOUT_S = 1.0
 
 
-class SerialStream:
-    """A pyserial port as a :class:`ByteStream`. Create with :meth:`open` on the event loop."""
+class SerialStream(BufferedInput):
+    """A pyserial port as a :class:`ByteStream` (pull-only: read with ``read()``).
+
+    Create with :meth:`open` on the event loop.
+    """
+
+    failed_text = "serial port failed"
 
     def __init__(self, port: Any, loop: asyncio.AbstractEventLoop) -> None:
+        super().__init__()
         self._port = port
         self._loop = loop
-        self._buf = bytearray()
-        self._ready = asyncio.Event()
-        self._traces: list[TraceHook] = []
-        self._closed = False
-        self._error: BaseException | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._reader, name=f"serial-rx {port.name}",
                                         daemon=True)
@@ -76,26 +77,16 @@ class SerialStream:
 
     def _deliver(self, data: bytes | None, error: BaseException | None) -> None:
         if error is not None:
-            self._error = error
+            self._fail(error)
         elif data:
-            if self._traces:
-                t = time.monotonic()
-                for hook in self._traces:
-                    hook(Direction.RX, data, t)
-            self._buf.extend(data)
-        self._ready.set()
+            self._received(data)
 
     # ------------------------------------------------------------- ByteStream
-    def add_trace(self, hook: TraceHook) -> None:
-        self._traces.append(hook)
-
     async def write(self, data: bytes) -> None:
         if self._closed:
             raise ConnectionError("stream is closed")
         if self._traces:
-            t = time.monotonic()
-            for hook in self._traces:
-                hook(Direction.TX, bytes(data), t)
+            self._trace(Direction.TX, bytes(data))
         try:
             self._port.write(data)
         except serial.SerialTimeoutException as exc:
@@ -103,27 +94,10 @@ class SerialStream:
         except (serial.SerialException, OSError) as exc:
             raise ConnectionError(f"serial write failed: {exc}") from exc
 
-    async def read(self, max_bytes: int = 4096) -> bytes:
-        while not self._buf:
-            if self._closed:
-                raise ConnectionError("stream is closed")
-            if self._error is not None:
-                raise ConnectionError(f"serial port failed: {self._error}")
-            self._ready.clear()
-            await self._ready.wait()
-        out = bytes(self._buf[:max_bytes])
-        del self._buf[:max_bytes]
-        return out
-
-    def discard_input(self) -> None:
-        self._buf.clear()
-
     async def close(self) -> None:
-        if self._closed:
+        if not self._mark_closed():
             return
-        self._closed = True
         self._stop.set()
-        self._ready.set()
         with contextlib.suppress(Exception):
             self._port.cancel_read()  # not every URL handler has it; the read timeout bounds it
         await self._loop.run_in_executor(None, self._thread.join, 2 * READ_POLL_S + 1.0)
