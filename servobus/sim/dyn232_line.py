@@ -64,6 +64,9 @@ def host_value(packet: c.Packet) -> int:
 
 
 Handler = Callable[[VirtualDrive, int], "int | None"]
+#: handler, value, reply function (None: no reply), addressed id (127 = broadcast)
+_Plan = tuple[Handler, int, "c.DriveFunction | None", int]
+MAX_CACHED = 1024  # bound on cached plans / reply encodings (a run of distinct values)
 
 
 class Dyn232Line:
@@ -77,6 +80,8 @@ class Dyn232Line:
         self.framing_errors = 0
         self.collisions = 0  # replies suppressed because several drives would answer
         self._handlers: dict[H, Handler] = _build_handlers()
+        self._plans: dict[bytes, _Plan | None] = {}  # request bytes -> plan (handle_whole)
+        self._replies: dict[tuple[int, int, int], bytes] = {}  # memoised reply encodings
 
     # ------------------------------------------------------------------ byte level
     def receive(self, data: bytes | bytearray) -> bytes:
@@ -120,25 +125,69 @@ class Dyn232Line:
 
     def execute(self, packet: c.Packet) -> bytes:
         """Run a valid host packet on every drive it addresses; return the reply bytes."""
-        self.packets += 1
+        return self._run(self._plan(packet))
+
+    def handle_whole(self, raw: bytes) -> bytes:
+        """Same as ``handle`` of the one event ``raw`` frames to, for ``raw`` that is exactly
+        one packet (``Framer.whole_packet``) with the port's framer empty: the usual case.
+
+        Plans are cached by the exact request bytes (a poll repeats the same few packets),
+        so a repeated request skips decoding and the table look-ups. Only requests with a
+        good checksum are cached: the same bytes always check the same way.
+        """
+        plan = self._plans.get(raw)
+        if plan is None:
+            try:
+                packet = c.decode(raw)
+            except ProtocolError as exc:
+                return self.handle(exc)
+            plan = self._plan(packet)
+            if len(self._plans) >= MAX_CACHED:
+                self._plans.clear()
+            self._plans[bytes(raw)] = plan
+        return self._run(plan)
+
+    def _plan(self, packet: c.Packet) -> _Plan | None:
+        """What a valid packet does: (handler, value, reply function, addressed id)."""
         try:
             function = H(packet.function)
         except ValueError:  # pragma: no cover - every 5-bit code is a HostFunction
-            return b""
+            return None
         handler = self._handlers.get(function)
         if handler is None:
-            return b""
+            return None
         value = host_value(packet)
-        reply_fn = c.reply_function(function, value)
-        replies: list[bytes] = []
-        for drive in self.addressed(packet.drive_id):
+        return handler, value, c.reply_function(function, value), packet.drive_id
+
+    def _run(self, plan: _Plan | None) -> bytes:
+        self.packets += 1
+        if plan is None:
+            return b""
+        handler, value, reply_fn, target = plan
+        reply = b""
+        n_replies = 0
+        for drive in self.drives:  # every addressed drive executes, answering or not
+            if target != c.BROADCAST_ID and drive.drive_id != target:
+                continue
             result = handler(drive, value)
             if reply_fn is not None and result is not None:
-                replies.append(c.encode_reply(drive.drive_id, reply_fn, result))
-        if len(replies) > 1:  # several drives answering at once collide: see module doc
+                n_replies += 1
+                reply = self._encode_reply(drive.drive_id, reply_fn, result)
+        if n_replies > 1:  # several drives answering at once collide: see module doc
             self.collisions += 1
             return b""
-        return replies[0] if replies else b""
+        return reply
+
+    def _encode_reply(self, drive_id: int, function: c.DriveFunction, value: int) -> bytes:
+        """``c.encode_reply``, memoised: status, config and parameters rarely change."""
+        key = (drive_id, function, value)
+        raw = self._replies.get(key)
+        if raw is None:
+            raw = c.encode_reply(drive_id, function, value)
+            if len(self._replies) >= MAX_CACHED:
+                self._replies.clear()
+            self._replies[key] = raw
+        return raw
 
 
 # ---------------------------------------------------------------------- function table

@@ -9,6 +9,12 @@
   (host packets when their last byte arrived, replies when their last byte left), for
   ``servobus sniff --tap tcp://...``. What a tap client sends is ignored.
 
+TCP connections and taps are :class:`asyncio.Protocol` objects, not StreamReader tasks: a
+host's bytes go from ``data_received`` straight into :meth:`LineRunner.submit` and replies
+straight to ``transport.write`` (one event-loop wake-up per packet, no task switch). The
+runner's tap hook is only installed once a tap listener exists, so an untapped line skips
+the tap bookkeeping.
+
 The server binds 127.0.0.1 unless an address is given explicitly. The sim server's event
 loop uses ``select()`` (microsecond timeouts) so replies are released on time without
 blocking the loop; see :mod:`servobus.sim.pacing`.
@@ -18,12 +24,13 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import os
 import selectors
 import signal
 import sys
 import tty
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import TextIO
 from urllib.parse import urlsplit
 
@@ -34,6 +41,7 @@ from servobus.sim.pacing import COARSE_S, FINE_COARSE_S, HostPort, LineRunner
 from servobus.transport.base import Direction
 
 DEFAULT_HOST = "127.0.0.1"
+CLOSE_TIMEOUT_S = 2.0  # close(): how long to wait for client connections to go
 
 
 def parse_listen_url(url: str) -> tuple[str, int]:
@@ -72,10 +80,10 @@ class Dyn232Server:
         self.runner = LineRunner(self.line, paced=paced,
                                  coarse_s=COARSE_S if coarse_s is None else coarse_s)
         self._servers: list[asyncio.Server] = []
-        self._clients: set[asyncio.Task[None]] = set()
-        self._taps: set[asyncio.StreamWriter] = set()
+        self._clients: set[_LineConnection] = set()
+        self._taps: set[asyncio.Transport] = set()
+        self._tapped = False  # the runner's tap hook is added with the first tap listener
         self._pty: tuple[int, int] | None = None
-        self.runner.add_tap(self._to_taps)
 
     @property
     def drives(self) -> list[VirtualDrive]:
@@ -85,26 +93,11 @@ class Dyn232Server:
     async def listen_tcp(self, host: str = DEFAULT_HOST, port: int = 0) -> tuple[str, int]:
         """Serve the line on TCP; return the bound (host, port)."""
         self.runner.start()
-        server = await asyncio.start_server(self._client, host, port)
+        loop = asyncio.get_running_loop()
+        server = await loop.create_server(lambda: _LineConnection(self), host, port)
         self._servers.append(server)
         sockname = server.sockets[0].getsockname()
         return str(sockname[0]), int(sockname[1])
-
-    async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        task = asyncio.current_task()
-        if task is not None:
-            self._clients.add(task)
-        port = self.runner.open_port(_writer_sink(writer))
-        try:
-            while data := await reader.read(4096):
-                self.runner.submit(port, data)
-        except (ConnectionError, asyncio.CancelledError):
-            pass
-        finally:
-            port.closed = True
-            writer.close()
-            if task is not None:
-                self._clients.discard(task)
 
     # ------------------------------------------------------------------ PTY line
     def open_pty(self) -> str:
@@ -131,40 +124,33 @@ class Dyn232Server:
 
     # ------------------------------------------------------------------ tap
     async def listen_tap(self, host: str = DEFAULT_HOST, port: int = 0) -> tuple[str, int]:
-        server = await asyncio.start_server(self._tap_client, host, port)
+        if not self._tapped:  # no tap hook before: the untapped line skips the tap work
+            self._tapped = True
+            self.runner.add_tap(self._to_taps)
+        loop = asyncio.get_running_loop()
+        server = await loop.create_server(lambda: _TapConnection(self._taps), host, port)
         self._servers.append(server)
         sockname = server.sockets[0].getsockname()
         return str(sockname[0]), int(sockname[1])
 
-    async def _tap_client(self, reader: asyncio.StreamReader,
-                          writer: asyncio.StreamWriter) -> None:
-        self._taps.add(writer)
-        try:
-            while await reader.read(4096):
-                pass  # a tap is read-only
-        except (ConnectionError, asyncio.CancelledError):
-            pass
-        finally:
-            self._taps.discard(writer)
-            writer.close()
-
     def _to_taps(self, direction: Direction, data: bytes, when: float) -> None:
-        for writer in list(self._taps):
-            if writer.is_closing():
-                self._taps.discard(writer)
+        for transport in list(self._taps):
+            if transport.is_closing():
+                self._taps.discard(transport)
             else:
-                writer.write(data)
+                transport.write(data)
 
     # ------------------------------------------------------------------ shutdown
     async def close(self) -> None:
         for server in self._servers:
             server.close()
-        for task in list(self._clients):
-            task.cancel()
-        for writer in list(self._taps):
-            writer.close()
-        if self._clients:
-            await asyncio.gather(*self._clients, return_exceptions=True)
+        closing = [conn.close() for conn in list(self._clients)]
+        for transport in list(self._taps):
+            transport.close()
+        self._taps.clear()
+        if closing:
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(asyncio.gather(*closing), CLOSE_TIMEOUT_S)
         for server in self._servers:
             with contextlib.suppress(Exception):
                 await server.wait_closed()
@@ -178,12 +164,68 @@ class Dyn232Server:
         await self.runner.close()
 
 
-def _writer_sink(writer: asyncio.StreamWriter) -> Callable[[bytes], None]:
-    def sink(data: bytes) -> None:
-        if not writer.is_closing():
-            writer.write(data)
+class _LineConnection(asyncio.Protocol):
+    """One TCP host on the line: its own HostPort, bytes straight from ``data_received``.
 
-    return sink
+    No StreamReader and no task per client: each chunk goes to ``LineRunner.submit`` from the
+    transport's callback, and replies (``HostPort.deliver``) go to ``transport.write``.
+    """
+
+    def __init__(self, server: Dyn232Server) -> None:
+        self._server = server
+        self._transport: asyncio.Transport | None = None
+        self._port: HostPort | None = None
+        self._lost: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self._transport = transport
+        self._port = self._server.runner.open_port(transport.write)
+        self._submit = functools.partial(self._server.runner.submit, self._port)
+        self._server._clients.add(self)
+
+    def data_received(self, data: bytes) -> None:
+        self._submit(data)
+
+    def eof_received(self) -> bool | None:
+        self._stop_replies()  # the transport closes itself (returning None)
+        return None
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self._stop_replies()
+        self._server._clients.discard(self)
+        if not self._lost.done():
+            self._lost.set_result(None)
+
+    def _stop_replies(self) -> None:
+        if self._port is not None:
+            self._port.closed = True  # paced replies still queued are not written
+
+    async def close(self) -> None:
+        self._stop_replies()
+        if self._transport is not None:
+            self._transport.close()
+        await self._lost
+
+
+class _TapConnection(asyncio.Protocol):
+    """A read-only tap client: receives every byte of the line; what it sends is ignored."""
+
+    def __init__(self, taps: set[asyncio.Transport]) -> None:
+        self._taps = taps
+        self._transport: asyncio.Transport | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self._transport = transport
+        self._taps.add(transport)
+
+    def data_received(self, data: bytes) -> None:
+        pass  # a tap is read-only
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self._transport is not None:
+            self._taps.discard(self._transport)
 
 
 def _pty_write(master: int, data: bytes) -> None:

@@ -128,22 +128,25 @@ class LineRunner:
         """
         if not data:
             return
+        if type(data) is not bytes:
+            data = bytes(data)
         now = time.monotonic()
+        taps = self.taps
         if not self.paced:
             self.clock.sync(now)
-            if not self.taps:
-                for event in port.framer.feed(data):
-                    reply = self.line.handle(event)
-                    if reply:
-                        port.deliver(reply)
-                self.start()
-                return
-            for _, chunk, event in self._segments(port, data):
-                self._tap(Direction.TX, chunk, now)
-                reply = self.line.handle(event)
+            if not taps and port.framer.whole_packet(data):  # the usual case, at once
+                reply = self.line.handle_whole(data)
                 if reply:
-                    self._tap(Direction.RX, reply, now)
                     port.deliver(reply)
+            else:
+                for _, chunk, event in self._segments(port, data):
+                    if taps:
+                        self._tap(Direction.TX, chunk, now)
+                    reply = self._handle(event)
+                    if reply:
+                        if taps:
+                            self._tap(Direction.RX, reply, now)
+                        port.deliver(reply)
             self.start()
             return
         self.start()
@@ -153,23 +156,31 @@ class LineRunner:
         for end, chunk, event in self._segments(port, data):
             t_done = start + end * bt
             self.clock.sync(t_done)  # the drives' time = arrival time of the last byte
-            if self.taps:
+            if taps:
                 self._at(t_done, self._tap_cb(Direction.TX, chunk, t_done))
-            reply = self.line.handle(event)
+            reply = self._handle(event)
             if reply:
                 _, t_end = self.tx.send(len(reply), t_done)
                 self._at(t_end, self._release_cb(port, reply, t_end))
 
+    def _handle(self, event: bytes | c.FramerEvent) -> bytes:
+        """Run one framed event; ``bytes`` stands for one whole, not yet decoded packet."""
+        if type(event) is bytes:
+            return self.line.handle_whole(event)
+        assert not isinstance(event, bytes)
+        return self.line.handle(event)
+
     def _segments(
         self, port: HostPort, data: bytes
-    ) -> Iterator[tuple[int, bytes, c.FramerEvent]]:
+    ) -> Iterator[tuple[int, bytes, bytes | c.FramerEvent]]:
         """Frame ``data``; yield (bytes of ``data`` used so far, bytes of the event, event).
 
         The first chunk includes the port's bytes held from earlier calls; bytes of a packet
-        still incomplete at the end are held in ``port.tap_pending``.
+        still incomplete at the end are held in ``port.tap_pending``. A chunk that is exactly
+        one packet is yielded undecoded (event = its bytes, see :meth:`_handle`).
         """
         if not port.tap_pending and port.framer.whole_packet(data):
-            yield len(data), bytes(data), port.framer.feed(data)[0]  # one packet, one chunk
+            yield len(data), data, data  # one packet, one chunk
             return
         seg = 0
         for i, event in self.line.events(data, port.framer):
