@@ -40,6 +40,7 @@ from collections.abc import Callable, Iterator, Sequence
 from servobus.codec import dyn232 as c
 from servobus.errors import ChecksumError, ProtocolError
 from servobus.sim.drive import VirtualDrive
+from servobus.sim.general_read import run_action
 
 H = c.HostFunction
 GR = c.GeneralReadSelector
@@ -222,12 +223,7 @@ def _build_handlers() -> dict[H, Handler]:
             return wrap28(round(drive.speed_rpm))
         if selector is GR.TORQUE:
             return wrap28(int(drive.torque_current))
-        if selector is GR.RESET:
-            drive.reset()
-        elif selector is GR.ENABLE:
-            drive.enable()
-        elif selector is GR.DISABLE:
-            drive.disable()
+        run_action(drive, selector)
         return None
 
     table: dict[H, Handler] = {

@@ -47,6 +47,7 @@ from servobus.drive import units as U
 from servobus.drive.registers import AlarmCode
 from servobus.errors import FramingError
 from servobus.sim.drive import VirtualDrive
+from servobus.sim.general_read import run_action
 from servobus.sim.realtime import RealtimeClock
 from servobus.transport.can_bus import FramePort
 
@@ -266,12 +267,7 @@ def _general_read_value(drive: VirtualDrive, code: int) -> int | None:
     elif selector is GR.SPEED:
         value = wrap32(round(drive.speed_rpm))
     else:
-        if selector is GR.RESET:
-            drive.reset()
-        elif selector is GR.ENABLE:
-            drive.enable()
-        elif selector is GR.DISABLE:
-            drive.disable()
+        run_action(drive, selector)
         return None
     return value
 

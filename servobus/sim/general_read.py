@@ -1,0 +1,28 @@
+"""General_Read selectors that act instead of answering, shared by every front end.
+
+DYN232M (NOTES.md, from DMM's library) and DYN CAN (same firmware) use the same selectors:
+0x1C reset (a power cycle), 0x20 servo enable, 0x21 servo disable. The readout selectors
+(0x1B position, 0x1D speed, 0x1E torque) are scaled per protocol by each front end.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from servobus.codec.dyn232 import GeneralReadSelector as GR
+from servobus.sim.drive import VirtualDrive
+
+ACTIONS: dict[GR, Callable[[VirtualDrive], None]] = {
+    GR.RESET: VirtualDrive.reset,
+    GR.ENABLE: VirtualDrive.enable,
+    GR.DISABLE: VirtualDrive.disable,
+}
+
+
+def run_action(drive: VirtualDrive, selector: GR) -> bool:
+    """Carry out an action selector; False when ``selector`` is a readout (or unknown)."""
+    action = ACTIONS.get(selector)
+    if action is None:
+        return False
+    action(drive)
+    return True
