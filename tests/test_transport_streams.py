@@ -118,7 +118,7 @@ async def test_serial_stream_loop_url() -> None:
 @arun
 async def test_serial_stream_socket_url_and_clean_shutdown() -> None:
     async with echo_server() as (host, port):
-        stream = await SerialStream.open(f"socket://{host}:{port}")
+        stream = await SerialStream.open(f"socket://{host}:{port}", baud=38400)
         await stream.write(b"abc")
         assert await read_exactly(stream, 3) == b"abc"
         stream.discard_input()
@@ -134,4 +134,4 @@ async def test_serial_stream_socket_url_and_clean_shutdown() -> None:
 @arun
 async def test_serial_stream_bad_port_is_a_servobus_error() -> None:
     with pytest.raises(ServobusError):
-        await SerialStream.open("/dev/servobus-no-such-port")
+        await SerialStream.open("/dev/servobus-no-such-port", baud=38400)

@@ -9,6 +9,7 @@ import click
 
 from servobus import __version__
 from servobus.cli.context import CliContext
+from servobus.codec.dyn232 import BAUD, MAX_DRIVE_ID
 from servobus.errors import ServobusError
 
 #: Command-group modules; each defines ``register(group: click.Group) -> None``.
@@ -29,9 +30,9 @@ COMMAND_MODULES: list[str] = [
 @click.option("--port", metavar="URL", default=None,
               help="pyserial port or URL (/dev/ttyUSB0, COM3, socket://host:port, loop://). "
                    "Default: the embedded virtual drive (sim://dyn2).")
-@click.option("--id", "drive_id", type=click.IntRange(0, 63), default=0, show_default=True,
+@click.option("--id", "drive_id", type=click.IntRange(0, MAX_DRIVE_ID), default=0, show_default=True,
               help="drive id")
-@click.option("--baud", type=int, default=38400, show_default=True, help="serial baud rate")
+@click.option("--baud", type=int, default=BAUD, show_default=True, help="serial baud rate")
 @click.option("--can", metavar="INTERFACE:CHANNEL", default=None,
               help="talk DYN CAN instead, e.g. socketcand:127.0.0.1:29536 or pcan:PCAN_USBBUS1")
 @click.option("--timeout", type=float, default=None, help="reply deadline in seconds")

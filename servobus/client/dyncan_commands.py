@@ -248,7 +248,7 @@ def make_read_status(drive_id: int) -> CanCommand:
 @functools.cache  # immutable result: built once per drive id (hot polling path)
 def make_read_config(drive_id: int) -> CanCommand:
     return _cmd(drive_id, F.READ_DRIVE_CONFIG,
-                parse=lambda f: DriveConfig.from_byte(f.unsigned & 0x3F))
+                parse=lambda f: DriveConfig.from_byte(f.unsigned))
 
 
 @functools.cache  # immutable result: built once per drive id (hot polling path)

@@ -88,6 +88,10 @@ class ConfigBits(IntFlag):
     FREE = 0x20  # b5: 1 = motor free (servo disabled)
 
 
+#: Bits the config byte defines (b7 b6 are TBD / unimplemented); ``from_byte`` ignores the rest.
+CONFIG_DEFINED_MASK = 0x3F
+
+
 class CommandMode(IntEnum):
     RS232 = 0
     CW_CCW = 1

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
+from dataclasses import replace
 
 from servobus.codec.dyn232 import WAVE_AMPLITUDE_MAX, WAVE_FREQUENCY_MAX_HZ
 from servobus.drive import params as P
@@ -219,7 +220,7 @@ class VirtualDrive:
         """Config byte (7.3); stored in EEPROM. b6 is TBD and dropped."""
         if not 0 <= value <= 0x7F:
             return False
-        cfg = DriveConfig.from_byte(value & 0x3F)
+        cfg = DriveConfig.from_byte(value)  # drops the undefined b6
         self._config = cfg
         self.eeprom.write_config(cfg.to_byte())
         self._apply_servo()
@@ -235,12 +236,12 @@ class VirtualDrive:
 
     def enable(self) -> None:
         """Servo on (General_Read 0x20). Decision: RAM only, to spare the EEPROM."""
-        self._config = DriveConfig.from_byte(self._config.to_byte() & ~0x20)
+        self._config = replace(self._config, free=False)
         self._apply_servo()
 
     def disable(self) -> None:
         """Servo off, motor free (General_Read 0x21). RAM only, like enable()."""
-        self._config = DriveConfig.from_byte(self._config.to_byte() | 0x20)
+        self._config = replace(self._config, free=True)
         self._apply_servo()
 
     def trip(self, code: AlarmCode) -> None:

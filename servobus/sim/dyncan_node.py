@@ -44,7 +44,7 @@ from dataclasses import dataclass
 from servobus.codec import dyncan as c
 from servobus.codec.dyn232 import GeneralReadSelector as GR
 from servobus.drive import units as U
-from servobus.drive.registers import AlarmCode
+from servobus.drive.registers import CONFIG_DEFINED_MASK, AlarmCode
 from servobus.errors import FramingError
 from servobus.sim.drive import VirtualDrive
 from servobus.sim.general_read import run_action
@@ -317,7 +317,7 @@ def _echo(node: DynCanNode, frame: c.Frame) -> c.Frame:
 
 def _build_handlers() -> dict[F, Handler]:
     def set_config(node: DynCanNode, frame: c.Frame) -> None:
-        node.drive.set_config(frame.unsigned & 0x3F)  # b7 b6 unimplemented
+        node.drive.set_config(frame.unsigned & CONFIG_DEFINED_MASK)  # b7 b6 unimplemented
 
     table: dict[F, Handler] = {
         F.SET_ORIGIN: _set_origin,

@@ -43,8 +43,11 @@ class SerialStream(BufferedInput):
         self._thread.start()
 
     @classmethod
-    async def open(cls, url: str, *, baud: int = 38400, **serial_options: Any) -> SerialStream:
-        """Open ``url`` (any pyserial port name or URL) at ``baud``, 8N1."""
+    async def open(cls, url: str, *, baud: int, **serial_options: Any) -> SerialStream:
+        """Open ``url`` (any pyserial port name or URL) at ``baud``, 8N1.
+
+        ``baud`` is the protocol's to give: the transport knows no protocol's default.
+        """
         loop = asyncio.get_running_loop()
 
         def _open() -> Any:
