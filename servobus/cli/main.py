@@ -30,8 +30,8 @@ COMMAND_MODULES: list[str] = [
 @click.option("--port", metavar="URL", default=None,
               help="pyserial port or URL (/dev/ttyUSB0, COM3, socket://host:port, loop://). "
                    "Default: the embedded virtual drive (sim://dyn2).")
-@click.option("--id", "drive_id", type=click.IntRange(0, MAX_DRIVE_ID), default=0, show_default=True,
-              help="drive id")
+@click.option("--id", "drive_id", type=click.IntRange(0, MAX_DRIVE_ID), default=0,
+              show_default=True, help="drive id")
 @click.option("--baud", type=int, default=BAUD, show_default=True, help="serial baud rate")
 @click.option("--can", metavar="INTERFACE:CHANNEL", default=None,
               help="talk DYN CAN instead, e.g. socketcand:127.0.0.1:29536 or pcan:PCAN_USBBUS1")
