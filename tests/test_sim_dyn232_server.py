@@ -11,7 +11,7 @@ import statistics
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -205,6 +205,13 @@ async def _read_packets(reader: asyncio.StreamReader, n: int) -> list[c.Packet]:
     return out
 
 
+async def _until(condition: Callable[[], bool], timeout: float = 2.0) -> None:
+    """Yield to the loop until ``condition`` holds (the server runs on this same loop)."""
+    async with asyncio.timeout(timeout):
+        while not condition():
+            await asyncio.sleep(0.001)
+
+
 def test_several_clients_each_get_their_own_replies_and_tap_sees_all() -> None:
     async def run() -> None:
         server = Dyn232Server([VirtualDrive(1), VirtualDrive(2)], paced=False)
@@ -213,7 +220,7 @@ def test_several_clients_each_get_their_own_replies_and_tap_sees_all() -> None:
         tap_r, tap_w = await asyncio.open_connection(host, tap_port)
         r1, w1 = await asyncio.open_connection(host, port)
         r2, w2 = await asyncio.open_connection(host, port)
-        await asyncio.sleep(0.05)  # let the tap connection be accepted
+        await _until(lambda: server.tap_count == 1)  # the tap is accepted: it sees everything
         req1, req2 = c.encode(1, H.READ_DRIVE_ID), c.encode(2, H.READ_DRIVE_ID)
         w1.write(req1[:2])  # half a packet from client 1 ...
         w2.write(req2)  # ... does not corrupt client 2's packet
@@ -248,7 +255,7 @@ def test_paced_tap_orders_bytes_as_on_the_wire() -> None:
         _, tap_port = await server.listen_tap("127.0.0.1", 0)
         tap_r, tap_w = await asyncio.open_connection(host, tap_port)
         r, w = await asyncio.open_connection(host, port)
-        await asyncio.sleep(0.05)
+        await _until(lambda: server.tap_count == 1)
         req = c.encode(0, H.READ_DRIVE_ID) + c.encode(0, H.READ_DRIVE_CONFIG)
         t = time.monotonic()
         w.write(req)

@@ -133,6 +133,11 @@ class Dyn232Server:
         sockname = server.sockets[0].getsockname()
         return str(sockname[0]), int(sockname[1])
 
+    @property
+    def tap_count(self) -> int:
+        """Tap clients connected now (tests wait for it rather than guess an accept delay)."""
+        return len(self._taps)
+
     def _to_taps(self, direction: Direction, data: bytes, when: float) -> None:
         for transport in list(self._taps):
             if transport.is_closing():
