@@ -130,10 +130,10 @@ async def test_motion_and_readouts_in_realtime() -> None:
         await ax.move_to(2000, wait=True, timeout=5)
         assert abs(await ax.position() - U.command_to_counts(2000, gear)) <= window
         await ax.turn(300)
-        async with asyncio.timeout(2.0):  # ramps at Max Accel (19073 rpm/s): ~16 ms
-            while (rpm := await ax.speed()) < 250:
-                await asyncio.sleep(0.005)
-        assert 250 <= rpm <= 300
+        # Not an event to wait on: the servo loop runs in wall-clock time and overshoots a
+        # few rpm right after the ~16 ms ramp; 0.3 s lets it settle before the steady check.
+        await asyncio.sleep(0.3)
+        assert 250 <= await ax.speed() <= 300
         assert -700 <= await ax.torque() <= 700
         await ax.stop()
         await ax.set_origin()
