@@ -7,17 +7,16 @@ The drives run in stepped virtual time: every chunk the line receives advances t
 from __future__ import annotations
 
 import asyncio
-import functools
 import itertools
 import time
 import warnings
-from collections.abc import AsyncIterator, Callable, Coroutine
-from contextlib import asynccontextmanager
+from collections.abc import Coroutine
+from contextlib import AbstractAsyncContextManager
 from typing import Any
 
 import pytest
+from dyn232_rig import Rig, arun, rig
 
-from servobus.client.dyn232 import AsyncDyn232Client, Dyn232Axis
 from servobus.client.eeprom_guard import EepromGuard, EepromWearWarning
 from servobus.codec import dyn232 as c
 from servobus.drive import params as P
@@ -30,14 +29,10 @@ from servobus.errors import (
     DriveTimeout,
     EepromGuardError,
 )
-from servobus.sim.drive import VirtualDrive
-from servobus.sim.dyn232_line import Dyn232Line
 from servobus.transport.base import Direction
-from servobus.transport.pair import Fault, Manipulator, PairStream, open_pair
-from servobus.transport.trace import ByteCounter, TraceRecorder
+from servobus.transport.pair import Fault
 
 pytestmark = pytest.mark.timeout(20)
-STEP_S = 0.02
 #: A servoed motor settles within OnRange of its target (default 10/16384 rev = 40 counts).
 TOLERANCE = round(U.onrange_to_counts(P.spec("on_range").default))
 
@@ -46,62 +41,9 @@ def near(actual: int, target: int) -> bool:
     return abs(actual - target) <= TOLERANCE
 
 
-def arun(fn: Callable[[], Coroutine[Any, Any, None]]) -> Callable[[], None]:
-    @functools.wraps(fn)
-    def wrapper() -> None:
-        asyncio.run(fn())
-
-    return wrapper
-
-
-class Bench:
-    """Host client + virtual line on one cable, with the manipulator and byte counters."""
-
-    def __init__(self, ids: tuple[int, ...], **client_kw: Any) -> None:
-        self.faults = Manipulator()
-        self.host, self.device = open_pair(self.faults)
-        self.drives = [VirtualDrive(i) for i in ids]
-        self.line = Dyn232Line(self.drives)
-        self.wire = ByteCounter()  # bytes as written by each end, before faults
-        self.host.add_trace(self._count_tx)
-        self.device.add_trace(self._count_rx)
-        self.client = AsyncDyn232Client(self.host, **client_kw)
-        self.trace = TraceRecorder()
-        self.client.add_trace(self.trace)
-
-    def _count_tx(self, d: Direction, data: bytes, t: float) -> None:
-        if d is Direction.TX:
-            self.wire(d, data, t)
-
-    def _count_rx(self, d: Direction, data: bytes, t: float) -> None:
-        if d is Direction.RX:
-            self.wire(d, data, t)
-
-    def axis(self, drive_id: int) -> Dyn232Axis:
-        return Dyn232Axis(self.client, drive_id, owns_client=False)
-
-    async def serve(self, device: PairStream) -> None:
-        try:
-            while True:
-                data = await device.read()
-                for drive in self.drives:
-                    drive.advance(STEP_S)
-                reply = self.line.receive(data)
-                if reply:
-                    await device.write(reply)
-        except ConnectionError:
-            pass
-
-
-@asynccontextmanager
-async def bench(ids: tuple[int, ...] = (0,), **client_kw: Any) -> AsyncIterator[Bench]:
-    b = Bench(ids, **client_kw)
-    task = asyncio.create_task(b.serve(b.device))
-    try:
-        yield b
-    finally:
-        await b.client.close()
-        await asyncio.wait_for(task, 2)
+def bench(ids: tuple[int, ...] = (0,), **client_kw: Any) -> AbstractAsyncContextManager[Rig]:
+    """The shared rig (tests/dyn232_rig.py) on the client's push path."""
+    return rig(ids, push=True, **client_kw)
 
 
 # ---------------------------------------------------------------------- basic reads
