@@ -3,11 +3,13 @@
 from servobus.errors import (
     ArgumentRangeError,
     ChecksumError,
+    ConnectionLost,
     DriveAlarm,
     DriveError,
     DriveTimeout,
     EepromGuardError,
     FramingError,
+    NotSupported,
     ProtocolError,
     ServobusError,
 )
@@ -17,11 +19,13 @@ __version__ = "0.1.0"
 __all__ = [
     "ArgumentRangeError",
     "ChecksumError",
+    "ConnectionLost",
     "DriveAlarm",
     "DriveError",
     "DriveTimeout",
     "EepromGuardError",
     "FramingError",
+    "NotSupported",
     "ProtocolError",
     "ServobusError",
     "__version__",

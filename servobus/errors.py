@@ -51,3 +51,15 @@ class DriveError(ServobusError):
         super().__init__(message)
         self.code = code
         self.drive_id = drive_id
+
+
+class ConnectionLost(ServobusError, ConnectionError):
+    """The transport went away (closed, reset, broken pipe); also a ``ConnectionError``."""
+
+
+class NotSupported(ServobusError):
+    """The connected drive family or protocol does not have this feature; nothing was sent."""
+
+    def __init__(self, message: str, family: str = "") -> None:
+        super().__init__(message)
+        self.family = family
