@@ -21,10 +21,10 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-from servobus.client import connect_async
-from servobus.client.dyn232 import Dyn232Axis
-from servobus.codec import dyn232 as c
-from servobus.drive import params as P
+from servobus.axis import connect_async
+from servobus.protocols.dyn232.client import Dyn232Axis
+from servobus.protocols.dyn232 import codec as c
+from servobus.families.dmm import params as P
 from servobus.transport.trace import ByteCounter
 
 POLL_SECONDS = 2.0

@@ -22,10 +22,10 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-from servobus.codec import dyn232 as c
+from servobus.protocols.dyn232 import codec as c
 from servobus.sim.drive import VirtualDrive
-from servobus.sim.dyn232_line import Dyn232Line
-from servobus.sim.inprocess import open_sim_stream
+from servobus.protocols.dyn232.line import Dyn232Line
+from servobus.protocols.dyn232.inprocess import open_sim_stream
 
 SECONDS = 2.0
 FAST_TRIPS = 3000

@@ -20,10 +20,10 @@ from contextlib import contextmanager
 
 import can
 
-from servobus.client.dyncan import DynCanAxis, open_can_client
-from servobus.codec import dyncan as c
+from servobus.protocols.dyncan.client import DynCanAxis, open_can_client
+from servobus.protocols.dyncan import codec as c
 from servobus.sim.drive import VirtualDrive
-from servobus.sim.dyncan_node import DynCanNetwork, serve
+from servobus.protocols.dyncan.node import DynCanNetwork, serve
 from servobus.transport.can_bus import AsyncCanBus, BitTiming
 
 ROUND_TRIPS = 5000

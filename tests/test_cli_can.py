@@ -13,10 +13,10 @@ import pytest
 from click.testing import CliRunner, Result
 
 from servobus.cli.main import cli
-from servobus.drive import params as P
-from servobus.drive import units as U
+from servobus.families.dmm import params as P
+from servobus.families.dmm import units as U
 from servobus.sim.drive import VirtualDrive
-from servobus.sim.dyncan_node import DynCanNetwork, serve
+from servobus.protocols.dyncan.node import DynCanNetwork, serve
 from servobus.sim.realtime import RealtimeClock
 from servobus.transport.can_bus import AsyncCanBus
 

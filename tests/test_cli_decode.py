@@ -25,7 +25,7 @@ from servobus.cli.line_decoder import (
     parse_hex,
 )
 from servobus.cli.main import cli
-from servobus.codec import dyn232 as c
+from servobus.protocols.dyn232 import codec as c
 
 SERVOBUS = "/work/venv/bin/servobus"
 H, D = c.HostFunction, c.DriveFunction
@@ -228,7 +228,7 @@ def test_sniff_without_source_is_a_usage_error() -> None:
 
 def test_sniff_live_tap_of_the_simulator() -> None:
     """End to end: `servobus sim dyn2 --tap`, a sniffer on the tap, a client on the line."""
-    from servobus.client import connect
+    from servobus.axis import connect
 
     sim = subprocess.Popen([SERVOBUS, "sim", "dyn2", "--fast", "--ids", "4", "--listen",
                             "tcp://127.0.0.1:0", "--tap", "tcp://127.0.0.1:0",
@@ -269,7 +269,7 @@ def test_sniff_live_tap_of_the_simulator() -> None:
 
 # ------------------------------------------------------------------ DYN CAN frames
 def test_decode_can_frames_in_cansend_notation() -> None:
-    from servobus.codec import dyncan
+    from servobus.protocols.dyncan import codec as dyncan
 
     ident = dyncan.arbitration_id(7, dyncan.Function.GENERAL_READ)
     code, out = run("decode", f"{ident:03x}#1b", f"{ident:03x}#00010000")
@@ -284,7 +284,7 @@ def test_decode_can_frames_in_cansend_notation() -> None:
 def test_sniff_can_bus() -> None:
     import can
 
-    from servobus.codec import dyncan
+    from servobus.protocols.dyncan import codec as dyncan
 
     channel = "servobus-test-sniff"
     ident = dyncan.arbitration_id(2, dyncan.Function.GENERAL_READ)

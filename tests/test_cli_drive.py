@@ -12,8 +12,8 @@ import pytest
 from click.testing import CliRunner, Result
 
 from servobus.cli.main import cli
-from servobus.drive import params as P
-from servobus.drive import units as U
+from servobus.families.dmm import params as P
+from servobus.families.dmm import units as U
 
 SERVOBUS = "/work/venv/bin/servobus"
 FAST = "sim://dyn2?fast=1"

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from servobus.cli import params_file as PF
-from servobus.drive import params as P
+from servobus.families.dmm import params as P
 from servobus.errors import ArgumentRangeError
 
 SERVOBUS = "/work/venv/bin/servobus"

@@ -17,11 +17,11 @@ from typing import Any
 import pytest
 from dyn232_rig import Rig, arun, rig
 
-from servobus.client.eeprom_guard import EepromGuard, EepromWearWarning
-from servobus.codec import dyn232 as c
-from servobus.drive import params as P
-from servobus.drive import units as U
-from servobus.drive.registers import AlarmCode, DriveConfig, ServoMode
+from servobus.axis.eeprom_guard import EepromGuard, EepromWearWarning
+from servobus.protocols.dyn232 import codec as c
+from servobus.families.dmm import params as P
+from servobus.families.dmm import units as U
+from servobus.families.dmm.registers import AlarmCode, DriveConfig, ServoMode
 from servobus.errors import (
     ArgumentRangeError,
     ChecksumError,

@@ -15,9 +15,9 @@ import time
 import pytest
 from dyn232_rig import PATHS, REPEATS, arun, assert_gives_up_on_time, check_window, fail_late, rig
 
-from servobus.client import connect, connect_async
-from servobus.client.dyn232 import DEFAULT_TURNAROUND_S, AsyncDyn232Client
-from servobus.codec import dyn232 as c
+from servobus.axis import connect, connect_async
+from servobus.protocols.dyn232.client import DEFAULT_TURNAROUND_S, AsyncDyn232Client
+from servobus.protocols.dyn232 import codec as c
 from servobus.errors import DriveTimeout
 from servobus.transport.base import Direction
 from servobus.transport.pair import Fault, open_pair
@@ -29,7 +29,7 @@ ABSENT_ID = 9  # no drive has it: its requests get silence
 STATUS_REQUEST_LEN = len(c.encode(0, c.HostFunction.READ_DRIVE_STATUS))
 #: 8N1: start bit + 8 data bits + stop bit per byte (the manual's 38400 8N1 line).
 BITS_PER_BYTE = 1 + 8 + 1
-#: Documented in servobus.client.dyn232: "turnaround_s (default 25 ms ...)".
+#: Documented in servobus.protocols.dyn232.client: "turnaround_s (default 25 ms ...)".
 DOCUMENTED_TURNAROUND_S = 0.025
 
 
@@ -108,7 +108,7 @@ async def test_ping_timeout_is_one_attempt_on_time(path: str) -> None:
 @pytest.mark.parametrize("retries", [0, 2])
 @arun
 async def test_connect_timeout_and_retries_options_on_time(retries: int) -> None:
-    ax = await connect_async("sim://dyn2?fast=1", drive_id=ABSENT_ID, timeout=DEADLINE_S,
+    ax = await connect_async("sim://dyn2?fast=1&ids=0", drive_id=ABSENT_ID, timeout=DEADLINE_S,
                              retries=retries)
     try:
         async def status_times_out() -> None:
@@ -121,7 +121,7 @@ async def test_connect_timeout_and_retries_options_on_time(retries: int) -> None
 
 
 def test_sync_connect_timeout_on_time() -> None:
-    ax = connect("sim://dyn2?fast=1", drive_id=ABSENT_ID, timeout=DEADLINE_S, retries=1)
+    ax = connect("sim://dyn2?fast=1&ids=0", drive_id=ABSENT_ID, timeout=DEADLINE_S, retries=1)
     try:
         expected = 2 * DEADLINE_S
         times: list[float] = []

@@ -13,13 +13,13 @@ from typing import Any
 
 import pytest
 
-from servobus.client import AsyncAxis, Axis, connect, connect_async
-from servobus.client.dyn232 import Dyn232Axis
-from servobus.drive import params as P
-from servobus.drive import units as U
+from servobus.axis import AsyncAxis, Axis, connect, connect_async
+from servobus.protocols.dyn232.client import Dyn232Axis
+from servobus.families.dmm import params as P
+from servobus.families.dmm import units as U
 from servobus.errors import ArgumentRangeError, DriveTimeout, ServobusError
 from servobus.sim.drive import VirtualDrive
-from servobus.sim.dyn232_server import Dyn232Server
+from servobus.protocols.dyn232.server import Dyn232Server
 from servobus.transport.base import Direction
 from servobus.transport.serial_stream import SerialStream
 from servobus.transport.tcp_stream import TcpStream
@@ -99,7 +99,7 @@ async def test_paced_round_trip_takes_the_wire_time() -> None:
 
 @arun
 async def test_absent_id_on_sim_times_out() -> None:
-    core = await connect_async(FAST, drive_id=7, retries=1, timeout=0.02)
+    core = await connect_async(FAST + "&ids=0", drive_id=7, retries=1, timeout=0.02)
     try:
         assert not await core.ping(timeout=0.02)
         with pytest.raises(DriveTimeout):

@@ -12,9 +12,9 @@ from collections.abc import Iterator
 import can
 import pytest
 
-from servobus.client import connect
-from servobus.codec import dyncan as c
-from servobus.sim.socketcand_server import (
+from servobus.axis import connect
+from servobus.protocols.dyncan import codec as c
+from servobus.transport.socketcand_hub import (
     RAWMODE_SETTLE_S,
     SocketcandHub,
     format_frame,
@@ -72,7 +72,7 @@ def test_python_can_socketcand_client_raw(server: int) -> None:
 
 
 def test_connect_can_sync_axis(server: int) -> None:
-    with connect(can=f"socketcand:127.0.0.1:{server}", drive_id=1) as axis:
+    with connect(f"dyncan+socketcand://127.0.0.1:{server}", drive_id=1) as axis:
         assert axis.protocol == "dyncan"
         assert axis.read_id() == 1
         axis.write_param("line_num", 2222)

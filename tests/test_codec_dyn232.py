@@ -6,7 +6,7 @@ import pytest
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
-from servobus.codec import dyn232 as c
+from servobus.protocols.dyn232 import codec as c
 from servobus.errors import ArgumentRangeError, ChecksumError, FramingError
 
 H = c.HostFunction

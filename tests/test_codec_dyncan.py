@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from servobus.codec import dyncan as c
-from servobus.drive import units as U
+from servobus.protocols.dyncan import codec as c
+from servobus.families.dmm import units as U
 from servobus.errors import ArgumentRangeError, FramingError
 
 F = c.Function

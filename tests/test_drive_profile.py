@@ -1,4 +1,4 @@
-"""Profile math (servobus.drive.profile) and the ``servobus profile`` command: Appendix B."""
+"""Profile math (servobus.families.dmm.profile) and the ``servobus profile`` command: Appendix B."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 from click.testing import CliRunner
 
 from servobus.cli.main import cli
-from servobus.drive.profile import pack_arc_word, ptp_profile, unpack_arc_word
+from servobus.families.dmm.profile import pack_arc_word, ptp_profile, unpack_arc_word
 
 
 def test_appendix_b_example_exact() -> None:

@@ -7,9 +7,9 @@ import math
 
 import pytest
 
-from servobus.drive import units as U
-from servobus.drive.profile import ptp_profile
-from servobus.drive.registers import DriveStatus
+from servobus.families.dmm import units as U
+from servobus.families.dmm.profile import ptp_profile
+from servobus.families.dmm.registers import DriveStatus
 from servobus.sim.drive import CONTROL_HZ, VirtualDrive
 
 DT = 1.0 / CONTROL_HZ

@@ -7,14 +7,14 @@ from pathlib import Path
 
 import pytest
 
-from servobus.drive import units as U
-from servobus.drive.profile import (
+from servobus.families.dmm import units as U
+from servobus.families.dmm.profile import (
     accel_counts_per_s2,
     pack_arc_word,
     speed_counts_per_s,
     trapezoid_time,
 )
-from servobus.drive.registers import AlarmCode
+from servobus.families.dmm.registers import AlarmCode
 from servobus.sim.drive import CONTROL_HZ, VirtualDrive
 from servobus.sim.eeprom import EEPROM_CYCLE_LIMIT, EepromStore
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from servobus.codec import dyn232 as c
+from servobus.protocols.dyn232 import codec as c
 from servobus.sim.drive import VirtualDrive
-from servobus.sim.dyn232_line import Dyn232Line
+from servobus.protocols.dyn232.line import Dyn232Line
 
 IDS = (0, 1, 2, 3, c.BROADCAST_ID, 9)  # 9 is absent; 127 reaches every drive
 

@@ -7,16 +7,16 @@ import time
 
 import pytest
 
-from servobus.codec import dyn232 as c
-from servobus.drive import params as P
-from servobus.drive import units as U
-from servobus.drive.registers import AlarmCode, DriveConfig, DriveStatus
+from servobus.protocols.dyn232 import codec as c
+from servobus.families.dmm import params as P
+from servobus.families.dmm import units as U
+from servobus.families.dmm.registers import AlarmCode, DriveConfig, DriveStatus
 from servobus.errors import ArgumentRangeError
 from servobus.sim.drive import VirtualDrive
-from servobus.sim.dyn232_line import Dyn232Line, wrap28
+from servobus.protocols.dyn232.line import Dyn232Line, wrap28
 from servobus.sim.eeprom import EepromStore
-from servobus.sim.inprocess import open_sim_stream, open_sim_url, parse_sim_url
-from servobus.sim.pacing import BYTE_TIME_S, WireClock
+from servobus.protocols.dyn232.inprocess import open_sim_stream, open_sim_url, parse_sim_url
+from servobus.protocols.dyn232.pacing import BYTE_TIME_S, WireClock
 
 H, D, GR = c.HostFunction, c.DriveFunction, c.GeneralReadSelector
 
@@ -361,7 +361,7 @@ def test_parse_sim_url() -> None:
 
 
 async def _round_trip(stream: object, request: bytes) -> bytes:
-    from servobus.sim.inprocess import SimByteStream
+    from servobus.protocols.dyn232.inprocess import SimByteStream
 
     assert isinstance(stream, SimByteStream)
     await stream.write(request)

@@ -17,11 +17,11 @@ from pathlib import Path
 import pytest
 import serial
 
-from servobus.codec import dyn232 as c
+from servobus.protocols.dyn232 import codec as c
 from servobus.errors import ArgumentRangeError
 from servobus.sim.drive import VirtualDrive
-from servobus.sim.dyn232_server import Dyn232Server, parse_listen_url
-from servobus.sim.pacing import BYTE_TIME_S
+from servobus.protocols.dyn232.server import Dyn232Server, parse_listen_url
+from servobus.protocols.dyn232.pacing import BYTE_TIME_S
 
 H, D, GR = c.HostFunction, c.DriveFunction, c.GeneralReadSelector
 CLI = [sys.executable, "-c", "from servobus.cli.main import main; main()"]

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import pytest
 
-from servobus.codec import dyncan as c
-from servobus.drive import params as P
-from servobus.drive import units as U
-from servobus.drive.registers import AlarmCode, DriveStatus
+from servobus.protocols.dyncan import codec as c
+from servobus.families.dmm import params as P
+from servobus.families.dmm import units as U
+from servobus.families.dmm.registers import AlarmCode, DriveStatus
 from servobus.sim.drive import CONTROL_HZ, VirtualDrive
-from servobus.sim.dyncan_node import DynCanNetwork
+from servobus.protocols.dyncan.node import DynCanNetwork
 
 F = c.Function
 ERR = c.DriveErrorCode

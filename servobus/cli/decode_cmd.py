@@ -150,7 +150,7 @@ def _open_source(ctx: CliContext, tap: str | None, from_file: str | None,
         if url.startswith("tcp://"):
             host, _, port = url[len("tcp://"):].rpartition(":")
             return _TcpSource(host or "127.0.0.1", int(port)), True
-        return _SerialSource(url, ctx.baud), True
+        return _SerialSource(url, ctx.baud or 38_400), True
     except (OSError, ValueError) as exc:
         raise click.ClickException(f"cannot open {url}: {exc}") from None
 

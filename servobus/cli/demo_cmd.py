@@ -20,12 +20,12 @@ from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.drive_cmds import render_status, status_record
 from servobus.cli.open_axis import connection_label, console, emit_json, open_axis
 from servobus.cli.params_cmd import params_table
-from servobus.drive import params as P
-from servobus.drive import units as U
 from servobus.errors import DriveAlarm, DriveTimeout
+from servobus.families.dmm import params as P
+from servobus.families.dmm import units as U
 
 if TYPE_CHECKING:
-    from servobus.client.axis import Axis
+    from servobus.axis.base import Axis
 
 POLL_S = 0.1
 MOVE_REVS = 10

@@ -15,7 +15,7 @@ from rich.console import Console
 
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.open_axis import connection_label, emit, kv_text, open_axis
-from servobus.drive.registers import DriveConfig, DriveStatus
+from servobus.families.dmm.registers import DriveConfig, DriveStatus
 
 
 def status_record(status: DriveStatus, config: DriveConfig, position: int,

@@ -26,11 +26,11 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
-from servobus.codec import dyn232 as c
-from servobus.codec import dyncan
-from servobus.drive import params as P
-from servobus.drive.registers import DriveConfig, DriveStatus
 from servobus.errors import ChecksumError, ProtocolError
+from servobus.families.dmm import params as P
+from servobus.families.dmm.registers import DriveConfig, DriveStatus
+from servobus.protocols.dyn232 import codec as c
+from servobus.protocols.dyncan import codec as dyncan
 
 REPLY, CODE, VALUE, AMBIGUOUS = "reply", "code", "value", "ambiguous"
 

@@ -9,14 +9,14 @@ import click
 
 from servobus import __version__
 from servobus.cli.context import CliContext
-from servobus.codec.dyn232 import BAUD, MAX_DRIVE_ID
 from servobus.errors import ServobusError
+from servobus.protocols.dyn232.codec import MAX_DRIVE_ID
 
 #: Command-group modules; each defines ``register(group: click.Group) -> None``.
 COMMAND_MODULES: list[str] = [
     "servobus.cli.sim_cmd",
-    "servobus.cli.sim_dyn2_cmd",
-    "servobus.cli.sim_dyncan_cmd",
+    "servobus.protocols.dyn232.sim_cmd",
+    "servobus.protocols.dyncan.sim_cmd",
     "servobus.cli.decode_cmd",
     "servobus.cli.drive_cmds",
     "servobus.cli.params_cmd",
@@ -32,14 +32,14 @@ COMMAND_MODULES: list[str] = [
                    "Default: the embedded virtual drive (sim://dyn2).")
 @click.option("--id", "drive_id", type=click.IntRange(0, MAX_DRIVE_ID), default=0,
               show_default=True, help="drive id")
-@click.option("--baud", type=int, default=BAUD, show_default=True, help="serial baud rate")
+@click.option("--baud", type=int, default=None, help="serial baud rate [default: the protocol's]")
 @click.option("--can", metavar="INTERFACE:CHANNEL", default=None,
               help="talk DYN CAN instead, e.g. socketcand:127.0.0.1:29536 or pcan:PCAN_USBBUS1")
 @click.option("--timeout", type=float, default=None, help="reply deadline in seconds")
 @click.option("--json", "as_json", is_flag=True, help="machine-readable output")
 @click.version_option(__version__, prog_name="servobus")
 @click.pass_context
-def cli(ctx: click.Context, port: str | None, drive_id: int, baud: int, can: str | None,
+def cli(ctx: click.Context, port: str | None, drive_id: int, baud: int | None, can: str | None,
         timeout: float | None, as_json: bool) -> None:
     """servobus: command, tune and monitor DMM servo drives (or their virtual twins)."""
     ctx.obj = CliContext(port=port, drive_id=drive_id, baud=baud, json=as_json, can=can,

@@ -18,16 +18,20 @@ from rich.console import Console
 from servobus.cli.context import CliContext
 
 if TYPE_CHECKING:
-    from servobus.client.axis import Axis
+    from servobus.axis.base import Axis
 
 
 @contextmanager
 def open_axis(ctx: CliContext, drive_id: int | None = None) -> Iterator[Axis]:
     """Connect to the drive (or the embedded virtual drive) and close it afterwards."""
-    from servobus.client import connect  # lazy: keeps `servobus decode` free of the client
+    from servobus.axis import connect  # lazy: keeps `servobus decode` free of the client
 
-    axis = connect(ctx.port, drive_id=ctx.drive_id if drive_id is None else drive_id,
-                   baud=ctx.baud, can=ctx.can, timeout=ctx.timeout)
+    options: dict[str, object] = {}
+    if ctx.baud is not None:
+        options["baud"] = ctx.baud
+    if ctx.timeout is not None:
+        options["timeout"] = ctx.timeout
+    axis = connect(ctx.url, drive_id=ctx.drive_id if drive_id is None else drive_id, **options)
     try:
         yield axis
     finally:

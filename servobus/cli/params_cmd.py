@@ -18,7 +18,7 @@ from rich.table import Table
 from servobus.cli import params_file as PF
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.open_axis import console, emit, emit_json, note, open_axis
-from servobus.drive import params as P
+from servobus.families.dmm import params as P
 
 
 def params_table(values: dict[str, int], title: str, width: int) -> Table:

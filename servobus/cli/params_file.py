@@ -11,7 +11,7 @@ Format (JSON, UTF-8), version 1::
       "params": {"main_gain": 40, "speed_gain": 40, ...}
     }
 
-Decisions: parameter names are the snake_case names of ``servobus.drive.params`` (the same
+Decisions: parameter names are the snake_case names of ``servobus.families.dmm.params`` (the same
 on every protocol, so a DYN232M backup restores onto a DYN CAN drive); a file may hold a
 subset of the parameters (only those are restored); unknown top-level keys are ignored so a
 later minor addition stays readable; a higher ``version`` is refused. Every value is checked
@@ -27,9 +27,9 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import TypeGuard
 
-from servobus.codec.dyn232 import MAX_DRIVE_ID
-from servobus.drive import params as P
 from servobus.errors import ArgumentRangeError, ServobusError
+from servobus.families.dmm import params as P
+from servobus.protocols.dyn232.codec import MAX_DRIVE_ID
 
 FORMAT = "servobus.params"
 VERSION = 1

@@ -1,6 +1,6 @@
 """``servobus profile``: the point-to-point profile table (DYN2 7.4.1 / DYN5 Appendix B).
 
-Computed by :mod:`servobus.drive.profile`, the same code the virtual drive runs.
+Computed by :mod:`servobus.families.dmm.profile`, the same code the virtual drive runs.
 """
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import json
 import click
 
 from servobus.cli.context import CliContext, pass_cli
-from servobus.drive import params as P
-from servobus.drive.profile import ptp_profile
+from servobus.families.dmm import params as P
+from servobus.families.dmm.profile import ptp_profile
 
 
 def _param(name: str) -> click.IntRange:

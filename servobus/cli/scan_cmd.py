@@ -14,7 +14,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.open_axis import connection_label, console, emit, open_axis
-from servobus.codec.dyn232 import MAX_DRIVE_ID
+from servobus.protocols.dyn232.codec import MAX_DRIVE_ID
 
 
 @click.command("scan")

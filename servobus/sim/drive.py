@@ -41,11 +41,17 @@ import math
 from collections.abc import Callable, Iterable
 from dataclasses import replace
 
-from servobus.codec.dyn232 import WAVE_AMPLITUDE_MAX, WAVE_FREQUENCY_MAX_HZ
-from servobus.drive import params as P
-from servobus.drive import profile as PR
-from servobus.drive import units as U
-from servobus.drive.registers import AlarmCode, CommandMode, DriveConfig, DriveStatus, ServoMode
+from servobus.families.dmm import params as P
+from servobus.families.dmm import profile as PR
+from servobus.families.dmm import units as U
+from servobus.families.dmm.registers import (
+    AlarmCode,
+    CommandMode,
+    DriveConfig,
+    DriveStatus,
+    ServoMode,
+)
+from servobus.families.dmm.vocabulary import WAVE_AMPLITUDE_MAX, WAVE_FREQUENCY_MAX_HZ
 from servobus.sim.core import constants as K
 from servobus.sim.core import interp
 from servobus.sim.core.engine import Gen, Ref, Servo, ServoEngine

@@ -17,7 +17,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from servobus.drive import params as P
+from servobus.families.dmm import params as P
 
 EEPROM_CYCLE_LIMIT = 1_000_000
 

@@ -5,7 +5,7 @@ each packet; a background task calls ``sync()`` every few milliseconds so motion
 timeouts progress while the line is idle (and no single ``advance`` has to cover a long gap).
 
 ``sync`` never moves a drive backwards: the paced line may already have advanced the drives
-to the (future) wire arrival time of a queued packet; see :mod:`servobus.sim.pacing`.
+to the (future) wire arrival time of a queued packet; see :mod:`servobus.protocols.dyn232.pacing`.
 """
 
 from __future__ import annotations

@@ -76,11 +76,13 @@ def format_event(direction: Direction, item: object, t: float | None = None,
 
 
 def describe_item(direction: Direction, item: object) -> str:
-    """Packets know how to describe themselves through their codec; fall back to repr."""
-    from servobus.codec import dyn232  # local: transport stays free of codec imports at load
+    """Decoded items describe themselves (``item.describe(from_drive)``); else repr.
 
-    if isinstance(item, dyn232.Packet):
-        return dyn232.describe(item, from_drive=direction is Direction.RX)
+    The transport knows no protocol: every codec's packet/frame type has ``describe``.
+    """
+    describe = getattr(item, "describe", None)
+    if callable(describe):
+        return str(describe(direction is Direction.RX))
     return repr(item)
 
 

@@ -1,12 +1,12 @@
 """Constants of the virtual drive core: control rate, loop scaling, alarm thresholds.
 
 Every number here is a servobus decision where the manuals are silent; the reason sits next
-to it. Unit factors from the manuals live in :mod:`servobus.drive.units`.
+to it. Unit factors from the manuals live in :mod:`servobus.families.dmm.units`.
 """
 
 from __future__ import annotations
 
-from servobus.drive import units as U
+from servobus.families.dmm import units as U
 
 #: Fixed control period. 4 kHz: the torque filter pole (26 x 127 = 3302 rad/s) and a speed loop
 #: of up to ~400 Hz are resolved (>= 2 samples per pole time constant), and 16 drives still fit

@@ -29,8 +29,8 @@ import math
 from collections.abc import Callable
 from enum import IntEnum
 
-from servobus.drive import units as U
-from servobus.drive.registers import AlarmCode
+from servobus.families.dmm import units as U
+from servobus.families.dmm.registers import AlarmCode
 from servobus.sim.core import constants as K
 
 TWO_PI = 2.0 * math.pi

@@ -20,7 +20,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from servobus.drive.profile import unpack_arc_word
+from servobus.families.dmm.profile import unpack_arc_word
 
 PLANES: dict[int, tuple[int, int]] = {0: (0, 1), 1: (1, 2), 2: (2, 0)}
 FEEDRATE_MAX = 127

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from servobus.drive import units as U
+from servobus.families.dmm import units as U
 
 SMOOTHING_FRACTION = 0.015
 SMOOTHING_MAX_S = 0.050

@@ -26,19 +26,20 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import Enum, IntEnum
 
-from servobus.codec.dyn232 import (
+from servobus.errors import ArgumentRangeError, FramingError
+from servobus.families.dmm import params as P
+from servobus.families.dmm.vocabulary import (
     CONST_SPEED_LIMIT_RPM,
     VALUE_MAX,
     VALUE_MIN,
     WAVE_AMPLITUDE_MAX,
     WAVE_FREQUENCY_MAX_HZ,
+    DmmFunction,
     GeneralReadSelector,
 )
-from servobus.codec.dyn232 import (
-    Kind as Kind,  # re-exported: the DYN232M command kinds apply to CAN as well
+from servobus.families.dmm.vocabulary import (
+    Kind as Kind,  # re-exported: the DMM command kinds
 )
-from servobus.drive import params as P
-from servobus.errors import ArgumentRangeError, FramingError
 
 BROADCAST_ID = 0
 MIN_DRIVE_ID = 1
@@ -55,22 +56,22 @@ BITRATES_KBIT = (10, 20, 50, 125, 250, 500, 800, 1000)
 class Function(IntEnum):
     """The 32 function codes (section 5)."""
 
-    SET_ORIGIN = 0x00
-    GO_ABSOLUTE_POS = 0x01
-    MAKE_LINEAR_LINE = 0x02
-    GO_RELATIVE_POS = 0x03
-    MAKE_CIRCULAR_ARC = 0x04
-    ASSIGN_DRIVE_ID = 0x05
-    READ_DRIVE_ID = 0x06
-    SET_DRIVE_CONFIG = 0x07
-    READ_DRIVE_CONFIG = 0x08
-    READ_DRIVE_STATUS = 0x09
-    TURN_CONST_SPEED = 0x0A
-    SQUARE_WAVE = 0x0B
-    SIN_WAVE = 0x0C
-    SS_FREQUENCY = 0x0D
-    GENERAL_READ = 0x0E
-    FOR_MOTOR_DEFINE = 0x0F
+    SET_ORIGIN = DmmFunction.SET_ORIGIN.value
+    GO_ABSOLUTE_POS = DmmFunction.GO_ABSOLUTE_POS.value
+    MAKE_LINEAR_LINE = DmmFunction.MAKE_LINEAR_LINE.value
+    GO_RELATIVE_POS = DmmFunction.GO_RELATIVE_POS.value
+    MAKE_CIRCULAR_ARC = DmmFunction.MAKE_CIRCULAR_ARC.value
+    ASSIGN_DRIVE_ID = DmmFunction.ASSIGN_DRIVE_ID.value
+    READ_DRIVE_ID = DmmFunction.READ_DRIVE_ID.value
+    SET_DRIVE_CONFIG = DmmFunction.SET_DRIVE_CONFIG.value
+    READ_DRIVE_CONFIG = DmmFunction.READ_DRIVE_CONFIG.value
+    READ_DRIVE_STATUS = DmmFunction.READ_DRIVE_STATUS.value
+    TURN_CONST_SPEED = DmmFunction.TURN_CONST_SPEED.value
+    SQUARE_WAVE = DmmFunction.SQUARE_WAVE.value
+    SIN_WAVE = DmmFunction.SIN_WAVE.value
+    SS_FREQUENCY = DmmFunction.SS_FREQUENCY.value
+    GENERAL_READ = DmmFunction.GENERAL_READ.value
+    FOR_MOTOR_DEFINE = DmmFunction.FOR_MOTOR_DEFINE.value
     SET_PARAM_GROUP1 = 0x10
     SET_PARAM_GROUP2 = 0x11
     SET_PARAM_GROUP3 = 0x12
@@ -118,7 +119,7 @@ class Layout(Enum):
 
 @dataclass(frozen=True)
 class Field:
-    param: str  # servobus.drive.params name: its range applies
+    param: str  # servobus.families.dmm.params name: its range applies
     width: int  # bytes
 
 
@@ -344,6 +345,10 @@ class Frame:
     def fields(self) -> tuple[int, ...]:
         return unpack_fields(self.spec.fields, self.data)
 
+    def describe(self, from_drive: bool) -> str:
+        """One line for traces, ``decode`` and ``sniff`` (see :func:`describe`)."""
+        return describe(self, from_drive)
+
 
 def encode(frame: Frame) -> tuple[int, bytes]:
     """(arbitration id, data) ready for any CAN library."""
@@ -364,7 +369,7 @@ def request(drive_id: int, function: Function, value: int | None = None,
             fields: tuple[int, ...] | None = None, raw: bytes | None = None) -> Frame:
     """Host request with the table's layout; structural checks only (fits the bytes).
 
-    Ranges are checked by the client (servobus.client.dyncan_commands) so the simulator
+    Ranges are checked by the client (servobus.protocols.dyncan.commands) so the simulator
     can still be fed out-of-range data in tests.
     """
     spec = SPECS[function]

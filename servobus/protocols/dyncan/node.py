@@ -1,6 +1,6 @@
 """DYN CAN front end: virtual nodes on one CAN bus (DYN CAN specification section 6).
 
-Pure-ish like :mod:`servobus.sim.dyn232_line`: ``DynCanNetwork.handle(frame)`` executes one
+Pure-ish like :mod:`servobus.protocols.dyn232.line`: ``DynCanNetwork.handle(frame)`` executes one
 host frame on every node it addresses and returns the frames the nodes send back; the
 caller advances the drives' time first. :func:`serve` runs a network on any FramePort
 (a python-can bus, the socketcand hub) in wall-clock time.
@@ -41,13 +41,13 @@ import contextlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from servobus.codec import dyncan as c
-from servobus.codec.dyn232 import GeneralReadSelector as GR
-from servobus.drive import units as U
-from servobus.drive.registers import CONFIG_DEFINED_MASK, AlarmCode
 from servobus.errors import FramingError
+from servobus.families.dmm import units as U
+from servobus.families.dmm.registers import CONFIG_DEFINED_MASK, AlarmCode
+from servobus.families.dmm.vocabulary import GeneralReadSelector as GR
+from servobus.protocols.dyncan import codec as c
+from servobus.sim.dmm_actions import run_action
 from servobus.sim.drive import VirtualDrive
-from servobus.sim.general_read import run_action
 from servobus.sim.realtime import RealtimeClock
 from servobus.transport.can_bus import FramePort
 

@@ -42,19 +42,19 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from servobus.client import dyn232_commands as cmds
-from servobus.client.axis import AxisTraceHook
-from servobus.client.command_axis import CommandAxis, CommandSet
-from servobus.client.dyn232_commands import Command
-from servobus.client.eeprom_guard import EepromGuard
-from servobus.codec import dyn232 as c
-from servobus.drive.registers import DriveConfig, DriveStatus
+from servobus.axis.base import AxisTraceHook
+from servobus.axis.command_axis import CommandAxis, CommandSet
+from servobus.axis.eeprom_guard import EepromGuard
 from servobus.errors import (
     ArgumentRangeError,
     ChecksumError,
     DriveTimeout,
     ProtocolError,
 )
+from servobus.families.dmm.registers import DriveConfig, DriveStatus
+from servobus.protocols.dyn232 import codec as c
+from servobus.protocols.dyn232 import commands as cmds
+from servobus.protocols.dyn232.commands import Command
 from servobus.transport.base import ByteStream, Direction, set_receiver
 
 DEFAULT_TURNAROUND_S = 0.025

@@ -17,11 +17,11 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
-from servobus.codec import dyncan as c
-from servobus.codec.dyn232 import GeneralReadSelector as GR
-from servobus.drive import params as P
-from servobus.drive.registers import DriveConfig, DriveStatus
 from servobus.errors import ArgumentRangeError
+from servobus.families.dmm import params as P
+from servobus.families.dmm.registers import DriveConfig, DriveStatus
+from servobus.families.dmm.vocabulary import GeneralReadSelector as GR
+from servobus.protocols.dyncan import codec as c
 
 F = c.Function
 Kind = c.Kind

@@ -14,11 +14,11 @@ from __future__ import annotations
 import click
 
 from servobus.cli.sim_cmd import add_sim_command
-from servobus.codec.dyn232 import FACTORY_ID
-from servobus.drive import units as U
 from servobus.errors import ArgumentRangeError
-from servobus.sim.dyn232_server import parse_listen_url, run_server
-from servobus.sim.inprocess import make_drives, parse_ids
+from servobus.families.dmm import units as U
+from servobus.protocols.dyn232.codec import FACTORY_ID
+from servobus.protocols.dyn232.server import parse_listen_url, run_server
+from servobus.sim.fleet import make_drives, parse_ids
 
 
 def _tcp(option: str, value: str | None) -> tuple[str, int] | None:

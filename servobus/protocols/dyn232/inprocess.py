@@ -10,7 +10,7 @@ URL form (parsed by :func:`parse_sim_url`)::
     sim://dyn2                      one drive, factory id 0, paced
     sim://dyn2?ids=1,2,3&fast=1     three drives, unpaced
     sim://dyn2?state=/tmp/e.json    EEPROM kept in a JSON file (see EepromStore)
-    sim://dyn2?model=DYN2-T1        motor/drive model (servobus.drive.units.MODELS)
+    sim://dyn2?model=DYN2-T1        motor/drive model (servobus.families.dmm.units.MODELS)
 
 ``dc2`` and ``dyn4`` are accepted as aliases of ``dyn2`` (same protocol, NOTES.md).
 """
@@ -19,17 +19,22 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 from urllib.parse import parse_qs, urlsplit
 
-from servobus.codec import dyn232 as c
-from servobus.drive import units as U
+from servobus.axis.url import DriveUrl, merge_options
 from servobus.errors import ArgumentRangeError
+from servobus.families.dmm import units as U
+from servobus.protocols.dyn232 import codec as c
+from servobus.protocols.dyn232.line import Dyn232Line
+from servobus.protocols.dyn232.pacing import HostPort, LineRunner
 from servobus.sim.drive import VirtualDrive
-from servobus.sim.dyn232_line import Dyn232Line
-from servobus.sim.eeprom import EepromStore
-from servobus.sim.pacing import HostPort, LineRunner
+from servobus.sim.fleet import make_drives, parse_ids
 from servobus.transport.base import Direction
 from servobus.transport.buffered import PushInput
+
+if TYPE_CHECKING:
+    from servobus.axis.base import AsyncAxis
 
 SIM_KINDS = ("dyn2", "dc2", "dyn4")
 _TRUE = ("1", "true", "yes", "on")
@@ -45,20 +50,6 @@ class SimUrl:
     model: str = U.DEFAULT_MODEL
 
 
-def parse_ids(text: str) -> tuple[int, ...]:
-    """``"1,2,3"`` -> (1, 2, 3); each 0..63, no duplicates."""
-    try:
-        ids = tuple(int(part) for part in text.split(",") if part.strip())
-    except ValueError:
-        raise ArgumentRangeError(f"drive ids must be integers, got {text!r}") from None
-    if not ids:
-        raise ArgumentRangeError("at least one drive id is needed")
-    bad = [i for i in ids if not 0 <= i <= c.MAX_DRIVE_ID]
-    if bad:
-        raise ArgumentRangeError(f"drive ids {bad} are outside 0..{c.MAX_DRIVE_ID}")
-    if len(set(ids)) != len(ids):
-        raise ArgumentRangeError(f"duplicate drive ids in {text!r}")
-    return ids
 
 
 def _flag(name: str, text: str) -> bool:
@@ -95,12 +86,6 @@ def parse_sim_url(url: str) -> SimUrl:
                   paced=paced, state=query.get("state") or None, model=model)
 
 
-def make_drives(ids: Sequence[int], *, state: str | None = None,
-                model: str = U.DEFAULT_MODEL) -> list[VirtualDrive]:
-    """One VirtualDrive per id; with ``state`` each keeps its EEPROM under key str(id)."""
-    return [VirtualDrive(i, model=model,
-                         eeprom=EepromStore(state, key=str(i)) if state else None)
-            for i in ids]
 
 
 class SimByteStream(PushInput):
@@ -164,3 +149,37 @@ def open_sim_url(url: str, *, drives: Sequence[VirtualDrive] | None = None) -> S
     u = parse_sim_url(url)
     return open_sim_stream(u.kind, ids=u.ids, paced=u.paced, drives=drives, state=u.state,
                            model=u.model)
+
+
+SIM_OPTIONS: dict[str, type] = {
+    "ids": str, "fast": bool, "paced": bool, "state": str, "model": str,
+    "timeout": float, "retries": int, "turnaround_s": float, "query_interval_s": float,
+    "eeprom_guard": object,
+}
+
+
+async def open_sim_axis(url: DriveUrl, *, drive_id: int | None = None,
+                        **keywords: object) -> AsyncAxis:
+    """``sim://dyn232``: an Axis on an in-process virtual line (registered in ``SIM``).
+
+    Without ``ids`` the line holds one drive with the id asked for (the factory id 0 when
+    none is), so ``connect("sim://dyn232", drive_id=3)`` just works.
+    """
+    from servobus.protocols.dyn232.client import AsyncDyn232Client, Dyn232Axis
+    from servobus.protocols.dyn232.commands import check_drive_id
+
+    options = merge_options(url, dict(keywords), SIM_OPTIONS)
+    if drive_id is not None:
+        check_drive_id(drive_id)
+    ids_text = options.pop("ids", None)
+    ids = parse_ids(str(ids_text)) if ids_text is not None else (
+        (c.FACTORY_ID,) if drive_id is None else (drive_id,))
+    paced = not bool(options.pop("fast", False)) and bool(options.pop("paced", True))
+    model = str(options.pop("model", U.DEFAULT_MODEL))
+    if model not in U.MODELS:
+        raise ArgumentRangeError(f"unknown model {model!r}; known: {', '.join(U.MODELS)}")
+    state = options.pop("state", None)
+    stream = open_sim_stream("dyn2", ids=ids, paced=paced, model=model,
+                             state=str(state) if state else None)
+    client = AsyncDyn232Client(stream, **options)  # type: ignore[arg-type]
+    return Dyn232Axis(client, ids[0] if drive_id is None else drive_id)

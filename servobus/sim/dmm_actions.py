@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from servobus.codec.dyn232 import GeneralReadSelector as GR
+from servobus.families.dmm.vocabulary import GeneralReadSelector as GR
 from servobus.sim.drive import VirtualDrive
 
 ACTIONS: dict[GR, Callable[[VirtualDrive], None]] = {

@@ -9,13 +9,13 @@ Direct, the 10 ms wait after an id change).
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from typing import Any, ClassVar, Protocol
 
-from servobus.client.axis import AsyncAxis, AxisTraceHook
-from servobus.client.eeprom_guard import EepromGuard
-from servobus.drive.registers import DriveConfig, DriveStatus
+from servobus.axis.base import AsyncAxis, AxisTraceHook
+from servobus.axis.eeprom_guard import EepromGuard
 from servobus.errors import DriveTimeout, ProtocolError
+from servobus.families.dmm.registers import DriveConfig, DriveStatus
 
 
 class CommandSet(Protocol):
@@ -66,6 +66,11 @@ class CommandAxis(AsyncAxis):
         self._id = self.commands.check_drive_id(drive_id)
         self._owns_client = owns_client
         self._reads: dict[tuple[object, ...], Any] = {}  # read commands are immutable
+        self._closers: list[Callable[[], Awaitable[None]]] = []
+
+    def on_close(self, closer: Callable[[], Awaitable[None]]) -> None:
+        """Run ``closer`` after the client closes (e.g. an in-process virtual drive's task)."""
+        self._closers.append(closer)
 
     def _read(self, factory: Callable[..., Any], *args: Any) -> Any:
         """The read command for this drive, built once (polling loops reuse it)."""
@@ -181,6 +186,9 @@ class CommandAxis(AsyncAxis):
     async def close(self) -> None:
         if self._owns_client:
             await self.client.close()
+            closers, self._closers = self._closers, []
+            for closer in closers:
+                await closer()
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} id {self._id}>"

@@ -11,12 +11,12 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
-from servobus.codec import dyn232 as c
-from servobus.drive import params as P
-from servobus.drive.profile import pack_arc_word as pack_arc_word  # one home: drive.profile
-from servobus.drive.profile import unpack_arc_word as unpack_arc_word
-from servobus.drive.registers import DriveConfig, DriveStatus
 from servobus.errors import ArgumentRangeError
+from servobus.families.dmm import params as P
+from servobus.families.dmm.profile import pack_arc_word as pack_arc_word  # one home: drive.profile
+from servobus.families.dmm.profile import unpack_arc_word as unpack_arc_word
+from servobus.families.dmm.registers import DriveConfig, DriveStatus
+from servobus.protocols.dyn232 import codec as c
 
 H = c.HostFunction
 GR = c.GeneralReadSelector

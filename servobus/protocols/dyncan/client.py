@@ -34,14 +34,14 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-from servobus.client import dyncan_commands as cmds
-from servobus.client.axis import AsyncAxis, AxisTraceHook
-from servobus.client.command_axis import CommandAxis, CommandSet
-from servobus.client.dyncan_commands import CanCommand
-from servobus.client.eeprom_guard import EepromGuard
-from servobus.codec import dyncan as c
-from servobus.drive import params as P
+from servobus.axis.base import AsyncAxis, AxisTraceHook
+from servobus.axis.command_axis import CommandAxis, CommandSet
+from servobus.axis.eeprom_guard import EepromGuard
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveError, DriveTimeout, ServobusError
+from servobus.families.dmm import params as P
+from servobus.protocols.dyncan import codec as c
+from servobus.protocols.dyncan import commands as cmds
+from servobus.protocols.dyncan.commands import CanCommand
 from servobus.transport.base import Direction
 from servobus.transport.can_bus import AsyncCanBus, CanFrame, FramePort, set_receiver
 

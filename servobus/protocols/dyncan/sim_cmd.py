@@ -19,14 +19,14 @@ from collections.abc import Sequence
 import click
 
 from servobus.cli.sim_cmd import add_sim_command
-from servobus.drive import units as U
 from servobus.errors import ArgumentRangeError
+from servobus.families.dmm import units as U
+from servobus.protocols.dyncan.node import DynCanNetwork, serve
 from servobus.sim.drive import VirtualDrive
-from servobus.sim.dyncan_node import DynCanNetwork, serve
-from servobus.sim.inprocess import make_drives, parse_ids
+from servobus.sim.fleet import make_drives, parse_ids
 from servobus.sim.realtime import RealtimeClock
-from servobus.sim.socketcand_server import SocketcandHub, parse_socketcand_address
 from servobus.transport.can_bus import BitTiming
+from servobus.transport.socketcand_hub import SocketcandHub, parse_socketcand_address
 
 
 async def run_socketcand_nodes(drives: Sequence[VirtualDrive], host: str, port: int, *,

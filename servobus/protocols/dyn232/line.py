@@ -3,7 +3,7 @@
 Pure-ish: no I/O and no clock. ``Dyn232Line.receive(data)`` takes host bytes in any
 chunking and returns the bytes the drives send back; the caller advances the drives' time
 first (servers via :mod:`servobus.sim.realtime`, tests via ``VirtualDrive.advance``).
-Pacing lives in :mod:`servobus.sim.pacing`, sockets in :mod:`servobus.sim.dyn232_server`.
+Pacing lives in :mod:`servobus.protocols.dyn232.pacing`, sockets in :mod:`servobus.protocols.dyn232.server`.
 
 Decisions where the manual is silent (kept here, in one place):
 
@@ -37,10 +37,10 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
 
-from servobus.codec import dyn232 as c
 from servobus.errors import ChecksumError, ProtocolError
+from servobus.protocols.dyn232 import codec as c
+from servobus.sim.dmm_actions import run_action
 from servobus.sim.drive import VirtualDrive
-from servobus.sim.general_read import run_action
 
 H = c.HostFunction
 GR = c.GeneralReadSelector

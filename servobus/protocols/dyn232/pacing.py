@@ -28,8 +28,8 @@ import itertools
 import time
 from collections.abc import Callable, Iterator
 
-from servobus.codec import dyn232 as c
-from servobus.sim.dyn232_line import Dyn232Line
+from servobus.protocols.dyn232 import codec as c
+from servobus.protocols.dyn232.line import Dyn232Line
 from servobus.sim.realtime import RealtimeClock
 from servobus.transport.base import Direction, TraceHook
 

@@ -17,7 +17,7 @@ the tap bookkeeping.
 
 The server binds 127.0.0.1 unless an address is given explicitly. The sim server's event
 loop uses ``select()`` (microsecond timeouts) so replies are released on time without
-blocking the loop; see :mod:`servobus.sim.pacing`.
+blocking the loop; see :mod:`servobus.protocols.dyn232.pacing`.
 """
 
 from __future__ import annotations
@@ -35,9 +35,9 @@ from typing import TextIO
 from urllib.parse import urlsplit
 
 from servobus.errors import ArgumentRangeError
+from servobus.protocols.dyn232.line import Dyn232Line
+from servobus.protocols.dyn232.pacing import COARSE_S, FINE_COARSE_S, HostPort, LineRunner
 from servobus.sim.drive import VirtualDrive
-from servobus.sim.dyn232_line import Dyn232Line
-from servobus.sim.pacing import COARSE_S, FINE_COARSE_S, HostPort, LineRunner
 from servobus.transport.base import Direction
 
 DEFAULT_HOST = "127.0.0.1"

@@ -20,15 +20,23 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
-from enum import Enum, IntEnum
+from enum import IntEnum
 
 from servobus.errors import ArgumentRangeError, ChecksumError, FramingError, ProtocolError
+from servobus.families.dmm.vocabulary import (
+    CONST_SPEED_LIMIT_RPM,
+    VALUE_MAX,
+    VALUE_MIN,
+    WAVE_AMPLITUDE_MAX,
+    WAVE_FREQUENCY_MAX_HZ,
+    DmmFunction,
+    GeneralReadSelector,
+    Kind,
+)
 
 BROADCAST_ID = 127
 FACTORY_ID = 0
 MAX_DRIVE_ID = 63  # 64..126 reserved (7.2.3)
-VALUE_MIN = -(1 << 27)  # -134,217,728
-VALUE_MAX = (1 << 27) - 1  # 134,217,727
 MIN_PACKET = 4
 MAX_PACKET = 7
 BAUD = 38_400
@@ -36,24 +44,24 @@ BITS_PER_BYTE = 10  # 8N1: start + 8 data + stop
 
 
 class HostFunction(IntEnum):
-    """Function codes sent by the host (7.2.4)."""
+    """Function codes sent by the host (7.2.4); 0x00-0x0F are the shared DMM codes."""
 
-    SET_ORIGIN = 0x00
-    GO_ABSOLUTE_POS = 0x01
-    MAKE_LINEAR_LINE = 0x02
-    GO_RELATIVE_POS = 0x03
-    MAKE_CIRCULAR_ARC = 0x04
-    ASSIGN_DRIVE_ID = 0x05
-    READ_DRIVE_ID = 0x06
-    SET_DRIVE_CONFIG = 0x07
-    READ_DRIVE_CONFIG = 0x08
-    READ_DRIVE_STATUS = 0x09
-    TURN_CONST_SPEED = 0x0A
-    SQUARE_WAVE = 0x0B
-    SIN_WAVE = 0x0C
-    SS_FREQUENCY = 0x0D
-    GENERAL_READ = 0x0E
-    FOR_MOTOR_DEFINE = 0x0F
+    SET_ORIGIN = DmmFunction.SET_ORIGIN.value
+    GO_ABSOLUTE_POS = DmmFunction.GO_ABSOLUTE_POS.value
+    MAKE_LINEAR_LINE = DmmFunction.MAKE_LINEAR_LINE.value
+    GO_RELATIVE_POS = DmmFunction.GO_RELATIVE_POS.value
+    MAKE_CIRCULAR_ARC = DmmFunction.MAKE_CIRCULAR_ARC.value
+    ASSIGN_DRIVE_ID = DmmFunction.ASSIGN_DRIVE_ID.value
+    READ_DRIVE_ID = DmmFunction.READ_DRIVE_ID.value
+    SET_DRIVE_CONFIG = DmmFunction.SET_DRIVE_CONFIG.value
+    READ_DRIVE_CONFIG = DmmFunction.READ_DRIVE_CONFIG.value
+    READ_DRIVE_STATUS = DmmFunction.READ_DRIVE_STATUS.value
+    TURN_CONST_SPEED = DmmFunction.TURN_CONST_SPEED.value
+    SQUARE_WAVE = DmmFunction.SQUARE_WAVE.value
+    SIN_WAVE = DmmFunction.SIN_WAVE.value
+    SS_FREQUENCY = DmmFunction.SS_FREQUENCY.value
+    GENERAL_READ = DmmFunction.GENERAL_READ.value
+    FOR_MOTOR_DEFINE = DmmFunction.FOR_MOTOR_DEFINE.value
     SET_MAIN_GAIN = 0x10
     SET_SPEED_GAIN = 0x11
     SET_INT_GAIN = 0x12
@@ -91,23 +99,6 @@ class DriveFunction(IntEnum):
     IS_TRQ_CURRENT = 0x1E
 
 
-class GeneralReadSelector(IntEnum):
-    """The one data byte of General_Read (NOTES.md, from DMM's library)."""
-
-    POSITION = 0x1B  # reply IS_ABS_POS32
-    RESET = 0x1C  # drive reset (counts as a power cycle); no reply
-    SPEED = 0x1D  # reply IS_SPEED (rpm)
-    TORQUE = 0x1E  # reply IS_TRQ_CURRENT
-    ENABLE = 0x20  # servo enable; no reply
-    DISABLE = 0x21  # servo disable; no reply
-
-
-class Kind(Enum):
-    MOTION = "motion"  # starts or changes motion: never re-sent automatically
-    SETTING = "setting"  # writes EEPROM (parameter, config, id): counted by the EEPROM guard
-    READ = "read"  # answered with an Is_* packet: safe to retry
-    ACTION = "action"  # no reply, no EEPROM (origin, general-read actions)
-    INTERNAL = "internal"
 
 
 @dataclass(frozen=True)
@@ -131,11 +122,6 @@ class DriveSpec:
 _H, _K = HostFunction, Kind
 _FULL = (VALUE_MIN, VALUE_MAX)
 _DUMMY = (0, 0)
-# Turn_ConstSpeed, wave amplitude and frequency: the DYN232M manual gives only the wire
-# length; servobus applies the ranges the DYN CAN manual gives for the same firmware.
-CONST_SPEED_LIMIT_RPM = 20_000
-WAVE_AMPLITUDE_MAX = 4_096
-WAVE_FREQUENCY_MAX_HZ = 50
 
 HOST_SPECS: dict[HostFunction, HostSpec] = {
     s.function: s
@@ -257,6 +243,10 @@ class Packet:
     def reply_value(self) -> int:
         """Value of a drive reply: 7-bit unsigned for 1-byte register/parameter replies."""
         return reply_value_of(self.function, self.data) if self.data else self.value
+
+    def describe(self, from_drive: bool) -> str:
+        """One line for traces, ``decode`` and ``sniff`` (see :func:`describe`)."""
+        return describe(self, from_drive)
 
 
 def reply_value_of(function: int, data: bytes | bytearray) -> int:

@@ -14,10 +14,10 @@ from collections.abc import Callable, Iterable, Mapping
 from types import TracebackType
 from typing import Any
 
-from servobus.client.sync import LoopThread
-from servobus.drive import params as P
-from servobus.drive.registers import DriveConfig, DriveStatus
+from servobus.axis.sync import LoopThread
 from servobus.errors import DriveAlarm, DriveTimeout
+from servobus.families.dmm import params as P
+from servobus.families.dmm.registers import DriveConfig, DriveStatus
 from servobus.transport.base import Direction
 
 #: Client-level trace hook: decoded packets/frames and the errors met (see transport.trace).

@@ -1,0 +1,43 @@
+"""connect() / connect_async(): one entry point for every protocol (docs/axis.md).
+
+The URL names the protocol, transport and target (:mod:`servobus.axis.url`); the registry
+(:mod:`servobus.axis.registry`) finds the protocol that serves it. This module knows no
+protocol. ``url=None`` opens the built-in virtual drive, :data:`DEFAULT_URL`.
+
+``drive_id=None`` means the protocol's default (its factory id); on ``sim://`` without
+``?ids=`` the virtual drive takes the id that is asked for.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from servobus.axis import registry
+from servobus.axis.base import AsyncAxis, Axis
+from servobus.axis.sync import LoopThread
+from servobus.axis.url import parse_url
+
+DEFAULT_URL = "sim://dyn232"
+
+
+async def connect_async(url: str | None = None, *, drive_id: int | None = None,
+                        **options: Any) -> AsyncAxis:
+    """Open the drive ``url`` names and return its AsyncAxis (close it when done).
+
+    Options (keywords or ``?name=value`` in the URL; keywords win) are per protocol:
+    docs/axis.md has the table. Every argument is checked before anything is opened.
+    """
+    parsed = parse_url(DEFAULT_URL if url is None else url)
+    opener = registry.lookup(parsed)
+    return await opener(parsed, drive_id=drive_id, **options)
+
+
+def connect(url: str | None = None, *, drive_id: int | None = None, **options: Any) -> Axis:
+    """Synchronous :func:`connect_async`: the Axis runs on a private event-loop thread."""
+    runner = LoopThread()
+    try:
+        core = runner.run(connect_async(url, drive_id=drive_id, **options))
+    except BaseException:
+        runner.stop()
+        raise
+    return Axis(core, runner)

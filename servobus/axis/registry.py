@@ -1,0 +1,105 @@
+"""URL scheme registry (like python-can's interface table): scheme -> lazily imported opener.
+
+Providers declare their schemes; nothing here names a protocol. A provider is a module with
+
+    SCHEMES: Mapping[str, str]   # scheme -> "module:function" of an opener
+    async def opener(url: DriveUrl, *, drive_id: int | None, **options) -> AsyncAxis
+
+Providers are every subpackage of :mod:`servobus.protocols` (its ``__init__`` stays light:
+it declares ``SCHEMES`` and imports nothing heavy), the simulator's ``servobus.sim.schemes``
+(``sim://``; a host client never imports the simulator unless a ``sim://`` URL is opened),
+and third-party packages through the ``servobus.schemes`` entry-point group (each entry
+point names a provider module). The empty scheme ``""`` is the bare serial port
+(``/dev/ttyUSB0``, ``COM3``); pyserial URL schemes (``socket``, ``loop`` ...) are claimed by
+the protocol that serves bare serial ports.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+from collections.abc import Awaitable, Callable, Mapping
+from importlib.metadata import entry_points
+from typing import TYPE_CHECKING, Any, cast
+
+from servobus.errors import ArgumentRangeError
+
+if TYPE_CHECKING:
+    from servobus.axis.base import AsyncAxis
+    from servobus.axis.url import DriveUrl
+
+Opener = Callable[..., Awaitable["AsyncAxis"]]
+
+BUILTIN_PROVIDERS: tuple[str, ...] = ("servobus.sim.schemes",)
+PROTOCOL_PACKAGE = "servobus.protocols"
+ENTRY_POINT_GROUP = "servobus.schemes"
+
+_extra: dict[str, str] = {}
+
+
+def register(scheme: str, target: str) -> None:
+    """Add (or replace) a scheme at run time: ``target`` is ``"module:function"``."""
+    _extra[scheme.lower()] = target
+
+
+def _provider_modules() -> list[str]:
+    names = list(BUILTIN_PROVIDERS)
+    package = importlib.import_module(PROTOCOL_PACKAGE)
+    names += [f"{PROTOCOL_PACKAGE}.{m.name}" for m in pkgutil.iter_modules(package.__path__)
+              if m.ispkg]
+    names += [ep.value for ep in entry_points(group=ENTRY_POINT_GROUP)]
+    return names
+
+
+_tables: dict[str, dict[str, str]] = {}
+
+
+def provided(attribute: str) -> dict[str, str]:
+    """Merge one declared table (``SCHEMES``, ``SIM``) over every provider, first wins."""
+    table = _tables.get(attribute)
+    if table is None:
+        table = {}
+        for name in _provider_modules():
+            module = importlib.import_module(name)
+            declared = cast(Mapping[str, str], getattr(module, attribute, {}))
+            for key, target in declared.items():
+                table.setdefault(key.lower(), target)
+        _tables[attribute] = table
+    return table
+
+
+def provided_list(attribute: str) -> list[str]:
+    """Single values a provider declares (``CLI = "module:register"``), in provider order."""
+    found: list[str] = []
+    for name in _provider_modules():
+        value = getattr(importlib.import_module(name), attribute, None)
+        if isinstance(value, str):
+            found.append(value)
+    return found
+
+
+def schemes() -> dict[str, str]:
+    """Every known scheme -> its opener target (providers are imported once, lightly)."""
+    return {**provided("SCHEMES"), **_extra}
+
+
+def load(target: str) -> Any:
+    """Import ``"module:attribute"`` and return the attribute."""
+    module_name, _, attr = target.partition(":")
+    return getattr(importlib.import_module(module_name), attr)
+
+
+def scheme_list() -> str:
+    """The schemes for an error message: ``dyn232, dyn232+<serial>, dyncan+<interface>, ...``."""
+    return ", ".join(sorted(s if s else "<serial port>" for s in schemes()))
+
+
+def lookup(url: DriveUrl) -> Opener:
+    """The opener for ``url``: ``scheme+transport`` first, then ``scheme``."""
+    table = schemes()
+    key = f"{url.scheme}+{url.transport}" if url.transport else url.scheme
+    target = table.get(key) or table.get(url.scheme if url.transport else key)
+    if target is None:
+        raise ArgumentRangeError(
+            f"unknown drive URL scheme in {url.raw!r}; known: {scheme_list()}")
+    return cast(Opener, load(target))

@@ -1,1 +1,0 @@
-"""The drive model both sides share: parameter table, registers, units, profile math."""

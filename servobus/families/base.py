@@ -1,0 +1,119 @@
+"""What every device family gives the vendor-neutral Axis (docs/axis.md).
+
+A family (DMM DYN2/DYN4, DMM DYN5, YZ-AIM) is a model of a kind of drive, independent of the
+wire: its parameter table (names, ranges, units, RAM/EEPROM), how its status decodes into one
+:class:`AxisStatus`, and its counts per revolution. Protocols carry a family's values; the
+Axis, the CLI and the GUI read the family to know what a drive has.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from enum import Enum
+
+from servobus.errors import ArgumentRangeError, NotSupported
+
+
+class Storage(Enum):
+    EEPROM = "eeprom"  # survives reset / power cycle; counts against the EEPROM's endurance
+    RAM = "ram"  # lost at reset / power cycle
+
+
+@dataclass(frozen=True)
+class ParamInfo:
+    """One settable parameter as the Axis sees it (the family's raw integer units)."""
+
+    name: str  # snake_case: CLI, JSON backups, GUI, Axis API
+    minimum: int
+    maximum: int
+    default: int | None
+    unit: str
+    storage: Storage
+    doc: str
+
+    def check(self, value: object) -> int:
+        """``value`` as int if it is an integer in range, else ArgumentRangeError."""
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ArgumentRangeError(f"{self.name} must be an integer, got {value!r}")
+        if not self.minimum <= value <= self.maximum:
+            raise ArgumentRangeError(
+                f"{self.name}={value} is outside the allowed range "
+                f"{self.minimum}..{self.maximum} ({self.unit})")
+        return value
+
+
+@dataclass(frozen=True)
+class AxisStatus:
+    """One status for every family; ``vendor`` keeps the family's own decoded value."""
+
+    enabled: bool
+    moving: bool
+    in_position: bool
+    alarm_code: int  # 0 = no alarm; the family's own numbering
+    alarm_text: str  # "" when no alarm
+    alarm_latched: bool  # holds until reset / power cycle
+    raw: int  # the status value as the drive sent it
+    family: str
+    vendor: object = field(default=None, compare=False)
+
+    @property
+    def alarm(self) -> bool:
+        return self.alarm_code != 0
+
+    @property
+    def idle(self) -> bool:
+        """Motion done and on position (what ``wait_idle`` waits for)."""
+        return not self.moving and self.in_position
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "enabled": self.enabled, "moving": self.moving, "in_position": self.in_position,
+            "alarm_code": self.alarm_code, "alarm": self.alarm_text,
+            "alarm_latched": self.alarm_latched, "raw": self.raw, "family": self.family,
+        }
+
+
+@dataclass(frozen=True)
+class Family:
+    """A device family: name, counts per revolution, parameters, features."""
+
+    name: str  # "dmm-dyn2", "dmm-dyn5", "yzaim"
+    title: str  # for people: "DMM DYN2/DYN4"
+    counts_per_rev: int
+    params: tuple[ParamInfo, ...]
+    #: Optional Axis features this family has ("waves", "config", "origin", ...).
+    features: frozenset[str] = frozenset()
+    #: Alarm code -> text.
+    alarms: Mapping[int, str] = field(default_factory=dict)
+
+    def param(self, name: str) -> ParamInfo:
+        for p in self.params:
+            if p.name == name:
+                return p
+        raise ArgumentRangeError(
+            f"{self.title} has no parameter {name!r}; it has: "
+            f"{', '.join(p.name for p in self.params)}")
+
+    def require(self, feature: str) -> None:
+        """Raise NotSupported (before anything is sent) when the family lacks ``feature``."""
+        if feature not in self.features:
+            raise NotSupported(f"{self.title} drives have no {feature.replace('_', ' ')}",
+                               family=self.name)
+
+    def alarm_text(self, code: int) -> str:
+        return "" if code == 0 else self.alarms.get(code, f"alarm {code}")
+
+    def revs_to_counts(self, revs: float) -> int:
+        return round_counts(revs * self.counts_per_rev)
+
+    def degrees_to_counts(self, degrees: float) -> int:
+        return round_counts(degrees / 360.0 * self.counts_per_rev)
+
+
+def round_counts(value: float) -> int:
+    """Round half away from zero; NaN and infinities are refused."""
+    if not math.isfinite(value):
+        raise ArgumentRangeError(f"a position must be a finite number, got {value!r}")
+    return int(math.copysign(math.floor(abs(value) + 0.5), value))

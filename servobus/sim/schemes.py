@@ -1,0 +1,41 @@
+"""``sim://<protocol>``: in-process virtual drives of any protocol (docs/axis.md).
+
+The scheme is registered here, in the simulator, so a host client never imports the
+simulator unless a ``sim://`` URL is opened. Each protocol package names the opener of its
+in-process virtual drive in its ``SIM`` table (``sim://dyn232``, ``sim://dyncan``, ...).
+
+Options every protocol's virtual drive takes: ``ids=1,2,3`` (default: the id asked for, else
+the protocol's factory id), ``fast=1`` (no wire pacing), ``state=FILE`` (EEPROM kept in a
+JSON file), ``model=NAME`` (motor/drive model).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from servobus.axis import registry
+from servobus.axis.url import DriveUrl
+from servobus.errors import ArgumentRangeError
+
+if TYPE_CHECKING:
+    from servobus.axis.base import AsyncAxis
+
+SCHEMES: dict[str, str] = {"sim": "servobus.sim.schemes:open_axis"}
+DEFAULT_PROTOCOL = "dyn232"
+
+
+def sim_protocols() -> dict[str, str]:
+    """Virtual-drive name -> opener, from every protocol package's ``SIM`` table."""
+    return registry.provided("SIM")
+
+
+async def open_axis(url: DriveUrl, *, drive_id: int | None = None, **keywords: Any) -> AsyncAxis:
+    name = url.target.strip("/").lower() or DEFAULT_PROTOCOL
+    target = sim_protocols().get(name)
+    if target is None:
+        raise ArgumentRangeError(
+            f"no virtual drive {name!r} in {url.raw!r}; known: sim://"
+            + ", sim://".join(sorted(sim_protocols())))
+    opener = registry.load(target)
+    axis: AsyncAxis = await opener(url, drive_id=drive_id, **keywords)
+    return axis
