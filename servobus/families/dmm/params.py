@@ -10,14 +10,10 @@ TrqCons "127 in position mode" and the Appendix B example MaxSpd 48 / MaxAcl 30)
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import Enum, IntEnum
+from enum import IntEnum
 
 from servobus.errors import ArgumentRangeError
-
-
-class Storage(Enum):
-    EEPROM = "eeprom"  # survives reset / power cycle; counts against the 1,000,000-cycle limit
-    RAM = "ram"  # lost at reset
+from servobus.families.base import ParamInfo, Storage
 
 
 class ParamId(IntEnum):
@@ -57,6 +53,12 @@ class ParamSpec:
 
     def valid(self, value: int) -> bool:
         return self.minimum <= value <= self.maximum
+
+    @property
+    def info(self) -> ParamInfo:
+        """The vendor-neutral view the Axis, CLI and GUI use."""
+        return ParamInfo(self.name, self.minimum, self.maximum, self.default, self.unit,
+                         self.storage, self.doc)
 
 
 _E, _R = Storage.EEPROM, Storage.RAM

@@ -1,0 +1,60 @@
+"""The DMM DYN2 / DC2 / DYN4 family as the vendor-neutral Axis sees it (docs/axis.md).
+
+Units at the Axis: positions in encoder counts (65,536 per revolution), speed in rpm,
+current in amperes. A point-to-point command moves ``command x 4096 / GEAR_NUM x 4``
+counts (DYN2 manual 7.4.1), so the Axis converts counts to command units through the
+GEAR_NUM it reads from the drive: ``command = round(counts x GEAR_NUM / 16384)``, rounded
+half away from zero; the resolution is ``16384 / GEAR_NUM`` counts (4 at GEAR_NUM 4096).
+"""
+
+from __future__ import annotations
+
+from servobus.families.base import AxisStatus, Family, round_counts
+from servobus.families.dmm import params as P
+from servobus.families.dmm import units as U
+from servobus.families.dmm.registers import AlarmCode, DriveStatus
+
+ALARM_TEXT: dict[int, str] = {
+    AlarmCode.LOST_PHASE: "lost phase (|Pset - Pmotor| > 180 deg, or >= 90 deg for 2 s)",
+    AlarmCode.OVER_CURRENT: "over current",
+    AlarmCode.OVERHEAT: "overheat / over power",
+    AlarmCode.CHECKSUM: "bad checksum (command refused)",
+    AlarmCode.OVER_VOLTAGE: "over voltage",
+}
+
+#: Features of the DMM Axis beyond move/speed/stop/params (Family.require names them).
+FEATURES = frozenset({"waves", "config", "origin", "drive_id", "reset"})
+
+DYN2 = Family(
+    name="dmm-dyn2",
+    title="DMM DYN2/DC2/DYN4",
+    counts_per_rev=U.COUNTS_PER_REV,
+    params=tuple(p.info for p in P.PARAMS),
+    features=FEATURES,
+    alarms={int(k): v for k, v in ALARM_TEXT.items()},
+)
+
+
+def axis_status(status: DriveStatus, raw: int | None = None) -> AxisStatus:
+    """The DYN2 status byte (7.3) as the one AxisStatus."""
+    code = int(status.alarm)
+    return AxisStatus(
+        enabled=not status.servo_free,
+        moving=status.motion_busy,
+        in_position=status.on_position,
+        alarm_code=code,
+        alarm_text=DYN2.alarm_text(code),
+        alarm_latched=status.alarm.latching,
+        raw=int(status.to_byte()) if raw is None else raw,
+        family=DYN2.name,
+        vendor=status,
+    )
+
+
+def counts_to_command(counts: int, gear_num: int) -> int:
+    """Encoder counts -> point-to-point command units at ``gear_num`` (rounded, see module)."""
+    return round_counts(U.counts_to_command(counts, gear_num))
+
+
+def command_to_counts(command: int, gear_num: int) -> int:
+    return round_counts(U.command_to_counts(command, gear_num))
