@@ -1,9 +1,12 @@
-"""CommandAxis: the AsyncAxis of any protocol whose client executes pure ``make_*`` commands.
+"""CommandAxis: the AsyncAxis of a DMM protocol whose client executes pure ``make_*`` commands.
 
 A protocol supplies a commands module (the :class:`CommandSet` vocabulary) and a client with
-``execute``; this class maps the Axis API onto them once. Dyn232Axis and DynCanAxis only add
-what their protocol really has on its own (CAN parameter groups, sync moves, Position
-Direct, the 10 ms wait after an id change).
+``execute``; this class maps the Axis API onto them once, in the Axis units: counts are
+converted to the drive's command units through GEAR_NUM (read from the drive once, then
+tracked through this axis's own writes; see :mod:`servobus.families.dmm.family`), the
+status byte becomes an AxisStatus, the torque readout amperes. Dyn232Axis and DynCanAxis
+only add what their protocol really has on its own (CAN parameter groups, sync moves,
+Position Direct, the 10 ms wait after an id change).
 """
 
 from __future__ import annotations
@@ -15,6 +18,8 @@ from typing import Any, ClassVar, Protocol
 from servobus.axis.base import AsyncAxis, AxisTraceHook
 from servobus.axis.eeprom_guard import EepromGuard
 from servobus.errors import DriveTimeout, ProtocolError
+from servobus.families.base import AxisStatus, Family, ParamInfo
+from servobus.families.dmm.family import DYN2, axis_status, counts_to_command
 from servobus.families.dmm.registers import DriveConfig, DriveStatus
 
 
@@ -42,6 +47,8 @@ class CommandSet(Protocol):
     def make_set_param(self, drive_id: int, name: str, value: int) -> Any: ...
     def make_read_id(self, drive_id: int) -> Any: ...
     def make_assign_id(self, drive_id: int, new_id: int) -> Any: ...
+    @property
+    def REACHABLE_PARAMS(self) -> tuple[str, ...]: ...
 
 
 class CommandClient(Protocol):
@@ -58,6 +65,9 @@ class CommandAxis(AsyncAxis):
 
     commands: ClassVar[CommandSet]
     protocol_name: ClassVar[str]
+    family_model: ClassVar[Family] = DYN2
+    #: Torque readout -> amperes (positive = towards increasing position).
+    amps_per_torque_unit: ClassVar[float] = 1.0
     #: Wait after Assign_Drive_ID before using the new id (DYN CAN: 10 ms re-initialisation).
     id_settle_s: ClassVar[float] = 0.0
 
@@ -67,6 +77,7 @@ class CommandAxis(AsyncAxis):
         self._owns_client = owns_client
         self._reads: dict[tuple[object, ...], Any] = {}  # read commands are immutable
         self._closers: list[Callable[[], Awaitable[None]]] = []
+        self._gear_num: int | None = None  # read on the first move (Axis units -> command)
 
     def on_close(self, closer: Callable[[], Awaitable[None]]) -> None:
         """Run ``closer`` after the client closes (e.g. an in-process virtual drive's task)."""
@@ -91,12 +102,37 @@ class CommandAxis(AsyncAxis):
     def protocol(self) -> str:
         return self.protocol_name
 
+    @property
+    def family(self) -> Family:
+        return self.family_model
+
+    # ------------------------------------------------------------- units
+    async def gear_num(self) -> int:
+        """GEAR_NUM as this axis knows it (read from the drive the first time)."""
+        if self._gear_num is None:
+            self._gear_num = await self.read_param("gear_num")
+        return self._gear_num
+
+    async def to_command(self, counts: int) -> int:
+        """Encoder counts -> the drive's point-to-point command units (rounded)."""
+        return counts_to_command(counts, await self.gear_num())
+
     # ------------------------------------------------------------- motion
     async def _send_move_to(self, position: int) -> None:
-        await self._run(self.commands.make_move_absolute(self._id, position))
+        command = await self.to_command(position)
+        await self._run(self.commands.make_move_absolute(self._id, command))
 
     async def _send_move_by(self, distance: int) -> None:
-        await self._run(self.commands.make_move_relative(self._id, distance))
+        command = await self.to_command(distance)
+        await self._run(self.commands.make_move_relative(self._id, command))
+
+    async def move_to_command(self, command: int) -> None:
+        """Absolute move in raw command units (x 4096/GEAR_NUM x 4 counts), no conversion."""
+        await self._run(self.commands.make_move_absolute(self._id, command))
+
+    async def move_by_command(self, command: int) -> None:
+        """Relative move in raw command units, no conversion."""
+        await self._run(self.commands.make_move_relative(self._id, command))
 
     async def turn(self, rpm: int) -> None:
         await self._run(self.commands.make_turn_const_speed(self._id, rpm))
@@ -123,9 +159,13 @@ class CommandAxis(AsyncAxis):
         await self._run(self.commands.make_reset(self._id))
 
     # ------------------------------------------------------------- registers and readouts
-    async def status(self) -> DriveStatus:
+    async def drive_status(self) -> DriveStatus:
+        """The DYN2 status byte as decoded by the family (7.3)."""
         result: DriveStatus = await self._run(self._read(self.commands.make_read_status))
         return result
+
+    async def status(self) -> AxisStatus:
+        return axis_status(await self.drive_status())
 
     async def config(self) -> DriveConfig:
         result: DriveConfig = await self._run(self._read(self.commands.make_read_config))
@@ -137,21 +177,34 @@ class CommandAxis(AsyncAxis):
     async def position(self) -> int:
         return int(await self._run(self._read(self.commands.make_read_position)))
 
-    async def speed(self) -> int:
-        return int(await self._run(self._read(self.commands.make_read_speed)))
+    async def speed(self) -> float:
+        return float(await self._run(self._read(self.commands.make_read_speed)))
 
-    async def torque(self) -> int:
+    async def torque_raw(self) -> int:
+        """The protocol's torque readout as sent (see ``amps_per_torque_unit``)."""
         return int(await self._run(self._read(self.commands.make_read_torque)))
 
+    async def current(self) -> float:
+        return await self.torque_raw() * self.amps_per_torque_unit
+
     # ------------------------------------------------------------- parameters and id
-    def _check_param(self, name: str, value: int) -> None:
-        self.commands.make_set_param(self._id, name, value)  # range + reachable here
+    def parameters(self) -> tuple[ParamInfo, ...]:
+        reach = set(self.commands.REACHABLE_PARAMS)
+        return tuple(p for p in self.family.params if p.name in reach)
+
+    def _check_param(self, name: str, value: object) -> int:
+        checked = super()._check_param(name, value)
+        self.commands.make_set_param(self._id, name, checked)  # the protocol's own checks
+        return checked
 
     async def read_param(self, name: str) -> int:
         return int(await self._run(self._read(self.commands.make_read_param, name)))
 
     async def write_param(self, name: str, value: int) -> None:
+        self._check_param(name, value)
         await self._run(self.commands.make_set_param(self._id, name, value))
+        if name == "gear_num":
+            self._gear_num = value
 
     async def read_id(self) -> int:
         return int(await self._run(self._read(self.commands.make_read_id)))

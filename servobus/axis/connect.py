@@ -13,8 +13,8 @@ from __future__ import annotations
 from typing import Any
 
 from servobus.axis import registry
-from servobus.axis.base import AsyncAxis, Axis
-from servobus.axis.sync import LoopThread
+from servobus.axis.base import AsyncAxis
+from servobus.axis.sync import Axis, LoopThread
 from servobus.axis.url import parse_url
 
 DEFAULT_URL = "sim://dyn232"

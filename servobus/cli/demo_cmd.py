@@ -25,7 +25,7 @@ from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
 
 if TYPE_CHECKING:
-    from servobus.axis.base import Axis
+    from servobus.axis.sync import Axis
 
 POLL_S = 0.1
 MOVE_REVS = 10

@@ -18,7 +18,7 @@ from rich.console import Console
 from servobus.cli.context import CliContext
 
 if TYPE_CHECKING:
-    from servobus.axis.base import Axis
+    from servobus.axis.sync import Axis
 
 
 @contextmanager

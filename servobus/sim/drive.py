@@ -63,7 +63,6 @@ AlarmListener = Callable[["VirtualDrive", AlarmCode], None]
 CONTROL_HZ = K.CONTROL_HZ  # fixed control period (see servobus.sim.core.constants)
 DEFAULT_AXIS_IDS = (1, 2, 3)  # drive ids of X, Y, Z for broadcast interpolation
 #: DYN232M torque readout: relative unit (manual example 10); decision: 1 unit = 1 mA.
-TORQUE_UNITS_PER_A = 1000.0
 _GAIN_PARAMS = ("main_gain", "speed_gain", "int_gain", "trq_cons", "torque_limit")
 
 
@@ -556,7 +555,7 @@ class VirtualDrive:
 
     @property
     def torque_current(self) -> int:
-        return round(self.current_a * TORQUE_UNITS_PER_A)
+        return round(self.current_a * U.DYN232_TORQUE_UNITS_PER_A)
 
     @property
     def heat_fraction(self) -> float:

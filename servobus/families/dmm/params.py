@@ -13,7 +13,8 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 from servobus.errors import ArgumentRangeError
-from servobus.families.base import ParamInfo, Storage
+from servobus.families.base import ParamInfo
+from servobus.families.base import Storage as Storage
 
 
 class ParamId(IntEnum):

@@ -18,6 +18,7 @@ WAVE_COUNTS_PER_UNIT = COUNTS_PER_REV / 8_192  # wave amplitude 4096 = 180 deg
 ANALOG_SPEED_RPM_PER_V = 600.0  # +5 V = 3000 rpm
 ANALOG_POSITION_DEG_AT_10V = 90.0  # x 4096 / GEAR_NUM
 OVER_VOLTAGE_V = 80.0
+DYN232_TORQUE_UNITS_PER_A = 1000.0  # General_Read torque on DYN232M: mA (servobus decision)
 CAN_TORQUE_FULL_SCALE = 700  # DYN CAN General_Read torque: 700 = peak current
 DYN5_TORQUE_FULL_SCALE = 2000  # DYN5: 2000 = 100 % peak current
 

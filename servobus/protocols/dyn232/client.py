@@ -51,6 +51,7 @@ from servobus.errors import (
     DriveTimeout,
     ProtocolError,
 )
+from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import DriveConfig, DriveStatus
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232 import commands as cmds
@@ -418,7 +419,11 @@ def _guard_item(command: Command) -> str:
 
 
 class Dyn232Axis(CommandAxis):
-    """One DYN2/DC2/DYN4 drive on a DYN232M line (everything is CommandAxis)."""
+    """One DYN2/DC2/DYN4 drive on a DYN232M line (everything is CommandAxis).
+
+    The torque readout counts milliamperes (a servobus decision, docs/dyn232.md).
+    """
 
     commands: ClassVar[CommandSet] = cmds
     protocol_name = "dyn232"
+    amps_per_torque_unit = 1.0 / U.DYN232_TORQUE_UNITS_PER_A

@@ -23,16 +23,16 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 from servobus.errors import ArgumentRangeError, ChecksumError, FramingError, ProtocolError
-from servobus.families.dmm.vocabulary import (
-    CONST_SPEED_LIMIT_RPM,
-    VALUE_MAX,
-    VALUE_MIN,
-    WAVE_AMPLITUDE_MAX,
-    WAVE_FREQUENCY_MAX_HZ,
-    DmmFunction,
-    GeneralReadSelector,
-    Kind,
+from servobus.families.dmm.vocabulary import (  # re-exported: the shared DMM vocabulary
+    CONST_SPEED_LIMIT_RPM as CONST_SPEED_LIMIT_RPM,
 )
+from servobus.families.dmm.vocabulary import VALUE_MAX as VALUE_MAX
+from servobus.families.dmm.vocabulary import VALUE_MIN as VALUE_MIN
+from servobus.families.dmm.vocabulary import WAVE_AMPLITUDE_MAX as WAVE_AMPLITUDE_MAX
+from servobus.families.dmm.vocabulary import WAVE_FREQUENCY_MAX_HZ as WAVE_FREQUENCY_MAX_HZ
+from servobus.families.dmm.vocabulary import DmmFunction
+from servobus.families.dmm.vocabulary import GeneralReadSelector as GeneralReadSelector
+from servobus.families.dmm.vocabulary import Kind as Kind
 
 BROADCAST_ID = 127
 FACTORY_ID = 0

@@ -228,3 +228,7 @@ def _param_functions(name: str) -> tuple[c.HostFunction, c.HostFunction]:
             f"parameter {name!r} is not reachable over DYN232M; "
             f"available: {', '.join(c.PARAM_FUNCTIONS)}"
         ) from None
+
+
+#: The family parameters DYN232M reaches (one set/read function pair each, 7.2.4).
+REACHABLE_PARAMS: tuple[str, ...] = tuple(c.PARAM_FUNCTIONS)

@@ -3,7 +3,8 @@
 Pure-ish: no I/O and no clock. ``Dyn232Line.receive(data)`` takes host bytes in any
 chunking and returns the bytes the drives send back; the caller advances the drives' time
 first (servers via :mod:`servobus.sim.realtime`, tests via ``VirtualDrive.advance``).
-Pacing lives in :mod:`servobus.protocols.dyn232.pacing`, sockets in :mod:`servobus.protocols.dyn232.server`.
+Pacing lives in :mod:`servobus.protocols.dyn232.pacing`, sockets in
+:mod:`servobus.protocols.dyn232.server`.
 
 Decisions where the manual is silent (kept here, in one place):
 

@@ -38,7 +38,7 @@ from servobus.axis.base import AsyncAxis, AxisTraceHook
 from servobus.axis.command_axis import CommandAxis, CommandSet
 from servobus.axis.eeprom_guard import EepromGuard
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveError, DriveTimeout, ServobusError
-from servobus.families.dmm import params as P
+from servobus.families.dmm import units as U
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan import commands as cmds
 from servobus.protocols.dyncan.commands import CanCommand
@@ -381,11 +381,15 @@ class Heartbeat:
 class DynCanAxis(CommandAxis):
     """One DYN2/DYN4 drive on a DYN CAN bus: CommandAxis plus what only CAN has.
 
-    ``torque()`` reads General_Read 0x1E: 700 = peak current, positive = CCW.
+    ``torque_raw()`` reads General_Read 0x1E: 700 = peak current, positive = CCW; the Axis
+    ``current()`` converts with the peak current of the DYN2-TL model (20 A; pass
+    ``peak_current_a=`` to the axis for another drive) and flips the sign so positive is
+    towards increasing position, as on every Axis.
     """
 
     commands: ClassVar[CommandSet] = cmds
     protocol_name = "dyncan"
+    amps_per_torque_unit = -U.MODELS[U.DEFAULT_MODEL].peak_current_a / U.CAN_TORQUE_FULL_SCALE
     id_settle_s = ID_REINIT_S
     client: AsyncDynCanClient
 
@@ -403,9 +407,10 @@ class DynCanAxis(CommandAxis):
     async def counter(self) -> int:
         return await self.client.heartbeat(self._id)
 
-    async def read_params(self, names: Iterable[str] = P.DYN_PARAMS) -> dict[str, int]:
+    async def read_params(self, names: Iterable[str] | None = None) -> dict[str, int]:
         """One group read per group touched (at most three frames for all nine)."""
-        wanted = [P.spec(n).name for n in names]
+        wanted = [p.name for p in self.parameters()] if names is None else [
+            self.param_info(n).name for n in names]
         groups = dict.fromkeys(cmds.group_of(n)[1] for n in wanted)
         values: dict[str, int] = {}
         for fn in groups:
@@ -414,7 +419,11 @@ class DynCanAxis(CommandAxis):
 
     async def write_params(self, values: Mapping[str, int]) -> None:
         """One group write per group touched; the untouched fields travel as 0 (unchanged)."""
+        for name, value in values.items():
+            self._check_param(name, value)
         await self.client.execute_all(cmds.make_set_params(self._id, dict(values)))
+        if "gear_num" in values:
+            self._gear_num = values["gear_num"]
 
 
 _CLIENT_OPTIONS = ("retries", "eeprom_guard", "on_alarm")

@@ -290,3 +290,7 @@ def broadcast(command: CanCommand) -> CanCommand:
     if command.expects_reply:
         raise ArgumentRangeError(f"{command.function.name} expects a reply: address one drive")
     return replace(command, frame=replace(command.frame, drive_id=c.BROADCAST_ID))
+
+
+#: The family parameters DYN CAN reaches (fields of parameter groups 1-3, section 6).
+REACHABLE_PARAMS: tuple[str, ...] = tuple(c.PARAM_GROUPS)
