@@ -1,0 +1,1 @@
+"""Device-family models: parameter tables, status decoding, counts per revolution."""
