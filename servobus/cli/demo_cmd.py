@@ -6,7 +6,9 @@ point-to-point move with live position, constant speed then stop, a Max Speed ch
 same distance back is visibly slower), the original value restored, final status.
 
 Live readouts poll status + position every 0.1 s (20 queries/s), below the ~50 queries/s a
-real drive is known to drop silently (NOTES.md).
+real drive is known to drop silently (docs/dyn232.md).
+
+Ctrl-C or SIGTERM stops the motor before the demo exits (servobus.cli.motion_guard).
 """
 
 from __future__ import annotations
@@ -16,8 +18,10 @@ from typing import TYPE_CHECKING
 
 import click
 
+from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.drive_cmds import render_status, status_record
+from servobus.cli.motion_guard import stop_on_interrupt
 from servobus.cli.open_axis import connection_label, console, emit_json, open_axis
 from servobus.cli.params_cmd import params_table
 from servobus.drive import params as P
@@ -145,7 +149,7 @@ def run_demo(axis: Axis, script: _Script, label: str) -> None:
         render_status(script.con, record, label)
 
 
-@click.command("demo")
+@click.command("demo", cls=ServobusCommand)
 @click.option("--yes", is_flag=True, help="allow the demo on a real drive (it moves the motor)")
 @pass_cli
 def demo_cmd(ctx: CliContext, yes: bool) -> None:
@@ -158,7 +162,7 @@ def demo_cmd(ctx: CliContext, yes: bool) -> None:
     if not ctx.json:
         script.con.print(f"[bold]servobus demo[/bold] on {label}"
                          + ("" if ctx.port or ctx.can else " (embedded virtual drive)"))
-    with open_axis(ctx) as axis:
+    with open_axis(ctx) as axis, stop_on_interrupt(axis):
         run_demo(axis, script, f"status of {label}")
     elapsed = round(time.monotonic() - script.t0, 2)
     if ctx.json:

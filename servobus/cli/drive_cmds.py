@@ -2,7 +2,8 @@
 
 Numbers are the protocol's: ``move`` takes command units (the motor moves
 COUNT x 4096 / GEAR_NUM x 4 encoder counts), ``position`` prints encoder counts (65,536/rev).
-Negative arguments go after ``--``: ``servobus move --relative -- -120``.
+Negative numbers are arguments: ``servobus move --relative -120`` (``--`` is not needed).
+Ctrl-C or SIGTERM during ``move --wait`` stops the motor first (servobus.cli.motion_guard).
 
 Note: without ``--port``/``--can`` each invocation starts its own embedded virtual drive, so
 state (position, motion) does not carry over from one command to the next.
@@ -13,8 +14,11 @@ from __future__ import annotations
 import click
 from rich.console import Console
 
+from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
+from servobus.cli.motion_guard import stop_on_interrupt
 from servobus.cli.open_axis import connection_label, emit, kv_text, open_axis
+from servobus.cli.param_types import Seconds
 from servobus.drive.registers import DriveConfig, DriveStatus
 
 
@@ -33,7 +37,7 @@ def render_status(con: Console, record: dict[str, object], title: str) -> None:
     con.print(kv_text("config", config), markup=False)
 
 
-@click.command("status")
+@click.command("status", cls=ServobusCommand)
 @pass_cli
 def status_cmd(ctx: CliContext) -> None:
     """Decoded drive status and configuration."""
@@ -43,7 +47,7 @@ def status_cmd(ctx: CliContext) -> None:
     emit(ctx, record, lambda con: render_status(con, record, f"status of {connection_label(ctx)}"))
 
 
-@click.command("position")
+@click.command("position", cls=ServobusCommand)
 @pass_cli
 def position_cmd(ctx: CliContext) -> None:
     """Absolute position in encoder counts (65,536 per revolution)."""
@@ -52,7 +56,7 @@ def position_cmd(ctx: CliContext) -> None:
     emit(ctx, {"position": pos}, lambda con: con.print(f"{pos} counts"))
 
 
-@click.command("speed")
+@click.command("speed", cls=ServobusCommand)
 @click.argument("rpm", type=int)
 @pass_cli
 def speed_cmd(ctx: CliContext, rpm: int) -> None:
@@ -62,17 +66,17 @@ def speed_cmd(ctx: CliContext, rpm: int) -> None:
     emit(ctx, {"speed_command": rpm}, lambda con: con.print(f"turning at {rpm} rpm"))
 
 
-@click.command("move")
+@click.command("move", cls=ServobusCommand)
 @click.option("--relative", is_flag=True, help="move by COUNT instead of to COUNT")
 @click.option("--wait", is_flag=True, help="wait until the move is finished and on position")
-@click.option("--wait-timeout", type=click.FloatRange(min=0), default=30.0, show_default=True,
+@click.option("--wait-timeout", type=Seconds(allow_zero=True), default=30.0, show_default=True,
               help="seconds --wait waits before DriveTimeout")
 @click.argument("count", type=int)
 @pass_cli
 def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float,
              count: int) -> None:
     """Point-to-point move (S-curve) to/by COUNT command units."""
-    with open_axis(ctx) as axis:
+    with open_axis(ctx) as axis, stop_on_interrupt(axis):
         if relative:
             axis.move_by(count)
         else:
@@ -90,7 +94,7 @@ def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float,
     emit(ctx, record, render)
 
 
-@click.command("stop")
+@click.command("stop", cls=ServobusCommand)
 @pass_cli
 def stop_cmd(ctx: CliContext) -> None:
     """Stop: ramp down at Max Accel and hold position."""

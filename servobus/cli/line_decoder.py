@@ -67,12 +67,18 @@ class PacketEvent:
 
 @dataclass(frozen=True)
 class ErrorEvent:
-    kind: str  # "checksum" or "framing"
+    kind: str  # "checksum", "framing" (DYN232M bytes) or "frame" (a CAN frame)
     message: str
     raw: bytes = b""
+    raw_text: str = ""  # how to show the raw item when not as hex bytes (CAN: ``02e#``)
+
+    @property
+    def label(self) -> str:
+        return {"checksum": "checksum error", "frame": "invalid frame"}.get(self.kind, "garbage")
 
     def as_dict(self) -> dict[str, object]:
-        return {"error": self.kind, "message": self.message, "raw": self.raw.hex(" ")}
+        return {"error": self.kind, "message": self.message,
+                "raw": self.raw_text or self.raw.hex(" ")}
 
 
 LineEvent = PacketEvent | ErrorEvent
@@ -234,6 +240,19 @@ def parse_hex(tokens: Iterable[str]) -> bytes:
     return bytes(out)
 
 
+HEX_TEXT_BYTES = frozenset(b"0123456789abcdefABCDEFxX,:; \t\r\n")
+
+
+def looks_like_hex_text(data: bytes) -> bool:
+    """True for text such as ``03 a3 ff 88 ad``: only hex digits and separators.
+
+    A raw DYN232M capture cannot look like this: every packet's data and checksum bytes
+    have their MSB set (DYN2 manual 7.2), and hex text is 7-bit ASCII.
+    """
+    return bool(data) and HEX_TEXT_BYTES.issuperset(data) and any(
+        chr(b) in "0123456789abcdefABCDEF" for b in data)
+
+
 # ------------------------------------------------------------------ DYN CAN frames
 @dataclass(frozen=True)
 class CanEvent:
@@ -253,11 +272,36 @@ class CanEvent:
         return {"id": self.arbitration_id, "data": self.data.hex(" "), "text": self.text}
 
 
+def can_length_error(frame: dyncan.Frame) -> str | None:
+    """Why the frame's data length fits neither the request nor the reply of its function.
+
+    The function table gives both lengths (DYN CAN specification 1.2A, section 5); a frame
+    that fits neither is reported, never decoded with made-up data (an empty 0x0E frame is not
+    General_Read 0). DMM-internal functions (0x0F, 0x1B) are shown as they are.
+    """
+    spec = frame.spec
+    shapes: list[tuple[str, tuple[int, int]]] = []
+    if spec.kind is not dyncan.Kind.INTERNAL:  # internal functions are never host requests
+        shapes.append(("request", spec.sent))
+    if spec.reply is not None:
+        shapes.append(("reply", spec.returned))
+    n = len(frame.data)
+    if not shapes or any(lo <= n <= hi for _, (lo, hi) in shapes):
+        return None
+    allowed = " or ".join(f"{lo if lo == hi else f'{lo}..{hi}'} ({what})"
+                          for what, (lo, hi) in shapes)
+    return f"{spec.function.name} takes {allowed} data byte(s); this frame has {n}"
+
+
 def can_event(arbitration_id: int, data: bytes) -> CanEvent | ErrorEvent:
+    raw_text = f"{arbitration_id:03x}#{bytes(data).hex()}"
     try:
         frame = dyncan.decode(arbitration_id, data)
     except ProtocolError as exc:
-        return ErrorEvent("framing", str(exc), data)
+        return ErrorEvent("frame", str(exc), bytes(data), raw_text)
+    problem = can_length_error(frame)
+    if problem is not None:
+        return ErrorEvent("frame", problem, bytes(data), raw_text)
     return CanEvent(arbitration_id, bytes(data), dyncan.describe(frame))
 
 

@@ -1,16 +1,27 @@
-"""Entry point of the ``servobus`` command."""
+"""Entry point of the ``servobus`` command (also ``python -m servobus``).
+
+:func:`main` turns every failure into one stderr line and a documented exit code
+(servobus.cli.failures); ``--debug`` or ``SERVOBUS_DEBUG=1`` adds the Python traceback and
+lets third-party libraries log to stderr.
+"""
 
 from __future__ import annotations
 
 import importlib
+import logging
+import os
+import signal
 import sys
+import traceback
+from types import FrameType
 
 import click
 
 from servobus import __version__
 from servobus.cli.context import CliContext
+from servobus.cli.failures import Terminated, describe
+from servobus.cli.param_types import Seconds
 from servobus.codec.dyn232 import BAUD, MAX_DRIVE_ID
-from servobus.errors import ServobusError
 
 #: Command-group modules; each defines ``register(group: click.Group) -> None``.
 COMMAND_MODULES: list[str] = [
@@ -25,6 +36,12 @@ COMMAND_MODULES: list[str] = [
     "servobus.cli.profile_cmd",
 ]
 
+DEBUG_ENV = "SERVOBUS_DEBUG"
+COMPLETE_ENV = "_SERVOBUS_COMPLETE"
+#: Loggers whose chatter never reaches the terminal without --debug (python-can's socketcand
+#: client logs every failed connect attempt, thousands per second).
+QUIET_LOGGERS = ("can",)
+
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.option("--port", metavar="URL", default=None,
@@ -32,16 +49,25 @@ COMMAND_MODULES: list[str] = [
                    "Default: the embedded virtual drive (sim://dyn2).")
 @click.option("--id", "drive_id", type=click.IntRange(0, MAX_DRIVE_ID), default=0,
               show_default=True, help="drive id")
-@click.option("--baud", type=int, default=BAUD, show_default=True, help="serial baud rate")
+@click.option("--baud", type=click.IntRange(min=1), default=BAUD, show_default=True,
+              help="serial baud rate")
 @click.option("--can", metavar="INTERFACE:CHANNEL", default=None,
               help="talk DYN CAN instead, e.g. socketcand:127.0.0.1:29536 or pcan:PCAN_USBBUS1")
-@click.option("--timeout", type=float, default=None, help="reply deadline in seconds")
-@click.option("--json", "as_json", is_flag=True, help="machine-readable output")
+@click.option("--timeout", type=Seconds(), default=None,
+              help="reply deadline in seconds (> 0)")
+@click.option("--json", "as_json", is_flag=True,
+              help="machine-readable output (also accepted after the command)")
+@click.option("--debug", is_flag=True,
+              help=f"show Python tracebacks and library logs (or {DEBUG_ENV}=1)")
 @click.version_option(__version__, prog_name="servobus")
 @click.pass_context
 def cli(ctx: click.Context, port: str | None, drive_id: int, baud: int, can: str | None,
-        timeout: float | None, as_json: bool) -> None:
-    """servobus: command, tune and monitor DMM servo drives (or their virtual twins)."""
+        timeout: float | None, as_json: bool, debug: bool) -> None:
+    """servobus: command, tune and monitor DMM servo drives (or their virtual twins).
+
+    Exit status: 0 done; 1 the drive reports a fault (alarm, drive error); 2 usage or
+    connection problem; 130 interrupted (Ctrl-C, SIGTERM; a motion in progress is stopped).
+    """
     ctx.obj = CliContext(port=port, drive_id=drive_id, baud=baud, json=as_json, can=can,
                          timeout=timeout)
 
@@ -50,17 +76,56 @@ for _name in COMMAND_MODULES:
     importlib.import_module(_name).register(cli)
 
 
-def main() -> None:
+def debug_requested(args: list[str]) -> bool:
+    """``--debug`` anywhere before ``--``, or SERVOBUS_DEBUG set to something true."""
+    options = args[:args.index("--")] if "--" in args else args
+    env = os.environ.get(DEBUG_ENV, "").strip().lower()
+    return "--debug" in options or env not in ("", "0", "false", "no", "off")
+
+
+def configure_logging(debug: bool) -> None:
+    """Library logs go to stderr only with --debug; otherwise they are dropped."""
+    if debug:
+        logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
+        return
+    for name in QUIET_LOGGERS:
+        logger = logging.getLogger(name)
+        logger.setLevel(logging.CRITICAL + 1)
+        logger.propagate = False
+    root = logging.getLogger()
+    if not root.handlers:  # no stray record reaches logging's last-resort stderr handler
+        root.addHandler(logging.NullHandler())
+
+
+def _terminate(signum: int, frame: FrameType | None) -> None:
+    raise Terminated()
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Run the command; exit with its status (see servobus.cli.failures for the codes)."""
+    args = sys.argv[1:] if argv is None else list(argv)
+    if any(key.startswith(COMPLETE_ENV) for key in os.environ):  # shell completion: click's
+        cli.main(args, prog_name="servobus")
+        return
+    debug = debug_requested(args)
+    configure_logging(debug)
+    previous = signal.signal(signal.SIGTERM, _terminate)
     try:
-        cli.main(standalone_mode=False)
-    except click.exceptions.Abort:
-        click.echo("aborted", err=True)
-        sys.exit(130)
-    except click.ClickException as exc:
-        exc.show()
+        with cli.make_context("servobus", args) as ctx:
+            cli.invoke(ctx)
+    except click.exceptions.Exit as exc:  # --help, --version, ctx.exit()
         sys.exit(exc.exit_code)
-    except ServobusError as exc:
-        click.echo(f"error: {type(exc).__name__}: {exc}", err=True)
-        sys.exit(2)
-    except KeyboardInterrupt:
-        sys.exit(130)
+    except click.exceptions.NoArgsIsHelpError as exc:  # `servobus`, `servobus sim`: the help
+        click.echo(exc.ctx.get_help())
+        sys.exit(0)
+    except SystemExit:
+        raise
+    except BaseException as exc:  # the one place every failure is reported
+        code, line = describe(exc)
+        if debug:
+            traceback.print_exception(exc)
+        click.echo(line, err=True)
+        sys.exit(code)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    sys.exit(0)

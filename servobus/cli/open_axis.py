@@ -9,13 +9,21 @@ from __future__ import annotations
 import json
 import sys
 from collections.abc import Callable, Iterator, Mapping
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from typing import TYPE_CHECKING, Any
 
 import click
 from rich.console import Console
 
 from servobus.cli.context import CliContext
+from servobus.cli.failures import CliError
+from servobus.cli.open_failures import (
+    can_open_failure,
+    check_can_reachable,
+    port_open_failure,
+)
+from servobus.codec import dyncan
+from servobus.errors import ArgumentRangeError
 
 if TYPE_CHECKING:
     from servobus.client.axis import Axis
@@ -23,15 +31,36 @@ if TYPE_CHECKING:
 
 @contextmanager
 def open_axis(ctx: CliContext, drive_id: int | None = None) -> Iterator[Axis]:
-    """Connect to the drive (or the embedded virtual drive) and close it afterwards."""
+    """Connect to the drive (or the embedded virtual drive) and close it afterwards.
+
+    Any failure to open the port or bus becomes one CliError naming it and what to do
+    (servobus.cli.open_failures); failures after that are the command's own.
+    """
     from servobus.client import connect  # lazy: keeps `servobus decode` free of the client
 
-    axis = connect(ctx.port, drive_id=ctx.drive_id if drive_id is None else drive_id,
-                   baud=ctx.baud, can=ctx.can, timeout=ctx.timeout)
+    wanted = ctx.drive_id if drive_id is None else drive_id
+    if ctx.can is not None:
+        if wanted == dyncan.BROADCAST_ID:
+            raise CliError(f"--id {wanted} is the DYN CAN broadcast id; drives answer only to "
+                           f"their own id {dyncan.MIN_DRIVE_ID}..{dyncan.MAX_DRIVE_ID}",
+                           "give the drive's --id (`servobus --can ... scan` lists them)")
+        check_can_reachable(ctx.can)
+    try:
+        axis = connect(ctx.port, drive_id=wanted,
+                       baud=ctx.baud, can=ctx.can, timeout=ctx.timeout)
+    except Exception as exc:  # whatever the driver raises, one line names the port
+        if ctx.can is None:
+            raise port_open_failure(ctx.url, exc) from exc
+        if isinstance(exc, ArgumentRangeError):  # e.g. --id 0 (broadcast): not a bus problem
+            raise
+        raise can_open_failure(ctx.can, exc) from exc
     try:
         yield axis
-    finally:
-        axis.close()
+    except BaseException:
+        with suppress(Exception):  # the failure that ended the command is the one to report
+            axis.close()
+        raise
+    axis.close()
 
 
 def connection_label(ctx: CliContext) -> str:

@@ -16,8 +16,11 @@ from rich.console import Console
 from rich.table import Table
 
 from servobus.cli import params_file as PF
+from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
+from servobus.cli.failures import EXIT_DIFFERENT, EXIT_FAULT, CliError
 from servobus.cli.open_axis import console, emit, emit_json, note, open_axis
+from servobus.cli.param_types import ReachableParam, reachable_help
 from servobus.drive import params as P
 
 
@@ -59,11 +62,11 @@ def _save(ctx: CliContext, path: str) -> None:
 
 def _load(ctx: CliContext, path: str) -> None:
     backup = PF.load(path)  # validated before anything is opened or sent
-    if backup.drive_id != ctx.drive_id:
-        note(f"note: {path} was saved from drive {backup.drive_id}; restoring onto drive "
-             f"{ctx.drive_id}")
     with open_axis(ctx) as axis:
         before = axis.read_params(list(backup.params))
+        if backup.drive_id != ctx.drive_id:  # said once the drive answers, not before a failure
+            note(f"note: {path} was saved from drive {backup.drive_id}; restoring onto drive "
+                 f"{ctx.drive_id}")
         changes = PF.diff(backup.params, before)
         if changes:
             axis.write_params({name: wanted for name, wanted, _ in changes})
@@ -86,7 +89,8 @@ def _load(ctx: CliContext, path: str) -> None:
     emit(ctx, {"restored": path, "written": [n for n, _, _ in changes], "params": rows}, render)
     if failed:
         names = ", ".join(n for n, _, _ in failed)
-        raise click.ClickException(f"drive did not take: {names}")
+        raise CliError(f"drive {ctx.drive_id} did not take: {names}",
+                       "check the values against the drive's ranges, then retry", EXIT_FAULT)
 
 
 def _diff(ctx: CliContext, path: str) -> None:
@@ -108,10 +112,10 @@ def _diff(ctx: CliContext, path: str) -> None:
     else:
         click.echo(f"drive {ctx.drive_id} matches {path} ({len(backup.params)} parameters)")
     if changes:
-        sys.exit(1)
+        sys.exit(EXIT_DIFFERENT)
 
 
-@click.command("params")
+@click.command("params", cls=ServobusCommand)
 @click.option("--save", "save_path", metavar="FILE", default=None,
               help="back the parameters up to FILE (JSON)")
 @click.option("--load", "load_path", metavar="FILE", default=None,
@@ -135,16 +139,13 @@ def params_cmd(ctx: CliContext, save_path: str | None, load_path: str | None,
         _show(ctx)
 
 
-@click.command("set")
-@click.argument("name", type=click.Choice(list(P.BY_NAME)), metavar="NAME")
+@click.command("set", cls=ServobusCommand,
+               help="Write one parameter (checked against its range first) and read it back."
+                    f"\n\nNAME is a parameter the protocol can set: {reachable_help()}.")
+@click.argument("name", type=ReachableParam(), metavar="NAME")
 @click.argument("value", type=int)
 @pass_cli
 def set_cmd(ctx: CliContext, name: str, value: int) -> None:
-    """Write one parameter (checked against its range first) and read it back.
-
-    NAME is one of: main_gain speed_gain int_gain trq_cons max_speed max_accel on_range
-    gear_num.
-    """
     P.spec(name).check(value)  # ArgumentRangeError before any connection
     with open_axis(ctx) as axis:
         old = axis.read_param(name)
@@ -153,7 +154,8 @@ def set_cmd(ctx: CliContext, name: str, value: int) -> None:
     emit(ctx, {"name": name, "old": old, "new": new},
          lambda con: con.print(f"{name}: {old} -> {new}"))
     if new != value:
-        raise click.ClickException(f"drive reports {name}={new} after writing {value}")
+        raise CliError(f"drive reports {name}={new} after writing {value}",
+                       "check the drive's range for this parameter, then retry", EXIT_FAULT)
 
 
 def register(group: click.Group) -> None:

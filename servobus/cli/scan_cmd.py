@@ -12,17 +12,19 @@ import sys
 import click
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
+from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.open_axis import connection_label, console, emit, open_axis
+from servobus.cli.param_types import Seconds
 from servobus.codec.dyn232 import MAX_DRIVE_ID
 
 
-@click.command("scan")
+@click.command("scan", cls=ServobusCommand)
 @click.option("--first", type=click.IntRange(0, MAX_DRIVE_ID), default=None,
               help="first id (default 0; 1 on CAN)")
 @click.option("--last", type=click.IntRange(0, MAX_DRIVE_ID), default=MAX_DRIVE_ID,
               show_default=True, help="last id")
-@click.option("--per-id", "per_id", type=click.FloatRange(0.001, 5.0), default=0.05,
+@click.option("--per-id", "per_id", type=Seconds(maximum=5.0), default=0.05,
               show_default=True, help="seconds to wait for each id's reply")
 @pass_cli
 def scan_cmd(ctx: CliContext, first: int | None, last: int, per_id: float) -> None:

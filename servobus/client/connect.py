@@ -3,7 +3,8 @@
 URL dispatch:
 
 * ``None`` (and no ``can=``) -> ``sim://dyn2``: the in-process virtual line
-  (:mod:`servobus.sim.inprocess`; ``sim://dyn2?ids=0,1,2&fast=1``).
+  (:mod:`servobus.sim.inprocess`; ``sim://dyn2?ids=0,1,2&fast=1``); without ``ids`` its one
+  drive has the ``drive_id`` asked for.
 * ``socket://host:port`` / ``tcp://host:port`` -> asyncio TCP (:class:`TcpStream`), faster
   than pyserial's socket handler (no reader thread; benchmarks/bench_dyn232_client.py);
   ``transport="pyserial"`` forces pyserial.
@@ -59,7 +60,7 @@ async def connect_async(
     from servobus.client.dyn232_commands import check_drive_id
 
     check_drive_id(drive_id)  # before opening anything
-    stream = await open_stream(url, baud=baud, transport=transport)
+    stream = await open_stream(url, baud=baud, transport=transport, drive_id=drive_id)
     client = AsyncDyn232Client(stream, baud=baud, timeout=timeout, **client_kw)
     return Dyn232Axis(client, drive_id)
 
@@ -84,13 +85,15 @@ def connect(
     return Axis(core, runner)
 
 
-async def open_stream(url: str, *, baud: int = c.BAUD, transport: str = "auto") -> ByteStream:
-    """The ByteStream a DYN232M url names (see module doc)."""
+async def open_stream(url: str, *, baud: int = c.BAUD, transport: str = "auto",
+                      drive_id: int = c.FACTORY_ID) -> ByteStream:
+    """The ByteStream a DYN232M url names (see module doc); ``drive_id`` is the id of the
+    one virtual drive of a ``sim://`` url without ``ids``."""
     scheme = url.split("://", 1)[0].lower() if "://" in url else ""
     if transport not in ("auto", "tcp", "pyserial"):
         raise ArgumentRangeError(f"transport={transport!r}: use 'auto', 'tcp' or 'pyserial'")
     if scheme == "sim":
-        return await _open_sim(url, baud)
+        return await _open_sim(url, baud, drive_id)
     if scheme in ("socket", "tcp") and transport != "pyserial":
         from servobus.transport.tcp_stream import TcpStream
 
@@ -109,12 +112,12 @@ def _default_query_interval(url: str) -> float:
     return HARDWARE_QUERY_INTERVAL_S
 
 
-async def _open_sim(url: str, baud: int) -> ByteStream:
+async def _open_sim(url: str, baud: int, drive_id: int) -> ByteStream:
     try:
         from servobus.sim.inprocess import open_sim_stream, parse_sim_url
     except ImportError as exc:
         raise ServobusError(f"the in-process simulator is not available: {exc}") from exc
-    u = parse_sim_url(url)
+    u = parse_sim_url(url, default_id=drive_id)
     stream: ByteStream = open_sim_stream(u.kind, ids=u.ids, paced=u.paced, state=u.state,
                                          model=u.model)
     return stream
