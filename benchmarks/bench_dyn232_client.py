@@ -4,7 +4,7 @@
    same bytes (baud / 10 / bytes per poll). Target >= 97 %.
 2. Full parameter read (8 parameters + config + status) on the paced line. Target <= 25 ms;
    the wire time of the same bytes is printed beside it.
-3. Unpaced round trips/s over TCP to ``servobus sim dyn2 --fast`` (own process) vs a raw
+3. Unpaced round trips/s over TCP to ``servobus sim dyn232 --fast`` (own process) vs a raw
    socket echo server (own process, same event-loop type) answering the same byte counts.
    Target >= 80 %.
 
@@ -194,7 +194,7 @@ async def _asyncio_floor_rate(host: str, port: int, request: bytes) -> float:
 
 
 def bench_tcp_round_trips() -> float:
-    sim = [sys.executable, "-c", "from servobus.cli.main import main; main()", "sim", "dyn2",
+    sim = [sys.executable, "-c", "from servobus.cli.main import main; main()", "sim", "dyn232",
            "--fast", "--listen", "tcp://127.0.0.1:0", "--duration", "120"]
     echo = [sys.executable, "-c", _ECHO_SERVER, "120"]
     request = c.encode(0, c.HostFunction.READ_DRIVE_STATUS, 0)

@@ -1,6 +1,6 @@
 """The virtual DYN232M line itself (no client library), measured against limits in the same run.
 
-1. Paced position polls over TCP to ``servobus sim dyn2`` (own process) from a minimal raw
+1. Paced position polls over TCP to ``servobus sim dyn232`` (own process) from a minimal raw
    socket host, vs the 38400-baud wire limit for the same bytes (target >= 97 %), and the
    server's CPU use while doing it (/proc, Linux).
 2. The same through the in-process ``sim://dyn2`` stream.
@@ -89,7 +89,7 @@ def reply_len(request: bytes, port: int) -> int:
 
 def bench_paced_tcp() -> float:
     request = c.encode(0, H.GENERAL_READ, GR.POSITION)
-    with server([*CLI, "sim", "dyn2", "--duration", "60"]) as (pid, port):
+    with server([*CLI, "sim", "dyn232", "--duration", "60"]) as (pid, port):
         n_reply = reply_len(request, port)
         with socket.create_connection(("127.0.0.1", port)) as sock:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
@@ -147,7 +147,7 @@ def _trips(port: int, request: bytes, n_reply: int) -> float:
 
 def bench_fast_tcp() -> float:
     request = c.encode(0, H.READ_DRIVE_STATUS)
-    with server([*CLI, "sim", "dyn2", "--fast", "--duration", "60"]) as (_, port):
+    with server([*CLI, "sim", "dyn232", "--fast", "--duration", "60"]) as (_, port):
         ours = _trips(port, request, 4)
     with server([sys.executable, "-c", ECHO, "60"]) as (_, port):
         raw = _trips(port, request, 4)

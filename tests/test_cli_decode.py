@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import socket
 import subprocess
+import sys
 import threading
 from collections.abc import Iterator
 from pathlib import Path
@@ -14,20 +15,20 @@ from click.testing import CliRunner
 from hypothesis import given
 from hypothesis import strategies as st
 
-from servobus.cli.line_decoder import (
+from servobus.cli.main import cli
+from servobus.protocols.dyn232 import codec as c
+from servobus.protocols.dyn232.sniff import (
     AMBIGUOUS,
     CODE,
+    DECODER,
     REPLY,
     VALUE,
     LineDecoder,
     PacketEvent,
-    decode_stream,
-    parse_hex,
 )
-from servobus.cli.main import cli
-from servobus.protocols.dyn232 import codec as c
+from servobus.sniff import decode_stream, parse_hex
 
-SERVOBUS = "/work/venv/bin/servobus"
+SERVOBUS = [sys.executable, "-m", "servobus"]  # the interpreter running the tests
 H, D = c.HostFunction, c.DriveFunction
 
 # The manual's worked examples (7.6 examples 1-6, 7.2.6) and what decode must say about them.
@@ -50,7 +51,7 @@ def run(*args: str, input: bytes | None = None) -> tuple[int, str]:
 
 
 def test_decode_subprocess_example_4() -> None:
-    proc = subprocess.run([SERVOBUS, "decode", "03", "a3", "ff", "88", "ad"],
+    proc = subprocess.run([*SERVOBUS, "decode", "03", "a3", "ff", "88", "ad"],
                           capture_output=True, text=True, timeout=30)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip() == "03 a3 ff 88 ad       host -> id 3: GO_RELATIVE_POS -120"
@@ -145,7 +146,7 @@ def test_chunking_does_not_change_the_events(cuts: list[int]) -> None:
         chunks.append(data[pos:pos + cut])
         pos += cut
     chunks.append(data[pos:])
-    assert list(decode_stream(chunks)) == list(decode_stream([data]))
+    assert list(decode_stream(DECODER, chunks)) == list(decode_stream(DECODER, [data]))
 
 
 def conversation() -> bytes:
@@ -227,10 +228,10 @@ def test_sniff_without_source_is_a_usage_error() -> None:
 
 
 def test_sniff_live_tap_of_the_simulator() -> None:
-    """End to end: `servobus sim dyn2 --tap`, a sniffer on the tap, a client on the line."""
+    """End to end: `servobus sim dyn232 --tap`, a sniffer on the tap, a client on the line."""
     from servobus.axis import connect
 
-    sim = subprocess.Popen([SERVOBUS, "sim", "dyn2", "--fast", "--ids", "4", "--listen",
+    sim = subprocess.Popen([*SERVOBUS, "sim", "dyn232", "--fast", "--ids", "4", "--listen",
                             "tcp://127.0.0.1:0", "--tap", "tcp://127.0.0.1:0",
                             "--duration", "20"], stdout=subprocess.PIPE, text=True)
     sniff = None
@@ -243,7 +244,7 @@ def test_sniff_live_tap_of_the_simulator() -> None:
             for key in ("listening on ", "tap on "):
                 if line.startswith(key):
                     ports[key.split()[0]] = line.split()[-1]
-        sniff = subprocess.Popen([SERVOBUS, "--json", "sniff", "--tap", ports["tap"],
+        sniff = subprocess.Popen([*SERVOBUS, "--json", "sniff", "--tap", ports["tap"],
                                   "--count", "3", "--duration", "15"],
                                  stdout=subprocess.PIPE, text=True)
         line_url = ports["listening"].replace("tcp://", "socket://")

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -15,12 +16,12 @@ from servobus.cli.main import cli
 from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
 
-SERVOBUS = "/work/venv/bin/servobus"
+SERVOBUS = [sys.executable, "-m", "servobus"]  # the interpreter running the tests
 FAST = "sim://dyn2?fast=1"
 
 
 def servobus(*args: str, timeout: float = 30) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([SERVOBUS, *args], capture_output=True, text=True, timeout=timeout)
+    return subprocess.run([*SERVOBUS, *args], capture_output=True, text=True, timeout=timeout)
 
 
 def invoke(*args: str) -> Result:
@@ -55,10 +56,17 @@ def test_move_negative_after_double_dash_and_wait() -> None:
     assert abs(doc["position"] - expected) <= window and doc["on_position"] is True
 
 
-def test_absent_drive_is_a_typed_timeout_exit_2() -> None:
-    proc = servobus("--id", "5", "position")
+def test_absent_drive_is_a_timeout_exit_2() -> None:
+    proc = servobus("--port", "sim://dyn2?ids=1", "--id", "5", "--timeout", "0.05", "position")
     assert proc.returncode == 2
-    assert proc.stderr.startswith("error: DriveTimeout: ")
+    assert proc.stderr.startswith("error: no reply from drive 5 ")
+    assert " - check --id" in proc.stderr and proc.stderr.count("\n") == 1
+
+
+def test_embedded_drive_takes_the_id_asked_for() -> None:
+    proc = servobus("--id", "5", "--json", "status")
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout)["drive_id"] == 5
 
 
 def test_params_shows_all_eight() -> None:

@@ -18,10 +18,6 @@ import pytest
 from dyn232_rig import Rig, arun, rig
 
 from servobus.axis.eeprom_guard import EepromGuard, EepromWearWarning
-from servobus.protocols.dyn232 import codec as c
-from servobus.families.dmm import params as P
-from servobus.families.dmm import units as U
-from servobus.families.dmm.registers import AlarmCode, DriveConfig, ServoMode
 from servobus.errors import (
     ArgumentRangeError,
     ChecksumError,
@@ -29,6 +25,10 @@ from servobus.errors import (
     DriveTimeout,
     EepromGuardError,
 )
+from servobus.families.dmm import params as P
+from servobus.families.dmm import units as U
+from servobus.families.dmm.registers import AlarmCode, DriveConfig, ServoMode
+from servobus.protocols.dyn232 import codec as c
 from servobus.transport.base import Direction
 from servobus.transport.pair import Fault
 

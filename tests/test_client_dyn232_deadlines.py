@@ -16,9 +16,9 @@ import pytest
 from dyn232_rig import PATHS, REPEATS, arun, assert_gives_up_on_time, check_window, fail_late, rig
 
 from servobus.axis import connect, connect_async
-from servobus.protocols.dyn232.client import DEFAULT_TURNAROUND_S, AsyncDyn232Client
-from servobus.protocols.dyn232 import codec as c
 from servobus.errors import DriveTimeout
+from servobus.protocols.dyn232 import codec as c
+from servobus.protocols.dyn232.client import DEFAULT_TURNAROUND_S, AsyncDyn232Client
 from servobus.transport.base import Direction
 from servobus.transport.pair import Fault, open_pair
 

@@ -12,8 +12,8 @@ import time
 import pytest
 from dyn232_rig import PATHS, arun, assert_gives_up_on_time, rig
 
-from servobus.protocols.dyn232 import codec as c
 from servobus.errors import ChecksumError, DriveTimeout
+from servobus.protocols.dyn232 import codec as c
 from servobus.transport.base import Direction, set_receiver
 from servobus.transport.pair import Fault, open_pair
 

@@ -14,12 +14,12 @@ from typing import Any
 import pytest
 
 from servobus.axis import AsyncAxis, Axis, connect, connect_async
-from servobus.protocols.dyn232.client import Dyn232Axis
+from servobus.errors import ArgumentRangeError, DriveTimeout, ServobusError
 from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
-from servobus.errors import ArgumentRangeError, DriveTimeout, ServobusError
-from servobus.sim.drive import VirtualDrive
+from servobus.protocols.dyn232.client import Dyn232Axis
 from servobus.protocols.dyn232.server import Dyn232Server
+from servobus.sim.drive import VirtualDrive
 from servobus.transport.base import Direction
 from servobus.transport.serial_stream import SerialStream
 from servobus.transport.tcp_stream import TcpStream
@@ -164,10 +164,10 @@ async def test_over_pty() -> None:
 
 
 def test_against_cli_server_subprocess() -> None:
-    """`servobus sim dyn2 --listen tcp://127.0.0.1:0 --fast --duration N` in its own process."""
+    """`servobus sim dyn232 --listen tcp://127.0.0.1:0 --fast --duration N` in its own process."""
     proc = subprocess.Popen(
         [sys.executable, "-c", "from servobus.cli.main import main; main()",
-         "sim", "dyn2", "--listen", "tcp://127.0.0.1:0", "--ids", "1,2", "--fast",
+         "sim", "dyn232", "--listen", "tcp://127.0.0.1:0", "--ids", "1,2", "--fast",
          "--duration", "20"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )

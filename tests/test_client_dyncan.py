@@ -12,15 +12,20 @@ from typing import Any
 
 import pytest
 
-from servobus.protocols.dyncan import commands as cmds
 from servobus.axis.base import AsyncAxis
-from servobus.protocols.dyncan.client import AsyncDynCanClient, DynCanAxis, open_can_axis, open_can_client
-from servobus.protocols.dyncan import codec as c
+from servobus.errors import ArgumentRangeError, DriveAlarm, DriveError, DriveTimeout
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, DriveConfig
-from servobus.errors import ArgumentRangeError, DriveAlarm, DriveError, DriveTimeout
-from servobus.sim.drive import VirtualDrive
+from servobus.protocols.dyncan import codec as c
+from servobus.protocols.dyncan import commands as cmds
+from servobus.protocols.dyncan.client import (
+    AsyncDynCanClient,
+    DynCanAxis,
+    open_can_axis,
+    open_can_client,
+)
 from servobus.protocols.dyncan.node import DynCanNetwork, serve
+from servobus.sim.drive import VirtualDrive
 from servobus.sim.realtime import RealtimeClock
 from servobus.transport.base import Direction
 from servobus.transport.can_bus import AsyncCanBus, parse_can_spec

@@ -6,8 +6,8 @@ import pytest
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
-from servobus.protocols.dyn232 import codec as c
 from servobus.errors import ArgumentRangeError, ChecksumError, FramingError
+from servobus.protocols.dyn232 import codec as c
 
 H = c.HostFunction
 

@@ -6,9 +6,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from servobus.protocols.dyncan import codec as c
-from servobus.families.dmm import units as U
 from servobus.errors import ArgumentRangeError, FramingError
+from servobus.families.dmm import units as U
+from servobus.protocols.dyncan import codec as c
 
 F = c.Function
 

@@ -17,22 +17,22 @@ from pathlib import Path
 import pytest
 import serial
 
-from servobus.protocols.dyn232 import codec as c
 from servobus.errors import ArgumentRangeError
-from servobus.sim.drive import VirtualDrive
-from servobus.protocols.dyn232.server import Dyn232Server, parse_listen_url
+from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232.pacing import BYTE_TIME_S
+from servobus.protocols.dyn232.server import Dyn232Server, parse_listen_url
+from servobus.sim.drive import VirtualDrive
 
 H, D, GR = c.HostFunction, c.DriveFunction, c.GeneralReadSelector
 CLI = [sys.executable, "-c", "from servobus.cli.main import main; main()"]
 
 
 class SimProcess:
-    """``servobus sim dyn2 ...`` in a subprocess; always bounded by --duration."""
+    """``servobus sim dyn232 ...`` in a subprocess; always bounded by --duration."""
 
     def __init__(self, *args: str, duration: float = 20.0) -> None:
         self.proc = subprocess.Popen(
-            [*CLI, "sim", "dyn2", *args, "--duration", str(duration)],
+            [*CLI, "sim", "dyn232", *args, "--duration", str(duration)],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         )
 
@@ -180,7 +180,7 @@ def test_duration_stops_the_server_by_itself() -> None:
 
 
 def test_bad_ids_are_refused() -> None:
-    out = subprocess.run([*CLI, "sim", "dyn2", "--ids", "1,99", "--duration", "0"],
+    out = subprocess.run([*CLI, "sim", "dyn232", "--ids", "1,99", "--duration", "0"],
                          capture_output=True, text=True, timeout=30)
     assert out.returncode != 0 and "99" in out.stderr
 

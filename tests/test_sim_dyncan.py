@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import pytest
 
-from servobus.protocols.dyncan import codec as c
 from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, DriveStatus
-from servobus.sim.drive import CONTROL_HZ, VirtualDrive
+from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan.node import DynCanNetwork
+from servobus.sim.drive import CONTROL_HZ, VirtualDrive
 
 F = c.Function
 ERR = c.DriveErrorCode

@@ -71,6 +71,11 @@ class AsyncAxis(ABC):
     def family(self) -> Family: ...
 
     @property
+    @abstractmethod
+    def drive_ids(self) -> range:
+        """Every id a drive can have on this protocol (what ``scan`` tries)."""
+
+    @property
     def counts_per_rev(self) -> int:
         return self.family.counts_per_rev
 

@@ -66,6 +66,7 @@ class CommandAxis(AsyncAxis):
     commands: ClassVar[CommandSet]
     protocol_name: ClassVar[str]
     family_model: ClassVar[Family] = DYN2
+    drive_id_range: ClassVar[range]
     #: Torque readout -> amperes (positive = towards increasing position).
     amps_per_torque_unit: ClassVar[float] = 1.0
     #: Wait after Assign_Drive_ID before using the new id (DYN CAN: 10 ms re-initialisation).
@@ -105,6 +106,10 @@ class CommandAxis(AsyncAxis):
     @property
     def family(self) -> Family:
         return self.family_model
+
+    @property
+    def drive_ids(self) -> range:
+        return self.drive_id_range
 
     # ------------------------------------------------------------- units
     async def gear_num(self) -> int:

@@ -103,3 +103,21 @@ def lookup(url: DriveUrl) -> Opener:
         raise ArgumentRangeError(
             f"unknown drive URL scheme in {url.raw!r}; known: {scheme_list()}")
     return cast(Opener, load(target))
+
+
+def protocol_of(url: DriveUrl) -> str | None:
+    """The protocol package serving ``url`` (``dyn232`` for ``/dev/ttyUSB0``), if any.
+
+    ``sim://<name>`` counts as the protocol of that virtual drive.
+    """
+    if url.scheme == "sim":
+        target = provided("SIM").get(url.target.strip("/").lower() or "dyn232")
+    else:
+        table = schemes()
+        key = f"{url.scheme}+{url.transport}" if url.transport else url.scheme
+        target = table.get(key) or table.get(url.scheme)
+    if target is None:
+        return None
+    module = target.partition(":")[0]
+    prefix = PROTOCOL_PACKAGE + "."
+    return module[len(prefix):].split(".")[0] if module.startswith(prefix) else None

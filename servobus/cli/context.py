@@ -1,30 +1,73 @@
-"""Global CLI options shared by every command group."""
+"""Global CLI options shared by every command group: which drive, how to talk to it."""
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import click
 
-EMBEDDED_SIM_URL = "sim://dyn232"
+#: The built-in virtual drive: used when no drive is named (the simulator picks the protocol).
+EMBEDDED_SIM_URL = "sim://"
+URL_ENV = "SERVOBUS_URL"
+ID_ENV = "SERVOBUS_ID"
 
 
 @dataclass
 class CliContext:
-    port: str | None  # pyserial URL; None -> the embedded virtual drive
-    drive_id: int
+    url_option: str | None  # --url
+    port: str | None  # --port: a serial port or pyserial URL (a shortcut)
+    can: str | None  # --can INTERFACE:CHANNEL (a shortcut for the CAN protocol's URL)
+    drive_id_option: int | None  # --id
     baud: int | None
     json: bool
-    can: str | None  # "INTERFACE:CHANNEL" for DYN CAN, None for DYN232M
     timeout: float | None
 
     @property
-    def url(self) -> str:
-        """The drive URL the global options name (``--can`` is a shortcut for dyncan+...)."""
+    def named_url(self) -> str | None:
+        """The URL the user named (options first, then SERVOBUS_URL), or None."""
+        if self.url_option:
+            return self.url_option
+        if self.port:
+            return self.port
         if self.can:
-            interface, _, channel = self.can.partition(":")
-            return f"dyncan+{interface}://{channel}"
-        return self.port or EMBEDDED_SIM_URL
+            return can_shortcut(self.can)
+        return os.environ.get(URL_ENV) or None
+
+    @property
+    def url_given(self) -> bool:
+        return self.named_url is not None
+
+    @property
+    def url(self) -> str:
+        return self.named_url or EMBEDDED_SIM_URL
+
+    @property
+    def drive_id(self) -> int | None:
+        """``--id``, else SERVOBUS_ID, else None (the protocol's default id)."""
+        if self.drive_id_option is not None:
+            return self.drive_id_option
+        text = os.environ.get(ID_ENV, "").strip()
+        if not text:
+            return None
+        try:
+            return int(text)
+        except ValueError:
+            raise click.BadParameter(f"{ID_ENV}={text!r} is not a drive id") from None
+
+
+def can_shortcut(spec: str) -> str:
+    """``--can INTERFACE:CHANNEL`` -> the drive URL of the protocol that claims the shortcut."""
+    from servobus.axis import registry
+
+    template = registry.provided("SHORTCUTS").get("can")
+    if template is None:
+        raise click.UsageError("no installed protocol serves --can; use --url")
+    interface, sep, channel = spec.partition(":")
+    if not sep or not interface:
+        raise click.BadParameter(f"{spec!r}: write INTERFACE:CHANNEL, e.g. pcan:PCAN_USBBUS1 or "
+                                 "socketcand:127.0.0.1:29536", param_hint="--can")
+    return template.format(interface=interface, channel=channel)
 
 
 pass_cli = click.make_pass_decorator(CliContext)

@@ -1,8 +1,16 @@
-"""``servobus decode HEX...`` and ``servobus sniff``: DYN232M packets in human terms.
+"""``servobus decode HEX...`` and ``servobus sniff``: wire traffic in human terms.
 
-Both print one line per packet (raw bytes, then the meaning) and one line per checksum error
-or run of garbage; direction is inferred as documented in :mod:`servobus.cli.line_decoder`.
-``decode`` exits with status 1 when the bytes contained errors (like ``cmp``), 0 otherwise.
+Both print one line per packet or frame (raw bytes, then the meaning) and one line per
+checksum error or run of garbage. The decoding is the protocol's (each protocol package
+declares a decoder, :mod:`servobus.sniff`): ``--protocol`` names it; otherwise the protocol
+of the drive URL the global options name, else the first protocol that reads the medium
+(hex bytes: a serial line; ``ID#DATA``: a CAN bus).
+``decode`` exits with status 1 when the bytes contained errors (like ``cmp``), 0 otherwise,
+and says so in one stderr line.
+
+``sniff`` decisions: Ctrl-C is the normal end of a live capture (exit 0 with the packet count,
+like tcpdump and candump); a ``--from-file`` capture that is hex text is refused without
+``--hex`` (a raw capture of a binary protocol has bytes hex text never has).
 """
 
 from __future__ import annotations
@@ -16,64 +24,80 @@ from typing import Any, BinaryIO, Protocol
 
 import click
 
+from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
-from servobus.cli.line_decoder import (
-    CanEvent,
+from servobus.cli.failures import EXIT_DIFFERENT, CliError, one_line
+from servobus.cli.open_axis import emit_json, note
+from servobus.cli.open_failures import check_reachable, open_failure
+from servobus.cli.param_types import Seconds
+from servobus.sniff import (
+    BYTES,
+    CAN,
+    Decoder,
     ErrorEvent,
-    LineDecoder,
-    LineEvent,
-    can_event,
+    Event,
     decode_stream,
+    decoder_for,
+    decoders,
+    looks_like_hex_text,
     parse_can_frame,
     parse_hex,
 )
-from servobus.cli.open_axis import emit_json, note
-
-RAW_WIDTH = 21  # "xx " x 7 bytes
 
 
-AnyEvent = LineEvent | CanEvent
+def pick_decoder(ctx: CliContext, medium: str, name: str | None) -> Decoder:
+    """``--protocol``, else the protocol of the global drive URL, else the medium's first."""
+    if name is None and ctx.url_given:
+        from servobus.axis import registry
+        from servobus.axis.url import parse_url
+
+        own = registry.protocol_of(parse_url(ctx.url))
+        if own is not None and own in decoders() and decoders()[own].medium == medium:
+            name = own
+    try:
+        return decoder_for(medium, name)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="--protocol") from None
 
 
-def format_event(event: AnyEvent, prefix: str = "") -> list[str]:
-    """Text lines for one event; an ambiguous packet gets a second line with the alternative."""
-    if isinstance(event, CanEvent):
-        return [f"{prefix}{event.raw_text:<{RAW_WIDTH}}{event.text}"]
-    if isinstance(event, ErrorEvent):
-        label = "checksum error" if event.kind == "checksum" else "garbage"
-        return [f"{prefix}{event.raw.hex(' '):<{RAW_WIDTH}}{label}: {event.message}"]
-    lines = [f"{prefix}{event.raw.hex(' '):<{RAW_WIDTH}}{event.text}"]
-    if event.ambiguous:
-        lines[0] += "   [direction ambiguous]"
-        lines.append(f"{prefix}{'':<{RAW_WIDTH}}or {event.alternative}")
-    return lines
+PROTOCOL_OPTION = click.option(
+    "--protocol", "protocol", metavar="NAME", default=None,
+    help="decode as this protocol (dyn232, dyncan, ...) [default: the drive URL's protocol, "
+         "else the first that reads hex bytes or ID#DATA frames]")
 
 
-@click.command("decode")
+@click.command("decode", cls=ServobusCommand)
 @click.argument("hex_bytes", nargs=-1, required=True, metavar="HEX...")
+@PROTOCOL_OPTION
 @pass_cli
-def decode_cmd(ctx: CliContext, hex_bytes: tuple[str, ...]) -> None:
-    """Decode DYN232M packets from hex bytes in any spacing, or DYN CAN frames written ID#DATA.
+def decode_cmd(ctx: CliContext, hex_bytes: tuple[str, ...], protocol: str | None) -> None:
+    """Decode packets from hex bytes in any spacing, or CAN frames written ID#DATA.
 
-    Examples: servobus decode 03 a3 ff 88 ad   (Go_Relative_Pos -120 to id 3);
+    Examples: servobus decode 03 a3 ff 88 ad   (DYN232M Go_Relative_Pos -120 to id 3);
     servobus decode 0ee#1b  (DYN CAN General_Read position from id 7)
     """
-    events: list[AnyEvent]
+    events: list[Event]
+    can = any("#" in token for token in hex_bytes)
+    decoder = pick_decoder(ctx, CAN if can else BYTES, protocol)
     try:
-        if any("#" in token for token in hex_bytes):
-            events = [can_event(*parse_can_frame(t)) for arg in hex_bytes for t in arg.split()]
+        if can:
+            events = [decoder.frame(*parse_can_frame(t)) for arg in hex_bytes
+                      for t in arg.split()]
         else:
-            events = list(decode_stream([parse_hex(hex_bytes)]))
+            events = list(decode_stream(decoder, [parse_hex(hex_bytes)]))
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="HEX") from None
     if ctx.json:
         emit_json([e.as_dict() for e in events])
     else:
         for event in events:
-            for line in format_event(event):
+            for line in event.lines():
                 click.echo(line)
-    if any(isinstance(e, ErrorEvent) for e in events):
-        sys.exit(1)
+    bad = sum(e.is_error for e in events)
+    if bad:
+        note(f"error: {bad} of {len(events)} item(s) are not valid packets or frames - "
+             "see the lines marked above")
+        sys.exit(EXIT_DIFFERENT)
 
 
 class _Source(Protocol):
@@ -87,17 +111,26 @@ POLL_S = 0.05
 
 
 class _FileSource:
-    def __init__(self, stream: BinaryIO, as_hex: bool) -> None:
-        self._stream, self._hex = stream, as_hex
+    def __init__(self, stream: BinaryIO, as_hex: bool, name: str) -> None:
+        self._stream, self._hex, self._name = stream, as_hex, name
+        self._first = True
 
     def read(self) -> bytes | None:
         if self._hex:
             text = self._stream.read().decode("ascii", "replace")
-            data = parse_hex(text.split())
             self._hex = False  # read once; the next read() sees EOF
+            try:
+                data = parse_hex(text.split())
+            except ValueError as exc:
+                raise CliError(f"{self._name} is not hex text: {exc}",
+                               "drop --hex for a raw binary capture") from None
             return data or None
         chunk = self._stream.read1(4096) if hasattr(self._stream, "read1") else \
             self._stream.read(4096)
+        if self._first and looks_like_hex_text(chunk):
+            raise CliError(f"{self._name} looks like hex text, not raw bytes",
+                           "add --hex to decode it as hex")
+        self._first = False
         return chunk or None
 
     def close(self) -> None:
@@ -141,8 +174,14 @@ def _open_source(ctx: CliContext, tap: str | None, from_file: str | None,
                  as_hex: bool) -> tuple[_Source, bool]:
     """The byte source and whether it is live (timestamps make sense)."""
     if from_file is not None:
-        stream = sys.stdin.buffer if from_file == "-" else Path(from_file).open("rb")  # noqa: SIM115
-        return _FileSource(stream, as_hex), False
+        if from_file == "-":
+            return _FileSource(sys.stdin.buffer, as_hex, "stdin"), False
+        try:
+            stream = Path(from_file).open("rb")  # noqa: SIM115 - closed by _FileSource
+        except OSError as exc:
+            raise CliError(f"cannot read {from_file}: {exc.strerror or exc}",
+                           "check the path ('-' reads stdin)") from None
+        return _FileSource(stream, as_hex, from_file), False
     url = tap or ctx.port
     if url is None:
         raise click.UsageError("sniff needs --tap URL, --from-file FILE|- or the global --port URL")
@@ -152,7 +191,9 @@ def _open_source(ctx: CliContext, tap: str | None, from_file: str | None,
             return _TcpSource(host or "127.0.0.1", int(port)), True
         return _SerialSource(url, ctx.baud or 38_400), True
     except (OSError, ValueError) as exc:
-        raise click.ClickException(f"cannot open {url}: {exc}") from None
+        raise CliError(f"cannot open {url}: {one_line(str(exc))}",
+                       "start the virtual drive's tap (`servobus sim ... --tap tcp://HOST:PORT`) "
+                       "or the line's bridge, or fix the address") from None
 
 
 def _chunks(source: _Source, deadline: float | None) -> Iterator[bytes]:
@@ -164,9 +205,9 @@ def _chunks(source: _Source, deadline: float | None) -> Iterator[bytes]:
             yield data
 
 
-@click.command("sniff")
+@click.command("sniff", cls=ServobusCommand)
 @click.option("--tap", metavar="URL", default=None,
-              help="tap to read, e.g. tcp://127.0.0.1:PORT from `servobus sim dyn2 --tap`; "
+              help="tap to read, e.g. tcp://127.0.0.1:PORT from `servobus sim dyn232 --tap`; "
                    "default: the global --port (a pyserial port/URL on the RS485 line) "
                    "or the global --can bus (DYN CAN frames)")
 @click.option("--from-file", "from_file", metavar="FILE", default=None,
@@ -174,29 +215,31 @@ def _chunks(source: _Source, deadline: float | None) -> Iterator[bytes]:
 @click.option("--hex", "as_hex", is_flag=True, help="with --from-file: the file holds hex text")
 @click.option("--count", type=click.IntRange(min=1), default=None,
               help="stop after N packets")
-@click.option("--duration", type=click.FloatRange(min=0), default=None,
+@click.option("--duration", type=Seconds(allow_zero=True), default=None,
               help="stop after S seconds")
+@PROTOCOL_OPTION
 @pass_cli
 def sniff_cmd(ctx: CliContext, tap: str | None, from_file: str | None, as_hex: bool,
-              count: int | None, duration: float | None) -> None:
-    """Print the packets on a live DYN232M line (or in a capture) as they pass.
+              count: int | None, duration: float | None, protocol: str | None) -> None:
+    """Print the packets on a live line or CAN bus (or in a capture) as they pass.
 
-    Direction is inferred (a reply follows the host's read with the expected Is_* code from
-    the same id); when both readings fit, both are printed.
+    On a serial line the direction is inferred by the protocol's decoder (DYN232M: a reply
+    follows the host's read with the expected Is_* code from the same id; when both readings
+    fit, both are printed). Ctrl-C ends a live capture.
     """
     start = time.monotonic()
     deadline = None if duration is None else start + duration
-    events: Iterator[AnyEvent]
+    events: Iterator[Event]
     if ctx.can is not None and tap is None and from_file is None:
         source: _Source | None = None
-        events, live = _can_events(ctx.can, deadline), True
+        events, live = _can_events(ctx.can, pick_decoder(ctx, CAN, protocol), deadline), True
     else:
         source, live = _open_source(ctx, tap, from_file, as_hex)
-        events = _events(source, deadline)
+        events = _events(source, pick_decoder(ctx, BYTES, protocol), deadline)
     packets = errors = 0
     try:
         for event in events:
-            if not isinstance(event, ErrorEvent):
+            if not event.is_error:
                 packets += 1
             else:
                 errors += 1
@@ -207,41 +250,47 @@ def sniff_cmd(ctx: CliContext, tap: str | None, from_file: str | None, as_hex: b
                     record["t"] = round(t, 6)
                 emit_json(record)
             else:
-                for line in format_event(event, f"{t:9.4f}  " if live else ""):
+                for line in event.lines(f"{t:9.4f}  " if live else ""):
                     click.echo(line)
             if count is not None and packets >= count:
                 break
+    except KeyboardInterrupt:
+        pass  # the normal end of a live capture
     finally:
         if source is not None:
             source.close()
-        if not ctx.json:
-            note(f"{packets} packet(s), {errors} error(s)")
+    if not ctx.json:
+        note(f"{packets} packet(s), {errors} error(s)")
 
 
-def _can_events(spec: str, deadline: float | None) -> Iterator[AnyEvent]:
-    """Frames seen on a python-can bus (``--can INTERFACE:CHANNEL``), as DYN CAN events."""
+def _can_events(spec: str, decoder: Decoder, deadline: float | None) -> Iterator[Event]:
+    """Frames seen on a python-can bus (``--can INTERFACE:CHANNEL``), decoded."""
+    from servobus.axis.url import parse_url
     from servobus.transport.can_bus import open_bus
 
-    bus = open_bus(spec)
+    interface, _, channel = spec.partition(":")
+    url = parse_url(f"can+{interface}://{channel}")
+    check_reachable(url)
+    try:
+        bus = open_bus(spec)
+    except Exception as exc:  # whatever python-can or the vendor driver raises
+        raise open_failure(url, exc) from exc
     try:
         while deadline is None or time.monotonic() < deadline:
             msg = bus.recv(POLL_S)
             if msg is None:
                 continue
             if msg.is_extended_id or msg.is_error_frame:
-                yield ErrorEvent("framing", f"not a DYN CAN frame: id 0x{msg.arbitration_id:x}",
-                                 bytes(msg.data))
+                yield ErrorEvent("frame", f"not a CAN 2.0A frame: id 0x{msg.arbitration_id:x}",
+                                 bytes(msg.data), f"{msg.arbitration_id:x}#{msg.data.hex()}")
             else:
-                yield can_event(msg.arbitration_id, bytes(msg.data))
+                yield decoder.frame(msg.arbitration_id, bytes(msg.data))
     finally:
         bus.shutdown()
 
 
-def _events(source: _Source, deadline: float | None) -> Iterator[LineEvent]:
-    decoder = LineDecoder()
-    for chunk in _chunks(source, deadline):
-        yield from decoder.iter_feed(chunk)
-    yield from decoder.finish()
+def _events(source: _Source, decoder: Decoder, deadline: float | None) -> Iterator[Event]:
+    return decode_stream(decoder, _chunks(source, deadline))
 
 
 def register(group: click.Group) -> None:

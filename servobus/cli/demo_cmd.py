@@ -6,7 +6,9 @@ point-to-point move with live position, constant speed then stop, a Max Speed ch
 same distance back is visibly slower), the original value restored, final status.
 
 Live readouts poll status + position every 0.1 s (20 queries/s), below the ~50 queries/s a
-real drive is known to drop silently (NOTES.md).
+real drive is known to drop silently (docs/dyn232.md).
+
+Ctrl-C or SIGTERM stops the motor before the demo exits (servobus.cli.motion_guard).
 """
 
 from __future__ import annotations
@@ -16,13 +18,13 @@ from typing import TYPE_CHECKING
 
 import click
 
+from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.drive_cmds import render_status, status_record
+from servobus.cli.motion_guard import stop_on_interrupt
 from servobus.cli.open_axis import connection_label, console, emit_json, open_axis
 from servobus.cli.params_cmd import params_table
 from servobus.errors import DriveAlarm, DriveTimeout
-from servobus.families.dmm import params as P
-from servobus.families.dmm import units as U
 
 if TYPE_CHECKING:
     from servobus.axis.sync import Axis
@@ -31,7 +33,7 @@ POLL_S = 0.1
 MOVE_REVS = 10
 TURN_RPM = 600
 TURN_S = 1.0
-SLOW_MAX_SPEED = 20  # (20+3)^2/16 x 12.21 = 404 rpm vs the default 48 -> 1,986 rpm
+SPEED_PARAM = "max_speed"  # the profile speed parameter, where the family has one
 
 
 class _Script:
@@ -65,11 +67,12 @@ def _follow_move(axis: Axis, script: _Script, timeout: float) -> dict[str, objec
         t = time.monotonic() - t0
         samples.append([round(t, 3), pos])
         if status.alarm:
-            raise DriveAlarm(f"alarm {status.alarm.name} during the demo move",
-                             int(status.alarm), axis.drive_id)
-        busy = status.motion_busy or not status.on_position
-        script.line(f"t={t:5.2f} s  position {pos:>9} counts  ({pos / U.COUNTS_PER_REV:6.2f} rev)"
-                    f"{'  moving' if busy else '  on position'}")
+            raise DriveAlarm(f"alarm {status.alarm_code} ({status.alarm_text}) during the demo "
+                             "move", status.alarm_code, axis.drive_id)
+        busy = not status.idle
+        state = "moving" if busy else "on position"
+        script.line(f"t={t:5.2f} s  position {pos:>9} counts  "
+                    f"({pos / axis.counts_per_rev:6.2f} rev)  {state}")
         if not busy:
             return {"seconds": round(t, 3), "final_position": pos, "samples": samples}
         if t > timeout:
@@ -78,26 +81,20 @@ def _follow_move(axis: Axis, script: _Script, timeout: float) -> dict[str, objec
 
 
 def run_demo(axis: Axis, script: _Script, label: str) -> None:
-    record = status_record(axis.status(), axis.config(), axis.position(), axis.drive_id,
-                           axis.protocol)
+    record = status_record(axis, axis.status())
     script.step("status", **record)
     if not script.as_json:
         render_status(script.con, record, label)
 
-    values = axis.read_params(P.DYN_PARAMS)
+    values = axis.read_params()
     script.step("parameters", params=dict(values))
     if not script.as_json:
-        script.con.print(params_table(dict(values), "parameters", script.con.width))
+        script.con.print(params_table(dict(values), "parameters", script.con.width, axis.family))
 
-    gear = values["gear_num"]
-    command = round(U.counts_to_command(MOVE_REVS * U.COUNTS_PER_REV, gear))
-    rpm = U.profile_speed_rpm(values["max_speed"], gear)
-    rec = script.step(f"point-to-point move: move_to({command}) = {MOVE_REVS} rev",
-                      command=command)
-    script.line(f"max_speed {values['max_speed']} -> cruise {rpm:.0f} rpm; "
-                f"max_accel {values['max_accel']} -> "
-                f"{U.profile_accel_rpm_s(values['max_accel'], gear):.0f} rpm/s")
-    axis.move_to(command)
+    counts = axis.revs(MOVE_REVS)
+    rec = script.step(f"point-to-point move: move_to({counts}) = {MOVE_REVS} rev",
+                      counts=counts)
+    axis.move_to(counts)
     fast = _follow_move(axis, script, timeout=10.0)
     rec.update(fast)
 
@@ -120,45 +117,45 @@ def run_demo(axis: Axis, script: _Script, label: str) -> None:
                 f"holding at {held} counts")
     rec.update(speeds=speeds, stopped_speed=speed, held_position=held)
 
-    original = values["max_speed"]
-    rec = script.step(f"parameter change: max_speed {original} -> {SLOW_MAX_SPEED}, "
-                      f"move_by({-command}) = {MOVE_REVS} rev back")
-    axis.write_param("max_speed", SLOW_MAX_SPEED)
-    readback = axis.read_param("max_speed")
-    script.line(f"max_speed read back: {readback} -> cruise "
-                f"{U.profile_speed_rpm(readback, gear):.0f} rpm")
-    axis.move_by(-command)
-    slow = _follow_move(axis, script, timeout=20.0)
-    script.line(f"same distance took {slow['seconds']} s instead of {fast['seconds']} s")
-    rec.update(readback=readback, **slow)
+    if SPEED_PARAM in values:
+        original = values[SPEED_PARAM]
+        slow_value = max(axis.param_info(SPEED_PARAM).minimum, original // 2)
+        rec = script.step(f"parameter change: {SPEED_PARAM} {original} -> {slow_value}, "
+                          f"move_by({-counts}) = {MOVE_REVS} rev back")
+        axis.write_param(SPEED_PARAM, slow_value)
+        readback = axis.read_param(SPEED_PARAM)
+        script.line(f"{SPEED_PARAM} read back: {readback}")
+        axis.move_by(-counts)
+        slow = _follow_move(axis, script, timeout=30.0)
+        script.line(f"same distance took {slow['seconds']} s instead of {fast['seconds']} s")
+        rec.update(readback=readback, **slow)
 
-    rec = script.step(f"restore max_speed {original}")
-    axis.write_param("max_speed", original)
-    restored = axis.read_param("max_speed")
-    script.line(f"max_speed read back: {restored}")
-    rec.update(restored=restored)
+        rec = script.step(f"restore {SPEED_PARAM} {original}")
+        axis.write_param(SPEED_PARAM, original)
+        restored = axis.read_param(SPEED_PARAM)
+        script.line(f"{SPEED_PARAM} read back: {restored}")
+        rec.update(restored=restored)
 
-    record = status_record(axis.status(), axis.config(), axis.position(), axis.drive_id,
-                           axis.protocol)
+    record = status_record(axis, axis.status())
     script.step("final status", **record)
     if not script.as_json:
         render_status(script.con, record, label)
 
 
-@click.command("demo")
+@click.command("demo", cls=ServobusCommand)
 @click.option("--yes", is_flag=True, help="allow the demo on a real drive (it moves the motor)")
 @pass_cli
 def demo_cmd(ctx: CliContext, yes: bool) -> None:
     """A short scripted session on the embedded virtual drive: status, parameters, moves."""
-    real = ctx.port is not None and not ctx.port.startswith("sim://")
-    if (real or ctx.can is not None) and not yes:
+    real = ctx.url_given and not ctx.url.startswith("sim:")
+    if real and not yes:
         raise click.UsageError("the demo moves the motor; add --yes to run it on a real drive")
     label = connection_label(ctx)
     script = _Script(ctx.json)
     if not ctx.json:
         script.con.print(f"[bold]servobus demo[/bold] on {label}"
-                         + ("" if ctx.port or ctx.can else " (embedded virtual drive)"))
-    with open_axis(ctx) as axis:
+                         + ("" if ctx.url_given else " (embedded virtual drive)"))
+    with open_axis(ctx) as axis, stop_on_interrupt(axis):
         run_demo(axis, script, f"status of {label}")
     elapsed = round(time.monotonic() - script.t0, 2)
     if ctx.json:

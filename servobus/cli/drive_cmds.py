@@ -1,99 +1,162 @@
-"""Drive commands: ``status``, ``position``, ``speed RPM``, ``move [--relative] COUNT``, ``stop``.
+"""Drive commands: ``status``, ``position``, ``speed RPM``, ``move [--relative] TARGET``, ``stop``.
 
-Numbers are the protocol's: ``move`` takes command units (the motor moves
-COUNT x 4096 / GEAR_NUM x 4 encoder counts), ``position`` prints encoder counts (65,536/rev).
-Negative arguments go after ``--``: ``servobus move --relative -- -120``.
+Units are the Axis's, the same on every drive: ``move`` takes encoder counts of the drive
+family (``move 16384``), revolutions (``2.5rev``), degrees (``90deg``) or the drive's raw
+command units (``120cmd``, where the protocol has them); ``position`` prints counts and
+revolutions. Negative numbers are arguments: ``servobus move --relative -120``.
+Ctrl-C or SIGTERM during ``move --wait`` stops the motor first (servobus.cli.motion_guard).
 
-Note: without ``--port``/``--can`` each invocation starts its own embedded virtual drive, so
-state (position, motion) does not carry over from one command to the next.
+Note: without a drive URL each invocation starts its own built-in virtual drive, so state
+(position, motion) does not carry over from one command to the next.
 """
 
 from __future__ import annotations
 
+import re
+from typing import TYPE_CHECKING, Any, TypeAlias
+
 import click
 from rich.console import Console
 
+from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
+from servobus.cli.motion_guard import stop_on_interrupt
 from servobus.cli.open_axis import connection_label, emit, kv_text, open_axis
-from servobus.families.dmm.registers import DriveConfig, DriveStatus
+from servobus.cli.param_types import Seconds
+from servobus.errors import NotSupported
+
+if TYPE_CHECKING:
+    from servobus.axis.sync import Axis
+    from servobus.families.base import AxisStatus
+
+    _TargetType: TypeAlias = click.ParamType[tuple[float, str]]
+else:
+    _TargetType = click.ParamType
+
+_TARGET = re.compile(r"^([-+]?\d+(?:\.\d*)?|[-+]?\.\d+)\s*(counts?|rev|revs|deg|cmd)?$")
 
 
-def status_record(status: DriveStatus, config: DriveConfig, position: int,
-                  drive_id: int, protocol: str) -> dict[str, object]:
-    """--json of ``status``: the status bits at top level, the config nested."""
-    return {"drive_id": drive_id, "protocol": protocol, **status.as_dict(),
-            "position": position, "config": config.as_dict()}
+class Target(_TargetType):
+    """``16384``, ``-2.5rev``, ``90deg``, ``120cmd`` -> (number, unit)."""
+
+    name = "target"
+
+    def convert(self, value: object, param: click.Parameter | None,
+                ctx: click.Context | None) -> tuple[float, str]:
+        if isinstance(value, tuple):
+            return value
+        match = _TARGET.match(str(value).strip().lower())
+        if match is None:
+            self.fail(f"{value!r}: write counts (16384), revolutions (2.5rev), degrees (90deg) "
+                      "or command units (120cmd)", param, ctx)
+        number, unit = float(match.group(1)), (match.group(2) or "counts").rstrip("s")
+        unit = {"count": "counts", "rev": "rev"}.get(unit, unit)
+        if unit in ("counts", "cmd") and not number.is_integer():
+            self.fail(f"{value!r}: {unit} are whole numbers", param, ctx)
+        return number, unit
+
+
+def to_counts(axis: Axis, number: float, unit: str) -> int:
+    if unit == "rev":
+        return int(axis.revs(number))
+    if unit == "deg":
+        return int(axis.degrees(number))
+    return int(number)
+
+
+def status_record(axis: Axis, status: AxisStatus) -> dict[str, object]:
+    """--json of ``status``: the AxisStatus at top level, position, the vendor's extras."""
+    record: dict[str, object] = {"drive_id": axis.drive_id, "protocol": axis.protocol,
+                                 **status.as_dict(), "position": axis.position()}
+    vendor: Any = status.vendor
+    if vendor is not None and hasattr(vendor, "as_dict"):
+        record["vendor_status"] = vendor.as_dict()
+    if "config" in axis.family.features and hasattr(axis.core, "config"):
+        record["config"] = axis.config().as_dict()
+    return record
 
 
 def render_status(con: Console, record: dict[str, object], title: str) -> None:
-    status = {k: v for k, v in record.items() if k not in ("config", "drive_id", "protocol")}
-    config = record["config"]
-    assert isinstance(config, dict)
-    con.print(kv_text(title, status), markup=False)
-    con.print(kv_text("config", config), markup=False)
+    nested = ("config", "vendor_status")
+    top = {k: v for k, v in record.items() if k not in (*nested, "drive_id", "protocol")}
+    con.print(kv_text(title, top), markup=False)
+    for key in nested:
+        block = record.get(key)
+        if isinstance(block, dict):
+            con.print(kv_text(key.replace("_", " "), block), markup=False)
 
 
-@click.command("status")
+@click.command("status", cls=ServobusCommand)
 @pass_cli
 def status_cmd(ctx: CliContext) -> None:
-    """Decoded drive status and configuration."""
+    """Decoded drive status (and the drive's configuration where it has one)."""
     with open_axis(ctx) as axis:
-        record = status_record(axis.status(), axis.config(), axis.position(), axis.drive_id,
-                               axis.protocol)
-    emit(ctx, record, lambda con: render_status(con, record, f"status of {connection_label(ctx)}"))
+        record = status_record(axis, axis.status())
+        label = connection_label(ctx, axis)
+    emit(ctx, record, lambda con: render_status(con, record, f"status of {label}"))
 
 
-@click.command("position")
+@click.command("position", cls=ServobusCommand)
 @pass_cli
 def position_cmd(ctx: CliContext) -> None:
-    """Absolute position in encoder counts (65,536 per revolution)."""
+    """Absolute position in encoder counts (and revolutions) of the drive family."""
     with open_axis(ctx) as axis:
-        pos = axis.position()
-    emit(ctx, {"position": pos}, lambda con: con.print(f"{pos} counts"))
+        pos, per_rev = axis.position(), axis.counts_per_rev
+    emit(ctx, {"position": pos, "counts_per_rev": per_rev, "rev": pos / per_rev},
+         lambda con: con.print(f"{pos} counts ({pos / per_rev:.4f} rev)"))
 
 
-@click.command("speed")
+@click.command("speed", cls=ServobusCommand)
 @click.argument("rpm", type=int)
 @pass_cli
 def speed_cmd(ctx: CliContext, rpm: int) -> None:
-    """Turn at constant speed RPM (positive = CW; 0 ramps down and holds)."""
+    """Turn at constant speed RPM (positive = towards increasing position; 0 ramps down)."""
     with open_axis(ctx) as axis:
         axis.turn(rpm)
     emit(ctx, {"speed_command": rpm}, lambda con: con.print(f"turning at {rpm} rpm"))
 
 
-@click.command("move")
-@click.option("--relative", is_flag=True, help="move by COUNT instead of to COUNT")
+@click.command("move", cls=ServobusCommand)
+@click.option("--relative", is_flag=True, help="move by TARGET instead of to TARGET")
 @click.option("--wait", is_flag=True, help="wait until the move is finished and on position")
-@click.option("--wait-timeout", type=click.FloatRange(min=0), default=30.0, show_default=True,
+@click.option("--wait-timeout", type=Seconds(allow_zero=True), default=30.0, show_default=True,
               help="seconds --wait waits before DriveTimeout")
-@click.argument("count", type=int)
+@click.option("--confirm", is_flag=True,
+              help="check that the drive took the move (status/position); never re-sent")
+@click.argument("target", type=Target(), metavar="TARGET")
 @pass_cli
-def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float,
-             count: int) -> None:
-    """Point-to-point move (S-curve) to/by COUNT command units."""
-    with open_axis(ctx) as axis:
-        if relative:
-            axis.move_by(count)
+def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float, confirm: bool,
+             target: tuple[float, str]) -> None:
+    """Point-to-point move to/by TARGET: counts (16384), 2.5rev, 90deg or 120cmd."""
+    number, unit = target
+    with open_axis(ctx) as axis, stop_on_interrupt(axis):
+        if unit == "cmd":
+            if not hasattr(axis.core, "move_to_command"):
+                raise NotSupported(f"{axis.family.title} over {axis.protocol} has no raw "
+                                   "command units; give counts, rev or deg", axis.family.name)
+            (axis.move_by_command if relative else axis.move_to_command)(int(number))
+            record: dict[str, object] = {"command_units": int(number)}
         else:
-            axis.move_to(count)
-        record: dict[str, object] = {"move": "relative" if relative else "absolute",
-                                     "command": count}
+            counts = to_counts(axis, number, unit)
+            (axis.move_by if relative else axis.move_to)(counts, confirm=confirm)
+            record = {"counts": counts}
+        record["move"] = "relative" if relative else "absolute"
         if wait:
-            status = axis.wait_idle(timeout=wait_timeout)
-            record.update(on_position=status.on_position, position=axis.position())
+            status = axis.wait_idle(timeout=wait_timeout) if wait_timeout > 0 else axis.status()
+            record.update(in_position=status.in_position, position=axis.position())
 
     def render(con: Console) -> None:
         verb = "moving by" if relative else "moving to"
-        con.print(f"{verb} {count}" + (f"; done at {record['position']} counts" if wait else ""))
+        what = f"{int(number)} command units" if unit == "cmd" else f"{record['counts']} counts"
+        con.print(f"{verb} {what}" + (f"; done at {record['position']} counts" if wait else ""))
 
     emit(ctx, record, render)
 
 
-@click.command("stop")
+@click.command("stop", cls=ServobusCommand)
 @pass_cli
 def stop_cmd(ctx: CliContext) -> None:
-    """Stop: ramp down at Max Accel and hold position."""
+    """Stop: ramp down at the drive's deceleration and hold position."""
     with open_axis(ctx) as axis:
         axis.stop()
     emit(ctx, {"stopped": True}, lambda con: con.print("stopping"))

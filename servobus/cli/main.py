@@ -1,22 +1,31 @@
-"""Entry point of the ``servobus`` command."""
+"""Entry point of the ``servobus`` command (also ``python -m servobus``).
+
+:func:`main` turns every failure into one stderr line and a documented exit code
+(servobus.cli.failures); ``--debug`` or ``SERVOBUS_DEBUG=1`` adds the Python traceback and
+lets third-party libraries log to stderr.
+"""
 
 from __future__ import annotations
 
 import importlib
+import logging
+import os
+import signal
 import sys
+import traceback
+from types import FrameType
 
 import click
 
 from servobus import __version__
-from servobus.cli.context import CliContext
-from servobus.errors import ServobusError
-from servobus.protocols.dyn232.codec import MAX_DRIVE_ID
+from servobus.cli.context import URL_ENV, CliContext
+from servobus.cli.failures import Terminated, describe
+from servobus.cli.param_types import Seconds
 
-#: Command-group modules; each defines ``register(group: click.Group) -> None``.
+#: Command-group modules; each defines ``register(group: click.Group) -> None``. Protocol
+#: packages add theirs (``sim <protocol>``) through the registry (``CLI`` in their __init__).
 COMMAND_MODULES: list[str] = [
     "servobus.cli.sim_cmd",
-    "servobus.protocols.dyn232.sim_cmd",
-    "servobus.protocols.dyncan.sim_cmd",
     "servobus.cli.decode_cmd",
     "servobus.cli.drive_cmds",
     "servobus.cli.params_cmd",
@@ -25,42 +34,108 @@ COMMAND_MODULES: list[str] = [
     "servobus.cli.profile_cmd",
 ]
 
+DEBUG_ENV = "SERVOBUS_DEBUG"
+COMPLETE_ENV = "_SERVOBUS_COMPLETE"
+#: Loggers whose chatter never reaches the terminal without --debug (python-can's socketcand
+#: client logs every failed connect attempt, thousands per second).
+QUIET_LOGGERS = ("can",)
+
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
-@click.option("--port", metavar="URL", default=None,
-              help="pyserial port or URL (/dev/ttyUSB0, COM3, socket://host:port, loop://). "
-                   "Default: the embedded virtual drive (sim://dyn2).")
-@click.option("--id", "drive_id", type=click.IntRange(0, MAX_DRIVE_ID), default=0,
-              show_default=True, help="drive id")
-@click.option("--baud", type=int, default=None, help="serial baud rate [default: the protocol's]")
+@click.option("--url", "url", metavar="URL", default=None,
+              help="the drive: dyn232:///dev/ttyUSB0, dyncan+pcan://PCAN_USBBUS1, sim://dyncan "
+                   f"... (docs/axis.md; or {URL_ENV}). Default: the built-in virtual drive.")
+@click.option("--port", metavar="PORT", default=None,
+              help="shortcut: a serial port or pyserial URL (/dev/ttyUSB0, COM3, "
+                   "socket://host:port)")
 @click.option("--can", metavar="INTERFACE:CHANNEL", default=None,
-              help="talk DYN CAN instead, e.g. socketcand:127.0.0.1:29536 or pcan:PCAN_USBBUS1")
-@click.option("--timeout", type=float, default=None, help="reply deadline in seconds")
-@click.option("--json", "as_json", is_flag=True, help="machine-readable output")
+              help="shortcut: a CAN bus, e.g. pcan:PCAN_USBBUS1 or socketcand:127.0.0.1:29536")
+@click.option("--id", "drive_id", type=click.IntRange(0, 255), default=None,
+              help="drive id [default: SERVOBUS_ID, else the protocol's factory id]")
+@click.option("--baud", type=click.IntRange(min=1), default=None,
+              help="serial baud rate [default: the protocol's]")
+@click.option("--timeout", type=Seconds(), default=None,
+              help="reply deadline in seconds (> 0)")
+@click.option("--json", "as_json", is_flag=True,
+              help="machine-readable output (also accepted after the command)")
+@click.option("--debug", is_flag=True,
+              help=f"show Python tracebacks and library logs (or {DEBUG_ENV}=1)")
 @click.version_option(__version__, prog_name="servobus")
 @click.pass_context
-def cli(ctx: click.Context, port: str | None, drive_id: int, baud: int | None, can: str | None,
-        timeout: float | None, as_json: bool) -> None:
-    """servobus: command, tune and monitor DMM servo drives (or their virtual twins)."""
-    ctx.obj = CliContext(port=port, drive_id=drive_id, baud=baud, json=as_json, can=can,
-                         timeout=timeout)
+def cli(ctx: click.Context, url: str | None, port: str | None, can: str | None,
+        drive_id: int | None, baud: int | None, timeout: float | None, as_json: bool,
+        debug: bool) -> None:
+    """servobus: command, tune and monitor servo drives (or their virtual twins).
+
+    Exit status: 0 done; 1 the drive reports a fault (alarm, drive error); 2 usage or
+    connection problem; 130 interrupted (Ctrl-C, SIGTERM; a motion in progress is stopped).
+    """
+    ctx.obj = CliContext(url_option=url, port=port, can=can, drive_id_option=drive_id,
+                         baud=baud, json=as_json, timeout=timeout)
 
 
-for _name in COMMAND_MODULES:
-    importlib.import_module(_name).register(cli)
+def _register_commands() -> None:
+    from servobus.axis import registry
+
+    for name in COMMAND_MODULES:
+        importlib.import_module(name).register(cli)
+    for target in registry.provided_list("CLI"):
+        registry.load(target)(cli)
 
 
-def main() -> None:
+_register_commands()
+
+
+def debug_requested(args: list[str]) -> bool:
+    """``--debug`` anywhere before ``--``, or SERVOBUS_DEBUG set to something true."""
+    options = args[:args.index("--")] if "--" in args else args
+    env = os.environ.get(DEBUG_ENV, "").strip().lower()
+    return "--debug" in options or env not in ("", "0", "false", "no", "off")
+
+
+def configure_logging(debug: bool) -> None:
+    """Library logs go to stderr only with --debug; otherwise they are dropped."""
+    if debug:
+        logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
+        return
+    for name in QUIET_LOGGERS:
+        logger = logging.getLogger(name)
+        logger.setLevel(logging.CRITICAL + 1)
+        logger.propagate = False
+    root = logging.getLogger()
+    if not root.handlers:  # no stray record reaches logging's last-resort stderr handler
+        root.addHandler(logging.NullHandler())
+
+
+def _terminate(signum: int, frame: FrameType | None) -> None:
+    raise Terminated()
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Run the command; exit with its status (see servobus.cli.failures for the codes)."""
+    args = sys.argv[1:] if argv is None else list(argv)
+    if any(key.startswith(COMPLETE_ENV) for key in os.environ):  # shell completion: click's
+        cli.main(args, prog_name="servobus")
+        return
+    debug = debug_requested(args)
+    configure_logging(debug)
+    previous = signal.signal(signal.SIGTERM, _terminate)
     try:
-        cli.main(standalone_mode=False)
-    except click.exceptions.Abort:
-        click.echo("aborted", err=True)
-        sys.exit(130)
-    except click.ClickException as exc:
-        exc.show()
+        with cli.make_context("servobus", args) as ctx:
+            cli.invoke(ctx)
+    except click.exceptions.Exit as exc:  # --help, --version, ctx.exit()
         sys.exit(exc.exit_code)
-    except ServobusError as exc:
-        click.echo(f"error: {type(exc).__name__}: {exc}", err=True)
-        sys.exit(2)
-    except KeyboardInterrupt:
-        sys.exit(130)
+    except click.exceptions.NoArgsIsHelpError as exc:  # `servobus`, `servobus sim`: the help
+        click.echo(exc.ctx.get_help())
+        sys.exit(0)
+    except SystemExit:
+        raise
+    except BaseException as exc:  # the one place every failure is reported
+        code, line = describe(exc)
+        if debug:
+            traceback.print_exception(exc)
+        click.echo(line, err=True)
+        sys.exit(code)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    sys.exit(0)

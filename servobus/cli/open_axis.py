@@ -1,7 +1,7 @@
 """Shared plumbing of the drive commands: open the Axis the global options name, print results.
 
-Every command goes through :func:`open_axis`, so ``--port``, ``--id``, ``--baud``, ``--can``
-and ``--timeout`` mean the same thing everywhere, and DYN CAN works wherever DYN232M does.
+Every command goes through :func:`open_axis`, so ``--url`` (and its shortcuts ``--port`` and
+``--can``), ``--id``, ``--baud`` and ``--timeout`` mean the same thing on every protocol.
 """
 
 from __future__ import annotations
@@ -9,13 +9,16 @@ from __future__ import annotations
 import json
 import sys
 from collections.abc import Callable, Iterator, Mapping
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from typing import TYPE_CHECKING, Any
 
 import click
 from rich.console import Console
 
+from servobus.axis.url import parse_url
 from servobus.cli.context import CliContext
+from servobus.cli.open_failures import check_reachable, open_failure
+from servobus.errors import ArgumentRangeError, NotSupported
 
 if TYPE_CHECKING:
     from servobus.axis.sync import Axis
@@ -23,25 +26,53 @@ if TYPE_CHECKING:
 
 @contextmanager
 def open_axis(ctx: CliContext, drive_id: int | None = None) -> Iterator[Axis]:
-    """Connect to the drive (or the embedded virtual drive) and close it afterwards."""
+    """Connect to the drive the global options name (or the built-in virtual drive).
+
+    Any failure to open the port or bus becomes one CliError naming it and what to do
+    (servobus.cli.open_failures); argument errors (a bad id for the protocol) pass through;
+    failures after that are the command's own.
+    """
     from servobus.axis import connect  # lazy: keeps `servobus decode` free of the client
 
+    url = parse_url(ctx.url)
+    if not ctx.url_given:
+        note_builtin_once()
+    wanted = ctx.drive_id if drive_id is None else drive_id
+    check_reachable(url)
     options: dict[str, object] = {}
     if ctx.baud is not None:
         options["baud"] = ctx.baud
     if ctx.timeout is not None:
         options["timeout"] = ctx.timeout
-    axis = connect(ctx.url, drive_id=ctx.drive_id if drive_id is None else drive_id, **options)
+    try:
+        axis = connect(ctx.url, drive_id=wanted, **options)
+    except (ArgumentRangeError, NotSupported):
+        raise
+    except Exception as exc:  # whatever the driver raises, one line names the port
+        raise open_failure(url, exc) from exc
     try:
         yield axis
-    finally:
-        axis.close()
+    except BaseException:
+        with suppress(Exception):  # the failure that ended the command is the one to report
+            axis.close()
+        raise
+    axis.close()
 
 
-def connection_label(ctx: CliContext) -> str:
-    if ctx.can:
-        return f"DYN CAN {ctx.can}, id {ctx.drive_id}"
-    return f"{ctx.url}, id {ctx.drive_id}"
+_noted: list[bool] = []
+
+
+def note_builtin_once() -> None:
+    """One stderr line: no drive was named, so the command runs on the built-in one."""
+    if not _noted:
+        _noted.append(True)
+        note("note: no drive named (--url, --port, --can or SERVOBUS_URL): using the built-in "
+             "virtual drive, which stops when this command ends")
+
+
+def connection_label(ctx: CliContext, axis: Axis | None = None) -> str:
+    drive = axis.drive_id if axis is not None else ctx.drive_id
+    return f"{ctx.url}, id {drive if drive is not None else 'default'}"
 
 
 def console(err: bool = False) -> Console:

@@ -16,12 +16,15 @@ from rich.console import Console
 from rich.table import Table
 
 from servobus.cli import params_file as PF
+from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
+from servobus.cli.failures import EXIT_DIFFERENT, EXIT_FAULT, CliError
 from servobus.cli.open_axis import console, emit, emit_json, note, open_axis
-from servobus.families.dmm import params as P
+from servobus.cli.param_types import ReachableParam, family_for, reachable_help
+from servobus.families.base import Family
 
 
-def params_table(values: dict[str, int], title: str, width: int) -> Table:
+def params_table(values: dict[str, int], title: str, width: int, fam: Family) -> Table:
     """Parameter table; the explanation column only when the terminal is wide enough."""
     wide = width >= 110
     table = Table(title=title, title_justify="left")
@@ -32,7 +35,7 @@ def params_table(values: dict[str, int], title: str, width: int) -> Table:
     if wide:
         table.add_column("meaning")
     for name, value in values.items():
-        s = P.spec(name)
+        s = fam.param(name)
         cells = [name, str(value), f"{s.minimum}..{s.maximum}", s.unit]
         table.add_row(*cells, *([s.doc] if wide else []))
     return table
@@ -40,17 +43,19 @@ def params_table(values: dict[str, int], title: str, width: int) -> Table:
 
 def _show(ctx: CliContext) -> None:
     with open_axis(ctx) as axis:
-        values = axis.read_params(P.DYN_PARAMS)
-        backup = PF.ParamsBackup(axis.protocol, axis.drive_id, dict(values))
+        values = axis.read_params()
+        backup = PF.ParamsBackup(axis.protocol, axis.drive_id, dict(values), axis.family.name)
+        fam = axis.family
     emit(ctx, backup.to_json(),
-         lambda con: con.print(params_table(backup.params, f"parameters of drive {ctx.drive_id}",
-                                            con.width)))
+         lambda con: con.print(params_table(backup.params,
+                                            f"parameters of drive {backup.drive_id}",
+                                            con.width, fam)))
 
 
 def _save(ctx: CliContext, path: str) -> None:
     with open_axis(ctx) as axis:
-        values = axis.read_params(P.DYN_PARAMS)
-        backup = PF.ParamsBackup(axis.protocol, axis.drive_id, dict(values))
+        values = axis.read_params()
+        backup = PF.ParamsBackup(axis.protocol, axis.drive_id, dict(values), axis.family.name)
     PF.save(path, backup)
     emit(ctx, {"saved": path, **backup.to_json()},
          lambda con: con.print(f"saved {len(values)} parameters of drive {backup.drive_id} "
@@ -59,11 +64,12 @@ def _save(ctx: CliContext, path: str) -> None:
 
 def _load(ctx: CliContext, path: str) -> None:
     backup = PF.load(path)  # validated before anything is opened or sent
-    if backup.drive_id != ctx.drive_id:
-        note(f"note: {path} was saved from drive {backup.drive_id}; restoring onto drive "
-             f"{ctx.drive_id}")
     with open_axis(ctx) as axis:
+        drive = axis.drive_id
         before = axis.read_params(list(backup.params))
+        if backup.drive_id != drive:  # said once the drive answers, not before a failure
+            note(f"note: {path} was saved from drive {backup.drive_id}; restoring onto drive "
+                 f"{drive}")
         changes = PF.diff(backup.params, before)
         if changes:
             axis.write_params({name: wanted for name, wanted, _ in changes})
@@ -73,7 +79,7 @@ def _load(ctx: CliContext, path: str) -> None:
             for n, v in backup.params.items()]
 
     def render(con: Console) -> None:
-        table = Table(title=f"restore {path} -> drive {ctx.drive_id}", title_justify="left")
+        table = Table(title=f"restore {path} -> drive {drive}", title_justify="left")
         for col in ("parameter", "before", "after", ""):
             table.add_column(col, justify="left" if col in ("parameter", "") else "right")
         for r in rows:
@@ -86,19 +92,21 @@ def _load(ctx: CliContext, path: str) -> None:
     emit(ctx, {"restored": path, "written": [n for n, _, _ in changes], "params": rows}, render)
     if failed:
         names = ", ".join(n for n, _, _ in failed)
-        raise click.ClickException(f"drive did not take: {names}")
+        raise CliError(f"drive {drive} did not take: {names}",
+                       "check the values against the drive's ranges, then retry", EXIT_FAULT)
 
 
 def _diff(ctx: CliContext, path: str) -> None:
     backup = PF.load(path)
     with open_axis(ctx) as axis:
+        drive = axis.drive_id
         actual = axis.read_params(list(backup.params))
     changes = PF.diff(backup.params, actual)
     if ctx.json:
         emit_json({"file": path, "identical": not changes,
                    "differences": [{"name": n, "file": f, "drive": d} for n, f, d in changes]})
     elif changes:
-        table = Table(title=f"{path} vs drive {ctx.drive_id}", title_justify="left")
+        table = Table(title=f"{path} vs drive {drive}", title_justify="left")
         table.add_column("parameter", style="bold")
         table.add_column("file", justify="right")
         table.add_column("drive", justify="right")
@@ -106,12 +114,12 @@ def _diff(ctx: CliContext, path: str) -> None:
             table.add_row(name, str(wanted), str(have))
         console().print(table)
     else:
-        click.echo(f"drive {ctx.drive_id} matches {path} ({len(backup.params)} parameters)")
+        click.echo(f"drive {drive} matches {path} ({len(backup.params)} parameters)")
     if changes:
-        sys.exit(1)
+        sys.exit(EXIT_DIFFERENT)
 
 
-@click.command("params")
+@click.command("params", cls=ServobusCommand)
 @click.option("--save", "save_path", metavar="FILE", default=None,
               help="back the parameters up to FILE (JSON)")
 @click.option("--load", "load_path", metavar="FILE", default=None,
@@ -121,7 +129,7 @@ def _diff(ctx: CliContext, path: str) -> None:
 @pass_cli
 def params_cmd(ctx: CliContext, save_path: str | None, load_path: str | None,
                diff_path: str | None) -> None:
-    """Show the eight drive parameters, or back them up / restore / compare them."""
+    """Show the drive's parameters, or back them up / restore / compare them."""
     chosen = [p for p in (save_path, load_path, diff_path) if p is not None]
     if len(chosen) > 1:
         raise click.UsageError("use only one of --save, --load, --diff")
@@ -135,17 +143,16 @@ def params_cmd(ctx: CliContext, save_path: str | None, load_path: str | None,
         _show(ctx)
 
 
-@click.command("set")
-@click.argument("name", type=click.Choice(list(P.BY_NAME)), metavar="NAME")
+@click.command("set", cls=ServobusCommand,
+               help="Write one parameter (checked against its range first) and read it back."
+                    f"\n\nNAME is a parameter the protocol can set: {reachable_help()}.")
+@click.argument("name", type=ReachableParam(), metavar="NAME")
 @click.argument("value", type=int)
 @pass_cli
 def set_cmd(ctx: CliContext, name: str, value: int) -> None:
-    """Write one parameter (checked against its range first) and read it back.
-
-    NAME is one of: main_gain speed_gain int_gain trq_cons max_speed max_accel on_range
-    gear_num.
-    """
-    P.spec(name).check(value)  # ArgumentRangeError before any connection
+    fam = family_for(ctx)
+    if fam is not None:
+        fam.param(name).check(value)  # ArgumentRangeError before any connection
     with open_axis(ctx) as axis:
         old = axis.read_param(name)
         axis.write_param(name, value)
@@ -153,7 +160,8 @@ def set_cmd(ctx: CliContext, name: str, value: int) -> None:
     emit(ctx, {"name": name, "old": old, "new": new},
          lambda con: con.print(f"{name}: {old} -> {new}"))
     if new != value:
-        raise click.ClickException(f"drive reports {name}={new} after writing {value}")
+        raise CliError(f"drive reports {name}={new} after writing {value}",
+                       "check the drive's range for this parameter, then retry", EXIT_FAULT)
 
 
 def register(group: click.Group) -> None:

@@ -6,13 +6,15 @@ Format (JSON, UTF-8), version 1::
       "format": "servobus.params",
       "version": 1,
       "protocol": "dyn232",            # protocol of the drive it was read from
+      "family": "dmm-dyn2",            # device family: its table validates the values
       "drive_id": 1,
       "saved": "2025-01-31T12:00:00+00:00",
       "params": {"main_gain": 40, "speed_gain": 40, ...}
     }
 
-Decisions: parameter names are the snake_case names of ``servobus.families.dmm.params`` (the same
-on every protocol, so a DYN232M backup restores onto a DYN CAN drive); a file may hold a
+Decisions: parameter names are the snake_case names of the family's table (the same on every
+protocol, so a DYN232M backup restores onto a DYN CAN drive); a file without ``family`` is a
+DMM DYN2 backup (what servobus wrote before families existed); a file may hold a
 subset of the parameters (only those are restored); unknown top-level keys are ignored so a
 later minor addition stays readable; a higher ``version`` is refused. Every value is checked
 against the parameter table on load, so an out-of-range value never reaches a drive.
@@ -28,12 +30,13 @@ from pathlib import Path
 from typing import TypeGuard
 
 from servobus.errors import ArgumentRangeError, ServobusError
-from servobus.families.dmm import params as P
-from servobus.protocols.dyn232.codec import MAX_DRIVE_ID
+from servobus.families import family
 
 FORMAT = "servobus.params"
 VERSION = 1
-PROTOCOLS = ("dyn232", "dyncan")
+#: Version-1 files name no family: their protocols were DMM DYN2's.
+V1_FAMILY = "dmm-dyn2"
+MAX_DRIVE_ID = 255
 
 
 class ParamsFileError(ServobusError):
@@ -45,6 +48,7 @@ class ParamsBackup:
     protocol: str
     drive_id: int
     params: dict[str, int]
+    family: str = V1_FAMILY
     saved: str = field(default_factory=lambda: datetime.now(UTC).isoformat(timespec="seconds"))
     version: int = VERSION
 
@@ -53,6 +57,7 @@ class ParamsBackup:
             "format": FORMAT,
             "version": self.version,
             "protocol": self.protocol,
+            "family": self.family,
             "drive_id": self.drive_id,
             "saved": self.saved,
             "params": dict(self.params),
@@ -93,8 +98,13 @@ def parse(doc: object, where: str = "backup") -> ParamsBackup:
         raise ParamsFileError(f"{where}: version {version} is newer than this servobus "
                               f"understands ({VERSION})")
     protocol = doc.get("protocol")
-    if protocol not in PROTOCOLS:
-        raise ParamsFileError(f"{where}: protocol {protocol!r} is not one of {PROTOCOLS}")
+    if not isinstance(protocol, str) or not protocol:
+        raise ParamsFileError(f"{where}: protocol {protocol!r} is not a protocol name")
+    family_name = doc.get("family", V1_FAMILY)
+    try:
+        fam = family(str(family_name))
+    except ArgumentRangeError as exc:
+        raise ParamsFileError(f"{where}: {exc}") from None
     drive_id = doc.get("drive_id")
     if not _is_int(drive_id) or not 0 <= drive_id <= MAX_DRIVE_ID:
         raise ParamsFileError(f"{where}: drive_id {drive_id!r} is not 0..{MAX_DRIVE_ID}")
@@ -102,18 +112,19 @@ def parse(doc: object, where: str = "backup") -> ParamsBackup:
     if not isinstance(raw, dict) or not raw:
         raise ParamsFileError(f"{where}: 'params' must be a non-empty object")
     params: dict[str, int] = {}
+    known = {p.name: p for p in fam.params}
     for name, value in raw.items():
-        if name not in P.BY_NAME:
+        if name not in known:
             raise ParamsFileError(f"{where}: unknown parameter {name!r}; "
-                                  f"known: {', '.join(P.BY_NAME)}")
+                                  f"known: {', '.join(known)}")
         if not _is_int(value):
             raise ParamsFileError(f"{where}: {name} must be an integer, got {value!r}")
         try:
-            params[name] = P.spec(name).check(value)
+            params[name] = known[name].check(value)
         except ArgumentRangeError as exc:
             raise ArgumentRangeError(f"{where}: {exc}") from None
     saved = doc.get("saved", "")
-    return ParamsBackup(str(protocol), drive_id, params, str(saved), version)
+    return ParamsBackup(protocol, drive_id, params, fam.name, str(saved), version)
 
 
 def diff(wanted: Mapping[str, int], actual: Mapping[str, int]) -> list[tuple[str, int, int]]:

@@ -9,6 +9,7 @@ import json
 
 import click
 
+from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
 from servobus.families.dmm import params as P
 from servobus.families.dmm.profile import ptp_profile
@@ -19,7 +20,7 @@ def _param(name: str) -> click.IntRange:
     return click.IntRange(spec.minimum, spec.maximum)
 
 
-@click.command("profile")
+@click.command("profile", cls=ServobusCommand)
 @click.option("--max-speed", type=_param("max_speed"), default=P.spec("max_speed").default,
               show_default=True, help="Max Speed parameter (MaxSpd)")
 @click.option("--max-accel", type=_param("max_accel"), default=P.spec("max_accel").default,

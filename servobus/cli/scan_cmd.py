@@ -1,8 +1,8 @@
 """``servobus scan``: which drive ids answer on the line (or CAN bus).
 
-One status read per id with a short deadline and no retry (``Axis.ping``), so a scan of the
-64 ids 0..63 takes at most about 64 x ``--per-id`` seconds. On DYN CAN id 0 is the broadcast
-id, so the default range starts at 1 there.
+One status read per id with a short deadline and no retry (``Axis.ping``), so a scan of
+N ids takes at most about N x ``--per-id`` seconds. The default range is every id the
+protocol addresses (``Axis.drive_ids``: DYN232M 0..63; DYN CAN 1..63, 0 being broadcast).
 """
 
 from __future__ import annotations
@@ -12,32 +12,37 @@ import sys
 import click
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
+from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.open_axis import connection_label, console, emit, open_axis
-from servobus.protocols.dyn232.codec import MAX_DRIVE_ID
+from servobus.cli.param_types import Seconds
 
 
-@click.command("scan")
-@click.option("--first", type=click.IntRange(0, MAX_DRIVE_ID), default=None,
-              help="first id (default 0; 1 on CAN)")
-@click.option("--last", type=click.IntRange(0, MAX_DRIVE_ID), default=MAX_DRIVE_ID,
-              show_default=True, help="last id")
-@click.option("--per-id", "per_id", type=click.FloatRange(0.001, 5.0), default=0.05,
+@click.command("scan", cls=ServobusCommand)
+@click.option("--first", type=click.IntRange(0, 255), default=None,
+              help="first id [default: the protocol's lowest]")
+@click.option("--last", type=click.IntRange(0, 255), default=None,
+              help="last id [default: the protocol's highest]")
+@click.option("--per-id", "per_id", type=Seconds(maximum=5.0), default=0.05,
               show_default=True, help="seconds to wait for each id's reply")
 @pass_cli
-def scan_cmd(ctx: CliContext, first: int | None, last: int, per_id: float) -> None:
+def scan_cmd(ctx: CliContext, first: int | None, last: int | None, per_id: float) -> None:
     """Find the drive ids that answer (one status read per id, no retries)."""
-    start = (1 if ctx.can else 0) if first is None else first
-    if start > last:
-        raise click.BadParameter(f"--first {start} is after --last {last}")
-    ids = range(start, last + 1)
+    if first is not None and last is not None and first > last:
+        raise click.BadParameter(f"--first {first} is after --last {last}")
     found: list[int] = []
     quiet = ctx.json or not sys.stderr.isatty()
-    with open_axis(ctx, drive_id=start) as axis, Progress(
+    with open_axis(ctx, drive_id=first) as axis, Progress(
         TextColumn("scanning id {task.fields[current]:>2}"), BarColumn(), MofNCompleteColumn(),
         TextColumn("found {task.fields[found]}"),
         console=console(err=True), transient=True, disable=quiet,
     ) as progress:
+        known: range = axis.drive_ids
+        start = known.start if first is None else first
+        stop = known.stop - 1 if last is None else last
+        if start > stop:
+            raise click.BadParameter(f"--first {start} is after --last {stop}")
+        ids = range(start, stop + 1)
         task = progress.add_task("scan", total=len(ids), current=start, found=0)
         for drive_id in ids:
             progress.update(task, current=drive_id)
@@ -50,7 +55,7 @@ def scan_cmd(ctx: CliContext, first: int | None, last: int, per_id: float) -> No
         if found:
             click.echo(f"found {len(found)} drive(s) on {where}: {' '.join(map(str, found))}")
         else:
-            click.echo(f"no drive answered on {where} (ids {start}..{last})")
+            click.echo(f"no drive answered on {where} (ids {ids.start}..{ids.stop - 1})")
 
     emit(ctx, found, render)
 

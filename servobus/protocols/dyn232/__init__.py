@@ -13,3 +13,6 @@ SCHEMES: dict[str, str] = {"dyn232": _OPEN, "": _OPEN, **{s: _OPEN for s in PYSE
 SIM: dict[str, str] = {name: "servobus.protocols.dyn232.inprocess:open_sim_axis"
                        for name in ("dyn232", "dyn2", "dc2", "dyn4")}
 CLI = "servobus.protocols.dyn232.sim_cmd:register"
+DECODERS: dict[str, str] = {"dyn232": "servobus.protocols.dyn232.sniff:DECODER"}
+PARAMS: dict[str, str] = {"dyn232": "servobus.protocols.dyn232.commands:REACHABLE_PARAMS"}
+FAMILIES: dict[str, str] = {"dyn232": "dmm-dyn2"}

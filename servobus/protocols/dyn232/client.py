@@ -426,4 +426,5 @@ class Dyn232Axis(CommandAxis):
 
     commands: ClassVar[CommandSet] = cmds
     protocol_name = "dyn232"
+    drive_id_range = range(c.FACTORY_ID, c.MAX_DRIVE_ID + 1)
     amps_per_torque_unit = 1.0 / U.DYN232_TORQUE_UNITS_PER_A

@@ -7,7 +7,8 @@ paced at 38400 8N1 unless ``paced=False`` (``fast=1``), drives in wall-clock tim
 
 URL form (parsed by :func:`parse_sim_url`)::
 
-    sim://dyn2                      one drive, factory id 0, paced
+    sim://dyn2                      one drive with the id the caller asks for (connect()'s
+                                    drive_id; the factory id 0 otherwise), paced
     sim://dyn2?ids=1,2,3&fast=1     three drives, unpaced
     sim://dyn2?state=/tmp/e.json    EEPROM kept in a JSON file (see EepromStore)
     sim://dyn2?model=DYN2-T1        motor/drive model (servobus.families.dmm.units.MODELS)
@@ -36,7 +37,7 @@ from servobus.transport.buffered import PushInput
 if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis
 
-SIM_KINDS = ("dyn2", "dc2", "dyn4")
+SIM_KINDS = ("dyn232", "dyn2", "dc2", "dyn4")
 _TRUE = ("1", "true", "yes", "on")
 _FALSE = ("0", "false", "no", "off")
 
@@ -61,8 +62,13 @@ def _flag(name: str, text: str) -> bool:
     raise ArgumentRangeError(f"{name}={text!r}: expected 1/0, true/false")
 
 
-def parse_sim_url(url: str) -> SimUrl:
-    """Parse ``sim://dyn2?ids=1,2&fast=1&state=FILE&model=NAME``."""
+def parse_sim_url(url: str, default_id: int = c.FACTORY_ID) -> SimUrl:
+    """Parse ``sim://dyn2?ids=1,2&fast=1&state=FILE&model=NAME``.
+
+    Without ``ids`` the line has one drive with ``default_id`` (servobus decision:
+    ``connect("sim://dyn2", drive_id=1)`` finds a drive 1, as a user who asks for drive 1 of
+    "the built-in drive" means); an id outside 0..63 falls back to the factory id.
+    """
     parts = urlsplit(url)
     if parts.scheme != "sim":
         raise ArgumentRangeError(f"not a sim:// URL: {url!r}")
@@ -82,7 +88,11 @@ def parse_sim_url(url: str) -> SimUrl:
     model = query.get("model", U.DEFAULT_MODEL)
     if model not in U.MODELS:
         raise ArgumentRangeError(f"unknown model {model!r}; known: {', '.join(U.MODELS)}")
-    return SimUrl(kind=kind, ids=parse_ids(query["ids"]) if "ids" in query else (c.FACTORY_ID,),
+    if "ids" in query:
+        ids = parse_ids(query["ids"])
+    else:
+        ids = (default_id if 0 <= default_id <= c.MAX_DRIVE_ID else c.FACTORY_ID,)
+    return SimUrl(kind=kind, ids=ids,
                   paced=paced, state=query.get("state") or None, model=model)
 
 

@@ -1,4 +1,4 @@
-"""``servobus sim dyn2``: a virtual DYN2 RS485 line on TCP (serial-to-TCP bridge) or a PTY.
+"""``servobus sim dyn232``: a virtual DYN2 RS485 line on TCP (serial-to-TCP bridge) or a PTY.
 
 stdout gets one line per endpoint, flushed at once, so scripts and tests can read them::
 
@@ -30,7 +30,7 @@ def _tcp(option: str, value: str | None) -> tuple[str, int] | None:
         raise click.BadParameter(str(exc), param_hint=option) from None
 
 
-@click.command("dyn2")
+@click.command("dyn232")
 @click.option("--listen", metavar="tcp://HOST:PORT", default=None,
               help="serve the line on TCP (pyserial socket://HOST:PORT connects); PORT 0 picks "
                    "a free port; a missing host means 127.0.0.1  [default: tcp://127.0.0.1:0, "
@@ -60,7 +60,7 @@ def sim_dyn2_cmd(listen: str | None, ids: str | None, pty: bool, fast: bool, sta
     tap_endpoint = _tcp("--tap", tap)
     drives = make_drives(drive_ids, state=state, model=model)
     pacing = "unpaced (--fast)" if fast else "paced at 38400 8N1"
-    click.echo(f"servobus sim dyn2: {len(drives)} {model} drive(s), ids "
+    click.echo(f"servobus sim dyn232: {len(drives)} {model} drive(s), ids "
                f"{','.join(str(d.drive_id) for d in drives)}, {pacing}", err=True)
     server = run_server(drives, listen=endpoint, pty=pty, tap=tap_endpoint, paced=not fast,
                         duration=duration)

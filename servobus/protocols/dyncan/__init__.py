@@ -8,3 +8,7 @@ URLs: ``dyncan+<python-can interface>://<channel>``, e.g. ``dyncan+pcan://PCAN_U
 SCHEMES: dict[str, str] = {"dyncan": "servobus.protocols.dyncan.opener:open_axis"}
 SIM: dict[str, str] = {"dyncan": "servobus.protocols.dyncan.inprocess:open_sim_axis"}
 CLI = "servobus.protocols.dyncan.sim_cmd:register"
+DECODERS: dict[str, str] = {"dyncan": "servobus.protocols.dyncan.sniff:DECODER"}
+SHORTCUTS: dict[str, str] = {"can": "dyncan+{interface}://{channel}"}
+PARAMS: dict[str, str] = {"dyncan": "servobus.protocols.dyncan.commands:REACHABLE_PARAMS"}
+FAMILIES: dict[str, str] = {"dyncan": "dmm-dyn2"}

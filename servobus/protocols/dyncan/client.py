@@ -389,6 +389,7 @@ class DynCanAxis(CommandAxis):
 
     commands: ClassVar[CommandSet] = cmds
     protocol_name = "dyncan"
+    drive_id_range = range(c.MIN_DRIVE_ID, c.MAX_DRIVE_ID + 1)
     amps_per_torque_unit = -U.MODELS[U.DEFAULT_MODEL].peak_current_a / U.CAN_TORQUE_FULL_SCALE
     id_settle_s = ID_REINIT_S
     client: AsyncDynCanClient

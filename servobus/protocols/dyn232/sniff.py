@@ -1,4 +1,4 @@
-"""Human-readable DYN232M line decoding for ``servobus decode`` and ``servobus sniff``.
+"""DYN232M line decoding for people (``servobus decode``/``sniff``, the GUI's monitor).
 
 Pure (no I/O): bytes in, :class:`LineEvent` out. Built on the codec's Framer and tables.
 
@@ -23,20 +23,22 @@ clears it (the drive answers at once, so a reply never comes after an unrelated 
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 from servobus.errors import ChecksumError, ProtocolError
 from servobus.families.dmm import params as P
 from servobus.families.dmm.registers import DriveConfig, DriveStatus
 from servobus.protocols.dyn232 import codec as c
-from servobus.protocols.dyncan import codec as dyncan
+from servobus.sniff import BYTES, ErrorEvent
 
 REPLY, CODE, VALUE, AMBIGUOUS = "reply", "code", "value", "ambiguous"
 
 
 @dataclass(frozen=True)
 class PacketEvent:
+    """One packet with its inferred direction (see the module docstring)."""
+
     raw: bytes
     packet: c.Packet
     from_drive: bool
@@ -44,9 +46,19 @@ class PacketEvent:
     text: str
     alternative: str | None = None  # the other reading when basis is AMBIGUOUS
 
+    is_error = False
+
     @property
     def ambiguous(self) -> bool:
         return self.basis == AMBIGUOUS
+
+    def lines(self, prefix: str = "", width: int = 21) -> list[str]:
+        """One line; an ambiguous packet gets a second line with the other reading."""
+        lines = [f"{prefix}{self.raw.hex(' '):<{width}}{self.text}"]
+        if self.ambiguous:
+            lines[0] += "   [direction ambiguous]"
+            lines.append(f"{prefix}{'':<{width}}or {self.alternative}")
+        return lines
 
     def as_dict(self) -> dict[str, object]:
         p = self.packet
@@ -63,16 +75,6 @@ class PacketEvent:
         if self.alternative is not None:
             d["alternative"] = self.alternative
         return d
-
-
-@dataclass(frozen=True)
-class ErrorEvent:
-    kind: str  # "checksum" or "framing"
-    message: str
-    raw: bytes = b""
-
-    def as_dict(self) -> dict[str, object]:
-        return {"error": self.kind, "message": self.message, "raw": self.raw.hex(" ")}
 
 
 LineEvent = PacketEvent | ErrorEvent
@@ -206,70 +208,17 @@ class LineDecoder:
             self._pending = (packet.drive_id, reply)
 
 
-def decode_stream(chunks: Iterable[bytes]) -> Iterator[LineEvent]:
-    """Decode a whole finite byte source (including the end-of-input report)."""
-    decoder = LineDecoder()
-    for chunk in chunks:
-        yield from decoder.iter_feed(chunk)
-    yield from decoder.finish()
+class Dyn232Decoder:
+    """The DYN232M entry of ``DECODERS``: byte streams on an RS232/RS485 line."""
+
+    name = "dyn232"
+    medium = BYTES
+
+    def stream(self) -> LineDecoder:
+        return LineDecoder()
+
+    def frame(self, arbitration_id: int, data: bytes) -> ErrorEvent:
+        return ErrorEvent("frame", "DYN232M has no CAN frames")
 
 
-def parse_hex(tokens: Iterable[str]) -> bytes:
-    """Bytes from hex text in any spacing: ``03 a3 ff``, ``03a3ff``, ``0x03,0xa3``, ``03:a3``.
-
-    Raises ValueError naming the offending token.
-    """
-    out = bytearray()
-    for token in tokens:
-        for part in token.replace(",", " ").replace(":", " ").replace(";", " ").split():
-            digits = part[2:] if part.lower().startswith("0x") else part
-            if len(digits) == 1:
-                digits = "0" + digits
-            if len(digits) % 2:
-                raise ValueError(f"odd number of hex digits in {part!r}")
-            try:
-                out.extend(bytes.fromhex(digits))
-            except ValueError:
-                raise ValueError(f"not hex: {part!r}") from None
-    return bytes(out)
-
-
-# ------------------------------------------------------------------ DYN CAN frames
-@dataclass(frozen=True)
-class CanEvent:
-    """One DYN CAN frame; direction from the frame's shape (dyncan.describe: replies reuse the
-    request's identifier, so the data length against the function table tells them apart)."""
-
-    arbitration_id: int
-    data: bytes
-    text: str
-
-    @property
-    def raw_text(self) -> str:
-        """candump/cansend notation: ``0e3#1b``."""
-        return f"{self.arbitration_id:03x}#{self.data.hex()}"
-
-    def as_dict(self) -> dict[str, object]:
-        return {"id": self.arbitration_id, "data": self.data.hex(" "), "text": self.text}
-
-
-def can_event(arbitration_id: int, data: bytes) -> CanEvent | ErrorEvent:
-    try:
-        frame = dyncan.decode(arbitration_id, data)
-    except ProtocolError as exc:
-        return ErrorEvent("framing", str(exc), data)
-    return CanEvent(arbitration_id, bytes(data), dyncan.describe(frame))
-
-
-def parse_can_frame(token: str) -> tuple[int, bytes]:
-    """``ID#DATA`` as cansend writes it (``0e3#1b``, ``7#de.ad``); ValueError if malformed."""
-    ident, sep, data = token.partition("#")
-    if not sep:
-        raise ValueError(f"CAN frame {token!r} must be ID#DATA (hex)")
-    try:
-        arbitration_id = int(ident, 16)
-    except ValueError:
-        raise ValueError(f"CAN identifier {ident!r} is not hex") from None
-    if not 0 <= arbitration_id <= 0x7FF:
-        raise ValueError(f"CAN identifier 0x{arbitration_id:x} is not an 11-bit identifier")
-    return arbitration_id, parse_hex([data.replace(".", "")]) if data else b""
+DECODER = Dyn232Decoder()
