@@ -62,16 +62,19 @@ def invoke(*args: str) -> Result:
 def test_status_params_set_over_can(can_bus: str) -> None:
     result = invoke("--can", can_bus, "--id", "1", "--json", "status")
     doc = json.loads(result.stdout)
-    assert doc["protocol"] == "dyncan" and doc["drive_id"] == 1 and doc["on_position"] is True
+    assert doc["protocol"] == "dyncan" and doc["drive_id"] == 1 and doc["in_position"] is True
     result = invoke("--can", can_bus, "--id", "3", "--json", "params")
-    assert json.loads(result.stdout)["params"] == {n: P.spec(n).default for n in P.DYN_PARAMS}
+    params = json.loads(result.stdout)["params"]  # all DYN CAN reaches: the 8 and line_num
+    assert params == {n: P.spec(n).default for n in (*P.DYN_PARAMS, "line_num")}
     result = invoke("--can", can_bus, "--id", "3", "--json", "set", "max_accel", "60")
     assert json.loads(result.stdout)["new"] == 60
 
 
 def test_move_and_scan_over_can(can_bus: str) -> None:
-    result = invoke("--can", can_bus, "--id", "1", "--json", "move", "--wait", "--", "-1024")
+    result = invoke("--can", can_bus, "--id", "1", "--json", "move", "--wait", "-4096")
     window = U.onrange_to_counts(P.spec("on_range").default)  # "on position" = inside OnRange
-    assert abs(json.loads(result.stdout)["position"] - U.command_to_counts(-1024)) <= window
+    assert abs(json.loads(result.stdout)["position"] - (-4096)) <= window  # counts
+    result = invoke("--can", can_bus, "--id", "1", "--json", "move", "--wait", "-0.25rev")
+    assert abs(json.loads(result.stdout)["position"] - (-16384)) <= window
     result = invoke("--can", can_bus, "--json", "scan", "--last", "5", "--per-id", "0.05")
     assert json.loads(result.stdout) == [1, 3]

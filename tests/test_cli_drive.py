@@ -36,24 +36,26 @@ def test_status_json_keys() -> None:
     proc = servobus("--json", "status")
     assert proc.returncode == 0, proc.stderr
     doc = json.loads(proc.stdout)
-    assert {"on_position", "servo_free", "alarm", "motion_busy"} <= doc.keys()
-    assert (doc["on_position"], doc["servo_free"], doc["motion_busy"]) == (True, False, False)
-    assert doc["alarm"] == "none" and doc["config"]["servo_mode"] == "position"
+    assert {"enabled", "moving", "in_position", "alarm", "alarm_code", "family"} <= doc.keys()
+    assert (doc["in_position"], doc["enabled"], doc["moving"]) == (True, True, False)
+    assert doc["alarm_code"] == 0 and doc["alarm"] == "" and doc["family"] == "dmm-dyn2"
+    assert doc["vendor_status"]["servo_free"] is False  # the DYN2 status byte, decoded
+    assert doc["config"]["servo_mode"] == "position"
 
 
 def test_position_json() -> None:
     proc = servobus("--json", "position")
     assert proc.returncode == 0, proc.stderr
-    assert json.loads(proc.stdout) == {"position": 0}
+    assert json.loads(proc.stdout) == {"position": 0, "counts_per_rev": 65_536, "rev": 0.0}
 
 
 def test_move_negative_after_double_dash_and_wait() -> None:
-    proc = servobus("--json", "move", "--relative", "--wait", "--", "-120")
+    proc = servobus("--json", "move", "--relative", "--wait", "--", "-120cmd")
     assert proc.returncode == 0, proc.stderr
     doc = json.loads(proc.stdout)
-    expected = U.command_to_counts(-120, P.spec("gear_num").default)
+    expected = U.command_to_counts(-120, P.spec("gear_num").default)  # raw command units
     window = U.onrange_to_counts(P.spec("on_range").default)  # "on position" = inside OnRange
-    assert abs(doc["position"] - expected) <= window and doc["on_position"] is True
+    assert abs(doc["position"] - expected) <= window and doc["in_position"] is True
 
 
 def test_absent_drive_is_a_timeout_exit_2() -> None:
@@ -105,7 +107,7 @@ def test_demo_json_tells_the_story() -> None:
     assert [s["step"].split(":")[0] for s in steps][:2] == ["status", "parameters"]
     move, turn, change, restore = steps[2:6]
     window = U.onrange_to_counts(P.spec("on_range").default)
-    assert abs(move["final_position"] - U.command_to_counts(move["command"])) <= window
+    assert abs(move["final_position"] - move["counts"]) <= window
     assert turn["stopped_speed"] == 0 and max(s for _, s in turn["speeds"]) == turn["rpm"]
     assert change["readback"] != restore["restored"]
     assert change["seconds"] > move["seconds"]  # lower max_speed, same distance: slower

@@ -15,7 +15,7 @@ from collections.abc import Iterator
 import pytest
 
 from servobus.axis import connect
-from servobus.axis.base import Axis
+from servobus.axis.sync import Axis
 from servobus.cli.failures import EXIT_INTERRUPTED, EXIT_USAGE
 from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
@@ -85,7 +85,7 @@ def test_interrupt_during_move_wait_stops_the_drive(
     # Holding: the servo settles inside the OnRange window (turning at 500 rpm would cover
     # ~11,000 counts during these polls).
     assert max(held) - min(held) <= U.onrange_to_counts(P.spec("on_range").default), held
-    assert not status.motion_busy and not status.servo_free
+    assert not status.moving and status.enabled
 
 
 def test_simulator_killed_during_move_wait_is_one_line(

@@ -42,16 +42,19 @@ def invoke(*args: str) -> Result:
 
 
 # ------------------------------------------------------------------ parsing
-@pytest.mark.parametrize("args", [
-    ("move", "-120"),
-    ("move", "--relative", "-120"),
-    ("move", "-120", "--relative"),
-    ("move", "--", "-120"),
+@pytest.mark.parametrize(("args", "key", "value"), [
+    (("move", "-120"), "counts", -120),
+    (("move", "--relative", "-120"), "counts", -120),
+    (("move", "-120", "--relative"), "counts", -120),
+    (("move", "--", "-120"), "counts", -120),
+    (("move", "-0.5rev"), "counts", -32_768),
+    (("move", "-90deg", "--relative"), "counts", -16_384),
+    (("move", "-120cmd"), "command_units", -120),
 ])
-def test_negative_numbers_are_arguments(args: tuple[str, ...]) -> None:
+def test_negative_numbers_are_arguments(args: tuple[str, ...], key: str, value: int) -> None:
     result = invoke("--port", FAST, "--json", *args)
     assert result.exit_code == 0, result.output
-    assert json.loads(result.stdout)["command"] == -120
+    assert json.loads(result.stdout)[key] == value
 
 
 def test_negative_speed_and_profile_without_double_dash() -> None:
@@ -76,7 +79,7 @@ def test_json_before_or_after_the_command(where: str) -> None:
         ["--port", FAST, "status", "--json"]
     result = invoke(*args)
     assert result.exit_code == 0, result.output
-    assert json.loads(result.stdout)["on_position"] is True
+    assert json.loads(result.stdout)["in_position"] is True
 
 
 def test_every_command_takes_json_after_it() -> None:
@@ -116,8 +119,10 @@ def test_set_offers_what_the_protocol_reaches() -> None:
     assert convert("line_num", "virtual:x") == "line_num"
     with pytest.raises(click.BadParameter, match="not reachable over dyn232"):
         convert("line_num", None)
-    with pytest.raises(click.BadParameter, match="unknown parameter 'torque_limit'"):
-        convert("torque_limit", "virtual:x")  # DYN5's: no DMM serial/CAN protocol reaches it
+    with pytest.raises(click.BadParameter, match="not reachable over dyncan"):
+        convert("torque_limit", "virtual:x")  # in the DMM table (DYN5's), not on CAN
+    with pytest.raises(click.BadParameter, match="unknown parameter 'bogus'"):
+        convert("bogus", "virtual:x")
     result = invoke("set", "--help")
     assert "over dyn232: main_gain" in result.output
 

@@ -53,7 +53,8 @@ async def test_reads_parse_every_register_and_parameter() -> None:
         ax = b.axis(5)
         drive = b.drives[0]
         assert await ax.read_id() == 5
-        assert await ax.status() == drive.peek_status()
+        assert await ax.drive_status() == drive.peek_status()
+        assert (await ax.status()).vendor == drive.peek_status()
         assert await ax.config() == drive.read_config()
         assert await ax.read_params() == {n: drive.get_param(n) for n in P.DYN_PARAMS}
         assert await ax.position() == drive.position
@@ -66,12 +67,14 @@ async def test_move_with_wait_reaches_target_in_counts() -> None:
     async with bench((1,)) as b:
         ax = b.axis(1)
         await ax.write_param("gear_num", 2048)  # command x 4096/2048 x 4 counts
-        await ax.move_to(1000, wait=True, timeout=5)
+        await ax.move_to(8000, wait=True, timeout=5)  # Axis units: counts (command 1000)
         assert near(await ax.position(), 1000 * 2 * 4)
         await ax.set_origin()
         assert near(await ax.position(), 0)
-        await ax.move_by(-250, wait=True, timeout=5)
+        await ax.move_by(-2000, wait=True, timeout=5)
         assert near(await ax.position(), -250 * 2 * 4)
+        await ax.move_by_command(250, wait=True, timeout=5)  # raw command units: 2000 counts
+        assert near(await ax.position(), 0)
 
 
 @arun
@@ -88,7 +91,7 @@ async def test_turn_speed_and_stop() -> None:
             if abs(await ax.speed()) <= 6:
                 break
         assert abs(await ax.speed()) <= 6
-        assert (await ax.status()).motion_busy is False
+        assert (await ax.status()).moving is False
 
 
 # ---------------------------------------------------------------------- faults
@@ -150,17 +153,18 @@ async def test_absent_id_times_out_and_ping_is_false() -> None:
 async def test_motion_is_sent_exactly_once_on_a_faulty_line() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
+        assert await ax.gear_num() == 4096  # read once, before the count starts
         b.faults.drop_next(n=1, direction=Direction.TX)  # the move vanishes on the wire
         before = b.wire.tx
-        await ax.move_to(5000)
+        await ax.move_to(5000)  # counts: command 1250
         await ax.turn(100)
         await ax.write_param("on_range", 20)
         await ax.set_origin()
-        sizes = [len(c.encode(0, f, v)) for f, v in ((c.HostFunction.GO_ABSOLUTE_POS, 5000),
+        sizes = [len(c.encode(0, f, v)) for f, v in ((c.HostFunction.GO_ABSOLUTE_POS, 1250),
                  (c.HostFunction.TURN_CONST_SPEED, 100), (c.HostFunction.SET_POS_ON_RANGE, 20),
                  (c.HostFunction.SET_ORIGIN, 0))]
         assert b.wire.tx - before == sum(sizes)  # one packet each, never re-sent
-        assert b.client.stats.sent == 4
+        assert b.client.stats.sent == 5  # the gear read and the four packets
 
 
 @arun
@@ -198,8 +202,12 @@ async def test_split_duplicate_and_delayed_replies_still_parse() -> None:
 async def test_range_errors_raise_before_any_byte_is_written() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
+        assert await ax.gear_num() == 4096  # counts -> command units needs GEAR_NUM
+        before = b.wire.tx
         bad: list[Coroutine[Any, Any, Any]] = [
-            ax.move_to(c.VALUE_MAX + 1), ax.move_by(c.VALUE_MIN - 1), ax.turn(20001),
+            ax.move_to(4 * (c.VALUE_MAX + 1)), ax.move_by(4 * (c.VALUE_MIN - 1)),
+            ax.move_to_command(c.VALUE_MAX + 1), ax.move_by_command(c.VALUE_MIN - 1),
+            ax.move_to(None), ax.move_by(1.5), ax.move_to(True), ax.turn(20001),
             ax.write_param("main_gain", 0), ax.write_param("gear_num", 499),
             ax.write_param("line_num", 1000),  # not reachable over DYN232M
             ax.read_param("nope"), ax.assign_id(64), ax.sibling(127),
@@ -208,7 +216,7 @@ async def test_range_errors_raise_before_any_byte_is_written() -> None:
         for coro in bad:
             with pytest.raises(ArgumentRangeError):
                 await coro
-        assert b.wire.tx == 0
+        assert b.wire.tx == before
         assert b.drives[0].get_param("main_gain") == P.spec("main_gain").default
 
 
@@ -273,9 +281,9 @@ async def test_config_and_enable_disable() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
         await ax.disable()
-        assert (await ax.status()).servo_free
+        assert not (await ax.status()).enabled
         await ax.enable()
-        assert not (await ax.status()).servo_free
+        assert (await ax.status()).enabled
         cfg = DriveConfig(servo_mode=ServoMode.SPEED)
         await ax.set_config(cfg)
         assert await ax.config() == cfg
@@ -290,17 +298,18 @@ async def test_wait_idle_raises_drive_alarm_and_reset_clears_it() -> None:
             await ax.wait_idle(timeout=1, poll=0)
         assert info.value.code == int(AlarmCode.OVER_CURRENT)
         await ax.reset()
-        assert (await ax.wait_idle(timeout=1, poll=0)).alarm is AlarmCode.NONE
+        assert (await ax.wait_idle(timeout=1, poll=0)).alarm_code == AlarmCode.NONE
 
 
 @arun
 async def test_checksum_notice_from_drive_is_not_an_alarm() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
+        await ax.gear_num()  # the move's packet is the next one on the wire
         b.faults.corrupt_next(direction=Direction.TX)  # the drive gets a bad packet
-        await ax.move_to(100)  # not executed by the drive (checksum)
+        await ax.move_to(400)  # not executed by the drive (checksum)
         st = await ax.wait_idle(timeout=1, poll=0)  # code 4 reported once, not raised
-        assert st.alarm in (AlarmCode.CHECKSUM, AlarmCode.NONE)
+        assert st.alarm_code in (AlarmCode.CHECKSUM, AlarmCode.NONE)
         assert near(await ax.position(), 0)
 
 

@@ -77,11 +77,13 @@ async def test_dropped_reply_raises_drive_timeout_within_deadline(path: str) -> 
 async def test_motion_is_sent_exactly_once(path: str) -> None:
     async with rig(push=PATHS[path], timeout=DEADLINE_S) as r:
         ax = r.axis(0)
+        await ax.gear_num()  # counts -> command units: GEAR_NUM is read before the faults
+        sent_before = r.client.stats.sent
         r.faults.drop_next(n=1, direction=Direction.TX)  # the move vanishes on the wire
         r.faults.set_rate(Direction.RX, Fault.DROP, 1.0)  # and nothing ever answers
         before = r.wire.tx
         t0 = time.monotonic()
-        await ax.move_to(5000)
+        await ax.move_to(20000)  # counts: command 5000 at GEAR_NUM 4096
         await ax.turn(100)
         await ax.write_param("on_range", 20)
         await ax.set_origin()
@@ -89,7 +91,7 @@ async def test_motion_is_sent_exactly_once(path: str) -> None:
         sizes = [len(c.encode(0, f, v)) for f, v in ((H.GO_ABSOLUTE_POS, 5000),
                  (H.TURN_CONST_SPEED, 100), (H.SET_POS_ON_RANGE, 20), (H.SET_ORIGIN, 0))]
         assert r.wire.tx - before == sum(sizes)  # one packet each, never re-sent
-        assert r.client.stats.sent == 4 and r.client.stats.retries == 0
+        assert r.client.stats.sent - sent_before == 4 and r.client.stats.retries == 0
 
 
 @arun

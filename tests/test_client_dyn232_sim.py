@@ -52,8 +52,8 @@ def test_default_connect_is_the_embedded_drive() -> None:
 
 def test_sync_facade_moves_and_siblings_share_the_line() -> None:
     with connect("sim://dyn2?ids=0,1,2&fast=1", drive_id=1) as axis:
-        axis.move_by(500, wait=True, timeout=10)
-        assert near(axis.position(), 500 * 4)
+        axis.move_by(2000, wait=True, timeout=10)  # counts
+        assert near(axis.position(), 2000)
         two = axis.sibling(2)
         assert two.read_id() == 2
         assert near(two.position(), 0)
@@ -64,7 +64,7 @@ def test_sync_facade_moves_and_siblings_share_the_line() -> None:
 
 #: The same call sequence for the sync facade and the async core; index 4 is the position.
 CALLS: list[tuple[str, tuple[Any, ...]]] = [
-    ("write_param", ("max_accel", 60)), ("read_params", ()), ("move_to", (300,)),
+    ("write_param", ("max_accel", 60)), ("read_params", ()), ("move_to", (1200,)),
     ("wait_idle", (10.0, 0.005)), ("position", ()), ("status", ()), ("config", ()),
     ("read_id", ()), ("ping", ()),
 ]
@@ -82,7 +82,7 @@ def test_sync_facade_and_async_core_give_the_same_results() -> None:
     async_results = asyncio.run(run_async())
     positions = sync_results.pop(4), async_results.pop(4)
     assert sync_results == async_results  # everything but the servoed position: exact
-    assert all(isinstance(p, int) and near(p, 300 * 4) for p in positions)
+    assert all(isinstance(p, int) and near(p, 1200) for p in positions)
 
 
 @arun
@@ -124,8 +124,8 @@ async def _exercise(core: AsyncAxis, drives: list[VirtualDrive]) -> None:
     assert await core.read_id() == core.drive_id
     await core.write_params({"main_gain": 90, "gear_num": 8192})
     assert (await core.read_params())["main_gain"] == 90
-    await core.move_to(-1000, wait=True, timeout=10)
-    assert near(await core.position(), -1000 * 4 // 2)
+    await core.move_to(-2000, wait=True, timeout=10)  # counts, whatever GEAR_NUM is
+    assert near(await core.position(), -2000)
     mine = next(d for d in drives if d.drive_id == core.drive_id)
     assert mine.get_param("gear_num") == 8192
 
@@ -182,7 +182,7 @@ def test_against_cli_server_subprocess() -> None:
             trace: list[tuple[Direction, object]] = []
             axis.add_trace(lambda d, item, t: trace.append((d, item)))
             assert axis.read_id() == 2
-            axis.move_by(64, wait=True, timeout=10)
+            axis.move_by(256, wait=True, timeout=10)
             assert near(axis.position(), 256)
             assert axis.sibling(1).read_id() == 1
             assert [d for d, _ in trace[:2]] == [Direction.TX, Direction.RX]

@@ -92,7 +92,7 @@ async def test_axis_api_reads_and_writes() -> None:
         assert ax.protocol == "dyncan"
         assert await ax.read_id() == 1
         st = await ax.status()
-        assert st.on_position and not st.servo_free
+        assert st.in_position and st.enabled
         await ax.write_params({"main_gain": 55, "line_num": 1234, "gear_num": 2048})
         params = await ax.read_params(["main_gain", "speed_gain", "line_num", "gear_num"])
         d = h.network.node(1).drive
@@ -106,7 +106,7 @@ async def test_axis_api_reads_and_writes() -> None:
         assert await ax.echo(b"\x00\x7f\x80\xff") == b"\x00\x7f\x80\xff"
         assert [await ax.counter() for _ in range(3)] == [0, 1, 2]
         await ax.disable()
-        assert (await ax.status()).servo_free
+        assert not (await ax.status()).enabled
         await ax.enable()
         other = await ax.sibling(2)
         assert await other.read_id() == 2
@@ -117,8 +117,11 @@ async def test_axis_api_reads_and_writes() -> None:
 async def test_range_checks_before_sending() -> None:
     async with harness(1) as h:
         ax = h.axis(1)
+        await ax.gear_num()  # counts -> command units needs GEAR_NUM, read once
         sent = h.client.stats.sent
-        for call in (ax.turn(20_001), ax.move_to(c.VALUE_MAX + 1), ax.write_param("gear_num", 1),
+        for call in (ax.turn(20_001), ax.move_to(4 * (c.VALUE_MAX + 1)), ax.move_to(None),
+                     ax.move_by(float("nan")), ax.move_to_command(c.VALUE_MAX + 1),
+                     ax.write_param("gear_num", 1),
                      ax.write_param("torque_limit", 100), ax.assign_id(64),
                      ax.position_direct(16_385), ax.wave_frequency(51)):
             with pytest.raises(ArgumentRangeError):
@@ -132,14 +135,19 @@ async def test_motion_and_readouts_in_realtime() -> None:
         ax = h.axis(1)
         gear = await ax.read_param("gear_num")
         window = U.onrange_to_counts(await ax.read_param("on_range"))
-        await ax.move_to(2000, wait=True, timeout=5)
-        assert abs(await ax.position() - U.command_to_counts(2000, gear)) <= window
+        await ax.move_to(8000, wait=True, timeout=5)  # counts
+        assert abs(await ax.position() - 8000) <= window
+        await ax.move_to_command(1000, wait=True, timeout=5)  # raw command units
+        assert abs(await ax.position() - U.command_to_counts(1000, gear)) <= window
         await ax.turn(300)
         # Not an event to wait on: the servo loop runs in wall-clock time and overshoots a
         # few rpm right after the ~16 ms ramp; 0.3 s lets it settle before the steady check.
         await asyncio.sleep(0.3)
         assert 250 <= await ax.speed() <= 300
-        assert -700 <= await ax.torque() <= 700
+        raw = await ax.torque_raw()
+        assert -700 <= raw <= 700
+        peak = U.MODELS[U.DEFAULT_MODEL].peak_current_a
+        assert abs(await ax.current()) <= peak  # amperes: 700 = peak, sign flipped to CW+
         await ax.stop()
         await ax.set_origin()
         assert abs(await ax.position()) < 3000
@@ -201,11 +209,11 @@ async def test_alarm_push_callback_and_next_call() -> None:
             await h.axis(2).status()
         assert info.value.drive_id == 2
         st = await h.axis(2).status()
-        assert st.alarm is AlarmCode.OVERHEAT and st.servo_free
+        assert st.alarm_code == AlarmCode.OVERHEAT and not st.enabled
         with pytest.raises(DriveAlarm):
             await h.axis(2).wait_idle(1.0)
         await h.axis(2).reset()
-        assert (await h.axis(2).status()).alarm is AlarmCode.NONE
+        assert (await h.axis(2).status()).alarm_code == AlarmCode.NONE
 
 
 @arun

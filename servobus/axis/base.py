@@ -230,7 +230,7 @@ class AsyncAxis(ABC):
         passes.
         """
         timeout_s = check_timeout("timeout", timeout, allow_none=False)
-        poll_s = check_timeout("poll", poll, allow_none=False)
+        poll_s = 0.0 if poll == 0 else check_timeout("poll", poll, allow_none=False)
         assert timeout_s is not None and poll_s is not None
         deadline = time.monotonic() + timeout_s
         while True:

@@ -15,7 +15,7 @@ import asyncio
 from collections.abc import Awaitable, Callable
 from typing import Any, ClassVar, Protocol
 
-from servobus.axis.base import AsyncAxis, AxisTraceHook
+from servobus.axis.base import DEFAULT_WAIT_TIMEOUT_S, AsyncAxis, AxisTraceHook, check_int
 from servobus.axis.eeprom_guard import EepromGuard
 from servobus.errors import DriveTimeout, ProtocolError
 from servobus.families.base import AxisStatus, Family, ParamInfo
@@ -131,13 +131,19 @@ class CommandAxis(AsyncAxis):
         command = await self.to_command(distance)
         await self._run(self.commands.make_move_relative(self._id, command))
 
-    async def move_to_command(self, command: int) -> None:
+    async def move_to_command(self, command: int, *, wait: bool = False,
+                              timeout: float | None = None) -> None:
         """Absolute move in raw command units (x 4096/GEAR_NUM x 4 counts), no conversion."""
-        await self._run(self.commands.make_move_absolute(self._id, command))
+        await self._run(self.commands.make_move_absolute(self._id, check_int("command", command)))
+        if wait:
+            await self.wait_idle(DEFAULT_WAIT_TIMEOUT_S if timeout is None else timeout)
 
-    async def move_by_command(self, command: int) -> None:
+    async def move_by_command(self, command: int, *, wait: bool = False,
+                              timeout: float | None = None) -> None:
         """Relative move in raw command units, no conversion."""
-        await self._run(self.commands.make_move_relative(self._id, command))
+        await self._run(self.commands.make_move_relative(self._id, check_int("command", command)))
+        if wait:
+            await self.wait_idle(DEFAULT_WAIT_TIMEOUT_S if timeout is None else timeout)
 
     async def turn(self, rpm: int) -> None:
         await self._run(self.commands.make_turn_const_speed(self._id, rpm))

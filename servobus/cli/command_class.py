@@ -19,7 +19,8 @@ import click
 
 from servobus.cli.context import CliContext
 
-NUMBER = re.compile(r"-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
+#: A negative number, optionally with a unit suffix (``-120``, ``-2.5rev``, ``-90deg``).
+NUMBER = re.compile(r"-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(counts?|revs?|deg|cmd)?")
 
 
 def _set_json(ctx: click.Context, param: click.Parameter, value: bool) -> None:

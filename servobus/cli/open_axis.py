@@ -35,8 +35,6 @@ def open_axis(ctx: CliContext, drive_id: int | None = None) -> Iterator[Axis]:
     from servobus.axis import connect  # lazy: keeps `servobus decode` free of the client
 
     url = parse_url(ctx.url)
-    if not ctx.url_given:
-        note_builtin_once()
     wanted = ctx.drive_id if drive_id is None else drive_id
     check_reachable(url)
     options: dict[str, object] = {}
@@ -57,6 +55,8 @@ def open_axis(ctx: CliContext, drive_id: int | None = None) -> Iterator[Axis]:
             axis.close()
         raise
     axis.close()
+    if not ctx.url_given:  # after success only: a failure keeps its one stderr line
+        note_builtin_once()
 
 
 _noted: list[bool] = []
@@ -66,8 +66,8 @@ def note_builtin_once() -> None:
     """One stderr line: no drive was named, so the command runs on the built-in one."""
     if not _noted:
         _noted.append(True)
-        note("note: no drive named (--url, --port, --can or SERVOBUS_URL): using the built-in "
-             "virtual drive, which stops when this command ends")
+        note("note: no drive named (--url, --port, --can or SERVOBUS_URL): this ran on the "
+             "built-in virtual drive, which is gone now")
 
 
 def connection_label(ctx: CliContext, axis: Axis | None = None) -> str:

@@ -97,7 +97,9 @@ class ReachableParam(_StrType):
         names = table[protocol]
         if text in names:
             return text
-        if any(text in other for other in table.values()):
+        fam = family_for(ctx.find_object(CliContext) if ctx is not None else None)
+        in_family = fam is not None and any(p.name == text for p in fam.params)
+        if in_family or any(text in other for other in table.values()):
             self.fail(f"{text} is not reachable over {protocol}; choose from: "
                       f"{', '.join(names)}", param, ctx)
         self.fail(f"unknown parameter {text!r}; choose from: {', '.join(names)}", param, ctx)

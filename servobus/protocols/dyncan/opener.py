@@ -36,7 +36,8 @@ def can_spec(url: DriveUrl) -> tuple[str, dict[str, str]]:
 
 async def open_axis(url: DriveUrl, *, drive_id: int | None = None, **keywords: Any) -> DynCanAxis:
     options = merge_options(url, keywords, OPTIONS)
-    drive_id = c.MIN_DRIVE_ID if drive_id is None else check_drive_id(drive_id)
+    drive_id = c.MIN_DRIVE_ID if drive_id is None else check_drive_id(drive_id,
+                                                                    allow_broadcast=False)
     spec, extra = can_spec(url)
     client = await open_can_client(spec, **extra, **options)  # type: ignore[arg-type]
     return DynCanAxis(client, drive_id)
