@@ -13,7 +13,8 @@ Decisions: a range-valid command the drive cannot carry out now (servo free, ala
 mode for a position command) is still a successful write: the DYN5 reports execution in
 the status word, not in the reply. A drive parameter the core's table refuses although the
 DYN5 range allows it (GEAR_NUM / LINE_NUM below 500: the core models DYN2-class limits)
-answers 05 like an out-of-range write.
+answers 05 like an out-of-range write. The torque-mode speed limit (0x27) is stored and
+read back but not enforced: the drive core's torque servo has no speed limit.
 """
 
 from __future__ import annotations
