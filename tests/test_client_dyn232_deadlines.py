@@ -108,7 +108,7 @@ async def test_ping_timeout_is_one_attempt_on_time(path: str) -> None:
 @pytest.mark.parametrize("retries", [0, 2])
 @arun
 async def test_connect_timeout_and_retries_options_on_time(retries: int) -> None:
-    ax = await connect_async("sim://dyn2?fast=1", drive_id=ABSENT_ID, timeout=DEADLINE_S,
+    ax = await connect_async("sim://dyn2?fast=1&ids=0", drive_id=ABSENT_ID, timeout=DEADLINE_S,
                              retries=retries)
     try:
         async def status_times_out() -> None:
@@ -121,7 +121,7 @@ async def test_connect_timeout_and_retries_options_on_time(retries: int) -> None
 
 
 def test_sync_connect_timeout_on_time() -> None:
-    ax = connect("sim://dyn2?fast=1", drive_id=ABSENT_ID, timeout=DEADLINE_S, retries=1)
+    ax = connect("sim://dyn2?fast=1&ids=0", drive_id=ABSENT_ID, timeout=DEADLINE_S, retries=1)
     try:
         expected = 2 * DEADLINE_S
         times: list[float] = []

@@ -99,7 +99,7 @@ async def test_paced_round_trip_takes_the_wire_time() -> None:
 
 @arun
 async def test_absent_id_on_sim_times_out() -> None:
-    core = await connect_async(FAST, drive_id=7, retries=1, timeout=0.02)
+    core = await connect_async(FAST + "&ids=0", drive_id=7, retries=1, timeout=0.02)
     try:
         assert not await core.ping(timeout=0.02)
         with pytest.raises(DriveTimeout):
