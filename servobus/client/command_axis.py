@@ -12,6 +12,7 @@ import asyncio
 from collections.abc import Callable
 from typing import Any, ClassVar, Protocol
 
+from servobus.client import checks
 from servobus.client.axis import AsyncAxis, AxisTraceHook
 from servobus.client.eeprom_guard import EepromGuard
 from servobus.drive.registers import DriveConfig, DriveStatus
@@ -142,7 +143,12 @@ class CommandAxis(AsyncAxis):
     def _check_param(self, name: str, value: int) -> None:
         self.commands.make_set_param(self._id, name, value)  # range + reachable here
 
+    def _check_move(self, value: int, *, relative: bool) -> None:
+        build = self.commands.make_move_relative if relative else self.commands.make_move_absolute
+        build(self._id, value)  # type + range, nothing sent
+
     async def read_param(self, name: str) -> int:
+        checks.param_name(name)  # before it keys the read cache
         return int(await self._run(self._read(self.commands.make_read_param, name)))
 
     async def write_param(self, name: str, value: int) -> None:

@@ -12,7 +12,8 @@ URL dispatch:
 * ``can="INTERFACE:CHANNEL"`` -> ``servobus.client.dyncan.open_can_axis``.
 
 Options (keywords) for DYN232M: ``retries`` (reads only, default 2), ``turnaround_s``,
-``query_interval_s``, ``eeprom_guard`` (an EepromGuard), ``transport`` ("auto", "tcp",
+``query_interval_s``, ``eeprom_guard`` (an EepromGuard), ``late_reply_s`` (the late-reply
+drain after a timeout, servobus.client.late_replies), ``transport`` ("auto", "tcp",
 "pyserial"). ``timeout`` is the per-attempt reply deadline (default: from the baud rate).
 
 Query pacing default (servobus decision): 0.02 s (50 queries/s, NOTES.md) on serial device
@@ -34,7 +35,8 @@ from servobus.transport.base import ByteStream
 
 DEFAULT_URL = "sim://dyn2"
 HARDWARE_QUERY_INTERVAL_S = 0.02  # NOTES.md: real drives may drop queries above ~50/s
-_CLIENT_OPTIONS = ("retries", "turnaround_s", "query_interval_s", "eeprom_guard")
+_CLIENT_OPTIONS = ("retries", "turnaround_s", "query_interval_s", "eeprom_guard",
+                   "late_reply_s")
 
 
 async def connect_async(
@@ -61,7 +63,11 @@ async def connect_async(
 
     check_drive_id(drive_id)  # before opening anything
     stream = await open_stream(url, baud=baud, transport=transport, drive_id=drive_id)
-    client = AsyncDyn232Client(stream, baud=baud, timeout=timeout, **client_kw)
+    try:
+        client = AsyncDyn232Client(stream, baud=baud, timeout=timeout, **client_kw)
+    except BaseException:  # a bad option (ArgumentRangeError): nothing sent, port released
+        await stream.close()
+        raise
     return Dyn232Axis(client, drive_id)
 
 
