@@ -108,6 +108,23 @@ async def test_drain_waits_at_most_late_reply_s_for_a_lost_reply(path: str) -> N
         assert time.monotonic() - t0 < LATE_S - EARLY_S
 
 
+@pytest.mark.parametrize("path", PATHS)
+@arun
+async def test_old_debts_of_other_kinds_expire_by_themselves(path: str) -> None:
+    """A scan leaves a debt per absent id; once their quiet time is over they are given up
+    without anyone reading those ids again (the receive path is back to its fast form)."""
+    async with rig((0,), push=PATHS[path], timeout=0.01, retries=0,
+                   late_reply_s=LATE_S / 3) as r:
+        for drive_id in (5, 6, 7):
+            assert not await r.axis(drive_id).ping(timeout=0.01)
+        assert r.client.late_replies  # three debts open
+        t0 = time.monotonic()
+        while r.client.late_replies:
+            await r.axis(0).position()  # another kind: never waits
+            assert time.monotonic() - t0 < LATE_S + MARGIN_S
+        assert r.client.late_replies.given_up == 3
+
+
 @arun
 async def test_drain_fails_at_once_when_the_link_dies() -> None:
     async with rig((0,), push=True, timeout=DEADLINE_S, retries=0, late_reply_s=10.0) as r:

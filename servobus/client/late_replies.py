@@ -58,23 +58,34 @@ class LateReplies(Generic[K]):
         self.given_up = 0  # owed replies that never came within the quiet time
         self.drains = 0  # reads that waited for owed replies before sending
         self._debts: dict[K, _Debt] = {}
+        self._latest = 0.0  # the latest quiet_until of any debt: past it, all are given up
         self._waiters: list[asyncio.Future[None]] = []
         self._describe = describe
 
     def __bool__(self) -> bool:
-        return bool(self._debts)
+        """Any debt still open. Once every quiet time has passed all are given up, so a
+        timeout long ago costs the receive path nothing (scans leave many keys owed)."""
+        if not self._debts:
+            return False
+        if time.monotonic() > self._latest:
+            for key, debt in list(self._debts.items()):
+                self._give_up(key, debt)
+            return False
+        return True
 
     def owe(self, key: K) -> None:
         """An attempt for ``key`` timed out: its reply may still come."""
         if self.late_reply_s <= 0:
             return
         now = time.monotonic()
+        until = now + self.late_reply_s
+        self._latest = max(self._latest, until)
         debt = self._debts.get(key)
         if debt is None:
-            self._debts[key] = _Debt(1, now + self.late_reply_s)
+            self._debts[key] = _Debt(1, until)
         else:
             debt.count += 1
-            debt.quiet_until = max(debt.quiet_until, now + self.late_reply_s)
+            debt.quiet_until = max(debt.quiet_until, until)
 
     def take(self, key: K) -> bool:
         """A reply of ``key`` arrived and no request of its key waits: True if it was owed
@@ -93,6 +104,7 @@ class LateReplies(Generic[K]):
             del self._debts[key]
         else:
             debt.quiet_until = now + self.late_reply_s
+            self._latest = max(self._latest, debt.quiet_until)
         self._wake(None)
         return True
 
