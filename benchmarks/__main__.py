@@ -1,4 +1,9 @@
-"""Run every ``benchmarks/bench_*.py`` module's ``main()`` in name order."""
+"""Run every ``benchmarks/bench_*.py`` module's ``main()`` in name order, then the summary.
+
+Each figure with a target is marked OK or MISS (benchmarks.verdict); the last line counts
+them. Exit status 0 whatever the figures (benchmarks are not tests); a benchmark that
+cannot run is reported as ERROR in the summary and the others still run.
+"""
 
 from __future__ import annotations
 
@@ -7,6 +12,7 @@ import pkgutil
 import sys
 
 import benchmarks
+from benchmarks import verdict
 
 
 def main(argv: list[str]) -> int:
@@ -16,9 +22,13 @@ def main(argv: list[str]) -> int:
     if argv:
         names = [n for n in names if any(a in n for a in argv)]
     for name in names:
-        module = importlib.import_module(f"benchmarks.{name}")
-        module.main()
+        try:
+            module = importlib.import_module(f"benchmarks.{name}")
+            module.main()
+        except Exception as exc:  # reported in the summary; the rest still run
+            print(verdict.error(name, exc))
         print()
+    print(verdict.summary())
     return 0
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import time
 
+from benchmarks.verdict import mark, percent, summary
 from servobus.sim.drive import CONTROL_HZ, VirtualDrive
 
 TICK_S = 0.001  # how often a server calls advance_to() (a front end's event-loop tick)
@@ -74,16 +75,18 @@ def main() -> None:
     print(f"drive core @ {CONTROL_HZ} Hz control rate (pure Python)")
     r_tick = stepped(20.0, TICK_S)
     r_bulk = stepped(20.0, 0.25)
+    verdict = mark("core: 1 drive stepped time", r_tick, at_least=20, show="{:g}x".format)
     print(f"  1 drive, stepped time, advance every {TICK_S * 1000:g} ms: {r_tick:6.1f}x real time"
-          f"  (target >= 20x)  {'OK' if r_tick >= 20 else 'MISSED'}")
+          f"  {verdict}")
     print(f"  1 drive, stepped time, advance every 250 ms:  {r_bulk:6.1f}x real time")
     cpu, lag = realtime(16, 3.0)
-    verdict = "OK" if cpu <= 0.5 else "MISSED"
+    verdict = mark("core: 16 drives real time CPU", cpu, at_most=0.5, show=percent)
     print(f"  16 moving drives, real time, {TICK_S * 1000:g} ms ticks: CPU {cpu * 100:5.1f} %"
-          f" of one core (target <= 50 %) {verdict}; worst lag {lag * 1000:.2f} ms")
+          f" of one core {verdict}; worst lag {lag * 1000:.2f} ms")
     cpu_idle, _ = realtime(16, 1.0, idle=True)
     print(f"  16 idle drives (settled fast path): CPU {cpu_idle * 100:5.1f} % of one core")
 
 
 if __name__ == "__main__":
     main()
+    print(summary())

@@ -8,7 +8,7 @@
    socket echo server (own process, same event-loop type) answering the same byte counts.
    Target >= 80 %.
 
-Run: ``python -m benchmarks`` (all) or ``python benchmarks/bench_dyn232_client.py``.
+Run: ``python -m benchmarks`` (all) or ``python -m benchmarks.bench_dyn232_client``.
 """
 
 from __future__ import annotations
@@ -21,10 +21,11 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+from benchmarks.verdict import mark, percent, summary
 from servobus.axis import connect_async
-from servobus.protocols.dyn232.client import Dyn232Axis
-from servobus.protocols.dyn232 import codec as c
 from servobus.families.dmm import params as P
+from servobus.protocols.dyn232 import codec as c
+from servobus.protocols.dyn232.client import AsyncDyn232Client, Dyn232Axis
 from servobus.transport.trace import ByteCounter
 
 POLL_SECONDS = 2.0
@@ -67,7 +68,7 @@ asyncio.run(main())
 
 async def _open_paced() -> tuple[Dyn232Axis, ByteCounter]:
     core = await connect_async("sim://dyn2")
-    assert isinstance(core, Dyn232Axis)
+    assert isinstance(core, Dyn232Axis) and isinstance(core.client, AsyncDyn232Client)
     counter = ByteCounter()
     core.client.stream.add_trace(counter)
     return core, counter
@@ -89,8 +90,9 @@ async def bench_position_polls() -> float:
     limit = c.BAUD / c.BITS_PER_BYTE / bytes_per_poll
     rate = n / elapsed
     ratio = rate / limit
+    verdict = mark("dyn232 client: paced position polls", ratio, at_least=0.97, show=percent)
     print(f"position polls, paced 38400: {rate:7.1f}/s vs wire limit {limit:7.1f}/s "
-          f"({bytes_per_poll:.0f} bytes/poll) = {ratio:6.1%}  (target >= 97 %)")
+          f"({bytes_per_poll:.0f} bytes/poll) = {ratio:6.1%}  {verdict}")
     return ratio
 
 
@@ -111,15 +113,17 @@ async def bench_param_read() -> float:
         await core.close()
     wire = c.wire_time_s((counter.tx - tx0 + counter.rx - rx0) // PARAM_READS)
     mean = total / PARAM_READS
+    verdict = mark("dyn232 client: full parameter read", mean, at_most=0.025,
+                   show=lambda s: f"{s * 1e3:g} ms")
     print(f"full parameter read (8 + config + status), paced 38400: mean {mean * 1e3:5.2f} ms, "
           f"best {best * 1e3:5.2f} ms, wire time {wire * 1e3:5.2f} ms "
-          f"= {wire / mean:6.1%} of wire speed  (target <= 25 ms)")
+          f"= {wire / mean:6.1%} of wire speed  {verdict}")
     return mean
 
 
 @contextmanager
 def _server(args: list[str]) -> Iterator[tuple[str, int]]:
-    proc = subprocess.Popen(args, stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
         assert proc.stdout is not None
         line = proc.stdout.readline().strip()
@@ -194,7 +198,7 @@ async def _asyncio_floor_rate(host: str, port: int, request: bytes) -> float:
 
 
 def bench_tcp_round_trips() -> float:
-    sim = [sys.executable, "-c", "from servobus.cli.main import main; main()", "sim", "dyn232",
+    sim = [sys.executable, "-m", "servobus", "sim", "dyn232",
            "--fast", "--listen", "tcp://127.0.0.1:0", "--duration", "120"]
     echo = [sys.executable, "-c", _ECHO_SERVER, "120"]
     request = c.encode(0, c.HostFunction.READ_DRIVE_STATUS, 0)
@@ -210,8 +214,9 @@ def bench_tcp_round_trips() -> float:
     with _server(canned) as (host, port):
         client_only = asyncio.run(_client_rate(host, port, "tcp"))
     ratio = ours / raw
+    verdict = mark("dyn232 client: unpaced TCP round trips", ratio, at_least=0.8, show=percent)
     print(f"unpaced status round trips over TCP: client + simulator {ours:7.0f}/s vs raw "
-          f"socket echo {raw:7.0f}/s = {ratio:6.1%}  (target >= 80 %)")
+          f"socket echo {raw:7.0f}/s = {ratio:6.1%}  {verdict}")
     print(f"  same client, pyserial socket:// {via_pyserial:7.0f}/s = {via_pyserial / raw:6.1%}; "
           f"same client vs a canned-reply server {client_only:7.0f}/s = {client_only / raw:6.1%} "
           f"(client cost alone)")
@@ -229,3 +234,4 @@ def main() -> None:
 
 if __name__ == "__main__":
     main()
+    print(summary())

@@ -8,7 +8,7 @@
    byte counts (both own processes, same client code).
 4. ``Dyn232Line.receive`` alone: packets/s in stepped time (the protocol front end's cost).
 
-Run: ``python benchmarks/bench_dyn232_line.py`` (or ``python -m benchmarks`` if it lists it).
+Run: ``python -m benchmarks`` (all) or ``python -m benchmarks.bench_dyn232_line``.
 """
 
 from __future__ import annotations
@@ -22,15 +22,16 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+from benchmarks.verdict import mark, percent, summary
 from servobus.protocols.dyn232 import codec as c
-from servobus.sim.drive import VirtualDrive
-from servobus.protocols.dyn232.line import Dyn232Line
 from servobus.protocols.dyn232.inprocess import open_sim_stream
+from servobus.protocols.dyn232.line import Dyn232Line
+from servobus.sim.drive import VirtualDrive
 
 SECONDS = 2.0
 FAST_TRIPS = 3000
 H, GR = c.HostFunction, c.GeneralReadSelector
-CLI = [sys.executable, "-c", "from servobus.cli.main import main; main()"]
+CLI = [sys.executable, "-m", "servobus"]
 ECHO = """
 import asyncio, sys
 async def handle(reader, writer):
@@ -102,8 +103,9 @@ def bench_paced_tcp() -> float:
             cpu = (cpu_seconds(pid) - cpu0) / elapsed
     limit = c.BAUD / c.BITS_PER_BYTE / (len(request) + n_reply)
     ratio = n / elapsed / limit
+    verdict = mark("dyn232 line: paced polls over TCP", ratio, at_least=0.97, show=percent)
     print(f"paced polls over TCP (raw host): {n / elapsed:6.1f}/s vs wire limit {limit:6.1f}/s "
-          f"({len(request)}+{n_reply} bytes) = {ratio:6.1%} (target >= 97 %); "
+          f"({len(request)}+{n_reply} bytes) = {ratio:6.1%} {verdict}; "
           f"server CPU {cpu:5.1%} of one core")
     return ratio
 
@@ -127,8 +129,9 @@ async def _inprocess() -> float:
         await stream.close()
     limit = c.BAUD / c.BITS_PER_BYTE / (len(request) + n_reply)
     ratio = n / elapsed / limit
+    verdict = mark("dyn232 line: paced polls in-process", ratio, at_least=0.97, show=percent)
     print(f"paced polls in-process (raw host): {n / elapsed:6.1f}/s vs wire limit {limit:6.1f}/s "
-          f"= {ratio:6.1%} (target >= 97 %); process CPU (host + line) {cpu:5.1%}")
+          f"= {ratio:6.1%} {verdict}; process CPU (host + line) {cpu:5.1%}")
     return ratio
 
 
@@ -183,3 +186,4 @@ def main() -> None:
 
 if __name__ == "__main__":
     main()
+    print(summary())

@@ -7,7 +7,7 @@
    at 500 Hz take - from the model (frame bits incl. worst-case stuffing) and as measured by
    the node side's bus accounting while the client streams for real.
 
-Run: ``python -m benchmarks`` (all) or ``python benchmarks/bench_dyncan.py``.
+Run: ``python -m benchmarks`` (all) or ``python -m benchmarks.bench_dyncan``.
 """
 
 from __future__ import annotations
@@ -20,10 +20,11 @@ from contextlib import contextmanager
 
 import can
 
-from servobus.protocols.dyncan.client import DynCanAxis, open_can_client
+from benchmarks.verdict import mark, percent, summary
 from servobus.protocols.dyncan import codec as c
-from servobus.sim.drive import VirtualDrive
+from servobus.protocols.dyncan.client import DynCanAxis, open_can_client
 from servobus.protocols.dyncan.node import DynCanNetwork, serve
+from servobus.sim.drive import VirtualDrive
 from servobus.transport.can_bus import AsyncCanBus, BitTiming
 
 ROUND_TRIPS = 5000
@@ -174,11 +175,14 @@ def main() -> None:
           f"{ROUND_TRIPS // ROUNDS}, same node):")
     print(f"  python-can raw send+recv (blocking):   {raw:8.0f} transactions/s")
     print(f"  python-can asyncio (Notifier+reader):  {aio:8.0f} transactions/s")
+    verdict = mark("dyncan: client transactions vs python-can raw", ours / raw, at_least=0.8,
+                   show=percent)
     print(f"  servobus client (asyncio, full rules): {ours:8.0f} transactions/s  "
-          f"= {ours / raw * 100:.0f} % of raw (target >= 80 %), "
+          f"= {ours / raw * 100:.0f} % of raw {verdict}, "
           f"{ours / aio * 100:.0f} % of python-can asyncio")
     bench_stream_load()
 
 
 if __name__ == "__main__":
     main()
+    print(summary())

@@ -233,3 +233,22 @@ def test_builtin_drive_takes_the_id_asked_for() -> None:
     assert parse_sim_url("sim://dyn2", default_id=7).ids == (7,)
     assert parse_sim_url("sim://dyn2?ids=2,3", default_id=7).ids == (2, 3)
     assert parse_sim_url("sim://dyn2", default_id=c.BROADCAST_ID).ids == (c.FACTORY_ID,)
+
+
+def test_motion_guard_off_the_main_thread() -> None:
+    """signal.signal only works on the main thread; the guard must still stop the axis."""
+    import threading
+
+    axis, caught = FakeAxis(), []
+
+    def body() -> None:
+        try:
+            with stop_on_interrupt(axis):  # type: ignore[arg-type]
+                raise KeyboardInterrupt
+        except F.Interrupted as exc:
+            caught.append(exc.outcome)
+
+    thread = threading.Thread(target=body)
+    thread.start()
+    thread.join(5)
+    assert caught == [STOPPED] and axis.stops == 1

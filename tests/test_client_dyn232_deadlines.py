@@ -6,6 +6,11 @@ did wait for every attempt) and at most ``dyn232_rig.MARGIN_S`` (40 ms) after it
 enough to catch a deadline that fires 50 ms late, robust on a loaded machine because a run
 that overran is repeated and only the fastest one has to fit (scheduler noise only ever
 makes a run slower, a late timer is late every time). See ``assert_gives_up_on_time``.
+
+The repeated runs read the same register again after a timeout, which would first wait for
+the late reply the timed-out attempts still owe (``late_reply_s``, the late-reply drain):
+these tests turn the drain off (``late_reply_s=0``) to time the attempts alone; the drain's
+own bound is timed in tests/test_client_abuse_stale.py.
 """
 
 from __future__ import annotations
@@ -26,6 +31,8 @@ pytestmark = pytest.mark.timeout(30)
 
 DEADLINE_S = 0.3
 ABSENT_ID = 9  # no drive has it: its requests get silence
+SIM_ONE_DRIVE = "sim://dyn2?fast=1&ids=0"  # one virtual drive, id 0 (not ABSENT_ID)
+NO_DRAIN = 0.0  # late_reply_s: no late-reply drain between the repeated runs
 STATUS_REQUEST_LEN = len(c.encode(0, c.HostFunction.READ_DRIVE_STATUS))
 #: 8N1: start bit + 8 data bits + stop bit per byte (the manual's 38400 8N1 line).
 BITS_PER_BYTE = 1 + 8 + 1
@@ -62,7 +69,8 @@ def test_default_deadline_is_wire_time_of_request_and_longest_reply_plus_turnaro
 @pytest.mark.parametrize("retries", [0, 2])
 @arun
 async def test_explicit_timeout_raises_on_time(path: str, retries: int) -> None:
-    async with rig(push=PATHS[path], timeout=DEADLINE_S, retries=retries) as r:
+    async with rig(push=PATHS[path], timeout=DEADLINE_S, retries=retries,
+                   late_reply_s=NO_DRAIN) as r:
         assert r.uses_push is PATHS[path]
         r.faults.set_rate(Direction.RX, Fault.DROP, 1.0)
         ax = r.axis(0)
@@ -80,7 +88,7 @@ async def test_explicit_timeout_raises_on_time(path: str, retries: int) -> None:
 @pytest.mark.parametrize("baud", [9600, 38400])
 @arun
 async def test_default_deadline_from_baud_rate_raises_on_time(path: str, baud: int) -> None:
-    async with rig(push=PATHS[path], baud=baud, retries=2) as r:
+    async with rig(push=PATHS[path], baud=baud, retries=2, late_reply_s=NO_DRAIN) as r:
         r.faults.set_rate(Direction.RX, Fault.DROP, 1.0)
         ax = r.axis(0)
         per_try = wire_time(STATUS_REQUEST_LEN + 7, baud) + DOCUMENTED_TURNAROUND_S
@@ -95,7 +103,7 @@ async def test_default_deadline_from_baud_rate_raises_on_time(path: str, baud: i
 @pytest.mark.parametrize("path", PATHS)
 @arun
 async def test_ping_timeout_is_one_attempt_on_time(path: str) -> None:
-    async with rig(push=PATHS[path], retries=2) as r:  # ping never retries
+    async with rig(push=PATHS[path], retries=2, late_reply_s=NO_DRAIN) as r:  # no ping retry
         r.faults.set_rate(Direction.RX, Fault.DROP, 1.0)
         ax = r.axis(0)
 
@@ -108,8 +116,8 @@ async def test_ping_timeout_is_one_attempt_on_time(path: str) -> None:
 @pytest.mark.parametrize("retries", [0, 2])
 @arun
 async def test_connect_timeout_and_retries_options_on_time(retries: int) -> None:
-    ax = await connect_async("sim://dyn2?fast=1&ids=0", drive_id=ABSENT_ID, timeout=DEADLINE_S,
-                             retries=retries)
+    ax = await connect_async(SIM_ONE_DRIVE, drive_id=ABSENT_ID, timeout=DEADLINE_S,
+                             retries=retries, late_reply_s=NO_DRAIN)
     try:
         async def status_times_out() -> None:
             with pytest.raises(DriveTimeout):
@@ -121,7 +129,8 @@ async def test_connect_timeout_and_retries_options_on_time(retries: int) -> None
 
 
 def test_sync_connect_timeout_on_time() -> None:
-    ax = connect("sim://dyn2?fast=1&ids=0", drive_id=ABSENT_ID, timeout=DEADLINE_S, retries=1)
+    ax = connect(SIM_ONE_DRIVE, drive_id=ABSENT_ID, timeout=DEADLINE_S, retries=1,
+                 late_reply_s=NO_DRAIN)
     try:
         expected = 2 * DEADLINE_S
         times: list[float] = []

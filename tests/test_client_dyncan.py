@@ -3,14 +3,10 @@
 from __future__ import annotations
 
 import asyncio
-import functools
 import itertools
-from collections.abc import AsyncIterator, Callable, Coroutine
-from contextlib import asynccontextmanager
-from dataclasses import dataclass
-from typing import Any
 
 import pytest
+from dyncan_rig import arun, harness
 
 from servobus.axis.base import AsyncAxis
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveError, DriveTimeout
@@ -18,59 +14,14 @@ from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, DriveConfig
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan import commands as cmds
-from servobus.protocols.dyncan.client import (
-    AsyncDynCanClient,
-    DynCanAxis,
-    open_can_axis,
-    open_can_client,
-)
+from servobus.protocols.dyncan.client import open_can_axis
 from servobus.protocols.dyncan.node import DynCanNetwork, serve
 from servobus.sim.drive import VirtualDrive
-from servobus.sim.realtime import RealtimeClock
 from servobus.transport.base import Direction
 from servobus.transport.can_bus import AsyncCanBus, parse_can_spec
 
-_channels = itertools.count()
+_channels = itertools.count()  # this module's own virtual channels (see also dyncan_rig)
 pytestmark = pytest.mark.timeout(30)
-
-
-def arun(fn: Callable[[], Coroutine[Any, Any, None]]) -> Callable[[], None]:
-    """Run an async test on a fresh event loop (no pytest-asyncio in the venv)."""
-
-    @functools.wraps(fn)
-    def wrapper() -> None:
-        asyncio.run(fn())
-
-    return wrapper
-
-
-@dataclass
-class Harness:
-    network: DynCanNetwork
-    client: AsyncDynCanClient
-    spec: str
-
-    def axis(self, drive_id: int) -> DynCanAxis:
-        return DynCanAxis(self.client, drive_id, owns_client=False)
-
-
-@asynccontextmanager
-async def harness(*ids: int, realtime: bool = False, **client_kw: object
-                  ) -> AsyncIterator[Harness]:
-    spec = f"virtual:servobus-dyncan-test-{next(_channels)}"
-    network = DynCanNetwork([VirtualDrive(i) for i in ids])
-    node_port = await AsyncCanBus.open(spec)
-    clock = RealtimeClock(network.drives) if realtime else None
-    stop = asyncio.Event()
-    server = asyncio.create_task(serve(network, node_port, clock=clock, stop=stop))
-    client = await open_can_client(spec, **client_kw)  # type: ignore[arg-type]
-    try:
-        yield Harness(network, client, spec)
-    finally:
-        await client.close()
-        stop.set()
-        await server
-        await node_port.close()
 
 
 def test_parse_can_spec() -> None:
@@ -284,7 +235,7 @@ async def test_trace_sees_frames() -> None:
 
 @arun
 async def test_open_can_axis_and_broadcast_id_zero() -> None:
-    spec = f"virtual:servobus-dyncan-test-{next(_channels)}"
+    spec = f"virtual:servobus-dyncan-open-{next(_channels)}"
     network = DynCanNetwork([VirtualDrive(5)])
     node_port = await AsyncCanBus.open(spec)
     stop = asyncio.Event()

@@ -7,23 +7,36 @@ once; the logic that combines them (move and wait, confirmed moves, wait_idle, s
 parameter backup) lives here once. :class:`servobus.axis.sync.Axis` runs any AsyncAxis
 synchronously, method for method, without a copy of it.
 
-What a host can know about a move (docs/axis.md): on DYN232M and DYN CAN a motion command
-gets no reply, so ``move_to`` returning means the bytes left the host, not that the drive
-took them. ``confirm=True`` checks afterwards, by status and position, that the drive is
-moving or already on the target, and raises DriveTimeout if not; the command is never
-re-sent (a re-sent relative move would move twice).
+What a host can know about a move (docs/axis.md; DYN2 manual 7.2: motion commands have no
+reply; the same on DYN CAN, section 6):
+
+* ``move_to``/``move_by``/``turn`` return once the command is handed to the medium: the
+  argument was in range and the link was up. They cannot know whether the drive received
+  the packet, was alive (a frozen or powered-off drive, a cable cut after the adapter, a
+  corrupted packet the drive drops all look the same), or started to move.
+* A motion command is never re-sent: a resend could move twice (relative moves) or restart
+  a profile. Reads are retried; motion is not.
+* ``confirm=True`` (or a ``confirm_timeout``) observes the drive after the one send: the
+  move is confirmed when a status read shows it moving (and it was not before), or a
+  position read shows the motor at the target within the in-position window or clearly
+  nearer to it than before. Otherwise DriveTimeout after ``confirm_timeout``, without a
+  resend; the caller decides. A move to where the motor already is cannot be observed: it
+  is confirmed by the position alone. A drive still heading the same way from an earlier
+  command also passes: confirmation means "seen heading to or at the target".
+* ``wait=True`` waits until the drive reports the move done (``wait_idle``); on its own it
+  does not prove that the move was received (a drive that never started is idle too).
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
-import math
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Mapping
 from types import TracebackType
 
+from servobus.axis import checks
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveTimeout
 from servobus.families.base import AxisStatus, Family, ParamInfo
 from servobus.transport.base import Direction
@@ -34,17 +47,10 @@ log = logging.getLogger(__name__)
 AxisTraceHook = Callable[[Direction, object, float], None]
 
 DEFAULT_WAIT_TIMEOUT_S = 30.0
+#: Default deadline of a confirmed move: a drive starts a profile within one servo cycle, so
+#: half a second covers the status reads and their retries on a slow or paced link.
 DEFAULT_CONFIRM_TIMEOUT_S = 0.5
-
-
-def check_timeout(name: str, value: float | None, *, allow_none: bool = True) -> float | None:
-    """A finite, positive number of seconds (or None where allowed); else ArgumentRangeError."""
-    if value is None and allow_none:
-        return None
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) \
-            or value <= 0:
-        raise ArgumentRangeError(f"{name}={value!r} must be a finite number of seconds > 0")
-    return float(value)
+DEFAULT_POLL_S = 0.02
 
 
 def check_int(name: str, value: object) -> int:
@@ -169,48 +175,89 @@ class AsyncAxis(ABC):
         """Degrees -> counts of this axis (rounded half away from zero)."""
         return self.family.degrees_to_counts(degrees)
 
+    def _check_move(self, value: object, *, relative: bool) -> int:
+        """Check a move argument before anything is sent (protocols add their range)."""
+        return check_int("distance" if relative else "position", value)
+
+    async def position_window(self) -> int:
+        """Counts within which the drive reports "in position" (protocols read the drive's)."""
+        return max(1, self.counts_per_rev // 1024)
+
     # ------------------------------------------------------------- shared logic (once)
     async def move_to(self, position: int, *, wait: bool = False, timeout: float | None = None,
-                      confirm: bool = False) -> None:
-        """Move to ``position`` counts; ``wait`` until idle; ``confirm`` the drive took it."""
-        check_int("position", position)
-        wait_s = check_timeout("timeout", timeout)
-        before = await self.position() if confirm else 0
-        await self._send_move_to(position)
-        if confirm:
-            await self._confirm(before, position)
-        if wait:
-            await self.wait_idle(DEFAULT_WAIT_TIMEOUT_S if wait_s is None else wait_s)
+                      confirm: bool = False, confirm_timeout: float | None = None) -> None:
+        """Absolute move to ``position`` counts.
+
+        Returns when the command is sent; the drive never answers a move (module doc:
+        what a host can know). ``confirm=True`` (or ``confirm_timeout``) then verifies that
+        the drive took it (DriveTimeout if not, never re-sent); ``wait=True`` then waits
+        until the move is done (``timeout``, default 30 s).
+        """
+        await self._move(position, False, wait, timeout, confirm, confirm_timeout)
 
     async def move_by(self, distance: int, *, wait: bool = False, timeout: float | None = None,
-                      confirm: bool = False) -> None:
-        """Move by ``distance`` counts; ``wait`` until idle; ``confirm`` the drive took it."""
-        check_int("distance", distance)
-        wait_s = check_timeout("timeout", timeout)
-        before = await self.position() if confirm else 0
-        await self._send_move_by(distance)
-        if confirm:
-            await self._confirm(before, before + distance)
+                      confirm: bool = False, confirm_timeout: float | None = None) -> None:
+        """Relative move by ``distance`` counts; as :meth:`move_to` (never re-sent)."""
+        await self._move(distance, True, wait, timeout, confirm, confirm_timeout)
+
+    async def _move(self, value: int, relative: bool, wait: bool, timeout: float | None,
+                    confirm: bool, confirm_timeout: float | None) -> None:
+        self._check_move(value, relative=relative)
+        wait_s = checks.optional_seconds("timeout", timeout)
+        confirm_s = checks.optional_seconds("confirm_timeout", confirm_timeout)
+        if confirm or confirm_s is not None:
+            await self._confirmed_move(value, relative, DEFAULT_CONFIRM_TIMEOUT_S
+                                       if confirm_s is None else confirm_s)
+        elif relative:
+            await self._send_move_by(value)
+        else:
+            await self._send_move_to(value)
         if wait:
             await self.wait_idle(DEFAULT_WAIT_TIMEOUT_S if wait_s is None else wait_s)
 
-    async def _confirm(self, before: int, target: int,
-                       timeout: float = DEFAULT_CONFIRM_TIMEOUT_S) -> None:
-        """The drive took the move: it is moving, or its position left ``before``, or it is
-        already on ``target``. Never re-sends; DriveTimeout (naming what was seen) if not."""
-        deadline = time.monotonic() + timeout
-        tolerance = max(1, self.counts_per_rev // 1024)
+    async def _confirmed_move(self, value: int, relative: bool, deadline_s: float) -> None:
+        """Read where the drive is, send the move once, then observe that it took it.
+
+        The reads before the send may fail (DriveTimeout, ...): then nothing was sent.
+        """
+        tolerance = await self.position_window()
+        was_busy = (await self.status()).moving
+        start = await self.position()
+        target = start + value if relative else value
+        if relative:
+            await self._send_move_by(value)
+        else:
+            await self._send_move_to(value)
+        await self._confirm(target, start, tolerance, was_busy, deadline_s)
+
+    async def _confirm(self, target: int, start: int, tolerance: int, was_busy: bool,
+                       deadline_s: float) -> None:
+        """Poll status and position until the move shows, the drive alarms (DriveAlarm)
+        or ``deadline_s`` passes (DriveTimeout). Read failures are retried until then."""
+        deadline = time.monotonic() + deadline_s
+        start_gap = abs(start - target)
+        seen = "no reply"
         while True:
-            st = await self.status()
-            self._raise_alarm(st)
-            pos = await self.position()
-            if st.moving or abs(pos - before) > tolerance or abs(pos - target) <= tolerance:
-                return
-            if time.monotonic() >= deadline:
+            try:
+                st = await self.status()
+                self._raise_alarm(st)
+                if st.moving and not was_busy:
+                    return
+                position = await self.position()
+            except DriveTimeout as exc:
+                seen = f"reads failed ({exc})"
+            else:
+                gap = abs(position - target)
+                if gap <= tolerance or gap < start_gap - tolerance:
+                    return
+                seen = f"position {position}, moving={st.moving}"
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
                 raise DriveTimeout(
-                    f"drive {self.drive_id} did not take the move within {timeout:g} s "
-                    f"(position {pos}, target {target}, status {st.as_dict()}); not re-sent")
-            await asyncio.sleep(0.01)
+                    f"drive {self.drive_id} did not take the move to {target} counts "
+                    f"within {deadline_s:g} s (started at {start}; {seen}); the move was "
+                    "sent once and is not re-sent")
+            await asyncio.sleep(min(DEFAULT_POLL_S, remaining))
 
     def _raise_alarm(self, st: AxisStatus) -> None:
         if st.alarm_latched:
@@ -223,15 +270,14 @@ class AsyncAxis(ABC):
         await self.turn(0)
 
     async def wait_idle(self, timeout: float = DEFAULT_WAIT_TIMEOUT_S,
-                        poll: float = 0.02) -> AxisStatus:
+                        poll: float = DEFAULT_POLL_S) -> AxisStatus:
         """Poll status until motion is done and the motor is on position.
 
         Raises DriveAlarm as soon as a latched alarm shows, DriveTimeout when ``timeout``
-        passes.
+        passes. ``timeout`` must be finite and > 0, ``poll`` finite and >= 0.
         """
-        timeout_s = check_timeout("timeout", timeout, allow_none=False)
-        poll_s = 0.0 if poll == 0 else check_timeout("poll", poll, allow_none=False)
-        assert timeout_s is not None and poll_s is not None
+        timeout_s = checks.seconds("timeout", timeout)
+        poll_s = checks.non_negative_seconds("poll", poll)
         deadline = time.monotonic() + timeout_s
         while True:
             st = await self.status()
@@ -261,7 +307,7 @@ class AsyncAxis(ABC):
 
     def _check_param(self, name: str, value: object) -> int:
         """Range-check one parameter write against the family table (protocols add more)."""
-        return self.param_info(name).check(value)
+        return self.param_info(checks.param_name(name)).check(value)
 
     async def __aenter__(self) -> AsyncAxis:
         return self

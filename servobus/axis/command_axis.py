@@ -15,10 +15,12 @@ import asyncio
 from collections.abc import Awaitable, Callable
 from typing import Any, ClassVar, Protocol
 
+from servobus.axis import checks
 from servobus.axis.base import DEFAULT_WAIT_TIMEOUT_S, AsyncAxis, AxisTraceHook, check_int
 from servobus.axis.eeprom_guard import EepromGuard
 from servobus.errors import DriveTimeout, ProtocolError
 from servobus.families.base import AxisStatus, Family, ParamInfo
+from servobus.families.dmm import units as U
 from servobus.families.dmm.family import DYN2, axis_status, counts_to_command
 from servobus.families.dmm.registers import DriveConfig, DriveStatus
 
@@ -208,7 +210,21 @@ class CommandAxis(AsyncAxis):
         self.commands.make_set_param(self._id, name, checked)  # the protocol's own checks
         return checked
 
+    def _check_move(self, value: object, *, relative: bool) -> int:
+        """Type, and range at the GEAR_NUM known so far (the widest, GEAR_NUM's minimum, before
+        it is read): a value no gear can reach is refused before even the gear read."""
+        counts = super()._check_move(value, relative=relative)
+        gear = self._gear_num or self.family.param("gear_num").minimum
+        build = self.commands.make_move_relative if relative else self.commands.make_move_absolute
+        build(self._id, counts_to_command(counts, gear))
+        return counts
+
+    async def position_window(self) -> int:
+        """OnRange (1/16384 rev) in counts: the drive's own in-position window."""
+        return max(1, round(U.onrange_to_counts(await self.read_param("on_range"))))
+
     async def read_param(self, name: str) -> int:
+        checks.param_name(name)  # before it keys the read cache
         return int(await self._run(self._read(self.commands.make_read_param, name)))
 
     async def write_param(self, name: str, value: int) -> None:

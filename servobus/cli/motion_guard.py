@@ -13,6 +13,7 @@ says on stderr whether the stop was sent. Exit status 130.
 from __future__ import annotations
 
 import signal
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import TYPE_CHECKING
@@ -28,6 +29,11 @@ STOPPED = "motion stopped: the drive ramps down at Max Accel and holds position"
 
 @contextmanager
 def _signals_ignored() -> Iterator[None]:
+    """Hold further Ctrl-C/SIGTERM off while the stop goes out (main thread only: elsewhere
+    Python delivers no signals anyway)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
     previous = {sig: signal.signal(sig, signal.SIG_IGN) for sig in _SIGNALS}
     try:
         yield

@@ -23,6 +23,8 @@ Public additions beyond the DYN232M set (contract for the other front ends and t
 * ``set_speed_accel_group(max_speed, max_accel) -> bool``: DYN CAN Set_Param_Group2. 0 leaves
   a value unchanged; any other value outside 1..127 rejects the whole write (False). The
   first 10 such writes after power-on go to EEPROM, later ones to RAM only.
+* ``set_torque_mode(bool)`` / ``torque_command(amps) -> bool``: DYN5 network torque mode
+  (RAM only); the current reference is clipped by the torque limit.
 * Inputs: ``input_pulses(count, seconds=0.0)`` (pulses spread over ``seconds``; 4 x GEAR_NUM
   per rev; needs CW/CCW or Pulse/Dir command mode), ``input_pulse_levels(samples,
   seconds=0.0)`` (signal-level (pin6, pin4) samples decoded per ``pulse_format``),
@@ -342,6 +344,24 @@ class VirtualDrive:
             return False
         self._ptp_limits()
         self._engine.run_speed(U.rpm_to_counts_per_s(rpm), 0.0)
+        return True
+
+    def set_torque_mode(self, torque: bool) -> None:
+        """DYN5 Command Mode Switch: torque servo (True) or position/speed servo (False).
+
+        RAM only, like enable(); the current reference restarts at 0 A."""
+        mode = ServoMode.TORQUE if torque else ServoMode.POSITION
+        if self._config.servo_mode is not mode:
+            self._config = replace(self._config, servo_mode=mode)
+            self._apply_servo()
+
+    def torque_command(self, amps: float) -> bool:
+        """Torque servo current reference in A (+ = towards + / CW), clipped by the torque
+        limit; ignored (False) unless the servo is on in torque mode."""
+        if self.servo_free or self._config.servo_mode is not ServoMode.TORQUE:
+            return False
+        self._engine.speed_target = float(amps)
+        self._engine.wake()
         return True
 
     def square_wave(self, amplitude: int) -> bool:

@@ -34,7 +34,8 @@ class ByteStream(Protocol):
     async def read(self, max_bytes: int = 4096) -> bytes:
         """Wait for at least one byte; return what is available (up to ``max_bytes``).
 
-        Raises ``ConnectionError`` when the stream is closed.
+        Raises :class:`~servobus.errors.ConnectionLost` (a ``ConnectionError``) when the
+        stream is closed or the medium failed; ``write`` does the same.
         """
 
     def discard_input(self) -> None:

@@ -4,10 +4,11 @@ The fault-injecting pair, pyserial ports and the in-process ``sim://`` line all 
 input as callbacks on the loop thread. :class:`BufferedInput` is the one implementation of
 what follows from that: the input buffer and its ready event (``read()``,
 ``discard_input()``), the closed flag and a medium failure (a pending ``read()`` raises
-``ConnectionError``), and the fan-out to trace hooks. :class:`PushInput` adds the optional
-push capability (``set_receiver``, see ``transport.base.PushByteStream``); streams that do
-not offer it (pyserial, the pull-only pair) derive from :class:`BufferedInput` alone, so
-``transport.base.set_receiver`` sees that they have none.
+:class:`~servobus.errors.ConnectionLost` at once), and the fan-out to trace hooks.
+:class:`PushInput` adds the optional push capability (``set_receiver``, see
+``transport.base.PushByteStream``); streams that do not offer it (pyserial, the pull-only
+pair) derive from :class:`BufferedInput` alone, so ``transport.base.set_receiver`` sees that
+they have none.
 
 Subclasses call :meth:`_received` for every chunk that arrives, :meth:`_fail` when the
 medium breaks and :meth:`_mark_closed` from their ``close()``; they implement ``write()``
@@ -19,13 +20,14 @@ from __future__ import annotations
 import asyncio
 import time
 
+from servobus.errors import ConnectionLost
 from servobus.transport.base import ByteReceiver, Direction, TraceHook
 
 
 class BufferedInput:
     """Input buffer + ready event + closed flag + trace fan-out (+ receiver slot)."""
 
-    #: ``ConnectionError`` text of a read on a closed stream / after a medium failure.
+    #: ``ConnectionLost`` text of a read on a closed stream / after a medium failure.
     closed_text = "stream is closed"
     failed_text = "stream failed"
 
@@ -70,9 +72,9 @@ class BufferedInput:
         buf = self._buf
         while not buf:
             if self._closed:
-                raise ConnectionError(self.closed_text)
+                raise ConnectionLost(self.closed_text)
             if self._failure is not None:
-                raise ConnectionError(f"{self.failed_text}: {self._failure}")
+                raise ConnectionLost(f"{self.failed_text}: {self._failure}")
             self._ready.clear()
             self._before_wait()
             await self._ready.wait()
@@ -85,7 +87,7 @@ class BufferedInput:
 
     # ------------------------------------------------------------- end of the stream
     def _fail(self, error: BaseException) -> None:
-        """The medium broke: once the buffer is drained, ``read()`` raises ConnectionError."""
+        """The medium broke: once the buffer is drained, ``read()`` raises ConnectionLost."""
         self._failure = error
         self._ready.set()
         self._hang_up()

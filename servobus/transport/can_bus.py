@@ -14,12 +14,14 @@ Transports move frames only: this module knows nothing about DYN CAN function co
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
-from servobus.errors import ArgumentRangeError
+from servobus.errors import ArgumentRangeError, ConnectionLost
 from servobus.transport.base import Direction
 
 SOCKETCAND_DEFAULT_CHANNEL = "can0"
@@ -50,7 +52,8 @@ class FramePort(Protocol):
     async def recv(self, timeout: float | None = None) -> CanFrame | None:
         """Next frame from the bus, or None when ``timeout`` passes.
 
-        Raises ``ConnectionError`` when the port is closed.
+        Raises :class:`~servobus.errors.ConnectionLost` when the port is closed or failed
+        (``send`` too).
         """
 
     def add_trace(self, hook: FrameTraceHook) -> None:
@@ -163,6 +166,44 @@ def open_bus(spec: str, **options: Any) -> Any:
     return can.Bus(**parse_can_spec(spec, **options))
 
 
+def _watch_socketcand_eof(bus: Any, on_eof: Callable[[BaseException], object]) -> None:
+    """Make python-can's socketcand client notice that the daemon hung up.
+
+    Its receive loop reads ``b""`` from a closed socket as "no frame yet" and spins: a read
+    waiting for a reply would only fail at its deadline, sends fail later still. When its
+    ``_recv_internal`` returns no frame, a non-blocking ``MSG_PEEK`` tells an idle socket
+    (would block) from a closed one (``b""``); then ``on_eof`` is called once (from the
+    Notifier thread) and the receive loop idles instead of spinning. Uses python-can's
+    private socket attribute; without it (another version) nothing changes.
+    """
+    sock = getattr(bus, "_SocketCanDaemonBus__socket", None)
+    inner = getattr(bus, "_recv_internal", None)
+    if not isinstance(sock, socket.socket) or inner is None:
+        return
+    ended: list[BaseException] = []
+
+    def recv_internal(timeout: float | None) -> Any:
+        if ended:
+            time.sleep(NOTIFIER_POLL_S if timeout is None else min(timeout, NOTIFIER_POLL_S))
+            return None, False
+        try:
+            result = inner(timeout)
+            if result[0] is not None:
+                return result
+            if sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) != b"":
+                return result
+            error: BaseException = ConnectionLost("socketcand closed the connection")
+        except BlockingIOError:
+            return None, False
+        except Exception as exc:  # the socket is gone, or python-can's CanError
+            error = exc
+        ended.append(error)
+        on_eof(error)
+        return None, False
+
+    bus._recv_internal = recv_internal
+
+
 class _QueueListener:
     """python-can listener (duck-typed) feeding an asyncio queue on the loop thread."""
 
@@ -196,10 +237,13 @@ class AsyncCanBus:
         self._queue: asyncio.Queue[CanFrame | BaseException] = asyncio.Queue()
         self._traces: list[FrameTraceHook] = []
         self._closed = False
+        self._failure: ConnectionLost | None = None
         self._receiver: FrameReceiver | None = None
         self.pacer = BusPacer(timing) if timing is not None else None
+        self._loop = loop = asyncio.get_running_loop()
         self._notifier = can.Notifier(bus, [_QueueListener(self)], timeout=NOTIFIER_POLL_S,
-                                      loop=asyncio.get_running_loop())
+                                      loop=loop)
+        _watch_socketcand_eof(bus, self._fail_threadsafe)
 
     @classmethod
     async def open(cls, spec: str, *, timing: BitTiming | None = None, **options: Any
@@ -224,18 +268,30 @@ class AsyncCanBus:
         else:
             self._queue.put_nowait(frame)
 
+    def _fail_threadsafe(self, exc: BaseException) -> None:
+        with contextlib.suppress(RuntimeError):  # the loop is already closed
+            self._loop.call_soon_threadsafe(self._fail, exc)
+
     def _fail(self, exc: BaseException) -> None:
+        """The bus broke (python-can's Notifier met an error receiving): every later call
+        raises ConnectionLost, and a receiver or a waiting ``recv`` hears of it at once."""
+        if self._failure is not None or self._closed:
+            return
+        self._failure = ConnectionLost(f"CAN bus failed: {exc}")
         if self._receiver is not None:
             self._receiver(None)
-        self._queue.put_nowait(ConnectionError(f"CAN bus failed: {exc}"))
+        self._queue.put_nowait(self._failure)
 
     def set_receiver(self, receiver: FrameReceiver) -> None:
         """Push every frame to ``receiver`` (on the loop) instead of the recv queue."""
         self._receiver = receiver
 
     async def recv(self, timeout: float | None = None) -> CanFrame | None:
-        if self._closed and self._queue.empty():
-            raise ConnectionError("CAN bus is closed")
+        if self._queue.empty():
+            if self._closed:
+                raise ConnectionLost("CAN bus is closed")
+            if self._failure is not None:
+                raise self._failure
         try:
             item = self._queue.get_nowait()
         except asyncio.QueueEmpty:
@@ -265,14 +321,16 @@ class AsyncCanBus:
     # -------------------------------------------------------------- send side
     async def send(self, arbitration_id: int, data: bytes) -> None:
         if self._closed:
-            raise ConnectionError("CAN bus is closed")
+            raise ConnectionLost("CAN bus is closed")
+        if self._failure is not None:
+            raise self._failure
         if self.pacer is not None:
             await self.pacer.wait_sent(len(data))
         msg = self._can.Message(arbitration_id=arbitration_id, data=data, is_extended_id=False)
         try:
             self.bus.send(msg)
-        except self._can.CanError as exc:
-            raise ConnectionError(f"CAN send failed: {exc}") from exc
+        except (self._can.CanError, OSError) as exc:  # socketcand: a broken TCP socket
+            raise ConnectionLost(f"CAN send failed: {exc}") from exc
         if self._traces:
             frame = CanFrame(arbitration_id, bytes(data), time.time())
             now = time.monotonic()
@@ -286,7 +344,7 @@ class AsyncCanBus:
         if self._closed:
             return
         self._closed = True
-        self._queue.put_nowait(ConnectionError("CAN bus is closed"))  # wake a waiting recv
+        self._queue.put_nowait(ConnectionLost("CAN bus is closed"))  # wake a waiting recv
         if self._receiver is not None:
             self._receiver(None)
         await asyncio.to_thread(self._notifier.stop, NOTIFIER_POLL_S * 3)

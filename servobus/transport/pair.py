@@ -19,6 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
 
+from servobus.errors import ArgumentRangeError, ConnectionLost
 from servobus.transport.base import Direction
 from servobus.transport.buffered import BufferedInput, PushInput
 
@@ -48,10 +49,15 @@ class Manipulator:
     seed: int | None = None
     rates: dict[Direction, dict[Fault, float]] = field(default_factory=dict)
     delay_s: float = 0.005  # used by random DELAY and SPLIT gaps
+    #: When set, a random DELAY lasts a uniform draw in [delay_s, delay_max_s] (jitter).
+    delay_max_s: float | None = None
     custom: CustomHook | None = None
     counts: dict[Fault, int] = field(default_factory=lambda: dict.fromkeys(Fault, 0))
 
     def __post_init__(self) -> None:
+        if self.delay_max_s is not None and not self.delay_s <= self.delay_max_s:
+            raise ArgumentRangeError(
+                f"delay_max_s={self.delay_max_s} must be >= delay_s={self.delay_s}")
         self._rng = random.Random(self.seed)
         self._script: dict[Direction, deque[_Scripted]] = {d: deque() for d in Direction}
 
@@ -98,6 +104,8 @@ class Manipulator:
         for fault, p in self.rates.get(direction, {}).items():
             if p > 0 and self._rng.random() < p:
                 seconds = self.delay_s if fault in (Fault.DELAY, Fault.SPLIT) else 0.0
+                if fault is Fault.DELAY and self.delay_max_s is not None:
+                    seconds = self._rng.uniform(self.delay_s, self.delay_max_s)
                 return self._do(fault, data, seconds)
         return [(0.0, data)]
 
@@ -137,7 +145,7 @@ class PairStream(BufferedInput):
 
     async def write(self, data: bytes) -> None:
         if self._closed:
-            raise ConnectionError("stream is closed")
+            raise ConnectionLost("stream is closed")
         data = bytes(data)
         self.bytes_written += len(data)
         direction = self._out_direction

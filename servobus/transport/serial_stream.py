@@ -17,7 +17,7 @@ from typing import Any
 
 import serial
 
-from servobus.errors import ServobusError
+from servobus.errors import ConnectionLost, ServobusError
 from servobus.transport.base import Direction
 from servobus.transport.buffered import BufferedInput
 
@@ -87,15 +87,16 @@ class SerialStream(BufferedInput):
     # ------------------------------------------------------------- ByteStream
     async def write(self, data: bytes) -> None:
         if self._closed:
-            raise ConnectionError("stream is closed")
+            raise ConnectionLost("stream is closed")
         if self._traces:
             self._trace(Direction.TX, bytes(data))
         try:
             self._port.write(data)
         except serial.SerialTimeoutException as exc:
-            raise ConnectionError(f"serial write timed out: {exc}") from exc
+            raise ConnectionLost(f"serial write timed out: {exc}") from exc
         except (serial.SerialException, OSError) as exc:
-            raise ConnectionError(f"serial write failed: {exc}") from exc
+            self._fail(exc)  # a pending or later read() fails at once too
+            raise ConnectionLost(f"serial write failed: {exc}") from exc
 
     async def close(self) -> None:
         if not self._mark_closed():

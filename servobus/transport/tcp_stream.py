@@ -16,7 +16,7 @@ import socket
 import time
 from urllib.parse import urlsplit
 
-from servobus.errors import ServobusError
+from servobus.errors import ConnectionLost, ServobusError
 from servobus.transport.base import ByteReceiver, Direction, TraceHook
 
 WRITE_HIGH_WATER = 65536  # wait for the socket to drain above this many queued bytes
@@ -136,10 +136,16 @@ class TcpStream:
     def set_receiver(self, receiver: ByteReceiver | None) -> None:
         self._protocol.receiver = receiver
 
+    def _lost_text(self) -> str:
+        error = self._protocol.error
+        return "connection closed by peer" if error is None else f"connection lost: {error}"
+
     async def write(self, data: bytes) -> None:
         protocol = self._protocol
-        if self._closed or protocol.lost:
-            raise ConnectionError("stream is closed")
+        if self._closed:
+            raise ConnectionLost("stream is closed")
+        if protocol.lost:
+            raise ConnectionLost(self._lost_text())
         if protocol.traces:
             t = time.monotonic()
             chunk = bytes(data)
@@ -154,11 +160,11 @@ class TcpStream:
         buf = protocol.buf
         while True:
             if self._closed:
-                raise ConnectionError("stream is closed")
+                raise ConnectionLost("stream is closed")
             if buf:
                 break
             if protocol.lost:
-                raise ConnectionError("connection closed by peer")
+                raise ConnectionLost(self._lost_text())
             await protocol.wait_data()
         out = bytes(buf[:max_bytes])
         del buf[:max_bytes]
@@ -171,7 +177,7 @@ class TcpStream:
         if self._closed:
             return
         self._closed = True
-        self._protocol._wake()  # a pending read() raises ConnectionError
+        self._protocol._wake()  # a pending read() raises ConnectionLost
         self._transport.close()
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(asyncio.shield(self._protocol.closed), 2.0)

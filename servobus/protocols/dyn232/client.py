@@ -23,6 +23,16 @@ Transaction rules (the manual gives none; these are servobus decisions):
   is the safe value on hardware; the default 0 is for simulators and fast links. A dropped
   query is still detected (deadline) and retried.
 * EEPROM settings (parameters, config, id) pass the EepromGuard before a byte is sent.
+* Late replies: a reply to a read that timed out can still come and would match the next
+  read of the same kind (id and function are all a reply carries). Each timed-out attempt
+  owes a reply; an owed reply that arrives outside its own call is dropped, and a read of
+  an owed kind first waits until the owed replies came or ``late_reply_s`` passed without
+  one (see :mod:`servobus.axis.late_replies`). So a value is never older than its call,
+  up to that bound; the cost is paid only after a timeout.
+* A dead link (closed, reset, unplugged) raises ConnectionLost, also in a call that waits
+  for a reply when it happens (at once, not at its deadline), and in every call after.
+* Options are checked at construction, per-call ``retries``/``timeout`` at the call
+  (ArgumentRangeError): ``timeout`` > 0 and finite, ``retries`` an int >= 0.
 
 Hot path (a poll is a few hundred microseconds of wire time, so host overhead shows): each
 read Command gets a plan once (request bytes, the reply to match, the parser); replies of
@@ -36,18 +46,22 @@ that only ``read()`` (pyserial, the pair) take the pull loop with the same rules
 from __future__ import annotations
 
 import asyncio
+import logging
 import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
+from servobus.axis import checks
 from servobus.axis.base import AxisTraceHook
 from servobus.axis.command_axis import CommandAxis, CommandSet
 from servobus.axis.eeprom_guard import EepromGuard
+from servobus.axis.late_replies import DEFAULT_LATE_REPLY_S, LateReplies
 from servobus.errors import (
     ArgumentRangeError,
     ChecksumError,
+    ConnectionLost,
     DriveTimeout,
     ProtocolError,
 )
@@ -57,6 +71,8 @@ from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232 import commands as cmds
 from servobus.protocols.dyn232.commands import Command
 from servobus.transport.base import ByteStream, Direction, set_receiver
+
+log = logging.getLogger(__name__)
 
 DEFAULT_TURNAROUND_S = 0.025
 DEFAULT_RETRIES = 2
@@ -69,7 +85,8 @@ _MEMO_PARSERS: frozenset[Callable[[int], Any]] = frozenset(
 class _Plan:
     """What a transaction needs, computed once per read Command."""
 
-    __slots__ = ("command", "drive_id", "memo", "parse", "raw", "retry_safe", "want_fn")
+    __slots__ = ("command", "drive_id", "key", "memo", "parse", "raw", "retry_safe",
+                 "want_fn")
 
     def __init__(self, command: Command, raw: bytes) -> None:
         self.command = command
@@ -77,6 +94,7 @@ class _Plan:
         self.drive_id = command.drive_id
         want = c.reply_function(command.function, command.value)
         self.want_fn = -1 if want is None else int(want)
+        self.key = (self.drive_id, self.want_fn)  # what a reply is matched on
         self.retry_safe = command.retry_safe
         parse = command.parse
         self.parse: Callable[[int], Any] | None = None if parse is cmds._identity else parse
@@ -121,17 +139,18 @@ class AsyncDyn232Client:
         timeout: float | None = None,
         query_interval_s: float = 0.0,
         eeprom_guard: EepromGuard | None = None,
+        late_reply_s: float = DEFAULT_LATE_REPLY_S,
     ) -> None:
-        if retries < 0:
-            raise ArgumentRangeError(f"retries={retries} must be >= 0")
-        if baud <= 0:
-            raise ArgumentRangeError(f"baud={baud} must be positive")
         self.stream = stream
-        self.baud = baud
-        self.retries = retries
-        self.turnaround_s = turnaround_s
-        self.timeout = timeout
-        self.query_interval_s = query_interval_s
+        self.baud = checks.positive_int("baud", baud)
+        self.retries = checks.count("retries", retries)
+        self.turnaround_s = checks.non_negative_seconds("turnaround_s", turnaround_s)
+        self.timeout = checks.optional_seconds("timeout", timeout)
+        self.query_interval_s = checks.non_negative_seconds("query_interval_s",
+                                                            query_interval_s)
+        #: Replies owed by timed-out reads (``late_replies.late``, ``.given_up``).
+        self.late_replies: LateReplies[tuple[int, int]] = LateReplies(
+            checks.non_negative_seconds("late_reply_s", late_reply_s), _describe_key)
         self.guard = eeprom_guard if eeprom_guard is not None else EepromGuard()
         self.stats = LineStats()
         self._framer = c.Framer()
@@ -140,6 +159,7 @@ class AsyncDyn232Client:
         self._hooks: list[AxisTraceHook] = []
         self._last_query = -1e9
         self._closed = False
+        self._dead: ConnectionLost | None = None  # set when closed or the link died
         self._plans: dict[int, _Plan] = {}  # id(command) -> plan (identity checked)
         # Push reception: the transaction waiting for a reply (future + plan), if any.
         self._push = set_receiver(stream, self._on_data)
@@ -174,8 +194,12 @@ class AsyncDyn232Client:
     async def execute(self, command: Command, *, retries: int | None = None,
                       timeout: float | None = None) -> Any:
         """Send ``command``; for reads return the parsed reply, else None."""
-        if self._closed:
-            raise ConnectionError("client is closed")
+        if self._dead is not None:
+            raise ConnectionLost(str(self._dead))
+        if retries is not None:
+            checks.count("retries", retries)
+        if timeout is not None:
+            checks.seconds("timeout", timeout)
         plan = self._plans.get(id(command))
         if plan is None or plan.command is not command:
             if command.kind is c.Kind.INTERNAL:
@@ -210,21 +234,42 @@ class AsyncDyn232Client:
         if self._hooks:
             self._trace(Direction.TX, c.decode(raw))
         self.stats.sent += 1
-        await self.stream.write(raw)
+        try:
+            await self.stream.write(raw)
+        except OSError as exc:
+            raise self._link_failed(exc) from exc
+
+    def _link_failed(self, exc: BaseException) -> BaseException:
+        """``exc`` from the stream as the client raises it; a dead link stays dead."""
+        out = checks.lost(exc, "DYN232M link lost")
+        if isinstance(out, ConnectionLost) and self._dead is None:
+            self._dead = out
+            self.late_replies.hang_up(ConnectionLost(str(out)))
+            log.debug("link lost: %s", out)
+        return out
 
     async def _transact(self, plan: _Plan, retries: int | None,
                         timeout: float | None) -> Any:
         command = plan.command
         n_retries = (self.retries if retries is None else retries) if plan.retry_safe else 0
         per_try = timeout if timeout is not None else self.reply_deadline_s(len(plan.raw))
+        if self._events:
+            self._settle_events()
+        late = self.late_replies
+        if late and late.owed(plan.key):
+            await self._drain(plan.key)
         last: ProtocolError | DriveTimeout | None = None
         for attempt in range(n_retries + 1):
             if attempt:
                 self.stats.retries += 1
+                log.debug("retry %d of %d: %s to drive %d after %s", attempt, n_retries,
+                          command.function.name, command.drive_id, type(last).__name__)
             if self.query_interval_s > 0:
                 await self._pace()
             else:
                 self._last_query = time.monotonic()
+            if late and not self._push:
+                await self._absorb_buffered()
             self._discard_pending()
             try:
                 if self._push:
@@ -232,7 +277,11 @@ class AsyncDyn232Client:
                 else:
                     await self._send(plan.raw)
                     value = (await self._await_reply(command, per_try)).reply_value()
-            except (ChecksumError, DriveTimeout) as exc:
+            except DriveTimeout as exc:
+                late.owe(plan.key)  # its reply may still come: never to a later call
+                last = exc
+                continue
+            except ChecksumError as exc:
                 last = exc
                 continue
             self.stats.replies += 1
@@ -263,7 +312,10 @@ class AsyncDyn232Client:
             if self._hooks:
                 self._trace(Direction.TX, c.decode(plan.raw))
             self.stats.sent += 1
-            await self.stream.write(plan.raw)  # an unpaced sim:// line answers in this call
+            try:
+                await self.stream.write(plan.raw)  # an unpaced sim:// line answers here
+            except OSError as exc:
+                raise self._link_failed(exc) from exc
             if not fut.done():
                 self._deadline = deadline = loop.time() + per_try
                 if self._timer is None or self._timer_at > deadline:
@@ -295,12 +347,20 @@ class AsyncDyn232Client:
 
     def _on_data(self, data: bytes | None) -> None:
         """Receive callback of push streams. Bytes that arrive while no transaction waits
-        are dropped, as ``discard_input()`` drops them before the next request."""
+        pay owed late replies, if any; else they are dropped, as ``discard_input()`` drops
+        them before the next request. ``None``: the stream closed or failed."""
         fut = self._waiting
-        if fut is None or fut.done():
-            return
         if data is None:
-            fut.set_exception(ConnectionError("stream closed while waiting for a reply"))
+            self._link_failed(ConnectionLost("stream closed"))
+            if fut is not None and not fut.done():
+                fut.set_exception(ConnectionLost("stream closed while waiting for a reply"))
+            return
+        if fut is None or fut.done():
+            if self.late_replies:
+                for event in self._framer.feed(data):
+                    self._arrival(event)
+            elif data:
+                log.debug("dropped %d byte(s) received between transactions", len(data))
             return
         plan = self._waiting_plan
         assert plan is not None
@@ -319,7 +379,7 @@ class AsyncDyn232Client:
                         self._trace(Direction.RX, event)
                     fut.set_result(event.reply_value())
                 else:
-                    self._note_stray(event)
+                    self._arrival(event)
             elif isinstance(event, ChecksumError):
                 self._note_stray(event)
                 fut.set_exception(event)
@@ -332,9 +392,21 @@ class AsyncDyn232Client:
             self.stream.discard_input()
         self._framer.reset()
         if self._events:
-            for event in self._events:
-                self._note_stray(event)
-            self._events.clear()
+            self._settle_events()
+
+    def _settle_events(self) -> None:
+        """Packets framed after the last reply: owed late replies or strays."""
+        events = self._events
+        while events:
+            self._arrival(events.popleft())
+
+    def _arrival(self, event: c.FramerEvent) -> None:
+        """A packet (or framing event) that is not the answer of a waiting request."""
+        if type(event) is c.Packet and self.late_replies.take(
+                (event.drive_id, event.function)):
+            self._trace(Direction.RX, event)
+            return
+        self._note_stray(event)
 
     def _note_stray(self, event: c.FramerEvent) -> None:
         self._trace(Direction.RX, event)
@@ -344,6 +416,47 @@ class AsyncDyn232Client:
             self.stats.framing_errors += 1
         else:
             self.stats.unmatched += 1
+        log.debug("stray %s", event)
+
+    # ------------------------------------------------------------- late replies
+    async def _drain(self, key: tuple[int, int]) -> None:
+        """Send nothing for ``key`` until its owed replies came or went quiet."""
+        if self._push:
+            self._framer.reset()
+            await self.late_replies.drain([key])
+            return
+        late = self.late_replies
+        left = late.wait_s([key])
+        if left > 0:
+            late.drains += 1
+            log.debug("waiting up to %.0f ms for late replies %s before sending",
+                      left * 1000, _describe_key(key))
+        while left > 0:
+            try:
+                async with asyncio.timeout(left):
+                    data = await self.stream.read()
+            except TimeoutError:
+                pass
+            except OSError as exc:
+                raise self._link_failed(exc) from exc
+            else:
+                for event in self._framer.iter_feed(data):
+                    self._arrival(event)
+            left = late.wait_s([key])
+
+    async def _absorb_buffered(self) -> None:
+        """Pull streams: frame what is already buffered (owed late replies pay their
+        debt) instead of discarding it unseen. Does not wait for more."""
+        while True:
+            try:
+                async with asyncio.timeout(0):
+                    data = await self.stream.read()
+            except TimeoutError:
+                return
+            except OSError as exc:
+                raise self._link_failed(exc) from exc
+            for event in self._framer.iter_feed(data):
+                self._arrival(event)
 
     async def _await_reply(self, command: Command, per_try: float) -> c.Packet:
         loop = asyncio.get_running_loop()
@@ -357,7 +470,7 @@ class AsyncDyn232Client:
                         if self._hooks:
                             self._trace(Direction.RX, event)
                         return event
-                    self._note_stray(event)
+                    self._arrival(event)
                 elif isinstance(event, ChecksumError):
                     self._note_stray(event)
                     raise event
@@ -371,6 +484,8 @@ class AsyncDyn232Client:
                     data = await self.stream.read()
             except TimeoutError:
                 raise self._timeout(command, per_try) from None
+            except OSError as exc:
+                raise self._link_failed(exc) from exc
             self._events.extend(self._framer.iter_feed(data))
 
     def _timeout(self, command: Command, per_try: float) -> DriveTimeout:
@@ -378,12 +493,15 @@ class AsyncDyn232Client:
         exc = DriveTimeout(f"no reply from drive {command.drive_id} to "
                            f"{command.function.name} within {per_try * 1000:.1f} ms")
         self._trace(Direction.RX, exc)
+        log.debug("%s", exc)
         return exc
 
     async def close(self) -> None:
         if self._closed:
             return
         self._closed = True
+        if self._dead is None:
+            self._dead = ConnectionLost("client is closed")
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
@@ -406,6 +524,11 @@ class AsyncDyn232Client:
                            plane: int = 0, feedrate: int = 1) -> None:
         await self.execute_all(cmds.make_circular_arc(start, end, plane=plane,
                                                       feedrate=feedrate))
+
+
+def _describe_key(key: tuple[int, int]) -> str:
+    drive_id, function = key
+    return f"{c.function_name(function, from_drive=True)} from drive {drive_id}"
 
 
 def _guard_item(command: Command) -> str:

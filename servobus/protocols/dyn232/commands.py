@@ -11,6 +11,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
+from servobus.axis import checks
 from servobus.errors import ArgumentRangeError
 from servobus.families.dmm import params as P
 from servobus.families.dmm.profile import pack_arc_word as pack_arc_word  # one home: drive.profile
@@ -62,7 +63,7 @@ def check_drive_id(drive_id: int) -> int:
     return drive_id
 
 
-def _check_value(function: c.HostFunction, value: int, what: str) -> int:
+def _check_value(function: c.HostFunction, value: object, what: str) -> int:
     spec = c.HOST_SPECS[function]
     if isinstance(value, bool) or not isinstance(value, int):
         raise ArgumentRangeError(f"{what} must be an integer, got {value!r}")
@@ -134,12 +135,20 @@ def make_circular_arc(
     plane 0 = XY, 1 = YZ, 2 = ZX; positive feedrate CW, negative CCW. Servobus packs a
     negative feedrate as plane*256 + F (two's complement addition), decoded symmetrically.
     """
-    if plane not in (0, 1, 2):
+    if isinstance(plane, bool) or plane not in (0, 1, 2):
         raise ArgumentRangeError(f"plane={plane!r} must be 0 (XY), 1 (YZ) or 2 (ZX)")
     _check_feedrate(feedrate, allow_negative=True)
-    words = [_check_value(H.MAKE_CIRCULAR_ARC, v, "arc coordinate") for v in (*start, *end)]
+    points = (_point("start", start), _point("end", end))
+    words = [_check_value(H.MAKE_CIRCULAR_ARC, v, "arc coordinate")
+             for point in points for v in point]
     return [Command(c.BROADCAST_ID, H.MAKE_CIRCULAR_ARC, v, kind=c.Kind.MOTION)
             for v in [*words, pack_arc_word(plane, feedrate)]]
+
+
+def _point(what: str, point: object) -> tuple[object, ...]:
+    if not isinstance(point, tuple | list) or len(point) != 2:
+        raise ArgumentRangeError(f"{what} must be an (x, y) pair, got {point!r}")
+    return tuple(point)
 
 
 # ------------------------------------------------------------------ actions (no reply)
@@ -158,7 +167,7 @@ def make_disable(drive_id: int) -> Command:
 
 # ------------------------------------------------------------------ settings (EEPROM)
 def make_set_param(drive_id: int, name: str, value: int) -> Command:
-    spec = P.spec(name)
+    spec = P.spec(checks.param_name(name))
     set_fn, _ = _param_functions(spec.name)
     return _cmd(drive_id, set_fn, spec.check(value), param=spec.name)
 
@@ -174,7 +183,7 @@ def make_assign_id(drive_id: int, new_id: int) -> Command:
 
 # ------------------------------------------------------------------ reads
 def make_read_param(drive_id: int, name: str) -> Command:
-    spec = P.spec(name)
+    spec = P.spec(checks.param_name(name))
     _, read_fn = _param_functions(spec.name)
     return _cmd(drive_id, read_fn, param=spec.name)
 

@@ -164,7 +164,7 @@ def open_sim_url(url: str, *, drives: Sequence[VirtualDrive] | None = None) -> S
 SIM_OPTIONS: dict[str, type] = {
     "ids": str, "fast": bool, "paced": bool, "state": str, "model": str,
     "timeout": float, "retries": int, "turnaround_s": float, "query_interval_s": float,
-    "eeprom_guard": object,
+    "eeprom_guard": object, "late_reply_s": float,
 }
 
 

@@ -24,7 +24,7 @@ HARDWARE_QUERY_INTERVAL_S = 0.02  # real drives may drop queries above ~50/s (do
 FAST_LINK_SCHEMES = ("loop", "socket", "tcp", "spy", "alt", "hwgrep")
 OPTIONS: dict[str, type] = {
     "baud": int, "timeout": float, "retries": int, "turnaround_s": float,
-    "query_interval_s": float, "transport": str, "eeprom_guard": object,
+    "query_interval_s": float, "transport": str, "eeprom_guard": object, "late_reply_s": float,
 }
 
 

@@ -23,27 +23,49 @@ Transaction rules (servobus decisions; the manual gives none):
   DriveAlarm on that drive's next call (once); Position Direct streaming stops on it.
 * EEPROM writes (config, id, parameter groups 1 and 3) pass the EepromGuard first. Group 2
   (max speed / accel) is exempt: the drive keeps it in RAM after 10 saves per power-on.
+* Late replies: a reply carries its identifier only, so a read that timed out owes its reply
+  to nobody else: each timed-out attempt owes one reply per (drive id, function); an owed
+  frame that arrives while no read of its identifier waits is dropped, and a read of an
+  owed identifier first waits until the owed frames came or ``late_reply_s`` passed
+  without one (:mod:`servobus.axis.late_replies`). A value is never older than its call,
+  up to that bound.
+* A dead bus (closed, socketcand gone, adapter error) raises ConnectionLost, at once in the
+  reads that wait when it happens, and in every call after.
+* Options are checked at construction and per-call ``retries``/``timeout`` at the call
+  (ArgumentRangeError): ``timeout`` > 0 and finite, ``retries`` an int >= 0.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
+from servobus.axis import checks
 from servobus.axis.base import AsyncAxis, AxisTraceHook
 from servobus.axis.command_axis import CommandAxis, CommandSet
 from servobus.axis.eeprom_guard import EepromGuard
-from servobus.errors import ArgumentRangeError, DriveAlarm, DriveError, DriveTimeout, ServobusError
+from servobus.axis.late_replies import DEFAULT_LATE_REPLY_S, LateReplies
+from servobus.errors import (
+    ArgumentRangeError,
+    ConnectionLost,
+    DriveAlarm,
+    DriveError,
+    DriveTimeout,
+    ServobusError,
+)
 from servobus.families.dmm import units as U
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan import commands as cmds
 from servobus.protocols.dyncan.commands import CanCommand
 from servobus.transport.base import Direction
 from servobus.transport.can_bus import AsyncCanBus, CanFrame, FramePort, set_receiver
+
+log = logging.getLogger(__name__)
 
 DEFAULT_TIMEOUT_S = 0.05
 DEFAULT_RETRIES = 2
@@ -84,19 +106,27 @@ def _expire(future: asyncio.Future[c.Frame]) -> None:
         future.set_exception(TimeoutError())
 
 
+def _describe_key(key: tuple[int, int]) -> str:
+    drive_id, function = key
+    return f"{c.function_name(function)} from drive {drive_id}"
+
+
 class AsyncDynCanClient:
     """Executes CanCommands on one CAN bus (any FramePort)."""
 
     def __init__(self, port: FramePort, *, timeout: float | None = None,
                  retries: int = DEFAULT_RETRIES, eeprom_guard: EepromGuard | None = None,
-                 on_alarm: AlarmCallback | None = None) -> None:
-        if retries < 0:
-            raise ArgumentRangeError(f"retries={retries} must be >= 0")
+                 on_alarm: AlarmCallback | None = None,
+                 late_reply_s: float = DEFAULT_LATE_REPLY_S) -> None:
+        checked = checks.optional_seconds("timeout", timeout)
+        self.timeout = DEFAULT_TIMEOUT_S if checked is None else checked
+        self.retries = checks.count("retries", retries)
+        if on_alarm is not None and not callable(on_alarm):
+            raise ArgumentRangeError(f"on_alarm must be callable, got {on_alarm!r}")
+        #: Replies owed by timed-out reads (``late_replies.late``, ``.given_up``).
+        self.late_replies: LateReplies[tuple[int, int]] = LateReplies(
+            checks.non_negative_seconds("late_reply_s", late_reply_s), _describe_key)
         self.port = port
-        self.timeout = DEFAULT_TIMEOUT_S if timeout is None else timeout
-        if self.timeout <= 0:
-            raise ArgumentRangeError(f"timeout={timeout} must be positive")
-        self.retries = retries
         self.guard = eeprom_guard if eeprom_guard is not None else EepromGuard()
         self.stats = BusStats()
         self._alarm_callbacks: list[AlarmCallback] = [on_alarm] if on_alarm else []
@@ -105,6 +135,7 @@ class AsyncDynCanClient:
         self._locks: dict[int, asyncio.Lock] = {}
         self._pending: dict[int, ServobusError] = {}
         self._closed = False
+        self._dead: ConnectionLost | None = None  # set when closed or the bus died
         self._rx_task: asyncio.Task[None] | None = None
         if not set_receiver(port, self._on_frame):  # push: one task switch less per reply
             self._rx_task = asyncio.get_running_loop().create_task(self._receive_loop(),
@@ -129,18 +160,21 @@ class AsyncDynCanClient:
         while True:
             try:
                 raw = await self.port.recv(None)
-            except ConnectionError:
+            except OSError as exc:  # ConnectionLost, or a foreign port's own error
+                self._bus_failed(exc)
                 self._on_frame(None)
                 return
             if raw is not None:
                 self._on_frame(raw)
 
     def _on_frame(self, raw: CanFrame | None) -> None:
-        if raw is None:  # the port closed or failed
-            exc = ConnectionError("CAN bus closed")
+        if raw is None:  # the port closed or failed: every waiting read fails now
+            dead = self._bus_failed(ConnectionLost("CAN bus closed"))
             for w in self._waiters:
                 if not w.future.done():
-                    w.future.set_exception(exc)
+                    w.future.set_exception(ConnectionLost(
+                        f"{dead} while drive {w.drive_id} was to answer "
+                        f"{c.function_name(w.function)}"))
             return
         if raw.is_extended_id or raw.arbitration_id > c.MAX_ARBITRATION_ID:
             self.stats.unmatched += 1
@@ -158,7 +192,13 @@ class AsyncDynCanClient:
                     and not w.future.done() and c.is_reply_shape(frame)):
                 w.future.set_result(frame)
                 return
+        late = self.late_replies
+        if late and c.is_reply_shape(frame) and (
+                late.take((frame.drive_id, frame.function))
+                or late.take((c.BROADCAST_ID, frame.function))):
+            return
         self.stats.unmatched += 1
+        log.debug("unmatched frame %s", frame)
 
     def _drive_error(self, drive_id: int, code: int) -> None:
         if code == c.DriveErrorCode.ALARM:
@@ -195,7 +235,23 @@ class AsyncDynCanClient:
         if self._hooks:
             self._trace(Direction.TX, frame)
         self.stats.sent += 1
-        await self.port.send(*c.encode(frame))
+        try:
+            await self.port.send(*c.encode(frame))
+        except OSError as exc:
+            raise self._bus_failed(exc) from exc
+
+    def _bus_failed(self, exc: BaseException) -> BaseException:
+        """``exc`` from the port as the client raises it; a dead bus stays dead."""
+        out = checks.lost(exc, "CAN bus lost")
+        if isinstance(out, ConnectionLost) and self._dead is None:
+            self._dead = out
+            self.late_replies.hang_up(ConnectionLost(str(out)))
+            log.debug("bus lost: %s", out)
+        return out
+
+    def _check_alive(self) -> None:
+        if self._dead is not None:
+            raise ConnectionLost(str(self._dead))
 
     def _guard(self, command: CanCommand) -> None:
         if command.kind is c.Kind.SETTING and command.guard_item:
@@ -206,8 +262,11 @@ class AsyncDynCanClient:
     async def execute(self, command: CanCommand, *, retries: int | None = None,
                       timeout: float | None = None) -> Any:
         """Send ``command``; for reads return the parsed reply, else None."""
-        if self._closed:
-            raise ConnectionError("client is closed")
+        self._check_alive()
+        if retries is not None:
+            checks.count("retries", retries)
+        if timeout is not None:
+            checks.seconds("timeout", timeout)
         self.raise_pending(command.drive_id)
         self._guard(command)
         if not command.expects_reply:
@@ -224,9 +283,15 @@ class AsyncDynCanClient:
         n_retries = (self.retries if retries is None else retries) if command.retry_safe else 0
         per_try = self.timeout if timeout is None else timeout
         loop = asyncio.get_running_loop()
+        key = (command.drive_id, int(command.function))
+        late = self.late_replies
+        if late:
+            await late.drain(self._owed_keys(key))
         for attempt in range(n_retries + 1):
             if attempt:
                 self.stats.retries += 1
+                log.debug("retry %d of %d: %s to drive %d after a timeout", attempt,
+                          n_retries, command.function.name, command.drive_id)
             waiter = _Waiter(command.drive_id, command.function, loop.create_future())
             self._waiters.append(waiter)
             # A plain timer on the future is cheaper than asyncio.timeout() per transaction.
@@ -236,10 +301,12 @@ class AsyncDynCanClient:
                 reply = await waiter.future
             except TimeoutError:
                 self.stats.timeouts += 1
+                late.owe(key)  # its reply may still come: never to a later call
+                exc = DriveTimeout(f"no reply from drive {command.drive_id} to "
+                                   f"{command.function.name} within {per_try * 1000:.1f} ms")
+                log.debug("%s", exc)
                 if self._hooks:
-                    self._trace(Direction.RX, DriveTimeout(
-                        f"no reply from drive {command.drive_id} to {command.function.name} "
-                        f"within {per_try * 1000:.1f} ms"))
+                    self._trace(Direction.RX, exc)
                 continue
             finally:
                 timer.cancel()
@@ -251,8 +318,17 @@ class AsyncDynCanClient:
             f"{n_retries + 1} attempt(s) of {per_try * 1000:.1f} ms"
         )
 
+    def _owed_keys(self, key: tuple[int, int]) -> list[tuple[int, int]]:
+        """Owed keys whose late frames this read could take for its answer: its own and a
+        broadcast read's of the same function; for a broadcast read, every drive's."""
+        drive_id, function = key
+        if drive_id == c.BROADCAST_ID:
+            return self.late_replies.keys(lambda k: k[1] == function)
+        return [key, (c.BROADCAST_ID, function)]
+
     async def execute_all(self, commands: Iterable[CanCommand]) -> None:
         """Send no-reply commands back to back (checked and guarded first)."""
+        self._check_alive()
         batch = list(commands)
         for command in batch:
             if command.expects_reply:
@@ -278,8 +354,7 @@ class AsyncDynCanClient:
         are range-checked before any of its frames is sent; an alarm push or Drive Error
         for a streamed drive stops the stream with that error.
         """
-        if period <= 0:
-            raise ArgumentRangeError(f"period={period} must be positive")
+        checks.seconds("period", period)
         iters = {cmds.check_drive_id(i, allow_broadcast=False): iter(s)
                  for i, s in steps.items()}
         stats = StreamStats()
@@ -316,6 +391,8 @@ class AsyncDynCanClient:
 
     def start_heartbeat(self, drive_id: int, period: float,
                         on_lost: Callable[[int, BaseException], None]) -> Heartbeat:
+        cmds.check_drive_id(drive_id, allow_broadcast=False)
+        checks.seconds("period", period)
         hb = Heartbeat(self, drive_id, period, on_lost)
         hb.start()
         return hb
@@ -324,6 +401,8 @@ class AsyncDynCanClient:
         if self._closed:
             return
         self._closed = True
+        if self._dead is None:
+            self._dead = ConnectionLost("client is closed")
         await self.port.close()
         if self._rx_task is not None:
             self._rx_task.cancel()
@@ -435,7 +514,11 @@ async def open_can_client(can: str, *, timeout: float | None = None,
     """Open ``can`` ("INTERFACE:CHANNEL"); keywords other than the client's go to can.Bus."""
     client_kw = {k: options.pop(k) for k in _CLIENT_OPTIONS if k in options}
     port = await AsyncCanBus.open(can, **options)
-    return AsyncDynCanClient(port, timeout=timeout, **client_kw)
+    try:
+        return AsyncDynCanClient(port, timeout=timeout, **client_kw)
+    except BaseException:  # a bad option (ArgumentRangeError): nothing sent, bus released
+        await port.close()
+        raise
 
 
 async def open_can_axis(can: str, *, drive_id: int, timeout: float | None = None,

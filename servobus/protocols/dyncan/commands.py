@@ -17,6 +17,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
+from servobus.axis import checks
 from servobus.errors import ArgumentRangeError
 from servobus.families.dmm import params as P
 from servobus.families.dmm.registers import DriveConfig, DriveStatus
@@ -80,16 +81,26 @@ def check_value(function: F, value: int, what: str) -> int:
     return value
 
 
-def _cmd(drive_id: int, function: F, value: int | None = None, *, what: str = "value",
+class _NoData:
+    """Marks a request without a value (reads); a caller's ``None`` is a value and fails."""
+
+
+_NO_DATA = _NoData()
+
+
+def _cmd(drive_id: int, function: F, value: int | _NoData = _NO_DATA, *, what: str = "value",
          parse: Callable[[c.Frame], Any] = _frame_value, guard_item: str | None = None,
          raw: bytes | None = None) -> CanCommand:
+    """Every value a caller gives is checked, ``None`` included (it would encode as 0 and
+    move the motor to 0); only builders of requests without data omit ``value``."""
     spec = c.SPECS[function]
     if spec.kind is Kind.INTERNAL:
         raise ArgumentRangeError(f"{function.name} is internal to DMM; never sent")
     check_drive_id(drive_id)
-    if value is not None:
-        check_value(function, value, what)
-    return CanCommand(c.request(drive_id, function, value, raw=raw), spec.kind, parse,
+    data: int | None = None
+    if not isinstance(value, _NoData):
+        data = check_value(function, value, what)
+    return CanCommand(c.request(drive_id, function, data, raw=raw), spec.kind, parse,
                       guard_item)
 
 
@@ -184,7 +195,7 @@ def make_assign_id(drive_id: int, new_id: int) -> CanCommand:
 
 def group_of(name: str) -> tuple[F, F, int]:
     """(set function, read function, field index) of a parameter reachable over CAN."""
-    spec = P.spec(name)
+    spec = P.spec(checks.param_name(name))
     try:
         return c.PARAM_GROUPS[spec.name]
     except KeyError:
@@ -199,6 +210,8 @@ def make_set_params(drive_id: int, values: Mapping[str, int]) -> list[CanCommand
     (= leave unchanged). Every value is checked before any frame is built."""
     groups: dict[F, list[int]] = {}
     names: dict[F, list[str]] = {}
+    if not isinstance(values, Mapping):
+        raise ArgumentRangeError(f"parameter values must be a mapping, got {values!r}")
     for name, value in values.items():
         set_fn, _, index = group_of(name)
         P.spec(name).check(value)
@@ -212,12 +225,14 @@ def make_set_params(drive_id: int, values: Mapping[str, int]) -> list[CanCommand
 
 
 def make_set_param(drive_id: int, name: str, value: int) -> CanCommand:
-    (command,) = make_set_params(drive_id, {name: value})
+    (command,) = make_set_params(drive_id, {checks.param_name(name): value})
     return command
 
 
 # ------------------------------------------------------------------ reads
 def make_read_group(drive_id: int, function: F) -> CanCommand:
+    if not isinstance(function, F):
+        raise ArgumentRangeError(f"{function!r} is not a DYN CAN function")
     spec = c.SPECS[function]
     if not (spec.kind is Kind.READ and spec.fields):
         raise ArgumentRangeError(f"{function.name} is not a parameter group read")
@@ -279,10 +294,12 @@ def make_read_counter(drive_id: int) -> CanCommand:
     return _cmd(drive_id, F.DIAGNOSTIC_COUNTER, parse=_unsigned)
 
 
+ECHO_LENGTH = 4  # section 6: Echo carries four data bytes and returns them
+
+
 def make_echo(drive_id: int, data: bytes) -> CanCommand:
-    if len(data) != 4:
-        raise ArgumentRangeError(f"echo takes exactly 4 bytes, got {len(data)}")
-    return _cmd(drive_id, F.ECHO, raw=bytes(data), parse=lambda f: f.data)
+    payload = checks.data_bytes("echo", data, ECHO_LENGTH)
+    return _cmd(drive_id, F.ECHO, raw=payload, parse=lambda f: f.data)
 
 
 def broadcast(command: CanCommand) -> CanCommand:

@@ -27,7 +27,7 @@ if TYPE_CHECKING:
 
 SIM_OPTIONS: dict[str, type] = {
     "ids": str, "fast": bool, "state": str, "model": str, "timeout": float, "retries": int,
-    "eeprom_guard": object, "on_alarm": object,
+    "eeprom_guard": object, "late_reply_s": float, "on_alarm": object,
 }
 _channels = itertools.count()
 

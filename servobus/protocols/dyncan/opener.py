@@ -16,7 +16,7 @@ from servobus.protocols.dyncan.client import DynCanAxis, open_can_client
 from servobus.protocols.dyncan.commands import check_drive_id
 
 OPTIONS: dict[str, type] = {
-    "bitrate": int, "timeout": float, "retries": int, "eeprom_guard": object,
+    "bitrate": int, "timeout": float, "retries": int, "eeprom_guard": object, "late_reply_s": float,
     "on_alarm": object,
 }
 

@@ -1,0 +1,596 @@
+"""asyncio EtherNet/IP server for the virtual DYN5: moves bytes, keeps time; the adapter decides.
+
+Per drive (one IP address each, like drives on a daisy chain): TCP explicit messaging on
+the encapsulation port (44818) with several sessions at once, UDP ListIdentity /
+ListServices / ListInterfaces on the same port number, Class 1 I/O on UDP (2222). Binds
+127.0.0.1 by default; port 0 picks a free port (the bound ports are in ``tcp_port``,
+``list_port`` and ``udp_port``).
+
+Encapsulation decisions (CIP Vol. 2 ch. 2): a packet with non-zero options is discarded;
+NOP gets no reply; an unknown or TCP-only-on-UDP command answers 0x0001; a length above
+the bound 0x0065 (its data skipped); RegisterSession with another version or options
+0x0069, a second registration on one TCP connection 0x0001, more than ``max_sessions``
+0x0002; a session handle that is not this connection's 0x0064; a SendRRData whose data or
+CPF items do not parse 0x0003. The connection stays open after each of these. The sender
+context is echoed in every reply. SendUnitData is dropped: the DYN5 has no Class 3
+connections (manual 1: explicit messaging is unconnected).
+
+Class 1: T->O frames go every T->O RPI (scheduled on absolute times, a late tick does not
+shift the grid) to the originator's Sockaddr Info 0x8001 when it sent one, else to port
+2222 of its IP. A Forward_Open reply carries a 0x8000 item naming the O->T port when it is
+not 2222. Reset (0x21 = 0xABCD): the reply is sent, then every connection and session is
+dropped, the drive power-cycles and the adapter ignores traffic for ``reset_downtime_s``
+(3 s like the drive; tests shorten it). Every TCP client has a bounded input buffer (one
+packet) and output buffer (``MAX_OUTPUT`` bytes; a client that does not read is cut off).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import ipaddress
+import itertools
+import logging
+import random
+import threading
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, cast
+
+from servobus.errors import ArgumentRangeError, FramingError
+from servobus.families import dyn5
+from servobus.families.dyn5 import Identity
+from servobus.protocols.enip import discovery, io
+from servobus.protocols.enip.adapter import Dyn5Adapter, Origin, Outcome
+from servobus.protocols.enip.connections import IoConnection
+from servobus.protocols.enip.cpf import RRData, SockaddrInfo, UnconnectedMessage
+from servobus.protocols.enip.encap import (
+    MAX_DATA,
+    TCP_PORT,
+    UDP_COMMANDS,
+    Command,
+    EncapFramer,
+    EncapPacket,
+    EncapReject,
+    EncapStatus,
+    RegisterSessionData,
+)
+from servobus.sim.drive import VirtualDrive
+from servobus.sim.eeprom import EepromStore
+from servobus.sim.realtime import RealtimeClock
+
+log = logging.getLogger("servobus.enip")
+
+MAX_OUTPUT = 64 * 1024
+MAX_SESSIONS = 32
+MAX_CLIENTS = 64
+STOP_POLL_S = 0.005
+
+
+@dataclass
+class _Producer:
+    conn: IoConnection
+    next_at: float
+    produce: asyncio.TimerHandle | None = None
+    watchdog: asyncio.TimerHandle | None = None
+
+    def cancel(self) -> None:
+        for handle in (self.produce, self.watchdog):
+            if handle is not None:
+                handle.cancel()
+
+
+@dataclass
+class ServerStats:
+    sessions_opened: int = 0
+    requests: int = 0
+    malformed: int = 0
+    frames_out: int = 0
+    frames_in: int = 0
+    frames_dropped: int = 0
+    watchdog_expiries: int = 0
+    resets: int = 0
+
+
+class EnipServer:
+    """One virtual DYN5 on one IP address."""
+
+    def __init__(self, drive: VirtualDrive, host: str = "127.0.0.1", *,
+                 tcp_port: int = TCP_PORT, udp_port: int = io.UDP_PORT,
+                 clock: RealtimeClock | None = None, identity: Identity = dyn5.IDENTITY,
+                 reset_downtime_s: float = dyn5.RESET_DOWNTIME_S,
+                 max_sessions: int = MAX_SESSIONS, max_data: int = MAX_DATA) -> None:
+        self.drive = drive
+        self.host = host
+        self.tcp_port = tcp_port
+        self.list_port = tcp_port
+        self.udp_port = udp_port
+        self.adapter = Dyn5Adapter(drive, identity=identity)
+        self.identity = identity
+        self.reset_downtime_s = reset_downtime_s
+        self.max_sessions = max_sessions
+        self.max_data = max_data
+        self.stats = ServerStats()
+        self._own_clock = clock is None
+        self.clock = clock if clock is not None else RealtimeClock([drive])
+        self._tcp: asyncio.Server | None = None
+        self._list: asyncio.DatagramTransport | None = None
+        self._io: asyncio.DatagramTransport | None = None
+        self._clients: set[_TcpClient] = set()
+        self._sessions: dict[int, _TcpClient] = {}
+        self._session_ids = itertools.count(random.getrandbits(24) + 1)
+        self._producers: dict[int, _Producer] = {}
+        self._down_until = 0.0
+        self._stop_poll: asyncio.TimerHandle | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+
+    # ---------------------------------------------------------------- lifecycle
+    async def start(self) -> EnipServer:
+        loop = self._loop = asyncio.get_running_loop()
+        self._tcp = await loop.create_server(lambda: _TcpClient(self), self.host,
+                                             self.tcp_port)
+        self.tcp_port = self._tcp.sockets[0].getsockname()[1]
+        try:
+            self._list, _ = await loop.create_datagram_endpoint(
+                lambda: _ListProtocol(self), local_addr=(self.host, self.tcp_port))
+        except OSError:  # the TCP port number is taken on UDP: any free port
+            self._list, _ = await loop.create_datagram_endpoint(
+                lambda: _ListProtocol(self), local_addr=(self.host, 0))
+        self.list_port = self._list.get_extra_info("sockname")[1]
+        self._io, _ = await loop.create_datagram_endpoint(
+            lambda: _IoProtocol(self), local_addr=(self.host, self.udp_port))
+        self.udp_port = self._io.get_extra_info("sockname")[1]
+        if self._own_clock:
+            self.clock.start()
+        log.info("virtual DYN5 on %s: TCP %d, UDP list %d, UDP I/O %d", self.host,
+                 self.tcp_port, self.list_port, self.udp_port)
+        return self
+
+    async def stop(self) -> None:
+        for prod in self._producers.values():
+            prod.cancel()
+        self._producers.clear()
+        if self._stop_poll is not None:
+            self._stop_poll.cancel()
+        for client in list(self._clients):
+            client.close()
+        for transport in (self._list, self._io):
+            if transport is not None:
+                transport.close()
+        if self._tcp is not None:
+            self._tcp.close()
+            with contextlib.suppress(asyncio.TimeoutError):
+                await asyncio.wait_for(self._tcp.wait_closed(), 1.0)
+        if self._own_clock:
+            await self.clock.stop()
+
+    async def __aenter__(self) -> EnipServer:
+        return await self.start()
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.stop()
+
+    @property
+    def session_count(self) -> int:
+        return len(self._sessions)
+
+    @property
+    def down(self) -> bool:
+        return self._now() < self._down_until
+
+    def _now(self) -> float:
+        return self._loop.time() if self._loop is not None else 0.0
+
+    def _sync(self) -> None:
+        t = self.clock.sim_time()
+        if t > self.drive.time:
+            self.drive.advance_to(t)
+
+    # ---------------------------------------------------------------- encapsulation
+    def handle_packet(self, item: EncapPacket | EncapReject, client: _TcpClient | None
+                      ) -> EncapPacket | None:
+        """One packet from TCP (``client``) or UDP (None); the reply, or None for none."""
+        if isinstance(item, EncapReject):
+            self.stats.malformed += 1
+            log.info("encapsulation length %d above %d: rejected", item.header.length,
+                     self.max_data)
+            h = item.header
+            return EncapPacket(h.command, b"", h.session, item.status, h.context)
+        pkt = item
+        if pkt.options:
+            self.stats.malformed += 1
+            log.info("encapsulation packet with options 0x%X discarded", pkt.options)
+            return None
+        cmd = pkt.command
+        if client is None and cmd not in UDP_COMMANDS:
+            return pkt.reply(status=EncapStatus.INVALID_COMMAND)
+        if cmd == Command.NOP:
+            return None
+        if cmd == Command.LIST_IDENTITY:
+            return pkt.reply(discovery.list_identity_reply(self.identity_item()))
+        if cmd == Command.LIST_SERVICES:
+            return pkt.reply(discovery.list_services_reply())
+        if cmd == Command.LIST_INTERFACES:
+            return pkt.reply(discovery.list_interfaces_reply())
+        assert client is not None
+        if cmd == Command.REGISTER_SESSION:
+            return self._register(pkt, client)
+        if cmd == Command.UNREGISTER_SESSION:
+            if pkt.session and pkt.session == client.session:
+                log.info("session 0x%08X unregistered", pkt.session)
+                client.close()
+                return None
+            return pkt.reply(status=EncapStatus.INVALID_SESSION)
+        if cmd in (Command.SEND_RR_DATA, Command.SEND_UNIT_DATA):
+            if not pkt.session or pkt.session != client.session:
+                return pkt.reply(status=EncapStatus.INVALID_SESSION)
+            if cmd == Command.SEND_UNIT_DATA:
+                log.debug("SendUnitData dropped: no Class 3 connections")
+                return None
+            return self._send_rr_data(pkt, client)
+        self.stats.malformed += 1
+        log.info("unsupported encapsulation command 0x%04X", cmd)
+        return pkt.reply(status=EncapStatus.INVALID_COMMAND)
+
+    def identity_item(self) -> discovery.IdentityItem:
+        i = self.identity
+        return discovery.IdentityItem(SockaddrInfo(self.tcp_port, self.host), i.vendor_id,
+                                      i.device_type, i.product_code, i.revision, i.status,
+                                      i.serial_number, i.product_name, i.state)
+
+    def _register(self, pkt: EncapPacket, client: _TcpClient) -> EncapPacket:
+        answer = RegisterSessionData().encode()
+        try:
+            data = RegisterSessionData.decode(pkt.data)
+        except FramingError:
+            return pkt.reply(answer, status=EncapStatus.INVALID_LENGTH)
+        if data.version != RegisterSessionData().version or data.options:
+            return pkt.reply(answer, status=EncapStatus.UNSUPPORTED_PROTOCOL)
+        if client.session:
+            return pkt.reply(answer, status=EncapStatus.INVALID_COMMAND)
+        if len(self._sessions) >= self.max_sessions:
+            return pkt.reply(answer, status=EncapStatus.INSUFFICIENT_MEMORY)
+        session = next(self._session_ids) & 0xFFFF_FFFF
+        client.session = session
+        self._sessions[session] = client
+        self.stats.sessions_opened += 1
+        log.info("session 0x%08X registered by %s", session, client.peer_ip)
+        return pkt.reply(answer, session=session)
+
+    def _send_rr_data(self, pkt: EncapPacket, client: _TcpClient) -> EncapPacket | None:
+        try:
+            rr = RRData.decode(pkt.data)
+            msg = UnconnectedMessage.from_items(rr.items)
+            if rr.interface_handle or not msg.message:
+                raise FramingError("interface handle must be 0 and the message not empty")
+        except FramingError as exc:
+            self.stats.malformed += 1
+            log.info("SendRRData from %s: %s", client.peer_ip, exc)
+            return pkt.reply(status=EncapStatus.INCORRECT_DATA)
+        self.stats.requests += 1
+        self._sync()
+        now = self._now()
+        outcome = self.adapter.handle(msg.message, Origin(client.peer_ip, msg.sockaddr_t_o, now))
+        o_t = None
+        if outcome.opened is not None and self.udp_port != io.UDP_PORT:
+            o_t = SockaddrInfo(self.udp_port, self.host)
+        reply = UnconnectedMessage(outcome.response.encode(), sockaddr_o_t=o_t)
+        self._after(outcome, now)
+        return pkt.reply(RRData(reply.items()).encode())
+
+    def _after(self, outcome: Outcome, now: float) -> None:
+        if outcome.opened is not None:
+            self._start_producer(outcome.opened, now)
+        if outcome.closed is not None:
+            self._stop_producer(outcome.closed)
+        if outcome.reset:
+            assert self._loop is not None
+            self._loop.call_soon(self.reset)
+
+    # ---------------------------------------------------------------- Class 1
+    def _start_producer(self, conn: IoConnection, now: float) -> None:
+        assert self._loop is not None
+        prod = _Producer(conn, now)
+        self._producers[conn.o_t_id] = prod
+        prod.produce = self._loop.call_at(now, self._produce, prod)
+        prod.watchdog = self._loop.call_at(conn.deadline, self._watch, prod)
+
+    def _stop_producer(self, conn: IoConnection) -> None:
+        prod = self._producers.pop(conn.o_t_id, None)
+        if prod is not None:
+            prod.cancel()
+
+    def _produce(self, prod: _Producer) -> None:
+        assert self._loop is not None and self._io is not None
+        conn = prod.conn
+        self._sync()
+        seq, count = conn.next_production()
+        frame = io.input_frame(conn.t_o_id, seq, count, self.adapter.input_image())
+        with contextlib.suppress(OSError):
+            self._io.sendto(frame, conn.destination)
+        self.stats.frames_out += 1
+        now = self._loop.time()
+        prod.next_at += conn.t_o_rpi_s
+        if prod.next_at < now - conn.t_o_rpi_s:  # fell behind by more than a period
+            prod.next_at = now + conn.t_o_rpi_s
+        prod.produce = self._loop.call_at(prod.next_at, self._produce, prod)
+
+    def _watch(self, prod: _Producer) -> None:
+        assert self._loop is not None
+        now = self._loop.time()
+        conn = prod.conn
+        if conn.deadline > now:
+            prod.watchdog = self._loop.call_at(conn.deadline, self._watch, prod)
+            return
+        self.adapter.connections.remove(conn)
+        self._stop_producer(conn)
+        self.stats.watchdog_expiries += 1
+        log.warning("Class 1 connection 0x%08X from %s timed out (%.0f ms without O->T data)",
+                    conn.o_t_id, conn.originator_ip, conn.timeout_s * 1e3)
+        self._sync()
+        self.adapter.connection_lost(now)
+        self._poll_stop()
+
+    def _poll_stop(self) -> None:
+        assert self._loop is not None
+        self._stop_poll = None
+        self._sync()
+        if not self.adapter.poll_stop(self._loop.time()):
+            self._stop_poll = self._loop.call_later(STOP_POLL_S, self._poll_stop)
+
+    def consume_datagram(self, data: bytes, addr: tuple[str, int]) -> None:
+        if self.down:
+            return
+        try:
+            frame = io.IoFrame.decode(data)
+        except FramingError as exc:
+            self.stats.frames_dropped += 1
+            log.debug("malformed Class 1 datagram from %s: %s", addr[0], exc)
+            return
+        self._sync()
+        got = self.adapter.consume(frame, addr[0], self._now())
+        if got is None:
+            self.stats.frames_dropped += 1
+            return
+        self.stats.frames_in += 1
+        prod = self._producers.get(got.connection.o_t_id)
+        if prod is not None and prod.watchdog is not None and (
+                prod.watchdog.when() > got.connection.deadline):  # the first frame: 10 s -> RPI
+            assert self._loop is not None
+            prod.watchdog.cancel()
+            prod.watchdog = self._loop.call_at(got.connection.deadline, self._watch, prod)
+        if got.apply:
+            log.info("O->T from %s: %s", addr[0], "enable" if got.image.enable else "disable")
+
+    # ---------------------------------------------------------------- reset
+    def reset(self) -> None:
+        """0x21 = 0xABCD: drop everything, power-cycle the drive, go quiet for a while."""
+        self.stats.resets += 1
+        self._sync()
+        for conn in self.adapter.reset():
+            self._stop_producer(conn)
+        if self._stop_poll is not None:
+            self._stop_poll.cancel()
+            self._stop_poll = None
+        for client in list(self._clients):
+            client.close()
+        self._down_until = self._now() + self.reset_downtime_s
+        log.warning("virtual DYN5 %s reset: connections dropped, RAM settings lost, "
+                    "EtherNet/IP down for %.1f s", self.host, self.reset_downtime_s)
+
+    # ---------------------------------------------------------------- clients
+    def client_opened(self, client: _TcpClient) -> bool:
+        if self.down or len(self._clients) >= MAX_CLIENTS:
+            return False
+        self._clients.add(client)
+        return True
+
+    def client_closed(self, client: _TcpClient) -> None:
+        self._clients.discard(client)
+        if client.session:
+            self._sessions.pop(client.session, None)
+
+
+class _TcpClient(asyncio.Protocol):
+    def __init__(self, server: EnipServer) -> None:
+        self.server = server
+        self.framer = EncapFramer(server.max_data)
+        self.session = 0
+        self.peer_ip = ""
+        self.transport: asyncio.Transport | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self.transport = cast(asyncio.Transport, transport)
+        peer = transport.get_extra_info("peername")
+        self.peer_ip = peer[0] if peer else ""
+        if not self.server.client_opened(self):
+            self.transport = None
+            cast(asyncio.Transport, transport).abort()
+
+    def data_received(self, data: bytes) -> None:
+        transport = self.transport
+        if transport is None:
+            return
+        for item in self.framer.feed(data):
+            try:
+                reply = self.server.handle_packet(item, self)
+            except Exception:  # a bug must not take the adapter down: log it, drop the client
+                log.exception("internal error on a packet from %s", self.peer_ip)
+                self.close(abort=True)
+                return
+            if self.transport is None:
+                return
+            if reply is not None:
+                transport.write(reply.encode())
+        if transport.get_write_buffer_size() > MAX_OUTPUT:
+            log.info("client %s does not read its replies: disconnected", self.peer_ip)
+            self.close(abort=True)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self.transport is not None:
+            self.server.client_closed(self)
+        self.transport = None
+
+    def close(self, *, abort: bool = False) -> None:
+        transport, self.transport = self.transport, None
+        self.server.client_closed(self)
+        if transport is None:
+            return
+        if abort:
+            transport.abort()
+        else:
+            transport.close()
+
+
+class _ListProtocol(asyncio.DatagramProtocol):
+    def __init__(self, server: EnipServer) -> None:
+        self.server = server
+        self.transport: asyncio.DatagramTransport | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self.transport = cast(asyncio.DatagramTransport, transport)
+
+    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+        if self.server.down or self.transport is None:
+            return
+        try:
+            pkt = EncapPacket.decode(data)
+        except FramingError as exc:
+            log.debug("malformed UDP encapsulation from %s: %s", addr[0], exc)
+            return
+        reply = self.server.handle_packet(pkt, None)
+        if reply is not None:
+            self.transport.sendto(reply.encode(), addr)
+
+
+class _IoProtocol(asyncio.DatagramProtocol):
+    def __init__(self, server: EnipServer) -> None:
+        self.server = server
+
+    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+        self.server.consume_datagram(data, addr)
+
+
+# ---------------------------------------------------------------- the CLI's entry point
+def parse_hosts(text: str) -> list[str]:
+    """``"127.0.0.1,127.0.0.2"`` -> addresses (IPv4, no duplicates)."""
+    hosts = [h.strip() for h in text.split(",") if h.strip()]
+    if not hosts:
+        raise ArgumentRangeError("at least one listen address is needed")
+    for h in hosts:
+        try:
+            ipaddress.IPv4Address(h)
+        except ValueError:
+            raise ArgumentRangeError(f"{h!r} is not an IPv4 address") from None
+    if len(set(hosts)) != len(hosts):
+        raise ArgumentRangeError(f"duplicate listen addresses in {text!r}")
+    return hosts
+
+
+def make_drive(host: str, *, state: str | None = None, model: str | None = None
+               ) -> VirtualDrive:
+    """One drive per address; with ``state`` its EEPROM is kept under the address."""
+    drive_id = int(host.rsplit(".", 1)[1]) % 64
+    kwargs: dict[str, Any] = {} if model is None else {"model": model}
+    eeprom = EepromStore(state, key=host) if state else None
+    return VirtualDrive(drive_id, eeprom=eeprom, **kwargs)
+
+
+async def serve_enip(hosts: str | Sequence[str] = "127.0.0.1", tcp_port: int = TCP_PORT,
+                     udp_port: int = io.UDP_PORT, state: str | None = None, *,
+                     model: str | None = None, stop: asyncio.Event | None = None,
+                     duration: float | None = None,
+                     reset_downtime_s: float = dyn5.RESET_DOWNTIME_S,
+                     on_ready: Callable[[list[EnipServer]], None] | None = None
+                     ) -> list[EnipServer]:
+    """Serve one virtual DYN5 per address until ``stop`` is set or ``duration`` passes.
+
+    What ``servobus sim enip --listen HOSTS --tcp-port N --udp-port M --state FILE`` runs.
+    ``on_ready`` gets the started servers (their bound ports) before serving begins."""
+    host_list = parse_hosts(hosts) if isinstance(hosts, str) else list(hosts)
+    drives = [make_drive(h, state=state, model=model) for h in host_list]
+    clock = RealtimeClock(drives)
+    servers = [EnipServer(d, h, tcp_port=tcp_port, udp_port=udp_port, clock=clock,
+                          reset_downtime_s=reset_downtime_s)
+               for d, h in zip(drives, host_list, strict=True)]
+    stop = stop or asyncio.Event()
+    started: list[EnipServer] = []
+    try:
+        for server in servers:
+            started.append(await server.start())
+        clock.start()
+        if on_ready is not None:
+            on_ready(started)
+        if duration is not None:
+            asyncio.get_running_loop().call_later(duration, stop.set)
+        await stop.wait()
+    finally:
+        for server in started:
+            await server.stop()
+        await clock.stop()
+    return servers
+
+
+class BackgroundEnip:
+    """Virtual DYN5 adapters on their own event loop thread: ``start()`` / ``stop()`` for
+    blocking clients (pycomm3, raw sockets) and tests."""
+
+    def __init__(self, hosts: str | Sequence[str] = "127.0.0.1", tcp_port: int = 0,
+                 udp_port: int = 0, state: str | None = None, *,
+                 reset_downtime_s: float = dyn5.RESET_DOWNTIME_S) -> None:
+        self._args = (hosts, tcp_port, udp_port, state)
+        self._downtime = reset_downtime_s
+        self.servers: list[EnipServer] = []
+        self._loop = asyncio.new_event_loop()
+        self._stop: asyncio.Event | None = None
+        self._thread: threading.Thread | None = None
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+
+    def start(self, timeout: float = 5.0) -> BackgroundEnip:
+        self._thread = threading.Thread(target=self._run, name="enip-sim", daemon=True)
+        self._thread.start()
+        if not self._ready.wait(timeout):
+            raise TimeoutError("virtual DYN5 did not start")
+        if self._error is not None:
+            raise self._error
+        return self
+
+    def _run(self) -> None:
+        asyncio.set_event_loop(self._loop)
+
+        def ready(servers: list[EnipServer]) -> None:
+            self.servers = servers
+            self._ready.set()
+
+        async def main() -> None:
+            self._stop = asyncio.Event()
+            await serve_enip(*self._args, stop=self._stop, on_ready=ready,
+                             reset_downtime_s=self._downtime)
+
+        try:
+            self._loop.run_until_complete(main())
+        except BaseException as exc:  # reported to start()
+            self._error = exc
+            self._ready.set()
+        finally:
+            self._loop.close()
+
+    def call(self, fn: Callable[[], Any], timeout: float = 5.0) -> Any:
+        """Run ``fn`` on the server loop (e.g. to read drive state) and return its result."""
+        async def wrapped() -> Any:
+            return fn()
+
+        return asyncio.run_coroutine_threadsafe(wrapped(), self._loop).result(timeout)
+
+    def stop(self, timeout: float = 5.0) -> None:
+        if self._stop is not None and not self._loop.is_closed():
+            self._loop.call_soon_threadsafe(self._stop.set)
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    def __enter__(self) -> BackgroundEnip:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()

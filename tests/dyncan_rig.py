@@ -1,0 +1,62 @@
+"""Test rig (not a test module): a DYN CAN client and virtual nodes on python-can's virtual bus.
+
+Each harness gets its own virtual channel; the nodes run ``servobus.protocols.dyncan.node.serve``
+on the loop, in stepped time unless ``realtime=True``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import itertools
+from collections.abc import AsyncIterator, Callable, Coroutine
+from contextlib import asynccontextmanager
+from dataclasses import dataclass
+from typing import Any
+
+from servobus.protocols.dyncan.client import AsyncDynCanClient, DynCanAxis, open_can_client
+from servobus.protocols.dyncan.node import DynCanNetwork, serve
+from servobus.sim.drive import VirtualDrive
+from servobus.sim.realtime import RealtimeClock
+from servobus.transport.can_bus import AsyncCanBus
+
+_channels = itertools.count()
+
+
+def arun(fn: Callable[..., Coroutine[Any, Any, None]]) -> Callable[..., None]:
+    """Run an async test on a fresh event loop (no pytest-asyncio in the venv)."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> None:
+        asyncio.run(fn(*args, **kwargs))
+
+    return wrapper
+
+
+@dataclass
+class Harness:
+    network: DynCanNetwork
+    client: AsyncDynCanClient
+    spec: str
+
+    def axis(self, drive_id: int) -> DynCanAxis:
+        return DynCanAxis(self.client, drive_id, owns_client=False)
+
+
+@asynccontextmanager
+async def harness(*ids: int, realtime: bool = False, **client_kw: object
+                  ) -> AsyncIterator[Harness]:
+    spec = f"virtual:servobus-dyncan-test-{next(_channels)}"
+    network = DynCanNetwork([VirtualDrive(i) for i in ids])
+    node_port = await AsyncCanBus.open(spec)
+    clock = RealtimeClock(network.drives) if realtime else None
+    stop = asyncio.Event()
+    server = asyncio.create_task(serve(network, node_port, clock=clock, stop=stop))
+    client = await open_can_client(spec, **client_kw)  # type: ignore[arg-type]
+    try:
+        yield Harness(network, client, spec)
+    finally:
+        await client.close()
+        stop.set()
+        await server
+        await node_port.close()
