@@ -37,7 +37,7 @@ from collections.abc import Callable, Iterable, Mapping
 from types import TracebackType
 
 from servobus.axis import checks
-from servobus.errors import ArgumentRangeError, DriveAlarm, DriveTimeout
+from servobus.errors import ArgumentRangeError, DriveAlarm, DriveTimeout, NotSupported
 from servobus.families.base import AxisStatus, Family, ParamInfo
 from servobus.transport.base import Direction
 
@@ -156,6 +156,24 @@ class AsyncAxis(ABC):
 
     @abstractmethod
     async def close(self) -> None: ...
+
+    # ------------------------------------------------------------- optional features
+    def unsupported(self, feature: str) -> NotSupported:
+        """The error for a feature this family (or this protocol) does not have."""
+        self.family.require(feature)  # raises when the family lacks it
+        return NotSupported(f"{self.family.title} over {self.protocol} has no "
+                            f"{feature.replace('_', ' ')}", family=self.family.name)
+
+    async def square_wave(self, amplitude: int) -> None:
+        """Drive-generated square-wave test motion (families with "waves")."""
+        raise self.unsupported("waves")
+
+    async def sine_wave(self, amplitude: int) -> None:
+        """Drive-generated sine-wave test motion (families with "waves")."""
+        raise self.unsupported("waves")
+
+    async def wave_frequency(self, hz: int) -> None:
+        raise self.unsupported("waves")
 
     # ------------------------------------------------------------- units
     def param_info(self, name: str) -> ParamInfo:

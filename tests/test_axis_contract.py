@@ -1,0 +1,118 @@
+"""One Axis contract, run against every protocol's virtual drive (like python-can's
+back-to-back tests): the same calls, the same units, the same errors on every protocol.
+
+Add a protocol by adding its ``sim://`` URL to CONTRACT_URLS.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+
+import pytest
+from conftest import wait_until
+
+from servobus.axis import Axis, connect
+from servobus.errors import ArgumentRangeError, DriveTimeout, NotSupported
+from servobus.families.base import AxisStatus
+
+#: Every protocol's in-process virtual drive, one drive with id DRIVE.
+CONTRACT_URLS = [
+    "sim://dyn232?fast=1",
+    "sim://dyncan?fast=1",
+]
+DRIVE = 1
+ABSENT = 9
+
+pytestmark = pytest.mark.timeout(60)
+
+
+@pytest.fixture(params=CONTRACT_URLS)
+def axis(request: pytest.FixtureRequest) -> Iterator[Axis]:
+    with connect(request.param, drive_id=DRIVE, timeout=0.2) as ax:
+        yield ax
+
+
+def test_identity_and_units(axis: Axis) -> None:
+    assert axis.drive_id == DRIVE and DRIVE in axis.drive_ids
+    assert isinstance(axis.protocol, str) and axis.protocol
+    assert axis.counts_per_rev == axis.family.counts_per_rev > 0
+    assert axis.revs(1) == axis.counts_per_rev
+    assert axis.degrees(-90) == -axis.counts_per_rev // 4
+
+
+def test_status_is_one_axis_status(axis: Axis) -> None:
+    st = axis.status()
+    assert isinstance(st, AxisStatus)
+    assert st.enabled and st.in_position and not st.moving
+    assert st.alarm_code == 0 and st.alarm_text == "" and not st.alarm
+    assert st.family == axis.family.name
+
+
+def test_move_in_counts_and_back(axis: Axis) -> None:
+    start = axis.position()
+    window = axis.position_window()
+    quarter = axis.revs(0.25)
+    axis.move_by(quarter, wait=True, timeout=10)
+    assert abs(axis.position() - (start + quarter)) <= window
+    axis.move_to(start, wait=True, timeout=10, confirm=True)
+    assert abs(axis.position() - start) <= window
+
+
+def test_speed_in_rpm_then_stop(axis: Axis) -> None:
+    axis.turn(300)
+    wait_until(lambda: abs(axis.speed() - 300) <= 15, timeout=5, what="300 rpm")
+    assert math.isfinite(axis.current())
+    axis.stop()
+    wait_until(lambda: abs(axis.speed()) <= 5, timeout=5, what="standstill")
+
+
+def test_parameters_read_write_and_range(axis: Axis) -> None:
+    params = axis.parameters()
+    assert params
+    values = axis.read_params()
+    assert list(values) == [p.name for p in params]
+    p = next(p for p in params if p.maximum > p.minimum + 1 and p.name != "gear_num")
+    new = p.minimum + 1 if values[p.name] != p.minimum + 1 else p.minimum
+    axis.write_param(p.name, new)
+    assert axis.read_param(p.name) == new
+    with pytest.raises(ArgumentRangeError):
+        axis.write_param(p.name, p.maximum + 1)
+    with pytest.raises(ArgumentRangeError):
+        axis.write_params({p.name: values[p.name], "no_such_parameter": 1})
+    assert axis.read_param(p.name) == new  # nothing of the refused batch was written
+
+
+@pytest.mark.parametrize("bad", [None, 1.5, math.nan, "10", True])
+def test_bad_arguments_are_refused_before_sending(axis: Axis, bad: object) -> None:
+    before = axis.position()
+    with pytest.raises(ArgumentRangeError):
+        axis.move_to(bad)
+    with pytest.raises(ArgumentRangeError):
+        axis.move_by(bad)
+    assert abs(axis.position() - before) <= axis.position_window()
+
+
+def test_unknown_parameter_and_missing_feature(axis: Axis) -> None:
+    with pytest.raises(ArgumentRangeError):
+        axis.read_param("no_such_parameter")
+    with pytest.raises(NotSupported) as info:
+        axis.family.require("teleportation")
+    assert info.value.family == axis.family.name
+
+
+def test_an_absent_drive_times_out_typed(axis: Axis) -> None:
+    ghost = axis.sibling(ABSENT)
+    assert ghost.ping(timeout=0.05) is False
+    with pytest.raises(DriveTimeout):
+        ghost.position()
+    assert axis.ping(timeout=0.5) is True  # the connection is still fine
+
+
+def test_waves_exist_or_are_not_supported(axis: Axis) -> None:
+    """A feature is there when the family has it, else NotSupported names the family."""
+    if "waves" in axis.family.features:
+        axis.wave_frequency(0)  # stops any wave: harmless
+    else:
+        with pytest.raises(NotSupported):
+            axis.square_wave(100)
