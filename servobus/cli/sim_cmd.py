@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+
 import click
 
 
@@ -14,9 +16,14 @@ def register(group: click.Group) -> None:
     group.add_command(sim_group)
 
 
-def add_sim_command(group: click.Group, command: click.Command) -> None:
-    """Attach ``servobus sim <command>``; sim_cmd must be registered first (COMMAND_MODULES)."""
+def add_sim_command(group: click.Group, command: click.Command,
+                    aliases: tuple[str, ...] = ()) -> None:
+    """Attach ``servobus sim <command>`` (and hidden ``aliases``); sim_cmd registers first."""
     sim = group.commands.get("sim")
     if not isinstance(sim, click.Group):
         raise RuntimeError(f"servobus.cli.sim_cmd must be registered before sim {command.name}")
     sim.add_command(command)
+    for alias in aliases:
+        hidden = copy.copy(command)
+        hidden.hidden = True
+        sim.add_command(hidden, name=alias)

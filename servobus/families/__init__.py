@@ -13,6 +13,7 @@ if TYPE_CHECKING:
 
 FAMILIES: dict[str, str] = {
     "dmm-dyn2": "servobus.families.dmm.family:DYN2",
+    "dmm-dyn5": "servobus.families.dyn5_family:DYN5",
 }
 
 

@@ -35,6 +35,18 @@ Public additions beyond the DYN232M set (contract for the other front ends and t
   ``zri_count``, ``brake_released`` (BKO, only when OnRange was 127 at power-on, else None).
 * World: ``set_load(inertia=, friction=)``, ``set_disturbance(nm)``, ``set_blocked(bool)``,
   ``set_bus_voltage(volts)`` (> 80 V trips over voltage), ``current_a``, ``heat_fraction``.
+
+Hooks for front ends of other families (YZ-AIM, servobus.sim.yzaim_motor), which keep their
+own registers and units on top of this core:
+
+* ``model`` may be a ``MotorModel`` instance (a motor sized from another vendor's tables).
+* ``set_protections(False)``: no DMM alarms (lost phase, over current, overheat, over
+  voltage); the front end models its family's own.
+* ``set_raw_profile(speed_rpm, accel_rpm_s)``: the generator's cruise speed and acceleration
+  in rpm and rpm/s instead of Max Speed / Max Accel (None, None restores those).
+* ``move_to_counts(counts, smooth=)``: absolute move to encoder counts from the origin
+  (counts of this core, 65,536 per revolution); ``halt()``: the reference stops where the
+  shaft is (servo on; the position loop brakes the motor, an emergency stop).
 """
 
 from __future__ import annotations
@@ -75,11 +87,13 @@ class VirtualDrive:
         self,
         drive_id: int = 0,
         *,
-        model: str = U.DEFAULT_MODEL,
+        model: str | U.MotorModel = U.DEFAULT_MODEL,
         eeprom: EepromStore | None = None,
         axis_ids: tuple[int, int, int] = DEFAULT_AXIS_IDS,
     ) -> None:
-        self.model = U.MODELS[model]
+        self.model = model if isinstance(model, U.MotorModel) else U.MODELS[model]
+        self._raw_profile: tuple[float, float] | None = None
+        self._protections = True
         self.eeprom = eeprom if eeprom is not None else EepromStore()
         self.eeprom.setdefault_drive(drive_id)
         self.axis_ids = axis_ids
@@ -186,10 +200,51 @@ class VirtualDrive:
         self._apply_profile()
 
     def _apply_profile(self) -> None:
+        if self._raw_profile is not None:
+            speed, accel = self._raw_profile
+            self._engine.set_profile(U.rpm_to_counts_per_s(speed) * self._feed_scale,
+                                     U.rpm_to_counts_per_s(accel))
+            return
         g = self._ram["gear_num"]
         self._engine.set_profile(PR.speed_counts_per_s(self._ram["max_speed"], g)
                                  * self._feed_scale,
                                  PR.accel_counts_per_s2(self._ram["max_accel"], g))
+
+    # ---------------------------------------------------------------- other families' hooks
+    def set_protections(self, enabled: bool) -> None:
+        """DMM alarms on (default) or off (a front end that models its own protections)."""
+        self._protections = bool(enabled)
+        self._engine.set_protections(self._protections)
+
+    def set_raw_profile(self, speed_rpm: float | None, accel_rpm_s: float | None) -> None:
+        """Cruise speed (rpm) and acceleration (rpm/s) of every generated motion instead of
+        Max Speed / Max Accel; both None restores the parameters. Both must be > 0."""
+        if speed_rpm is None or accel_rpm_s is None:
+            self._raw_profile = None
+        else:
+            self._raw_profile = (float(speed_rpm), float(accel_rpm_s))
+        self._apply_profile()
+
+    def move_to_counts(self, counts: float, *, smooth: bool = True) -> bool:
+        """Absolute move to ``counts`` (65,536 per rev) from the origin; as move_absolute."""
+        if not self._accepts_motion():
+            return False
+        self._go(self._origin + counts, smooth=smooth)
+        return True
+
+    def halt(self) -> bool:
+        """Emergency stop: the reference stays where the shaft is now (servo stays on)."""
+        if not self._accepts_motion():
+            return False
+        self._engine.hold_here()
+        return True
+
+    @property
+    def target_counts(self) -> float:
+        """Where the generated motion ends (counts from the origin; the reference if none)."""
+        eng = self._engine
+        end = eng.gT if eng.ref_mode == Ref.GEN and eng.path is None else eng.ref
+        return end - self._origin
 
     # ---------------------------------------------------------------- registers
     def peek_status(self) -> DriveStatus:
@@ -556,7 +611,7 @@ class VirtualDrive:
         self._check_bus()
 
     def _check_bus(self) -> None:
-        if self._engine.bus_voltage > U.OVER_VOLTAGE_V:
+        if self._protections and self._engine.bus_voltage > U.OVER_VOLTAGE_V:
             self.trip(AlarmCode.OVER_VOLTAGE)
 
     # ---------------------------------------------------------------- readouts

@@ -9,19 +9,322 @@ Wear (manual 5.1: 1,000,000 guaranteed write cycles). Decision: writes are count
 item's cell is worn out: further writes are still counted but no longer stick, so the value
 read back after the next power cycle is the last one written before wear-out (the drive
 keeps running on the value in RAM). :meth:`EepromStore.worn` reports it.
+
+The state file (:class:`StateFile`), decisions:
+
+* It is checked whole at start-up and the simulator refuses to start on anything it cannot
+  serve faithfully, with one line naming the file and the problem (:class:`StateFileError`);
+  the file is never rewritten then. Valid: a JSON object mapping power-on ids ("0".."63") to
+  records ``{"drive_id": 0..63, "params": {name: value}, "config": 0..0x3F, "origin":
+  0..65535, "writes": {item: count >= 0}}``; ``drive_id`` is required, the rest optional
+  (defaults); every parameter must be a known EEPROM parameter inside its range in
+  :mod:`servobus.families.dmm.params`; values are integers (not booleans, not floats); no
+  other keys.
+* A missing file is created (``{}``) at start-up, which also proves the directory writable.
+* One process at a time: the file is locked (``fcntl.flock``, exclusive, non-blocking; not
+  on Windows); a second simulator on the same file refuses to start. Within one process,
+  every store on the same path shares one :class:`StateFile`.
+* Writes are atomic: the whole file goes to ``FILE.tmp`` (locked before it is renamed, so
+  the lock moves with the content) and is renamed over ``FILE``. A ``FILE.tmp`` left by a
+  killed simulator is removed at start-up, once the lock is held. No fsync: the file
+  survives the simulator being killed, not a power cut of the host.
+* A write that fails later (disk full, directory removed) logs one line; the drive keeps
+  running on the values in RAM and the next write tries again.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
+import os
+import weakref
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
+from servobus.errors import ServobusError
 from servobus.families.dmm import params as P
+from servobus.families.dmm.registers import CONFIG_DEFINED_MASK
+from servobus.families.dmm.units import COUNTS_PER_REV
+from servobus.families.dmm.vocabulary import MAX_DRIVE_ID
+
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - Windows: the state file is not locked there
+    fcntl = None  # type: ignore[assignment]
 
 EEPROM_CYCLE_LIMIT = 1_000_000
+MAX_STATE_BYTES = 1 << 20  # 64 records are a few KiB; anything this large is not a state file
+_FIELDS = frozenset({"drive_id", "params", "config", "origin", "writes"})
+_ITEMS = frozenset({*P.BY_NAME, "config", "drive_id", "origin"})  # what write counters count
+_LOCK_ATTEMPTS = 20  # the file may be replaced between open and lock by its owner's write
+
+logger = logging.getLogger("servobus.sim")
 
 
+class StateFileError(ServobusError):
+    """The ``--state`` file cannot be used; nothing was written to it."""
+
+
+class StateFile:
+    """One validated, locked state file shared by the stores of one process."""
+
+    @classmethod
+    def shared(cls, path: str | Path) -> StateFile:
+        """The process's one StateFile for ``path`` (opened, checked and locked on first use)."""
+        key = os.path.realpath(path)
+        found = _OPEN.get(key)
+        if found is None:
+            found = cls(Path(path))
+            _OPEN[key] = found
+        return found
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.tmp = path.with_name(path.name + ".tmp")
+        self.records: dict[str, dict[str, Any]] = {}
+        self._fd = [-1]  # the locked descriptor, in a box the finalizer can see
+        self._failing = False
+        self._check_location()
+        self._fd[0], raw = self._lock()
+        weakref.finalize(self, _close_box, self._fd)
+        try:
+            self.records = parse_state(raw, str(path))
+            self._check_writable()
+        except StateFileError:
+            _close_box(self._fd)
+            raise
+
+    # ---------------------------------------------------------------- start-up
+    def _fail(self, problem: str, hint: str = "fix or remove it; it was not changed"
+              ) -> NoReturn:
+        raise StateFileError(f"state file {self.path}: {problem} - {hint}")
+
+    def _check_location(self) -> None:
+        parent = self.path.parent
+        if self.path.is_dir():
+            self._fail("is a directory", "name a file inside it")
+        if not parent.exists():
+            self._fail(f"its directory {parent} does not exist", "create it first")
+        if not parent.is_dir():
+            self._fail(f"{parent} is not a directory", "name a file in a directory")
+        if self.path.exists() and not os.access(self.path, os.R_OK):
+            self._fail("cannot be read (permission denied)", "check its permissions")
+
+    def _check_writable(self) -> None:
+        """With the lock held: drop a stale FILE.tmp, prove the directory takes a new one."""
+        with contextlib.suppress(FileNotFoundError):
+            self.tmp.unlink()  # left by a simulator killed mid-write
+        try:
+            probe = os.open(self.tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        except OSError as exc:
+            self._not_writable(exc)
+        os.close(probe)
+        os.unlink(self.tmp)
+        if not os.access(self.path, os.W_OK):
+            self._fail("is read-only", "make it writable or use a copy")
+
+    def _not_writable(self, exc: OSError) -> NoReturn:
+        reason = os.strerror(exc.errno) if exc.errno else str(exc)
+        self._fail(f"its directory {self.path.parent} is not writable ({reason})",
+                   "choose a writable place")
+
+    def _lock(self) -> tuple[int, bytes]:
+        """Open and lock the file that ``path`` names (creating ``{}`` if missing)."""
+        for _ in range(_LOCK_ATTEMPTS):
+            try:
+                fd = os.open(self.path, os.O_RDONLY)
+            except FileNotFoundError:
+                try:
+                    self._create()
+                except OSError as exc:
+                    self._not_writable(exc)
+                continue  # lock the file now there (ours, or one created meanwhile)
+            try:
+                _lock_fd(fd)
+            except BlockingIOError:
+                os.close(fd)
+                self._fail("is in use by another simulator process",
+                           "stop that one or use another file")
+            try:
+                same = os.fstat(fd).st_ino == os.stat(self.path).st_ino
+            except FileNotFoundError:
+                same = False
+            if not same:  # replaced between open and lock: lock the current one
+                os.close(fd)
+                continue
+            return fd, _read_all(fd)
+        self._fail("keeps changing while it is opened", "stop the other writer")
+
+    def _create(self) -> None:
+        """Create ``path`` holding ``{}`` without ever clobbering a file that appears.
+
+        Written under a name of this process's own, then hard-linked: the file appears
+        complete or not at all.
+        """
+        fresh = self.path.with_name(f".{self.path.name}.{os.getpid()}.new")
+        fd = os.open(fresh, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        try:
+            os.write(fd, b"{}\n")
+        finally:
+            os.close(fd)
+        try:
+            os.link(fresh, self.path)
+        except FileExistsError:
+            pass  # someone else's file appeared: it is locked and checked like any other
+        finally:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(fresh)
+
+    # ---------------------------------------------------------------- writing
+    def save(self, key: str, record: dict[str, Any]) -> None:
+        self.records[key] = record
+        data = (json.dumps(self.records, indent=1, sort_keys=True) + "\n").encode()
+        try:
+            fd = os.open(self.tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+            try:
+                _lock_fd(fd)  # the lock moves with the data
+                view = memoryview(data)
+                while view:
+                    view = view[os.write(fd, view):]
+                os.replace(self.tmp, self.path)
+            except BaseException:
+                os.close(fd)
+                with contextlib.suppress(OSError):
+                    os.unlink(self.tmp)
+                raise
+        except OSError as exc:
+            if not self._failing:
+                self._failing = True
+                logger.warning("state file %s: cannot save (%s) - EEPROM changes are kept in "
+                               "memory only until a save succeeds", self.path,
+                               os.strerror(exc.errno or 0) if exc.errno else exc)
+            return
+        self._failing = False
+        old, self._fd[0] = self._fd[0], fd
+        if old >= 0:
+            os.close(old)  # the replaced file's lock goes with it
+
+
+_OPEN: weakref.WeakValueDictionary[str, StateFile] = weakref.WeakValueDictionary()
+
+
+def _lock_fd(fd: int) -> None:
+    """Exclusive, non-blocking flock; BlockingIOError when another process holds it."""
+    if fcntl is not None:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+
+
+def _close_box(box: list[int]) -> None:
+    """Close the locked descriptor (releases the lock); also the StateFile's finalizer."""
+    fd, box[0] = box[0], -1
+    if fd >= 0:
+        os.close(fd)
+
+
+def _read_all(fd: int) -> bytes:
+    chunks = []
+    total = 0
+    while chunk := os.read(fd, 65536):
+        chunks.append(chunk)
+        total += len(chunk)
+        if total > MAX_STATE_BYTES:
+            break
+    return b"".join(chunks)
+
+
+# ---------------------------------------------------------------- validation
+def parse_state(raw: bytes, name: str) -> dict[str, dict[str, Any]]:
+    """The records of a state file's bytes; StateFileError (one line) if anything is off."""
+
+    def fail(problem: str) -> StateFileError:
+        return StateFileError(f"state file {name}: {problem} - fix or remove it; it was not "
+                              "changed")
+
+    if not raw.strip():
+        raise fail("is empty")
+    if len(raw) > MAX_STATE_BYTES:
+        raise fail(f"is larger than {MAX_STATE_BYTES // 1024} KiB: not a state file")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise fail("is not text (binary data?)") from None
+    try:
+        doc = json.loads(text, parse_constant=_reject_constant)
+    except ValueError as exc:
+        msg = exc.msg if isinstance(exc, json.JSONDecodeError) else str(exc)
+        where = (f" at line {exc.lineno} column {exc.colno}"
+                 if isinstance(exc, json.JSONDecodeError) else "")
+        raise fail(f"is not valid JSON ({msg}{where}; truncated?)") from None
+    if not isinstance(doc, dict):
+        raise fail(f"holds {_kind(doc)}, expected an object of drive records")
+    records: dict[str, dict[str, Any]] = {}
+    for key, rec in doc.items():
+        try:
+            records[key] = check_record(key, rec)
+        except ValueError as exc:
+            raise fail(f"record {key!r}: {exc}") from None
+    return records
+
+
+def _reject_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a number JSON allows")
+
+
+def _kind(value: object) -> str:
+    if value is None:
+        return "null"
+    if isinstance(value, list):
+        return "a list"
+    return f"a {type(value).__name__}"
+
+
+def _int(value: object, what: str, low: int, high: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ValueError(f"{what} must be an integer, got {json.dumps(value)[:40]}")
+    if not low <= value <= high:
+        raise ValueError(f"{what} {value} is outside {low}..{high}")
+    return value
+
+
+def check_record(key: str, rec: object) -> dict[str, Any]:
+    """One record, normalised (every field present); ValueError names the first problem."""
+    if not (key.isdigit() and key == str(int(key)) and int(key) <= MAX_DRIVE_ID):
+        raise ValueError(f"the key must be a power-on drive id 0..{MAX_DRIVE_ID}")
+    if not isinstance(rec, dict):
+        raise ValueError(f"must be an object, got {_kind(rec)}")
+    unknown = sorted(set(rec) - _FIELDS)
+    if unknown:
+        raise ValueError(f"unknown field {unknown[0]!r}")
+    if "drive_id" not in rec:
+        raise ValueError("has no drive_id")
+    out: dict[str, Any] = {
+        "drive_id": _int(rec["drive_id"], "drive_id", 0, MAX_DRIVE_ID),
+        "config": _int(rec.get("config", 0), "config", 0, CONFIG_DEFINED_MASK),
+        "origin": _int(rec.get("origin", 0), "origin", 0, COUNTS_PER_REV - 1),
+    }
+    params = rec.get("params", {})
+    if not isinstance(params, dict):
+        raise ValueError(f"params must be an object, got {_kind(params)}")
+    checked = P.defaults()
+    for name, value in params.items():
+        spec = P.BY_NAME.get(name)
+        if spec is None or spec.storage is not P.Storage.EEPROM:
+            raise ValueError(f"{name!r} is not an EEPROM parameter")
+        checked[name] = _int(value, name, spec.minimum, spec.maximum)
+    out["params"] = checked
+    writes = rec.get("writes", {})
+    if not isinstance(writes, dict):
+        raise ValueError(f"writes must be an object, got {_kind(writes)}")
+    for item, count in writes.items():
+        if item not in _ITEMS:
+            raise ValueError(f"writes counts an unknown item {item!r}")
+        _int(count, f"writes[{item!r}]", 0, 1 << 62)
+    out["writes"] = dict(writes)
+    return out
+
+
+# ---------------------------------------------------------------- the store
 class EepromStore:
     def __init__(self, path: str | Path | None = None, key: str = "0") -> None:
         self.path = Path(path) if path is not None else None
@@ -32,8 +335,9 @@ class EepromStore:
         self.origin = 0  # stored absolute zero: encoder angle within one revolution (counts)
         self.writes: dict[str, int] = {}
         self._initialised = False
-        if self.path is not None and self.path.exists():
-            self._load()
+        self._file = StateFile.shared(self.path) if self.path is not None else None
+        if self._file is not None:
+            self._load(self._file)
 
     def setdefault_drive(self, drive_id: int) -> None:
         """Factory id for a fresh EEPROM (ignored when a stored state was loaded)."""
@@ -73,36 +377,20 @@ class EepromStore:
         self.save()
 
     def _record(self) -> dict[str, Any]:
-        return {"params": self.params, "config": self.config, "drive_id": self.drive_id,
-                "origin": self.origin, "writes": self.writes}
+        return {"params": dict(self.params), "config": self.config, "drive_id": self.drive_id,
+                "origin": self.origin, "writes": dict(self.writes)}
 
     def save(self) -> None:
-        if self.path is None:
-            return
-        data: dict[str, Any] = {}
-        if self.path.exists():
-            try:
-                data = json.loads(self.path.read_text())
-            except (OSError, ValueError):
-                data = {}
-        data[self.key] = self._record()
-        tmp = self.path.with_suffix(self.path.suffix + ".tmp")
-        tmp.write_text(json.dumps(data, indent=1, sort_keys=True))
-        tmp.replace(self.path)
+        if self._file is not None:
+            self._file.save(self.key, self._record())
 
-    def _load(self) -> None:
-        assert self.path is not None
-        try:
-            data = json.loads(self.path.read_text())
-        except (OSError, ValueError):
+    def _load(self, state: StateFile) -> None:
+        rec = state.records.get(self.key)
+        if rec is None:
             return
-        rec = data.get(self.key)
-        if not isinstance(rec, dict):
-            return
-        self.params.update({k: int(v) for k, v in rec.get("params", {}).items()
-                            if k in P.BY_NAME})
-        self.config = int(rec.get("config", 0))
-        self.drive_id = int(rec.get("drive_id", 0))
-        self.origin = int(rec.get("origin", 0))
-        self.writes = {k: int(v) for k, v in rec.get("writes", {}).items()}
+        self.params.update(rec["params"])
+        self.config = rec["config"]
+        self.drive_id = rec["drive_id"]
+        self.origin = rec["origin"]
+        self.writes = dict(rec["writes"])
         self._initialised = True

@@ -14,16 +14,25 @@ import asyncio
 import contextlib
 import time
 from collections.abc import Sequence
+from typing import Protocol
 
-from servobus.sim.drive import VirtualDrive
+DEFAULT_TICK_S = 0.004
 
-DEFAULT_TICK_S = 0.004  # background advance period (2-5 ms keeps each step short)
+
+class Clocked(Protocol):
+    """What the clock drives: a VirtualDrive, or another family's motor built on one."""
+
+    @property
+    def time(self) -> float: ...
+
+    def advance_to(self, t: float) -> None: ...
+  # background advance period (2-5 ms keeps each step short)
 
 
 class RealtimeClock:
     """Maps monotonic wall-clock time onto the drives' simulated time."""
 
-    def __init__(self, drives: Sequence[VirtualDrive], *, tick_s: float = DEFAULT_TICK_S) -> None:
+    def __init__(self, drives: Sequence[Clocked], *, tick_s: float = DEFAULT_TICK_S) -> None:
         self.drives = drives
         self.tick_s = tick_s
         # Drives created earlier (or stepped by a test) keep their own time: start from it.

@@ -16,20 +16,49 @@ never back to its sender, like a CAN controller that does not receive its own fr
 client starts receiving 20 ms after its rawmode ``< ok >``: python-can's handshake reads
 with a single recv() and would fail if a frame were glued to that ``< ok >``. ``< echo >``
 is answered; other commands get ``< error unsupported >``. Binds 127.0.0.1 by default.
+
+Abuse (decisions; shared bounds in :mod:`servobus.sim.server_limits`):
+
+* A malformed message (bytes outside printable ASCII, a ``send`` whose identifier, length
+  or data bytes are not hex in range - ``-1`` included) is answered ``< error REASON >``
+  (fixed ASCII text) and never relayed; the session stays open.
+* The drives' port is a *gate*: it keeps a receive FIFO of ``RX_FIFO_FRAMES`` = 64 frames per
+  sender and serves senders round robin, so one flooding client cannot starve another.
+  A frame enters the bus (reaches any endpoint) only if every gate has room for it. Paced
+  (bit-timing model on): a frame that does not fit is lost, as when a drive's CAN receive
+  FIFO overflows (the specification gives no size: a servobus decision, docs/dyncan.md).
+  ``--fast``: the sender waits for room instead (its TCP data is not read meanwhile), so
+  nothing is lost and memory stays bounded.
+* Every client's unread output is bounded (``MAX_OUTPUT_BYTES``); past it the client is
+  dropped with one log line (it receives all bus traffic, so it cannot be paused).
+* A client that half-closes after its requests gets the replies: its session lingers until
+  the gates have taken its frames and ``REPLY_SETTLE_S`` more has passed.
+* Connections beyond the cap get ``< error too many clients >`` and are closed.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import re
+import socket
 import time
+from collections import deque
 
 from servobus.errors import ArgumentRangeError
+from servobus.sim import server_limits as lim
 from servobus.transport.base import Direction
 from servobus.transport.can_bus import BitTiming, BusPacer, CanFrame, FrameTraceHook
 
 RAWMODE_SETTLE_S = 0.020
 MAX_MESSAGE = 256  # a socketcand message is far shorter; longer input is garbage
+RX_FIFO_FRAMES = 64  # per sender at a gate (the drives' receive FIFO, see module doc)
+LISTENER_FRAMES = 4096  # per sender at a plain in-process port (drops beyond)
+REPLY_SETTLE_S = 0.1  # half-closed session: time for replies after the gates took its frames
+HALF_CLOSE_LINGER_S = 2.0  # ... at most this long in all
+WHAT = "sim dyncan socketcand"
+_HEX = re.compile(r"[0-9A-Fa-f]+")
+_PRINTABLE = re.compile(rb"[\x20-\x7e]*")
 
 
 def format_frame(frame: CanFrame) -> str:
@@ -41,39 +70,79 @@ def format_frame(frame: CanFrame) -> str:
 
 
 def parse_send(tokens: list[str]) -> CanFrame:
-    """``send ID DLC B0 B1 ...`` (tokens without the angle brackets)."""
+    """``send ID DLC B0 B1 ...`` (tokens without the angle brackets).
+
+    Raises ValueError with a fixed ASCII reason: ID is 1-8 hex digits (more than 3 = 29-bit),
+    DLC one hex digit 0..8, then exactly DLC data bytes of 1-2 hex digits each.
+    """
     if len(tokens) < 3:
-        raise ValueError("send needs an id and a dlc")
-    ident_text, dlc = tokens[1], int(tokens[2], 16)
-    data = bytes(int(b, 16) for b in tokens[3:3 + dlc])
-    if not 0 <= dlc <= 8 or len(data) != dlc:
-        raise ValueError(f"dlc {dlc} does not match {len(data)} data byte(s)")
+        raise ValueError("send needs an identifier and a length")
+    ident_text, dlc_text, data_texts = tokens[1], tokens[2], tokens[3:]
+    if not _HEX.fullmatch(ident_text) or len(ident_text) > 8:
+        raise ValueError("identifier must be 1 to 8 hex digits")
     extended = len(ident_text) > 3
     ident = int(ident_text, 16)
     if ident > (0x1FFFFFFF if extended else 0x7FF):
-        raise ValueError(f"identifier {ident_text} out of range")
-    return CanFrame(ident, data, time.time(), extended)
+        raise ValueError("identifier out of range")
+    if not _HEX.fullmatch(dlc_text) or len(dlc_text) > 1 or int(dlc_text, 16) > 8:
+        raise ValueError("length must be one hex digit 0 to 8")
+    dlc = int(dlc_text, 16)
+    if len(data_texts) != dlc:
+        raise ValueError("number of data bytes does not match the length")
+    if not all(_HEX.fullmatch(b) and len(b) <= 2 for b in data_texts):
+        raise ValueError("data bytes must be 1 or 2 hex digits")
+    return CanFrame(ident, bytes(int(b, 16) for b in data_texts), time.time(), extended)
 
 
 class HubPort:
-    """An in-process endpoint on the hub (a :class:`FramePort`)."""
+    """An in-process endpoint on the hub (a :class:`FramePort`).
 
-    def __init__(self, hub: SocketcandHub, timing: BitTiming | None = None) -> None:
+    Frames wait in one FIFO per sender, bounded (``fifo_frames``), and :meth:`recv` takes
+    them round robin across senders. A *gate* port (the drives) also decides whether a TCP
+    client's frame may enter the bus at all (see the module doc).
+    """
+
+    def __init__(self, hub: SocketcandHub, timing: BitTiming | None = None, *,
+                 gate: bool = False, fifo_frames: int | None = None) -> None:
         self._hub = hub
-        self._queue: asyncio.Queue[CanFrame | None] = asyncio.Queue()
+        self.gate = gate
+        self.fifo_frames = fifo_frames or (RX_FIFO_FRAMES if gate else LISTENER_FRAMES)
+        self._fifos: dict[object, deque[CanFrame]] = {}
+        self._turns: deque[object] = deque()  # senders with frames waiting, in service order
+        self._waiter: asyncio.Future[None] | None = None
         self._traces: list[FrameTraceHook] = []
         self._closed = False
+        self.overflows = 0  # frames lost to a full FIFO
         self.pacer = BusPacer(timing) if timing is not None else None
 
-    def deliver(self, frame: CanFrame) -> None:
+    def has_room(self, sender: object) -> bool:
+        fifo = self._fifos.get(sender)
+        return self._closed or fifo is None or len(fifo) < self.fifo_frames
+
+    def queued_from(self, sender: object) -> int:
+        fifo = self._fifos.get(sender)
+        return 0 if fifo is None else len(fifo)
+
+    def deliver(self, frame: CanFrame, sender: object = None) -> None:
         if self._closed:
             return
+        fifo = self._fifos.get(sender)
+        if fifo is None:
+            fifo = self._fifos[sender] = deque()
+        if len(fifo) >= self.fifo_frames:
+            self.overflows += 1
+            return
+        if not fifo:
+            self._turns.append(sender)
+        fifo.append(frame)
         now = time.monotonic()
         if self.pacer is not None:
             self.pacer.occupy(len(frame.data), now)
         for hook in self._traces:
             hook(Direction.RX, frame, now)
-        self._queue.put_nowait(frame)
+        waiter = self._waiter
+        if waiter is not None and not waiter.done():
+            waiter.set_result(None)
 
     async def send(self, arbitration_id: int, data: bytes) -> None:
         if self._closed:
@@ -86,18 +155,35 @@ class HubPort:
         self._hub.publish(frame, self)
 
     async def recv(self, timeout: float | None = None) -> CanFrame | None:
-        if self._closed and self._queue.empty():
-            raise ConnectionError("hub port is closed")
-        try:
-            item = self._queue.get_nowait()
-        except asyncio.QueueEmpty:
+        if not self._turns:
+            if self._closed:
+                raise ConnectionError("hub port is closed")
+            loop = asyncio.get_running_loop()
+            waiter = self._waiter = loop.create_future()
+            timer = None if timeout is None else loop.call_later(timeout, _resolve, waiter)
             try:
-                item = await asyncio.wait_for(self._queue.get(), timeout)
-            except TimeoutError:
+                await waiter
+            finally:
+                self._waiter = None
+                if timer is not None:
+                    timer.cancel()
+            if not self._turns:
+                if self._closed:
+                    raise ConnectionError("hub port is closed")
                 return None
-        if item is None:
-            raise ConnectionError("hub port is closed")
-        return item
+        return self._take()
+
+    def _take(self) -> CanFrame:
+        sender = self._turns.popleft()
+        fifo = self._fifos[sender]
+        frame = fifo.popleft()
+        if fifo:
+            self._turns.append(sender)  # back of the line: round robin
+        else:
+            del self._fifos[sender]
+        if self.gate:
+            self._hub.room_made()
+        return frame
 
     def add_trace(self, hook: FrameTraceHook) -> None:
         self._traces.append(hook)
@@ -105,8 +191,15 @@ class HubPort:
     async def close(self) -> None:
         if not self._closed:
             self._closed = True
-            self._queue.put_nowait(None)
+            if self._waiter is not None and not self._waiter.done():
+                self._waiter.set_result(None)
             self._hub.detach(self)
+            self._hub.room_made()
+
+
+def _resolve(fut: asyncio.Future[None]) -> None:
+    if not fut.done():
+        fut.set_result(None)
 
 
 class _Session:
@@ -115,21 +208,50 @@ class _Session:
     def __init__(self, hub: SocketcandHub, writer: asyncio.StreamWriter) -> None:
         self.hub = hub
         self.writer = writer
+        self.transport = writer.transport
         self.receiving = False
+        self.dropped = False
+        self._out = bytearray()  # written once per event-loop turn (one send for many frames)
+        self._flush_scheduled = False
 
-    def deliver(self, frame: CanFrame) -> None:
-        if self.receiving and not self.writer.is_closing():
-            self.writer.write(format_frame(frame).encode("ascii"))
+    def deliver(self, frame: CanFrame, sender: object = None) -> None:
+        if self.receiving:
+            self._write(format_frame(frame).encode("ascii"))
 
     def reply(self, text: str) -> None:
-        self.writer.write(text.encode("ascii"))
+        self._write(text.encode("ascii"))
+
+    def _write(self, data: bytes) -> None:
+        transport = self.transport
+        if self.dropped or transport.is_closing():
+            return
+        if lim.output_over_bound(transport, len(self._out) + len(data)):
+            self.dropped = True
+            self._out.clear()
+            self.hub.dropped_clients += 1
+            self.hub.detach(self)
+            lim.drop_slow_reader(transport, WHAT)
+            return
+        self._out += data
+        if not self._flush_scheduled:
+            self._flush_scheduled = True
+            asyncio.get_running_loop().call_soon(self._flush)
+
+    def _flush(self) -> None:
+        self._flush_scheduled = False
+        if self._out and not self.dropped and not self.transport.is_closing():
+            self.transport.write(bytes(self._out))
+        self._out.clear()
 
     async def run(self, reader: asyncio.StreamReader) -> None:
         self.reply("< hi >")
         buf = b""
-        while True:
-            chunk = await reader.read(4096)
+        while not self.dropped:
+            await asyncio.sleep(0)  # one chunk per loop turn: buffered input must not starve
+            chunk = await reader.read(4096)  # the other sessions
             if not chunk:
+                if not self.dropped:
+                    await self.hub.linger(self)  # half-closed: its replies are still owed
                 return
             buf += chunk
             while True:
@@ -144,7 +266,10 @@ class _Session:
                     buf = buf[start:]
                     continue
                 message, buf = buf[start + 1:end], buf[end + 1:]
-                await self._command(message.decode("ascii", "replace").split())
+                if not _PRINTABLE.fullmatch(message):
+                    self.reply("< error command must be printable ASCII >")
+                    continue
+                await self._command(message.decode("ascii").split())
 
     async def _command(self, tokens: list[str]) -> None:
         if not tokens:
@@ -154,17 +279,17 @@ class _Session:
             self.reply("< ok >")
         elif word == "rawmode":
             self.reply("< ok >")
-            await self.writer.drain()
+            with contextlib.suppress(ConnectionError):
+                await self.writer.drain()
             await asyncio.sleep(RAWMODE_SETTLE_S)
             self.receiving = True
         elif word == "send":
             try:
                 frame = parse_send(tokens)
             except ValueError as exc:
-                self.reply(f"< error {exc} >")
+                self.reply(f"< error {exc} >")  # fixed ASCII texts (parse_send)
                 return
-            self.hub.frames_from_tcp += 1
-            self.hub.publish(frame, self)
+            await self.hub.publish_from_client(frame, self)
         elif word == "echo":
             self.reply("< echo >")
         else:
@@ -177,22 +302,36 @@ Endpoint = HubPort | _Session
 class SocketcandHub:
     """The virtual bus: TCP sessions and in-process ports; every frame reaches all others."""
 
-    def __init__(self, host: str = "127.0.0.1", port: int = 0) -> None:
+    def __init__(self, host: str = "127.0.0.1", port: int = 0, *, lossless: bool = False,
+                 max_clients: int = lim.DEFAULT_MAX_CLIENTS) -> None:
         self.host = host
         self.port = port
+        self.lossless = lossless  # clients wait for room at the gates instead of losing frames
+        self.cap = lim.ClientCap(max_clients, WHAT)
         self._endpoints: list[Endpoint] = []
         self._server: asyncio.Server | None = None
         self._tasks: set[asyncio.Task[None]] = set()
+        self._room_waiters: list[asyncio.Future[None]] = []
         self.frames_from_tcp = 0
+        self.frames_lost = 0  # client frames that found a gate's FIFO full (paced)
+        self.dropped_clients = 0
 
     async def start(self) -> tuple[str, int]:
-        self._server = await asyncio.start_server(self._on_client, self.host, self.port)
+        url = f"{self.host}:{self.port}"
+        try:
+            self._server = await asyncio.start_server(self._on_client, self.host, self.port,
+                                                      backlog=lim.LISTEN_BACKLOG)
+        except OSError as exc:
+            raise lim.listen_error("socketcand", url, exc) from None
         sock = self._server.sockets[0]
+        requested = self.host
         self.host, self.port = sock.getsockname()[:2]
+        lim.warn_if_exposed("the socketcand bus", requested, f"{self.host}:{self.port}")
         return self.host, self.port
 
-    def open_port(self, timing: BitTiming | None = None) -> HubPort:
-        port = HubPort(self, timing)
+    def open_port(self, timing: BitTiming | None = None, *, gate: bool = False) -> HubPort:
+        """An in-process endpoint; ``gate=True`` for the drives' port (see the module doc)."""
+        port = HubPort(self, timing, gate=gate)
         self._endpoints.append(port)
         return port
 
@@ -201,19 +340,63 @@ class SocketcandHub:
             self._endpoints.remove(endpoint)
 
     def publish(self, frame: CanFrame, sender: Endpoint) -> None:
-        for endpoint in self._endpoints:
+        for endpoint in list(self._endpoints):
             if endpoint is not sender:
-                endpoint.deliver(frame)
+                endpoint.deliver(frame, sender)
 
+    # ------------------------------------------------------------------ gates
+    def _gates(self) -> list[HubPort]:
+        return [e for e in self._endpoints if isinstance(e, HubPort) and e.gate]
+
+    def has_room(self, sender: object) -> bool:
+        return all(g.has_room(sender) for g in self._gates())
+
+    def queued_from(self, sender: object) -> int:
+        return sum(g.queued_from(sender) for g in self._gates())
+
+    def room_made(self) -> None:
+        waiters, self._room_waiters = self._room_waiters, []
+        for fut in waiters:
+            if not fut.done():
+                fut.set_result(None)
+
+    async def _room_changed(self) -> None:
+        fut = asyncio.get_running_loop().create_future()
+        self._room_waiters.append(fut)
+        await fut
+
+    async def publish_from_client(self, frame: CanFrame, session: _Session) -> None:
+        """A TCP client's frame: onto the bus if the gates have room (see the module doc)."""
+        while not self.has_room(session):
+            if not self.lossless:
+                self.frames_lost += 1
+                return
+            await self._room_changed()
+        if session.dropped:
+            return
+        self.frames_from_tcp += 1
+        self.publish(frame, session)
+
+    async def linger(self, session: _Session) -> None:
+        """Keep a half-closed session until its frames are taken and answered (bounded)."""
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(HALF_CLOSE_LINGER_S):
+                while self.queued_from(session):
+                    await self._room_changed()
+                await asyncio.sleep(REPLY_SETTLE_S)
+
+    # ------------------------------------------------------------------ TCP clients
     async def _on_client(self, reader: asyncio.StreamReader,
                          writer: asyncio.StreamWriter) -> None:
+        if not self.cap.admit():
+            writer.write(b"< error too many clients >")
+            writer.close()
+            return
         task = asyncio.current_task()
         if task is not None:
             self._tasks.add(task)
         sock = writer.get_extra_info("socket")
         if sock is not None:
-            import socket
-
             with contextlib.suppress(OSError):
                 sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         session = _Session(self, writer)
@@ -223,6 +406,7 @@ class SocketcandHub:
         except (ConnectionError, asyncio.IncompleteReadError):
             pass
         finally:
+            self.cap.release()
             self.detach(session)
             writer.close()
             with contextlib.suppress(ConnectionError, OSError):
@@ -248,6 +432,7 @@ class SocketcandHub:
         for endpoint in list(self._endpoints):
             if isinstance(endpoint, HubPort):
                 await endpoint.close()
+        self.room_made()
 
 
 def parse_socketcand_address(text: str) -> tuple[str, int]:
@@ -255,4 +440,6 @@ def parse_socketcand_address(text: str) -> tuple[str, int]:
     host, sep, port = text.rpartition(":")
     if not sep or not port.isdigit() or not 0 <= int(port) <= 65535:
         raise ArgumentRangeError(f"socketcand address {text!r} must be HOST:PORT")
+    if host.startswith("[") and host.endswith("]"):  # [::1]:PORT
+        host = host[1:-1]
     return host or "127.0.0.1", int(port)

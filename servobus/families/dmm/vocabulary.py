@@ -52,6 +52,7 @@ class Kind(Enum):
     INTERNAL = "internal"
 
 
+MAX_DRIVE_ID = 63  # six id bits on both protocols (DYN232M 7.2.3: 64..126 reserved)
 VALUE_MIN = -(1 << 27)  # -134,217,728: 28-bit signed position/distance
 VALUE_MAX = (1 << 27) - 1  # 134,217,727
 # Turn_ConstSpeed, wave amplitude and frequency: the DYN232M manual gives only the wire

@@ -17,6 +17,15 @@ an asyncio sleep for all but the last ``coarse_s`` (event loops using epoll wake
 millisecond), a blocking ``time.sleep`` for most of the rest, then a short spin (``spin_s``)
 for the final microseconds. The loop is blocked at most ``coarse_s`` per reply; the line is
 serial anyway. ``paced=False`` (``--fast``) executes and answers at once.
+
+Receive buffer (paced). Each host port may have at most ``RX_BUFFER_BYTES`` = 256 bytes
+(67 ms of wire time) accepted but not yet arrived at the drives; bytes beyond that are lost,
+as bytes are when a serial bridge's or UART's receive buffer overflows: DYN232M has no flow
+control (RS-485, no RTS/CTS), and the manual (7.1) gives no buffer size, so the size is a
+servobus decision (docs/dyn232.md). A host that waits for its replies, or writes no faster
+than 38400 baud, never loses a byte; a flood costs the line at most 67 ms per host port,
+and no memory. Lost bytes cut packets, which the drives see as framing/checksum errors.
+Replies still pending for a port that closes are dropped (:meth:`LineRunner.close_port`).
 """
 
 from __future__ import annotations
@@ -26,6 +35,7 @@ import contextlib
 import heapq
 import itertools
 import time
+from collections import deque
 from collections.abc import Callable, Iterator
 
 from servobus.protocols.dyn232 import codec as c
@@ -35,8 +45,9 @@ from servobus.transport.base import Direction, TraceHook
 
 BYTE_TIME_S = c.wire_time_s(1)  # 10 bits at 38400 baud = 260.4 us
 COARSE_S = 0.0015  # epoll-based loops round timeouts up to 1 ms (+ wake-up jitter)
-FINE_COARSE_S = 0.0004  # for loops on a microsecond selector (the sim server uses select())
+FINE_COARSE_S = 0.0004  # for loops on a microsecond selector (sim.fine_selector)
 MAX_PENDING_TAP = 4096  # host bytes held for the tap until their packet completes
+RX_BUFFER_BYTES = 256  # per host port, accepted ahead of the wire (see the module doc)
 SPIN_S = 0.00012  # time.sleep overshoots by ~50-100 us (timer slack): spin the last part
 
 
@@ -62,6 +73,11 @@ class HostPort:
         self._deliver = deliver
         self.tap_pending = bytearray()  # host bytes of a packet not yet complete
         self.closed = False
+        self.pending = 0  # paced replies scheduled for this port, not yet released
+        self.on_idle: Callable[[], None] | None = None  # called when ``pending`` drops to 0
+        self.rx_queued = 0  # bytes accepted, not yet arrived (paced receive buffer)
+        self.rx_inflight: deque[tuple[float, int]] = deque()  # (arrival of the last, count)
+        self.rx_dropped = 0  # bytes lost to a full receive buffer
 
     def deliver(self, data: bytes) -> None:
         if not self.closed:
@@ -88,8 +104,10 @@ class LineRunner:
         self.tx = WireClock(byte_time_s)  # drives -> host
         self.coarse_s = coarse_s
         self.spin_s = spin_s
+        self.rx_buffer_bytes = RX_BUFFER_BYTES
+        self.rx_dropped = 0  # bytes lost to full receive buffers, all ports
         self.taps: list[TraceHook] = []
-        self._heap: list[tuple[float, int, Callable[[], None]]] = []
+        self._heap: list[tuple[float, int, HostPort | None, Callable[[], None]]] = []
         self._seq = itertools.count()
         self._task: asyncio.Task[None] | None = None
         self._waiter: asyncio.Future[None] | None = None
@@ -114,6 +132,15 @@ class LineRunner:
 
     def open_port(self, deliver: Callable[[bytes], None]) -> HostPort:
         return HostPort(deliver)
+
+    def close_port(self, port: HostPort) -> None:
+        """The host has gone: its pending replies are dropped (memory freed at once)."""
+        port.closed = True
+        port.on_idle = None
+        if port.pending:
+            port.pending = 0
+            self._heap[:] = [e for e in self._heap if e[2] is not port]
+            heapq.heapify(self._heap)
 
     def add_tap(self, hook: TraceHook) -> None:
         """``hook(direction, bytes, monotonic time)`` for every byte of the line, in order."""
@@ -151,17 +178,36 @@ class LineRunner:
             return
         self.start()
         self.clock.sync(now)
-        start, _ = self.rx.send(len(data), now)
+        data = self._admit(port, data, now)
+        if not data:
+            return
+        start, end_all = self.rx.send(len(data), now)
+        port.rx_inflight.append((end_all, len(data)))
+        port.rx_queued += len(data)
         bt = self.rx.byte_time_s
         for end, chunk, event in self._segments(port, data):
             t_done = start + end * bt
             self.clock.sync(t_done)  # the drives' time = arrival time of the last byte
             if taps:
-                self._at(t_done, self._tap_cb(Direction.TX, chunk, t_done))
+                self._at(t_done, None, self._tap_cb(Direction.TX, chunk, t_done))
             reply = self._handle(event)
             if reply:
                 _, t_end = self.tx.send(len(reply), t_done)
-                self._at(t_end, self._release_cb(port, reply, t_end))
+                port.pending += 1
+                self._at(t_end, port, self._release_cb(port, reply, t_end))
+
+    def _admit(self, port: HostPort, data: bytes, now: float) -> bytes:
+        """The part of ``data`` that fits the port's receive buffer (see the module doc)."""
+        inflight = port.rx_inflight
+        while inflight and inflight[0][0] <= now:
+            port.rx_queued -= inflight.popleft()[1]
+        room = self.rx_buffer_bytes - port.rx_queued
+        if room >= len(data):
+            return data
+        lost = len(data) - max(room, 0)
+        port.rx_dropped += lost
+        self.rx_dropped += lost
+        return data[:room] if room > 0 else b""
 
     def _handle(self, event: bytes | c.FramerEvent) -> bytes:
         """Run one framed event; ``bytes`` stands for one whole, not yet decoded packet."""
@@ -193,8 +239,8 @@ class LineRunner:
             del port.tap_pending[:-MAX_PENDING_TAP]
 
     # ------------------------------------------------------------------ timed release
-    def _at(self, when: float, action: Callable[[], None]) -> None:
-        heapq.heappush(self._heap, (when, next(self._seq), action))
+    def _at(self, when: float, port: HostPort | None, action: Callable[[], None]) -> None:
+        heapq.heappush(self._heap, (when, next(self._seq), port, action))
         if self._waiter is not None and not self._waiter.done():
             self._waiter.set_result(None)
 
@@ -202,7 +248,10 @@ class LineRunner:
         def release() -> None:
             self.max_late_s = max(self.max_late_s, time.monotonic() - when)
             self._tap(Direction.RX, reply, when)
+            port.pending -= 1
             port.deliver(reply)
+            if not port.pending and port.on_idle is not None:
+                port.on_idle()
 
         return release
 
@@ -227,7 +276,7 @@ class LineRunner:
                 continue  # something earlier may have been queued meanwhile
             _precise_sleep_until(when, self.spin_s)
             while heap and heap[0][0] <= time.monotonic():
-                heapq.heappop(heap)[2]()
+                heapq.heappop(heap)[3]()
             await asyncio.sleep(0)  # let the transports move the bytes
 
     async def _wait(self, loop: asyncio.AbstractEventLoop, timeout: float | None) -> None:

@@ -6,7 +6,8 @@ stdout gets one line per endpoint, flushed at once, so scripts and tests can rea
     pty /dev/pts/7
     tap on tcp://127.0.0.1:40124
 
-Everything else (drive list, statistics) goes to stderr.
+Everything else (drive list, warnings, one line per abuse event, statistics) goes to stderr.
+An address that cannot be bound ends the command with one ``error: ...`` line, exit code 2.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from servobus.families.dmm import units as U
 from servobus.protocols.dyn232.codec import FACTORY_ID
 from servobus.protocols.dyn232.server import parse_listen_url, run_server
 from servobus.sim.fleet import make_drives, parse_ids
+from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS, log_to_stderr
 
 
 def _tcp(option: str, value: str | None) -> tuple[str, int] | None:
@@ -47,9 +49,13 @@ def _tcp(option: str, value: str | None) -> tuple[str, int] | None:
               show_default=True, help="drive/motor model")
 @click.option("--duration", type=click.FloatRange(min=0.0), default=None, metavar="SECONDS",
               help="stop by itself after this many seconds [default: run until Ctrl-C]")
+@click.option("--max-clients", type=click.IntRange(min=1), default=DEFAULT_MAX_CLIENTS,
+              show_default=True, help="TCP connections (line and tap) served at once; more "
+                                      "are closed at once")
 def sim_dyn2_cmd(listen: str | None, ids: str | None, pty: bool, fast: bool, state: str | None,
-                 tap: str | None, model: str, duration: float | None) -> None:
+                 tap: str | None, model: str, duration: float | None, max_clients: int) -> None:
     """Virtual DYN2/DC2 drives sharing one RS485 line (DYN232M protocol)."""
+    log_to_stderr()
     try:
         drive_ids = parse_ids(ids) if ids is not None else (FACTORY_ID,)
     except ArgumentRangeError as exc:
@@ -60,14 +66,17 @@ def sim_dyn2_cmd(listen: str | None, ids: str | None, pty: bool, fast: bool, sta
     tap_endpoint = _tcp("--tap", tap)
     drives = make_drives(drive_ids, state=state, model=model)
     pacing = "unpaced (--fast)" if fast else "paced at 38400 8N1"
-    click.echo(f"servobus sim dyn232: {len(drives)} {model} drive(s), ids "
-               f"{','.join(str(d.drive_id) for d in drives)}, {pacing}", err=True)
+    banner = (f"servobus sim dyn232: {len(drives)} {model} drive(s), ids "
+              f"{','.join(str(d.drive_id) for d in drives)}, {pacing}")
     server = run_server(drives, listen=endpoint, pty=pty, tap=tap_endpoint, paced=not fast,
-                        duration=duration)
+                        duration=duration, max_clients=max_clients,
+                        ready=lambda: click.echo(banner, err=True))
     line = server.line
     click.echo(f"stopped: {line.packets} packet(s), {line.checksum_errors} checksum error(s), "
-               f"{line.framing_errors} framing error(s)", err=True)
+               f"{line.framing_errors} framing error(s), {server.runner.rx_dropped} byte(s) "
+               f"lost to full receive buffers, {server.cap.refused} connection(s) refused, "
+               f"{server.dropped_clients} client(s) dropped for not reading", err=True)
 
 
 def register(group: click.Group) -> None:
-    add_sim_command(group, sim_dyn2_cmd)
+    add_sim_command(group, sim_dyn2_cmd, aliases=("dyn2",))  # the name before protocols/

@@ -5,7 +5,9 @@ stdout gets one line, flushed at once, so scripts and tests can read the port::
     listening on socketcand 127.0.0.1:40123
 
 Connect with python-can (``interface="socketcand", host=..., port=..., channel="can0"``) or
-``servobus --can socketcand:127.0.0.1:40123 --id 1 status``. Everything else goes to stderr.
+``servobus --can socketcand:127.0.0.1:40123 --id 1 status``. Everything else (warnings, one
+line per abuse event, statistics) goes to stderr. An address that cannot be bound ends the
+command with one ``error: ...`` line, exit code 2.
 """
 
 from __future__ import annotations
@@ -25,20 +27,26 @@ from servobus.protocols.dyncan.node import DynCanNetwork, serve
 from servobus.sim.drive import VirtualDrive
 from servobus.sim.fleet import make_drives, parse_ids
 from servobus.sim.realtime import RealtimeClock
+from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS, fit_fd_limit, log_to_stderr
 from servobus.transport.can_bus import BitTiming
 from servobus.transport.socketcand_hub import SocketcandHub, parse_socketcand_address
 
 
 async def run_socketcand_nodes(drives: Sequence[VirtualDrive], host: str, port: int, *,
                                fast: bool = False, duration: float | None = None,
-                               bitrate: int = 1_000_000) -> DynCanNetwork:
+                               bitrate: int = 1_000_000,
+                               max_clients: int = DEFAULT_MAX_CLIENTS,
+                               banner: str | None = None,
+                               ) -> tuple[DynCanNetwork, SocketcandHub]:
     """Serve ``drives`` as DYN CAN nodes until ``duration`` passes or SIGINT/SIGTERM."""
     network = DynCanNetwork(drives)
-    hub = SocketcandHub(host, port)
+    hub = SocketcandHub(host, port, lossless=fast, max_clients=max_clients)
     host, port = await hub.start()
     click.echo(f"listening on socketcand {host}:{port}")
     sys.stdout.flush()
-    node_port = hub.open_port(timing=None if fast else BitTiming(bitrate))
+    if banner is not None:
+        click.echo(banner, err=True)
+    node_port = hub.open_port(timing=None if fast else BitTiming(bitrate), gate=True)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -50,7 +58,7 @@ async def run_socketcand_nodes(drives: Sequence[VirtualDrive], host: str, port: 
         await serve(network, node_port, clock=RealtimeClock(network.drives), stop=stop)
     finally:
         await hub.close()
-    return network
+    return network, hub
 
 
 @click.command("dyncan")
@@ -67,9 +75,12 @@ async def run_socketcand_nodes(drives: Sequence[VirtualDrive], host: str, port: 
               show_default=True, help="drive/motor model")
 @click.option("--duration", type=click.FloatRange(min=0.0), default=None, metavar="SECONDS",
               help="stop by itself after this many seconds [default: run until Ctrl-C]")
+@click.option("--max-clients", type=click.IntRange(min=1), default=DEFAULT_MAX_CLIENTS,
+              show_default=True, help="socketcand clients served at once; more are refused")
 def sim_dyncan_cmd(address: str, ids: str, fast: bool, bitrate: int, state: str | None,
-                   model: str, duration: float | None) -> None:
+                   model: str, duration: float | None, max_clients: int) -> None:
     """Virtual DYN2/DYN4 drives on one CAN bus (DYN CAN protocol, socketcand rawmode)."""
+    log_to_stderr()
     try:
         drive_ids = parse_ids(ids)
         host, port = parse_socketcand_address(address)
@@ -80,13 +91,18 @@ def sim_dyncan_cmd(address: str, ids: str, fast: bool, bitrate: int, state: str 
                                  param_hint="--ids")
     drives = make_drives(drive_ids, state=state, model=model)
     timing = "unpaced (--fast)" if fast else f"{bitrate / 1e6:g} Mbit/s timing model"
-    click.echo(f"servobus sim dyncan: {len(drives)} {model} drive(s), ids "
-               f"{','.join(str(d.drive_id) for d in drives)}, {timing}", err=True)
-    network = asyncio.run(run_socketcand_nodes(drives, host, port, fast=fast,
-                                               duration=duration, bitrate=bitrate))
+    banner = (f"servobus sim dyncan: {len(drives)} {model} drive(s), ids "
+              f"{','.join(str(d.drive_id) for d in drives)}, {timing}")
+    max_clients = fit_fd_limit(max_clients)
+    network, hub = asyncio.run(run_socketcand_nodes(drives, host, port, fast=fast,
+                                                    duration=duration, bitrate=bitrate,
+                                                    max_clients=max_clients, banner=banner))
     s = network.stats
     click.echo(f"stopped: {s.frames} frame(s), {s.replies} repl(ies), {s.drive_errors} drive "
-               f"error(s), {s.malformed} malformed, {s.alarms_pushed} alarm push(es)", err=True)
+               f"error(s), {s.malformed} malformed, {s.alarms_pushed} alarm push(es), "
+               f"{hub.frames_lost} frame(s) lost to full receive FIFOs, {hub.cap.refused} "
+               f"connection(s) refused, {hub.dropped_clients} client(s) dropped for not "
+               f"reading", err=True)
 
 
 def register(group: click.Group) -> None:

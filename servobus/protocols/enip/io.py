@@ -122,6 +122,61 @@ def output_frame(connection_id: int, sequence: int, count: int, image: OutputIma
     return IoFrame(connection_id, sequence, count, image.encode()).encode()
 
 
+#: A whole Class 1 datagram up to the sequence count: item count (2), sequenced address item
+#: (type, length 8, connection id, sequence number), connected data item (type, length),
+#: the 16-bit sequence count. The payload follows. Same bytes as :meth:`IoFrame.encode`.
+_DATAGRAM = struct.Struct("<HHHIIHHH")
+_SEQUENCED_LENGTH = 8
+
+
+class FramePacker:
+    """The datagrams of one connection, re-packed in one buffer (cyclic production: no
+    dataclasses per frame). The returned buffer is reused by the next :meth:`pack`."""
+
+    def __init__(self, connection_id: int, payload: struct.Struct) -> None:
+        self.connection_id = connection_id
+        self._payload = payload
+        self._data_len = _COUNT.size + payload.size
+        self._buf = bytearray(_DATAGRAM.size + payload.size)
+
+    def pack(self, sequence: int, count: int, *values: int) -> bytearray:
+        try:
+            _DATAGRAM.pack_into(self._buf, 0, 2, ItemType.SEQUENCED_ADDRESS, _SEQUENCED_LENGTH,
+                                self.connection_id, sequence, ItemType.CONNECTED_DATA,
+                                self._data_len, count)
+            self._payload.pack_into(self._buf, _DATAGRAM.size, *values)
+        except struct.error as exc:
+            raise FramingError(f"Class 1 frame field out of range: {exc}") from None
+        return self._buf
+
+
+def input_packer(connection_id: int) -> FramePacker:
+    """T->O: ``pack(sequence, count, position, speed, torque, status)``."""
+    return FramePacker(connection_id, _INPUT)
+
+
+def output_packer(connection_id: int) -> FramePacker:
+    """O->T: ``pack(sequence, count, run_idle_header, command)``."""
+    return FramePacker(connection_id, _OUTPUT)
+
+
+_INPUT_DATAGRAM_SIZE = _DATAGRAM.size + _INPUT.size
+_INPUT_DATA_LEN = _COUNT.size + _INPUT.size
+
+
+def unpack_input(raw: bytes) -> tuple[int, int, int, InputImage]:
+    """A T->O datagram of the DYN5's exact layout: connection id, sequence number, sequence
+    count and image. Anything else (other sizes, item types) is a FramingError."""
+    if len(raw) != _INPUT_DATAGRAM_SIZE:
+        raise FramingError(f"T->O datagram is {_INPUT_DATAGRAM_SIZE} bytes, got {len(raw)}")
+    items, addr_type, addr_len, conn, seq, data_type, data_len, count = _DATAGRAM.unpack_from(raw)
+    if (items, addr_type, addr_len, data_type, data_len) != (
+            2, ItemType.SEQUENCED_ADDRESS, _SEQUENCED_LENGTH, ItemType.CONNECTED_DATA,
+            _INPUT_DATA_LEN):
+        raise FramingError("T->O datagram is not a sequenced address + connected data")
+    return conn, seq, count, InputImage(*_INPUT.unpack_from(raw, _DATAGRAM.size))
+
+
 def seq32_newer(new: int, last: int) -> bool:
     """Serial-number order of 32-bit sequence numbers (wraps)."""
     diff = (new - last) & 0xFFFF_FFFF

@@ -252,6 +252,11 @@ class ReplyFramer:
         self._request = request
 
     @property
+    def pending(self) -> int:
+        """Bytes held that may still start the answer (0 after a reply or a skipped run)."""
+        return len(self._buf)
+
+    @property
     def needed(self) -> int:
         """Bytes that can be read without reading past the reply (at least 1). After a feed
         the buffer front is always a plausible start of the answer."""

@@ -77,6 +77,7 @@ class ServoEngine:
         self.bus_voltage = K.DEFAULT_BUS_VOLTAGE
         self.heat = 0.0  # filtered I^2, A^2 (thermal state persists like a warm motor)
         self.steps = 0
+        self.set_protections(True)
         self.power_on()
         self.set_gains(40, 40, 20, 127, 127)
         self.set_profile(1.0, 1.0)
@@ -140,8 +141,23 @@ class ServoEngine:
         self.fb = m.friction_nm * K.VISCOUS_PER_1000RPM / U.rpm_to_counts_per_s(1000.0)
         self.inv_fs = 1.0 / K.FRICTION_SMOOTH_CPS
         self.heat_beta = self.h / K.THERMAL_TAU_S
-        self.heat_trip = (K.THERMAL_TRIP_FACTOR * m.rated_current_a) ** 2
+        self.heat_trip = (self.thermal_trip_factor * m.rated_current_a) ** 2
         self.wake()
+
+    def set_protections(self, enabled: bool) -> None:
+        """The DMM alarms (lost phase, over current, I^2 t over power) on or off.
+
+        A front end of another family that models its own protections (YZ-AIM: stall and
+        current limit, docs/yzaim.md) switches them off: the thresholds become infinite, so
+        the hot loops stay unchanged."""
+        inf = math.inf
+        self.lp_fast = K.LOST_PHASE_FAST_COUNTS if enabled else inf
+        self.lp_slow = K.LOST_PHASE_SLOW_COUNTS if enabled else inf
+        self.lp_slow_s = K.LOST_PHASE_SLOW_S if enabled else inf
+        self.oc_trip_s = K.OVER_CURRENT_S if enabled else inf
+        self.thermal_trip_factor = K.THERMAL_TRIP_FACTOR if enabled else inf
+        if hasattr(self, "gains"):
+            self.set_gains(*self.gains)
 
     def set_profile(self, vmax: float, amax: float) -> None:
         """Generator limits in generator units per s and per s^2."""
@@ -352,7 +368,8 @@ class ServoEngine:
         fc, fb, inv_fs = self.fc, self.fb, self.inv_fs
         dist, blocked = self.disturbance, self.blocked
         beta, heat_trip = self.heat_beta, self.heat_trip
-        lp_fast, lp_slow = K.LOST_PHASE_FAST_COUNTS, K.LOST_PHASE_SLOW_COUNTS
+        lp_fast, lp_slow, lp_slow_s = self.lp_fast, self.lp_slow, self.lp_slow_s
+        oc_trip_s = self.oc_trip_s
         lp_t, oc_t = self.lp_t, self.oc_t
         oc_stall = K.OVER_CURRENT_STALL_CPS
         mode = int(self.ref_mode)
@@ -478,7 +495,7 @@ class ServoEngine:
                 break
             if ae >= lp_slow:
                 lp_t += h
-                if lp_t >= K.LOST_PHASE_SLOW_S:
+                if lp_t >= lp_slow_s:
                     trip = AlarmCode.LOST_PHASE
                     break
                 oc_t = 0.0
@@ -486,7 +503,7 @@ class ServoEngine:
                 lp_t = 0.0
                 if (tc == tmax or tc == -tmax) and -oc_stall < w < oc_stall:
                     oc_t += h
-                    if oc_t >= K.OVER_CURRENT_S:
+                    if oc_t >= oc_trip_s:
                         trip = AlarmCode.OVER_CURRENT
                         break
                 else:
@@ -552,7 +569,7 @@ class ServoEngine:
         ss, target, sref = self.ss_alpha, self.speed_target, self.speed_ref
         speed_mode = self.servo == Servo.SPEED
         kt = self.model.torque_constant_nm_a
-        oc_t, oc_stall = self.oc_t, K.OVER_CURRENT_STALL_CPS
+        oc_t, oc_stall, oc_trip_s = self.oc_t, K.OVER_CURRENT_STALL_CPS, self.oc_trip_s
         trip = AlarmCode.NONE
         k = 0
         tc = self.tq_cmd
@@ -592,7 +609,7 @@ class ServoEngine:
                 break
             if speed_mode and (tc == tmax or tc == -tmax) and -oc_stall < w < oc_stall:
                 oc_t += h
-                if oc_t >= K.OVER_CURRENT_S:
+                if oc_t >= oc_trip_s:
                     trip = AlarmCode.OVER_CURRENT
                     break
             else:
