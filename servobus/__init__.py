@@ -16,6 +16,15 @@ from servobus.errors import (
 
 __version__ = "0.1.0"
 
+
+def __getattr__(name: str) -> object:
+    """``servobus.connect`` / ``connect_async`` without loading the Axis on ``import servobus``."""
+    if name in ("connect", "connect_async"):
+        import importlib
+
+        return getattr(importlib.import_module("servobus.axis.connect"), name)
+    raise AttributeError(f"module 'servobus' has no attribute {name!r}")
+
 __all__ = [
     "ArgumentRangeError",
     "ChecksumError",
@@ -29,4 +38,6 @@ __all__ = [
     "ProtocolError",
     "ServobusError",
     "__version__",
+    "connect",
+    "connect_async",
 ]
