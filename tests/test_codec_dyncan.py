@@ -13,7 +13,7 @@ from servobus.protocols.dyncan import codec as c
 F = c.Function
 
 # (frame built by the codec, identifier, data hex) - hand-computed: id = drive << 5 | FC,
-# data big-endian two's complement (NOTES.md).
+# data big-endian two's complement (docs/dyncan.md).
 GOLDEN: list[tuple[c.Frame, int, str]] = [
     (c.request(1, F.SET_ORIGIN, 0xFF), 0x020, "ff"),
     (c.request(1, F.SET_ORIGIN), 0x020, ""),
@@ -41,7 +41,7 @@ GOLDEN: list[tuple[c.Frame, int, str]] = [
     (c.request(1, F.GENERAL_READ, 0x1B), 0x02E, "1b"),
     (c.reply(1, F.GENERAL_READ, 65_536), 0x02E, "01 00 00"),
     (c.request(1, F.GENERAL_READ, 0x1E), 0x02E, "1e"),
-    (c.reply(1, F.GENERAL_READ, -157), 0x02E, "ff 63"),  # torque example (NOTES.md)
+    (c.reply(1, F.GENERAL_READ, -157), 0x02E, "ff 63"),  # torque example (docs/dyncan.md)
     (c.Frame(1, F.FOR_MOTOR_DEFINE), 0x02F, ""),
     (c.request(1, F.SET_PARAM_GROUP1, fields=(40, 0, 20, 127)), 0x030, "28 00 14 7f"),
     (c.request(1, F.SET_PARAM_GROUP2, fields=(48, 30)), 0x031, "30 1e"),
@@ -87,7 +87,7 @@ def test_golden_decode(frame: c.Frame, ident: int, hexdata: str) -> None:
 
 
 def test_torque_example_amps() -> None:
-    # NOTES.md: 0xFF63 = -157; -157 / 700 x 20 A = -4.48 A; x 0.774 Nm/A = -3.47 Nm
+    # docs/dyncan.md: 0xFF63 = -157; -157 / 700 x 20 A = -4.48 A; x 0.774 Nm/A = -3.47 Nm
     value = c.decode(0x02E, bytes.fromhex("ff63")).value
     assert value == -157
     ratio = round(value / U.CAN_TORQUE_FULL_SCALE, 3)  # the manual rounds to 0.224 first

@@ -1,6 +1,6 @@
 """General_Read selectors that act instead of answering, shared by every front end.
 
-DYN232M (NOTES.md, from DMM's library) and DYN CAN (same firmware) use the same selectors:
+DYN232M (docs/dyn232.md, from DMM's library) and DYN CAN (same firmware) use the same selectors:
 0x1C reset (a power cycle), 0x20 servo enable, 0x21 servo disable. The readout selectors
 (0x1B position, 0x1D speed, 0x1E torque) are scaled per protocol by each front end.
 """

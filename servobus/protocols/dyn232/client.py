@@ -19,7 +19,7 @@ Transaction rules (the manual gives none; these are servobus decisions):
   parsed; the read is retried. When every attempt failed, the last failure is raised:
   ChecksumError if the last reply was corrupt, otherwise DriveTimeout.
 * Query pacing: ``query_interval_s`` is the minimum time between the starts of two queries
-  (commands with a reply). NOTES.md: real drives may drop queries above about 50/s, so 0.02
+  (commands with a reply). docs/dyn232.md: real drives may drop queries above ~50/s, so 0.02
   is the safe value on hardware; the default 0 is for simulators and fast links. A dropped
   query is still detected (deadline) and retried.
 * EEPROM settings (parameters, config, id) pass the EepromGuard before a byte is sent.

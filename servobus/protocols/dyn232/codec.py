@@ -7,11 +7,11 @@ Packet on the wire (the manual's Bn .. B0, sent Bn first)::
     ...     1 d[6:0]                       1..4 data bytes, 7-bit groups, MS group first
     B0      1 sum[6:0]                     sum of all previous bytes, mod 128
 
-Data is two's complement over 7 x n bits (28 bits for 4 bytes). NOTES.md decisions kept
+Data is two's complement over 7 x n bits (28 bits for 4 bytes). Decisions (docs/dyn232.md) kept
 here: encode with the fewest data bytes that hold the value; decode any length 1..4; the
 1-byte replies of register/parameter reads are 7-bit unsigned.
 
-Erratum found here (not in NOTES.md): the 1,400 rpm example in 7.4.2 shows the data bytes
+Erratum (docs/errata.md, DYN2): the 1,400 rpm example in 7.4.2 shows the data bytes
 as 0x85 0xF8, splitting 0x578 by hex digit; in 7-bit groups 1,400 is 0x8A 0xF8 (0x85 0xF8
 would be 760). The worked examples 1-6 and DMM's sample code agree with the 7-bit rule.
 """

@@ -13,7 +13,7 @@ URL form (parsed by :func:`parse_sim_url`)::
     sim://dyn2?state=/tmp/e.json    EEPROM kept in a JSON file (see EepromStore)
     sim://dyn2?model=DYN2-T1        motor/drive model (servobus.families.dmm.units.MODELS)
 
-``dc2`` and ``dyn4`` are accepted as aliases of ``dyn2`` (same protocol, NOTES.md).
+``dc2`` and ``dyn4`` are accepted as aliases of ``dyn2`` (same protocol, docs/dyn232.md).
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ Pacing lives in :mod:`servobus.protocols.dyn232.pacing`, sockets in
 Decisions where the manual is silent (kept here, in one place):
 
 * **Addressing.** A drive executes packets whose start byte holds its id or the broadcast
-  id 127, and answers with its own id (NOTES.md). Packets for ids nobody has get silence.
+  id 127, and answers with its own id (docs/dyn232.md). Packets for ids nobody has get silence.
 * **Several answers to one packet** (a broadcast read with more than one drive on the line,
   or two drives sharing an id): on a real line the replies collide and the host receives
   garbage that fails its checksum. The simulator models that as *silence*: every addressed

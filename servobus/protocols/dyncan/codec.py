@@ -4,7 +4,7 @@ CAN 2.0A base frames, 1..5 data bytes (group 3 carries 5)::
 
     11-bit identifier = drive id << 5 | function code     b10..b5 drive id, b4..b0 FC
 
-Decisions (NOTES.md; the manual is silent):
+Decisions (docs/dyncan.md; the manual is silent):
 
 * multi-byte data is big-endian two's complement, encoded with the fewest bytes the
   table allows; any length in the table's range decodes;
@@ -174,7 +174,7 @@ def _group_set(fn: Function, fields: tuple[Field, ...], doc: str) -> FunctionSpe
                         drive_error=True, doc=doc)
 
 
-#: THE DYN CAN function table (section 5, corrected by section 6 and NOTES.md).
+#: THE DYN CAN function table (section 5, corrected by section 6 and docs/errata.md).
 SPECS: dict[Function, FunctionSpec] = {
     s.function: s
     for s in (

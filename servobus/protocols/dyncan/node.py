@@ -23,7 +23,7 @@ Decisions where the manual is silent (kept here, in one place):
 * **Sync moves.** Go_*_Sync loads one pending target per kind; Sync_Trigger 0xFF / 0xEE
   starts it and consumes it (a second trigger without a new load does nothing, so a
   repeated trigger never moves twice). Loading does not move the motor.
-* **Set_Origin** with 0 data bytes or 1 byte 0xFF (NOTES.md); another byte is ignored.
+* **Set_Origin** with 0 data bytes or 1 byte 0xFF (docs/dyncan.md); another byte is ignored.
 * **Set_Drive_Config:** bits 7 and 6 are unimplemented and masked off.
 * **General_Read** answers 0x1B position (counts, low 32 bits, 1..4 bytes), 0x1E torque
   (700 = peak current) and 0x1D speed (rpm) on 0x0E; 0x1C resets, 0x20 / 0x21 enable /
