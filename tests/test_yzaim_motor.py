@@ -57,7 +57,7 @@ def test_power_on_registers_are_the_table_defaults_set_up_for_communication() ->
             assert regs[name] == value, name
     assert regs["gear_numerator"] == 0 and regs["modbus_enable"] == 1  # 4.8
     assert regs["device_address"] == 3 and m.address == 3
-    assert regs["supply_voltage"] == round(30 * 327)  # 57AIM30C: 24..36 V, nominal 30 V
+    assert regs["supply_voltage"] == 30 * 327  # 57AIM30C: 24..36 V, nominal 30 V
     assert regs["alarm_code"] == 0 and regs["motor_speed"] == 0
 
 
@@ -154,11 +154,9 @@ def test_gear_numerator_0_specials_stop_and_clear() -> None:
     m.advance(0.15)
     moving_at = m.position
     m.write_words(INC, [0, 0])  # 4.7: emergency stop
-    run_until(m, lambda: abs(m.speed_rpm) < 0.5, 0.5, 0.001)
-    assert moving_at < m.position < moving_at + REV // 4  # a short braking distance
     m.advance(0.5)
-    stopped = m.position
-    assert stopped < 10 * REV - REV
+    assert abs(m.position - moving_at) < REV // 8  # a short braking distance
+    assert abs(m.speed_rpm) < 0.5
     m.write_words(ABS, [0, 0])  # 4.7: clear the absolute position
     assert m.position == 0
     m.advance(0.2)
@@ -172,11 +170,14 @@ def test_emergency_stop_function_and_clear_position_function() -> None:
     write(m, "gear_numerator", 4)  # with a gear, 0 is an ordinary position
     m.write_words(ABS, Y.split32(5 * REV))
     m.advance(0.1)
+    m.advance(0.05)
+    moving_at = m.position
     m.emergency_stop()
-    run_until(m, lambda: abs(m.speed_rpm) < 0.5, 0.5, 0.001)
+    m.advance(0.5)
     here = m.position
-    m.advance(0.3)
-    assert abs(m.position - here) <= 2
+    assert abs(here - moving_at) < REV // 8 and abs(m.speed_rpm) < 0.5
+    m.advance(0.5)
+    assert abs(m.position - here) <= 1
     assert m.clear_position()
     assert m.position == 0 and read(m, "absolute_position") == 0
     m.write_words(ABS, [0, 0])  # gear 4: a move to 0, nothing to do
@@ -266,7 +267,7 @@ def test_streamed_cache_positions_run_at_the_commanded_speed() -> None:
         m.write_position_cache(start + round(k * step))
         m.advance(Y.SYNC_CYCLE_S)
     assert abs(m.speed_rpm - 600) < 10
-    m.advance(0.1)
+    m.advance(0.3)
     assert abs(m.position - (start + round(250 * step))) <= 2
     assert m.refused_cache == 0
 

@@ -45,8 +45,10 @@ own registers and units on top of this core:
 * ``set_raw_profile(speed_rpm, accel_rpm_s)``: the generator's cruise speed and acceleration
   in rpm and rpm/s instead of Max Speed / Max Accel (None, None restores those).
 * ``move_to_counts(counts, smooth=)``: absolute move to encoder counts from the origin
-  (counts of this core, 65,536 per revolution); ``halt()``: the reference stops where the
-  shaft is (servo on; the position loop brakes the motor, an emergency stop).
+  (counts of this core, 65,536 per revolution); ``halt()``: an emergency stop, the reference
+  stops where it is (servo on; the motor runs out its following error and brakes);
+  ``follow_counts(counts, seconds)``: interpolated motion without a curve (cyclic synchronous
+  position mode); ``target_counts``: where the commanded motion ends.
 """
 
 from __future__ import annotations
@@ -233,17 +235,31 @@ class VirtualDrive:
         return True
 
     def halt(self) -> bool:
-        """Emergency stop: the reference stays where the shaft is now (servo stays on)."""
+        """Emergency stop: the reference stops where it is now (servo stays on)."""
         if not self._accepts_motion():
             return False
-        self._engine.hold_here()
+        self._engine.freeze_reference()
+        return True
+
+    def follow_counts(self, counts: float, seconds: float) -> bool:
+        """Interpolated motion (a cyclic synchronous position mode): the reference moves by
+        ``counts`` evenly over ``seconds``, no curve; adds to what is left of the last one."""
+        if not self._accepts_motion():
+            return False
+        self._ptp_limits()
+        self._engine.ext_move(counts, seconds)
         return True
 
     @property
     def target_counts(self) -> float:
-        """Where the generated motion ends (counts from the origin; the reference if none)."""
+        """Where the commanded motion ends (counts from the origin; the reference if none)."""
         eng = self._engine
-        end = eng.gT if eng.ref_mode == Ref.GEN and eng.path is None else eng.ref
+        if eng.ref_mode == Ref.GEN and eng.path is None:
+            end = eng.gT
+        elif eng.ref_mode == Ref.EXT:
+            end = eng.ref + eng.ext_step * eng.ext_left
+        else:
+            end = eng.ref
         return end - self._origin
 
     # ---------------------------------------------------------------- registers

@@ -31,7 +31,7 @@ Behaviour, with the manual's sections (docs/yzaim.md) and servobus decisions whe
 * **Speed mode** (0x19 = 3, switched at once; the PWM input is not simulated): the motor runs
   at 0x02 rpm, direction from dir_polarity 0x09 (0: increasing position, as an open DIR input
   turns clockwise at polarity 0), ramping at 0x03. Position writes are ignored in speed mode;
-  leaving it ramps to a stop and holds.
+  leaving it ramps to a stop and holds; an emergency stop ends it (0x19 then reads 0).
 * **Enable** (0x01): 0 frees the motor and clears a latched alarm, 1 energises it (refused
   while an alarm is latched). An alarm that stops the motor frees it and holds until 0x01 is
   written 0 (then 1) or the power is cycled (2.3 says only "downtime").
@@ -43,10 +43,11 @@ Behaviour, with the manual's sections (docs/yzaim.md) and servobus decisions whe
   running) while ``set_battery(False)``.
 * **Synchronous cache** (0x1A-0x1C, 5.4c/d): with 0x1C = 0 the cache is only stored. Writing
   0x1C > 0 (not 255) is the synchronisation signal: a pending cache is taken at once and the
-  drive's 2 ms time base restarts there; then the newest cache value is taken every 2 ms (with
-  the drive's curve below 60000 - "accumulating" - and without it at 60000). 0x1C = 255 takes
-  the cache on each ``dir_edge()``. A cache write while the previous one is still pending is
-  refused (TOO_FAST) and not stored.
+  drive's 2 ms time base restarts there; then the newest cache value is taken every 2 ms: with
+  the drive's curve below 60000 (5.4c, "accumulating": it may lag), at 60000 and above
+  interpolated linearly over the next 2 ms cycle at no more than the speed limit 0x02 (5.4d,
+  "no lag"). 0x1C = 255 takes the cache on each ``dir_edge()``. A cache write while the
+  previous one is still pending is refused (TOO_FAST) and not stored.
 * **Save** (0x14): 1 stores every saved register at once (reads 2 afterwards), 3 also the
   single-turn origin (reads 2); 0 and 2 are only stored. A new device address 0x15 takes
   effect at the next power cycle.
@@ -463,8 +464,11 @@ class YzaimMotor:
             self._speed_mode = False
             self.drive.turn_const_speed(0)
 
+    def _speed_limit_rpm(self) -> int:
+        return min(self._ram["target_speed"], self.model.max_rpm)
+
     def _run_speed(self) -> None:
-        rpm = min(self._ram["target_speed"], self.model.max_rpm)
+        rpm = self._speed_limit_rpm()
         self.drive.turn_const_speed(-rpm if self._ram["dir_polarity"] else rpm)
 
     def _move_to(self, position: int) -> None:
@@ -530,8 +534,15 @@ class YzaimMotor:
 
     def _take_cache(self) -> None:
         self._cache_pending = False
-        if not self._speed_mode:
-            self._move_to(self._cache())
+        if self._speed_mode:
+            return
+        if yzaim.uses_internal_profile(self._ram["acceleration"]):
+            self._move_to(self._cache())  # 5.4c: the drive's curve, it may lag behind
+            return
+        # 5.4d: no curve: interpolate to the cache within the cycle, at most at the speed limit
+        most = self._speed_limit_rpm() / 60.0 * yzaim.COUNTS_PER_REV * TICK_S
+        step = max(-most, min(most, self._cache() - self.target))
+        self.drive.follow_counts(step * phys.CORE_PER_COUNT, TICK_S)
 
     def _sync_signal(self) -> None:
         """0x1C written: > 0 restarts the 2 ms time base here and takes a pending cache."""

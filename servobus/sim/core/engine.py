@@ -187,6 +187,16 @@ class ServoEngine:
         self.lp_t = self.oc_t = 0.0
         self.wake()
 
+    def freeze_reference(self) -> None:
+        """Emergency stop: the reference stops where it is (motion left is dropped); the
+        motor runs out its following error and brakes at the torque limit."""
+        self._reset_gen(self.ref, 0.0)
+        self.ref_prev = self.ref
+        self.ref_mode = Ref.HOLD
+        self.busy = False
+        self.ext_left = 0
+        self.wake()
+
     def _reset_gen(self, coord: float, speed: float) -> None:
         """Generator at ``coord`` moving at ``speed``, as if it had been for a filter window
         (so the smoothed reference speed is continuous)."""
