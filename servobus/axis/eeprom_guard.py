@@ -22,6 +22,7 @@ guard stops accidents (loops), not deliberate wear; lifetime counts are in ``tot
 from __future__ import annotations
 
 import time
+import logging
 import warnings
 from collections import deque
 from collections.abc import Callable
@@ -30,6 +31,8 @@ from dataclasses import dataclass, field
 from servobus.errors import EepromGuardError
 
 EEPROM_CYCLE_LIMIT = 1_000_000  # manual section 7
+
+log = logging.getLogger(__name__)
 
 
 class EepromWearWarning(UserWarning):
@@ -78,11 +81,11 @@ class EepromGuard:
                     f"{self.window_s:g} s (limit {self.max_drive_per_window}). Nothing was sent."
                 )
             if len(recent) >= self.warn_per_window:
-                warnings.warn(
-                    f"{item} of drive {drive_id} written {len(recent) + 1} times in "
-                    f"{self.window_s:g} s: EEPROM wears out after {EEPROM_CYCLE_LIMIT:,} cycles",
-                    EepromWearWarning, stacklevel=3,
-                )
+                text = (f"{item} of drive {drive_id} written {len(recent) + 1} times in "
+                        f"{self.window_s:g} s: EEPROM wears out after "
+                        f"{EEPROM_CYCLE_LIMIT:,} cycles")
+                log.warning("%s", text)
+                warnings.warn(text, EepromWearWarning, stacklevel=3)
         recent.append(now)
         drive.append(now)
         self.totals[key] = self.totals.get(key, 0) + 1
