@@ -21,8 +21,8 @@ guard stops accidents (loops), not deliberate wear; lifetime counts are in ``tot
 
 from __future__ import annotations
 
-import time
 import logging
+import time
 import warnings
 from collections import deque
 from collections.abc import Callable
