@@ -286,18 +286,33 @@ def test_two_cache_writes_in_one_cycle_are_too_fast() -> None:
     m.write_position_cache(200)  # taken: the next cycle accepts one
 
 
-def test_cache_is_only_stored_without_sync_and_the_sync_signal_triggers_it() -> None:
+def test_cache_waits_without_sync_and_the_sync_signal_triggers_it() -> None:
     m = YzaimMotor()
+    write(m, "sync_control", 1)  # the signal alone: the power-on cache 0 is not pending
+    write(m, "sync_control", 0)
     m.write_position_cache(REV)
-    m.write_position_cache(REV)  # sync off: no cycle, nothing pending
+    m.write_position_cache(REV // 2)  # sync off: no cycle, the newest value waits
     m.advance(0.3)
-    assert m.position == 0 and read(m, "position_cache") == REV
-    write(m, "sync_control", 1)  # the synchronisation signal takes nothing stale ...
+    assert m.position == 0 and read(m, "position_cache") == REV // 2
+    write(m, "sync_control", 1)  # the synchronisation signal takes it at once
     m.advance(0.3)
-    assert m.position == 0
-    m.write_position_cache(REV // 4)  # ... a new value is taken within one cycle
-    m.advance(0.3)
-    assert m.position == REV // 4
+    assert m.position == REV // 2
+    write(m, "sync_control", 1)  # nothing pending: nothing moves
+    m.advance(0.1)
+    assert m.position == REV // 2
+
+
+def test_motors_loaded_then_signalled_start_together() -> None:
+    a, b = YzaimMotor(1), YzaimMotor(2)
+    for m in (a, b):
+        m.write_position_cache(REV)
+    a.advance(0.0013)  # an odd moment in both motors' 2 ms cycles
+    b.advance(0.0013)
+    write(a, "sync_control", 1)
+    write(b, "sync_control", 1)
+    a.advance(0.05)
+    b.advance(0.05)
+    assert a.position == b.position > 0
 
 
 def test_sync_on_the_dir_signal() -> None:

@@ -41,13 +41,16 @@ Behaviour, with the manual's sections (docs/yzaim.md) and servobus decisions whe
   0x1D limit for its units digit in seconds (0: hold the limit). Over-voltage 0x12: supply
   above the model's range + 10 %. Battery warning 0x13 (multi-turn models, motor keeps
   running) while ``set_battery(False)``.
-* **Synchronous cache** (0x1A-0x1C, 5.4c/d): with 0x1C = 0 the cache is only stored. Writing
-  0x1C > 0 (not 255) is the synchronisation signal: a pending cache is taken at once and the
-  drive's 2 ms time base restarts there; then the newest cache value is taken every 2 ms: with
+* **Synchronous cache** (0x1A-0x1C, 5.4c/d): a cache value written since the last take is
+  pending. With 0x1C = 0 it only waits. Writing 0x1C > 0 (not 255) is the synchronisation
+  signal (5.2 0x1B): a pending cache is taken at once and the drive's 2 ms time base
+  restarts there, so motors loaded first and then signalled start together (a power-on
+  cache of 0 is never pending, so the signal alone never moves a motor); from then on the
+  newest cache value is taken every 2 ms: with
   the drive's curve below 60000 (5.4c, "accumulating": it may lag), at 60000 and above
   interpolated linearly over the next 2 ms cycle at no more than the speed limit 0x02 (5.4d,
-  "no lag"). 0x1C = 255 takes the cache on each ``dir_edge()``. A cache write while the
-  previous one is still pending is refused (TOO_FAST) and not stored.
+  "no lag"). 0x1C = 255 takes the cache on each ``dir_edge()``. While 0x1C is not 0, a
+  cache write while the previous one is still pending is refused (TOO_FAST), not stored.
 * **Save** (0x14): 1 stores every saved register at once (reads 2 afterwards), 3 also the
   single-turn origin (reads 2); 0 and 2 are only stored. A new device address 0x15 takes
   effect at the next power cycle.
@@ -527,7 +530,7 @@ class YzaimMotor:
     def _store_cache(self, position: int) -> None:
         low, high = yzaim.split32(position)
         self._ram["position_cache_low"], self._ram["position_cache_high"] = low, high
-        self._cache_pending = self._ram["sync_control"] != 0
+        self._cache_pending = True
 
     def _cache(self) -> int:
         return yzaim.join32(self._ram["position_cache_low"], self._ram["position_cache_high"])
@@ -550,8 +553,6 @@ class YzaimMotor:
             if self._cache_pending:
                 self._take_cache()
             self._next_tick = self.time + TICK_S
-        elif self._ram["sync_control"] == 0:
-            self._cache_pending = False
 
 
 _ALARM = yzaim.ALARM_BY_NAME
