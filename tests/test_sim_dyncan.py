@@ -241,3 +241,27 @@ def test_group2_saves_to_eeprom_only_first_ten_times() -> None:
     d.reset()
     (g2,) = n.handle(c.request(1, F.READ_PARAM_GROUP2))
     assert g2.fields()[0] == 69
+
+
+# ---------------------------------------------------------------------- issue 13 deviations
+@pytest.mark.parametrize(("function", "dummies"), [
+    (F.READ_DRIVE_CONFIG, 1), (F.READ_PARAM_GROUP1, 1), (F.READ_PARAM_GROUP2, 1),
+    (F.READ_PARAM_GROUP3, 2), (F.READ_MOTOR_SPEED, 2), (F.DIAGNOSTIC_COUNTER, 1),
+])
+def test_dyncan_5_reads_with_the_total_data_dummy_bytes_are_answered(function: F,
+                                                                     dummies: int) -> None:
+    """Section 5: the "Total Data" column counts dummy bytes a host may send with a read."""
+    network = DynCanNetwork([VirtualDrive(1)])
+    plain = network.handle(c.Frame(1, function, b""))
+    padded = network.handle(c.Frame(1, function, b"\x00" * dummies))
+    assert len(plain) == len(padded) == 1 and padded[0].function == function
+    assert network.handle(c.Frame(1, function, b"\x00" * (dummies + 1))) == []  # too long
+
+
+def test_dyncan_4_sim_refuses_bit_rates_the_manual_does_not_list() -> None:
+    from click.testing import CliRunner
+
+    from servobus.cli.main import cli
+
+    result = CliRunner().invoke(cli, ["sim", "dyncan", "--bitrate", "300000", "--duration", "0"])
+    assert result.exit_code == 2 and "300000" in result.output

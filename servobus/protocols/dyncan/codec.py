@@ -137,6 +137,14 @@ class FunctionSpec:
     fields: tuple[Field, ...] = ()
     drive_error: bool = False  # the manual says the drive answers Drive Error 0xFF
     doc: str = ""
+    #: Dummy bytes a host may send with a data-less read: the manual's "Total Data" column
+    #: counts them (e.g. Read_Drive_Config 1, Read_Param_Group3 2). Accepted and ignored.
+    dummy: int = 0
+
+    def accepts_length(self, n_bytes: int) -> bool:
+        """A request of ``n_bytes`` data bytes has this function's shape (dummies included)."""
+        lo, hi = self.sent
+        return lo <= n_bytes <= hi or (self.request is Layout.NONE and n_bytes <= self.dummy)
 
     @property
     def expects_reply(self) -> bool:
@@ -163,9 +171,10 @@ def _motion(fn: Function, lengths: tuple[int, int], lo: int, hi: int, doc: str,
                         drive_error=drive_error, doc=doc)
 
 
-def _group_read(fn: Function, fields: tuple[Field, ...], doc: str) -> FunctionSpec:
+def _group_read(fn: Function, fields: tuple[Field, ...], doc: str, dummy: int) -> FunctionSpec:
     n = sum(f.width for f in fields)
-    return FunctionSpec(fn, _K.READ, _L.NONE, (0, 0), _L.FIELDS, (n, n), fields=fields, doc=doc)
+    return FunctionSpec(fn, _K.READ, _L.NONE, (0, 0), _L.FIELDS, (n, n), fields=fields, doc=doc,
+                        dummy=dummy)
 
 
 def _group_set(fn: Function, fields: tuple[Field, ...], doc: str) -> FunctionSpec:
@@ -193,7 +202,7 @@ SPECS: dict[Function, FunctionSpec] = {
         FunctionSpec(_F.SET_DRIVE_CONFIG, _K.SETTING, _L.BYTE, (1, 1), None, minimum=0,
                      maximum=0xFF, doc="configuration byte (b7 b6 unimplemented)"),
         FunctionSpec(_F.READ_DRIVE_CONFIG, _K.READ, _L.NONE, (0, 0), _L.BYTE, (1, 1),
-                     doc="configuration byte"),
+                     doc="configuration byte", dummy=1),
         FunctionSpec(_F.READ_DRIVE_STATUS, _K.READ, _L.NONE, (0, 0), _L.BYTE, (1, 1),
                      doc="status byte"),
         _motion(_F.TURN_CONST_SPEED, (1, 2), -CONST_SPEED_LIMIT_RPM, CONST_SPEED_LIMIT_RPM,
@@ -209,9 +218,11 @@ SPECS: dict[Function, FunctionSpec] = {
         _group_set(_F.SET_PARAM_GROUP1, _G1, "main, speed, integration gain, torque filter"),
         _group_set(_F.SET_PARAM_GROUP2, _G2, "max speed, max acceleration"),
         _group_set(_F.SET_PARAM_GROUP3, _G3, "on-position range, GEAR_NUM, LINE_NUM"),
-        _group_read(_F.READ_PARAM_GROUP1, _G1, "main, speed, integration gain, torque filter"),
-        _group_read(_F.READ_PARAM_GROUP2, _G2, "max speed, max acceleration"),
-        _group_read(_F.READ_PARAM_GROUP3, _G3, "on-position range, GEAR_NUM, LINE_NUM"),
+        _group_read(_F.READ_PARAM_GROUP1, _G1, "main, speed, integration gain, torque filter",
+                    dummy=1),
+        _group_read(_F.READ_PARAM_GROUP2, _G2, "max speed, max acceleration", dummy=1),
+        _group_read(_F.READ_PARAM_GROUP3, _G3, "on-position range, GEAR_NUM, LINE_NUM",
+                    dummy=2),
         _motion(_F.GO_ABSOLUTE_POS_SYNC, (1, 4), *_POS, "load absolute move; Sync_Trigger 0xFF"),
         _motion(_F.GO_RELATIVE_POS_SYNC, (1, 4), *_POS, "load relative move; Sync_Trigger 0xEE"),
         FunctionSpec(_F.SYNC_TRIGGER, _K.MOTION, _L.BYTE, (1, 1), None,
@@ -221,7 +232,7 @@ SPECS: dict[Function, FunctionSpec] = {
                      minimum=min(ServoCommand), maximum=max(ServoCommand),
                      codes=tuple(int(c) for c in ServoCommand), doc="0x00 enable, 0xFF disable"),
         FunctionSpec(_F.READ_MOTOR_SPEED, _K.READ, _L.NONE, (0, 0), _L.SIGNED, (2, 2),
-                     doc="motor speed, rpm"),
+                     doc="motor speed, rpm", dummy=2),
         FunctionSpec(_F.TBD, _K.INTERNAL, _L.RAW, (0, 0), None, doc="empty command"),
         # The manual lists no Drive Error for Position Direct: out-of-range PD is ignored.
         _motion(_F.POSITION_DIRECT, (1, 2), -POSITION_DIRECT_LIMIT, POSITION_DIRECT_LIMIT,
@@ -230,7 +241,7 @@ SPECS: dict[Function, FunctionSpec] = {
                      doc="drive -> host: 0xFF invalid data, 0xEE alarm"),
         FunctionSpec(_F.ECHO, _K.READ, _L.RAW, (4, 4), _L.RAW, (4, 4), doc="4-byte echo"),
         FunctionSpec(_F.DIAGNOSTIC_COUNTER, _K.READ, _L.NONE, (0, 0), _L.BYTE, (1, 1),
-                     doc="8-bit counter, +1 per read, wraps after 255"),
+                     doc="8-bit counter, +1 per read, wraps after 255", dummy=1),
     )
 }
 assert len(SPECS) == 32

@@ -147,11 +147,10 @@ class DynCanNetwork:
         """Execute one host frame on every node it addresses; return the replies."""
         self.stats.frames += 1
         spec = c.SPECS[F(frame.function)]
-        lo, hi = spec.sent
         handler = self._handlers.get(F(frame.function))
         if handler is None:
             return []
-        if not lo <= len(frame.data) <= hi:
+        if not spec.accepts_length(len(frame.data)):
             self.stats.malformed += 1
             return []
         out: list[c.Frame] = []

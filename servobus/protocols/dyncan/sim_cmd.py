@@ -23,6 +23,7 @@ import click
 from servobus.cli.sim_cmd import add_sim_command
 from servobus.errors import ArgumentRangeError
 from servobus.families.dmm import units as U
+from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan.node import DynCanNetwork, serve
 from servobus.sim.drive import VirtualDrive
 from servobus.sim.fleet import make_drives, parse_ids
@@ -67,7 +68,8 @@ async def run_socketcand_nodes(drives: Sequence[VirtualDrive], host: str, port: 
 @click.option("--ids", default="1", show_default=True, metavar="1,2,3",
               help="drive ids on the bus (1..63)")
 @click.option("--fast", is_flag=True, help="no 1 Mbit/s bit-timing model: answer at once")
-@click.option("--bitrate", type=click.IntRange(10_000, 1_000_000), default=1_000_000,
+@click.option("--bitrate", type=click.Choice([str(k * 1000) for k in c.BITRATES_KBIT]),
+              callback=lambda _ctx, _param, value: int(value), default="1000000",
               show_default=True, help="bit rate of the timing model")
 @click.option("--state", metavar="FILE", default=None,
               help="keep each drive's EEPROM (parameters, config, id) in this JSON file")

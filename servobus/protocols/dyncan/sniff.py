@@ -21,7 +21,8 @@ def can_length_error(frame: dyncan.Frame) -> str | None:
     spec = frame.spec
     shapes: list[tuple[str, tuple[int, int]]] = []
     if spec.kind is not dyncan.Kind.INTERNAL:  # internal functions are never host requests
-        shapes.append(("request", spec.sent))
+        lo, hi = spec.sent
+        shapes.append(("request", (lo, max(hi, spec.dummy))))  # dummy bytes of a read
     if spec.reply is not None:
         shapes.append(("reply", spec.returned))
     n = len(frame.data)
