@@ -30,7 +30,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import Callable, Hashable, Iterable
+from collections.abc import Awaitable, Callable, Hashable, Iterable
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
@@ -135,9 +135,12 @@ class LateReplies(Generic[K]):
         log.debug("gave up %d owed reply(ies) %s after %.0f ms without one",
                   debt.count, self._describe(key), self.late_reply_s * 1000)
 
-    async def drain(self, keys: Iterable[K]) -> None:
-        """Wait until the debts of ``keys`` are paid or given up (event-driven receivers:
-        the client's receive callback calls :meth:`take`; :meth:`hang_up` ends it)."""
+    async def drain(self, keys: Iterable[K],
+                    pull: Callable[[], Awaitable[None]] | None = None) -> None:
+        """Wait until the debts of ``keys`` are paid or given up. The client's receive path
+        calls :meth:`take` for each reply; media that push call it themselves (then
+        :meth:`hang_up` ends the wait at once); for media that can only be read, ``pull``
+        reads once and feeds the receive path (an error it raises ends the drain)."""
         wanted = list(keys)
         loop = asyncio.get_running_loop()
         left = self.wait_s(wanted)
@@ -147,6 +150,14 @@ class LateReplies(Generic[K]):
         log.debug("waiting up to %.0f ms for late replies %s before sending", left * 1000,
                   ", ".join(self._describe(k) for k in wanted if k in self._debts))
         while left > 0:
+            if pull is not None:
+                try:
+                    async with asyncio.timeout(left):
+                        await pull()
+                except TimeoutError:
+                    pass
+                left = self.wait_s(wanted)
+                continue
             fut: asyncio.Future[None] = loop.create_future()
             self._waiters.append(fut)
             timer = loop.call_later(left, _resolve, fut)
