@@ -1,34 +1,16 @@
 """Serve one virtual DYN232M RS485 line over TCP (serial-to-TCP bridge) and/or a PTY.
 
-* TCP: the raw serial byte stream, as a serial-to-TCP bridge would carry it, so pyserial's
-  ``socket://127.0.0.1:PORT`` connects. Several clients may connect; each is its own host
-  port on the line (its bytes are framed separately, so two clients never corrupt each
-  other's packets) and each receives only the replies to its own packets.
-* PTY: ``os.openpty()``; the slave path (``/dev/pts/N``) is opened like a serial port.
-* Tap (optional): every byte of the line in both directions, in wire order, as raw bytes
-  (host packets when their last byte arrived, replies when their last byte left), for
-  ``servobus sniff --tap tcp://...``. What a tap client sends is ignored.
+The mechanics are protocol-free and live in :mod:`servobus.sim.line_server` (TCP hosts,
+each its own port on the line; PTY; tap; fairness, backpressure, half-close, connection
+cap); this module puts the DYN232M line and its 38400-baud runner behind them:
 
-TCP connections and taps are :class:`asyncio.Protocol` objects, not StreamReader tasks: a
-host's bytes go from ``data_received`` straight into :meth:`LineRunner.submit` and replies
-straight to ``transport.write`` (one event-loop wake-up per packet, no task switch). The
-runner's tap hook is only installed once a tap listener exists, so an untapped line skips
-the tap bookkeeping.
-
-Abuse (decisions; bounds in :mod:`servobus.sim.server_limits`):
-
-* Fair service: a chunk longer than ``QUANTUM`` bytes is queued and handed to the line
-  ``QUANTUM`` bytes per event-loop turn, reading from that client paused meanwhile, so one
-  client's flood costs every other client at most one quantum (~1 ms) per turn.
-* Backpressure: a client that does not read its replies is no longer read from once
-  ``WRITE_HIGH_WATER`` bytes wait for it; a tap (it cannot be paused) past
-  ``MAX_OUTPUT_BYTES`` is dropped with one log line.
-* Paced mode drops bytes beyond each port's receive buffer
-  (:mod:`servobus.protocols.dyn232.pacing`); replies pending for a client that has gone
-  are dropped, never written.
-* A client that half-closes (shuts down its sending side) still gets the replies to what
-  it sent; the connection closes once they are out.
-* Connections beyond the cap are accepted and closed at once (one log line per episode).
+* each TCP client or the PTY is a :class:`~servobus.protocols.dyn232.pacing.HostPort` of
+  the :class:`~servobus.protocols.dyn232.pacing.LineRunner`, so two clients never corrupt
+  each other's packets and each receives only the replies to its own packets;
+* the tap carries every byte of the line in both directions, in wire order (host packets
+  when their last byte arrived, replies when their last byte left);
+* paced mode drops bytes beyond each port's receive buffer
+  (:mod:`servobus.protocols.dyn232.pacing`).
 
 The server binds 127.0.0.1 unless an address is given explicitly, and warns (one log line)
 when told to bind beyond loopback. The CLI's event loop runs on
@@ -38,363 +20,46 @@ with microsecond timeouts so paced replies are released on time.
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
-import os
-import signal
-import sys
-import tty
 from collections.abc import Callable, Sequence
 from typing import TextIO
-from urllib.parse import urlsplit
 
-from servobus.errors import ArgumentRangeError
 from servobus.protocols.dyn232.line import Dyn232Line
 from servobus.protocols.dyn232.pacing import COARSE_S, FINE_COARSE_S, HostPort, LineRunner
 from servobus.sim import server_limits as lim
 from servobus.sim.drive import VirtualDrive
-from servobus.sim.fine_selector import fine_event_loop
-from servobus.transport.base import Direction
+from servobus.sim.line_server import (
+    CLOSE_TIMEOUT_S,
+    DEFAULT_HOST,
+    QUANTUM,
+    LineServer,
+    format_tcp_url,
+    parse_listen_url,
+    run_in_fine_loop,
+    serve_line,
+)
 
-DEFAULT_HOST = "127.0.0.1"
-CLOSE_TIMEOUT_S = 2.0  # close(): how long to wait for client connections to go
-QUANTUM = 1024  # bytes of one client handed to the line per event-loop turn (fairness)
+__all__ = ["CLOSE_TIMEOUT_S", "DEFAULT_HOST", "QUANTUM", "WHAT", "Dyn232Server",
+           "format_tcp_url", "parse_listen_url", "run_server", "serve"]
+
 WHAT = "sim dyn232"  # how log lines name this server
 
 
-def parse_listen_url(url: str) -> tuple[str, int]:
-    """``tcp://HOST:PORT`` (also ``HOST:PORT``, ``:PORT``, ``PORT``) -> (host, port).
+class Dyn232Server(LineServer[HostPort]):
+    """One virtual DYN232M line (drives + pacing) with its TCP, PTY and tap endpoints."""
 
-    A missing host means 127.0.0.1, never all interfaces: exposing a drive line to the
-    network has to be asked for explicitly (``tcp://0.0.0.0:PORT``).
-    """
-    text = url.strip()
-    if text.isdigit():
-        text = f"tcp://:{text}"
-    elif "://" not in text:
-        text = f"tcp://{text}"
-    parts = urlsplit(text)
-    if parts.scheme != "tcp":
-        raise ArgumentRangeError(f"listen URL must be tcp://HOST:PORT, got {url!r}")
-    try:
-        port = parts.port
-    except ValueError:
-        raise ArgumentRangeError(f"bad port in {url!r} (0..65535)") from None
-    if port is None:
-        raise ArgumentRangeError(f"listen URL needs a port (0 = any free port): {url!r}")
-    return parts.hostname or DEFAULT_HOST, port
-
-
-def format_tcp_url(host: str, port: int) -> str:
-    return f"tcp://[{host}]:{port}" if ":" in host else f"tcp://{host}:{port}"
-
-
-class Dyn232Server:
-    """One virtual line (drives + pacing) with its TCP, PTY and tap endpoints."""
+    runner: LineRunner
 
     def __init__(self, drives: Sequence[VirtualDrive], *, paced: bool = True,
                  coarse_s: float | None = None,
                  max_clients: int = lim.DEFAULT_MAX_CLIENTS) -> None:
         self.line = Dyn232Line(drives)
-        self.runner = LineRunner(self.line, paced=paced,
-                                 coarse_s=COARSE_S if coarse_s is None else coarse_s)
-        self.cap = lim.ClientCap(max_clients, WHAT)  # TCP clients and taps together
-        self.dropped_clients = 0  # dropped for leaving too much output unread
-        self._servers: list[asyncio.Server] = []
-        self._clients: set[_LineConnection] = set()
-        self._taps: set[asyncio.Transport] = set()
-        self._tapped = False  # the runner's tap hook is added with the first tap listener
-        self._pty: tuple[int, int] | None = None
+        super().__init__(LineRunner(self.line, paced=paced,
+                                    coarse_s=COARSE_S if coarse_s is None else coarse_s),
+                         what=WHAT, max_clients=max_clients)
 
     @property
     def drives(self) -> list[VirtualDrive]:
         return self.line.drives
-
-    @property
-    def client_count(self) -> int:
-        """TCP line clients connected now."""
-        return len(self._clients)
-
-    # ------------------------------------------------------------------ TCP line
-    async def listen_tcp(self, host: str = DEFAULT_HOST, port: int = 0) -> tuple[str, int]:
-        """Serve the line on TCP; return the bound (host, port)."""
-        self.runner.start()
-        return await self._listen("line", host, port, lambda: _LineConnection(self),
-                                  lim.MOVES_MOTORS)
-
-    async def _listen(self, what: str, host: str, port: int,
-                      factory: Callable[[], asyncio.Protocol],
-                      consequence: str) -> tuple[str, int]:
-        loop = asyncio.get_running_loop()
-        url = format_tcp_url(host, port)
-        try:
-            server = await loop.create_server(factory, host, port,
-                                              backlog=lim.LISTEN_BACKLOG)
-        except OSError as exc:
-            raise lim.listen_error(f"the {WHAT} {what}", url, exc) from None
-        self._servers.append(server)
-        sockname = server.sockets[0].getsockname()
-        bound = str(sockname[0]), int(sockname[1])
-        lim.warn_if_exposed(f"the {WHAT} {what}", host, format_tcp_url(*bound), consequence)
-        return bound
-
-    # ------------------------------------------------------------------ PTY line
-    def open_pty(self) -> str:
-        """Create a pseudo-terminal wired to the line; return the slave path."""
-        if self._pty is not None:
-            raise RuntimeError("the PTY is already open")
-        self.runner.start()
-        master, slave = os.openpty()
-        tty.setraw(slave)  # no echo, no line discipline: a clean 8-bit serial line
-        os.set_blocking(master, False)
-        self._pty = (master, slave)  # keep the slave open: no EIO when a client closes
-        port = self.runner.open_port(lambda data: _pty_write(master, data))
-        asyncio.get_running_loop().add_reader(master, self._pty_readable, master, port)
-        return os.ttyname(slave)
-
-    def _pty_readable(self, master: int, port: HostPort) -> None:
-        try:
-            data = os.read(master, 4096)
-        except (BlockingIOError, InterruptedError):
-            return
-        except OSError:  # EIO: no slave left; keep serving for the next opener
-            return
-        self.runner.submit(port, data)
-
-    # ------------------------------------------------------------------ tap
-    async def listen_tap(self, host: str = DEFAULT_HOST, port: int = 0) -> tuple[str, int]:
-        if not self._tapped:  # no tap hook before: the untapped line skips the tap work
-            self._tapped = True
-            self.runner.add_tap(self._to_taps)
-        return await self._listen("tap", host, port, lambda: _TapConnection(self),
-                                  lim.SEES_TRAFFIC)
-
-    @property
-    def tap_count(self) -> int:
-        """Tap clients connected now (tests wait for it rather than guess an accept delay)."""
-        return len(self._taps)
-
-    def _to_taps(self, direction: Direction, data: bytes, when: float) -> None:
-        for transport in list(self._taps):
-            if transport.is_closing():
-                self._taps.discard(transport)
-            elif lim.output_over_bound(transport, len(data)):
-                self._taps.discard(transport)
-                self.dropped_clients += 1
-                lim.drop_slow_reader(transport, f"{WHAT} tap")
-            else:
-                transport.write(data)
-
-    # ------------------------------------------------------------------ shutdown
-    async def close(self) -> None:
-        for server in self._servers:
-            server.close()
-        closing = [conn.close() for conn in list(self._clients)]
-        for transport in list(self._taps):
-            transport.close()
-        self._taps.clear()
-        if closing:
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(asyncio.gather(*closing), CLOSE_TIMEOUT_S)
-        for server in self._servers:
-            with contextlib.suppress(Exception):
-                await server.wait_closed()
-        self._servers.clear()
-        if self._pty is not None:
-            master, slave = self._pty
-            self._pty = None
-            asyncio.get_running_loop().remove_reader(master)
-            os.close(master)
-            os.close(slave)
-        await self.runner.close()
-
-
-class _LineConnection(asyncio.Protocol):
-    """One TCP host on the line: its own HostPort, bytes straight from ``data_received``.
-
-    No StreamReader and no task per client: each chunk goes to ``LineRunner.submit`` from the
-    transport's callback (a long chunk one ``QUANTUM`` per loop turn), and replies
-    (``HostPort.deliver``) go to ``transport.write``, those of one chunk in one write.
-    """
-
-    def __init__(self, server: Dyn232Server) -> None:
-        self._server = server
-        self._loop = asyncio.get_running_loop()
-        self._transport: asyncio.Transport | None = None
-        self._port: HostPort | None = None
-        self._admitted = False
-        self._backlog = bytearray()  # received, not yet handed to the line
-        self._scheduled = False  # a _serve_backlog call is queued
-        self._reading_paused = False
-        self._writing_paused = False
-        self._batch: bytearray | None = None  # replies collected while a chunk is submitted
-        self._eof = False
-        self._lost: asyncio.Future[None] = self._loop.create_future()
-
-    # ---------------------------------------------------------------- asyncio callbacks
-    def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)
-        self._transport = transport
-        if not self._server.cap.admit():
-            transport.close()  # the refusal: accepted and closed at once
-            return
-        self._admitted = True
-        transport.set_write_buffer_limits(high=lim.WRITE_HIGH_WATER)
-        self._port = self._server.runner.open_port(self._deliver)
-        self._port.on_idle = self._maybe_finish
-        self._server._clients.add(self)
-
-    def data_received(self, data: bytes) -> None:
-        if self._port is None or self._port.closed:
-            return
-        if self._backlog or len(data) > QUANTUM:
-            self._backlog += data
-            self._pause_reading()
-            self._schedule()
-        else:
-            self._submit(data)
-
-    def eof_received(self) -> bool | None:
-        """Half-close: answer what was sent, then close (keep the transport open till then)."""
-        self._eof = True
-        if self._port is None or self._port.closed:
-            return None
-        return not self._finished()
-
-    def pause_writing(self) -> None:
-        self._writing_paused = True
-        self._pause_reading()  # stop taking requests until the client reads its replies
-
-    def resume_writing(self) -> None:
-        self._writing_paused = False
-        if self._backlog:
-            self._schedule()
-        else:
-            self._resume_reading()
-
-    def connection_lost(self, exc: Exception | None) -> None:
-        if self._admitted:
-            self._admitted = False
-            self._server.cap.release()
-        self._stop_replies()
-        self._backlog.clear()
-        self._server._clients.discard(self)
-        if not self._lost.done():
-            self._lost.set_result(None)
-
-    # ---------------------------------------------------------------- line side
-    def _submit(self, data: bytes) -> None:
-        assert self._port is not None
-        self._batch = bytearray()
-        try:
-            self._server.runner.submit(self._port, data)
-        finally:
-            out, self._batch = self._batch, None
-        if out:
-            self._write(bytes(out))
-
-    def _schedule(self) -> None:
-        if not self._scheduled:
-            self._scheduled = True
-            self._loop.call_soon(self._serve_backlog)  # behind every other ready callback
-
-    def _serve_backlog(self) -> None:
-        self._scheduled = False
-        if self._port is None or self._port.closed:
-            self._backlog.clear()
-            return
-        if self._writing_paused:
-            return  # resume_writing() continues
-        chunk = bytes(self._backlog[:QUANTUM])
-        del self._backlog[:QUANTUM]
-        self._submit(chunk)
-        if self._backlog:
-            self._schedule()
-        else:
-            self._resume_reading()
-            self._maybe_finish()
-
-    def _deliver(self, data: bytes) -> None:
-        if self._batch is not None:
-            self._batch += data
-        else:
-            self._write(data)
-
-    def _write(self, data: bytes) -> None:
-        transport = self._transport
-        if transport is None or transport.is_closing():
-            return
-        if lim.output_over_bound(transport, len(data)):
-            self._server.dropped_clients += 1
-            self._stop_replies()
-            lim.drop_slow_reader(transport, WHAT)
-            return
-        transport.write(data)
-
-    # ---------------------------------------------------------------- flow and shutdown
-    def _pause_reading(self) -> None:
-        if not self._reading_paused and self._transport is not None \
-                and not self._transport.is_closing():
-            self._reading_paused = True
-            self._transport.pause_reading()
-
-    def _resume_reading(self) -> None:
-        if self._reading_paused and not self._writing_paused and not self._backlog:
-            self._reading_paused = False
-            if self._transport is not None and not self._transport.is_closing():
-                self._transport.resume_reading()
-
-    def _finished(self) -> bool:
-        return not self._backlog and (self._port is None or not self._port.pending)
-
-    def _maybe_finish(self) -> None:
-        """After a half-close: close once every reply owed has been written."""
-        if self._eof and self._finished() and self._transport is not None:
-            self._transport.close()  # flushes what is buffered first
-
-    def _stop_replies(self) -> None:
-        if self._port is not None and not self._port.closed:
-            self._server.runner.close_port(self._port)  # queued paced replies: dropped
-
-    async def close(self) -> None:
-        self._stop_replies()
-        if self._transport is not None:
-            self._transport.close()
-        await self._lost
-
-
-class _TapConnection(asyncio.Protocol):
-    """A read-only tap client: receives every byte of the line; what it sends is ignored."""
-
-    def __init__(self, server: Dyn232Server) -> None:
-        self._server = server
-        self._transport: asyncio.Transport | None = None
-        self._admitted = False
-
-    def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)
-        self._transport = transport
-        if not self._server.cap.admit():
-            transport.close()
-            return
-        self._admitted = True
-        self._server._taps.add(transport)
-
-    def data_received(self, data: bytes) -> None:
-        pass  # a tap is read-only
-
-    def connection_lost(self, exc: Exception | None) -> None:
-        if self._admitted:
-            self._admitted = False
-            self._server.cap.release()
-        if self._transport is not None:
-            self._server._taps.discard(self._transport)
-
-
-def _pty_write(master: int, data: bytes) -> None:
-    """Like a UART: bytes nobody reads are lost once the PTY buffer is full."""
-    with contextlib.suppress(BlockingIOError, InterruptedError, OSError):
-        os.write(master, data)
 
 
 async def serve(
@@ -415,33 +80,9 @@ async def serve(
     ``ready`` is called once every endpoint is up. Raises
     :class:`servobus.sim.server_limits.ListenError` when an address cannot be bound.
     """
-    stream = out if out is not None else sys.stdout
     server = Dyn232Server(drives, paced=paced, coarse_s=coarse_s, max_clients=max_clients)
-    stop = asyncio.Event()
-    loop = asyncio.get_running_loop()
-    installed: list[signal.Signals] = []
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
-            loop.add_signal_handler(sig, stop.set)
-            installed.append(sig)
-    try:
-        if listen is not None:
-            host, port = await server.listen_tcp(*listen)
-            print(f"listening on {format_tcp_url(host, port)}", file=stream, flush=True)
-        if pty:
-            print(f"pty {server.open_pty()}", file=stream, flush=True)
-        if tap is not None:
-            host, port = await server.listen_tap(*tap)
-            print(f"tap on {format_tcp_url(host, port)}", file=stream, flush=True)
-        if ready is not None:
-            ready()
-        with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(stop.wait(), duration)
-    finally:
-        for sig in installed:
-            loop.remove_signal_handler(sig)
-        await server.close()
-    return server
+    return await serve_line(server, listen=listen, pty=pty, tap=tap, duration=duration,
+                            out=out, ready=ready)
 
 
 def run_server(
@@ -458,7 +99,6 @@ def run_server(
 ) -> Dyn232Server:
     """Blocking entry point for the CLI: ``serve`` on an epoll loop with fine timeouts."""
     max_clients = lim.fit_fd_limit(max_clients)
-    with asyncio.Runner(loop_factory=fine_event_loop) as runner:
-        return runner.run(serve(drives, listen=listen, pty=pty, tap=tap, paced=paced,
-                                duration=duration, out=out, coarse_s=FINE_COARSE_S,
-                                max_clients=max_clients, ready=ready))
+    return run_in_fine_loop(serve(drives, listen=listen, pty=pty, tap=tap, paced=paced,
+                                  duration=duration, out=out, coarse_s=FINE_COARSE_S,
+                                  max_clients=max_clients, ready=ready))
