@@ -20,6 +20,7 @@ from servobus.families.base import AxisStatus
 CONTRACT_URLS = [
     "sim://dyn232?fast=1",
     "sim://dyncan?fast=1",
+    "sim://easycan?fast=1",
 ]
 DRIVE = 1
 ABSENT = 9

@@ -30,7 +30,7 @@ from hypothesis import strategies as st
 
 from servobus.errors import ArgumentRangeError, FramingError
 from servobus.families import yzaim
-from servobus.protocols import easycan as E
+from servobus.protocols.easycan import api as E
 from servobus.protocols.easycan import codec
 from servobus.protocols.easycan.functions import SPECS, ErrorCode, Function
 

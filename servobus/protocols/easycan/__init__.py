@@ -2,71 +2,21 @@
 
 ``functions`` holds the one table (function codes, frame lengths, error codes),
 ``messages`` the frozen dataclasses, ``codec`` (arbitration id, data) <-> messages in both
-directions, ``describe`` one line per frame for decode/sniff. Registers, ranges and units
-are the YZ-AIM family's (servobus.families.yzaim).
+directions, ``describe`` one line per frame for decode/sniff, ``commands`` the host's pure
+commands, ``client``/``axis`` the host side, ``node`` the virtual motors' side, ``sync``
+synchronised multi-axis motion. Registers, ranges and units are the YZ-AIM family's
+(servobus.families.yzaim). This module only declares the registry tables (nothing heavy is
+imported: docs/architecture.md).
+
+URLs: ``easycan+<python-can interface>://<channel>``, e.g. ``easycan+pcan://PCAN_USBBUS1``,
+``easycan+socketcand://127.0.0.1:29536/can0``, ``easycan+virtual://bus0``; ``sim://easycan``
+runs virtual YZ-AIM motors on an in-process python-can virtual bus (docs/easycan.md).
 """
 
-from servobus.protocols.easycan.codec import (
-    MalformedRequest,
-    answers,
-    decode,
-    decode_reply,
-    decode_request,
-    encode,
-    expects_reply,
-)
-from servobus.protocols.easycan.describe import describe, describe_frame
-from servobus.protocols.easycan.functions import (
-    HOST_ADDRESS,
-    CacheKind,
-    ErrorCode,
-    Function,
-)
-from servobus.protocols.easycan.messages import (
-    ClearPosition,
-    EmergencyStop,
-    EmergencyStopReply,
-    ErrorReply,
-    Message,
-    PositionCacheWrite,
-    PositionReply,
-    ReadMultipleReply,
-    ReadMultipleRequest,
-    ReadReply,
-    ReadRequest,
-    Reply,
-    Request,
-    WriteReply,
-    WriteRequest,
-)
+SCHEMES: dict[str, str] = {"easycan": "servobus.protocols.easycan.opener:open_axis"}
+SIM: dict[str, str] = {"easycan": "servobus.protocols.easycan.inprocess:open_sim_axis"}
+CLI = "servobus.protocols.easycan.sim_cmd:register"
+DECODERS: dict[str, str] = {"easycan": "servobus.protocols.easycan.sniff:DECODER"}
+PARAMS: dict[str, str] = {"easycan": "servobus.protocols.easycan.commands:REACHABLE_PARAMS"}
+FAMILIES: dict[str, str] = {"easycan": "yzaim"}
 
-__all__ = [
-    "HOST_ADDRESS",
-    "CacheKind",
-    "ClearPosition",
-    "EmergencyStop",
-    "EmergencyStopReply",
-    "ErrorCode",
-    "ErrorReply",
-    "Function",
-    "MalformedRequest",
-    "Message",
-    "PositionCacheWrite",
-    "PositionReply",
-    "ReadMultipleReply",
-    "ReadMultipleRequest",
-    "ReadReply",
-    "ReadRequest",
-    "Reply",
-    "Request",
-    "WriteReply",
-    "WriteRequest",
-    "answers",
-    "decode",
-    "decode_reply",
-    "decode_request",
-    "describe",
-    "describe_frame",
-    "encode",
-    "expects_reply",
-]

@@ -1,0 +1,183 @@
+"""EasyCan front end: virtual YZ-AIM motors as nodes on one CAN bus (manual 5.3, 5.5).
+
+``EasyCanNetwork.handle_raw(id, data)`` executes one host frame on the motor it addresses
+and returns the frames to send back; the caller advances the motors' time first.
+:func:`serve` runs a network on any FramePort (a python-can bus, the socketcand hub) in
+wall-clock time. The motors' behaviour is :mod:`servobus.sim.yzaim_motor`'s; this module only
+maps frames. Decisions where the manual is silent:
+
+* A frame that does not decode as a request (a reply on the host's identifier, an identifier
+  outside 0x0xx/0x1xx/0x3xx, a cache frame of the wrong length) is ignored and counted; a
+  request naming a function or length the table does not have is answered with error 0x03
+  or 0x04 by the motor it addresses (the codec's MalformedRequest).
+* Reads of 0 or more than 2 registers (0x03) answer 0x04; addresses past 0x1D answer 0x02.
+* A write reply carries what the registers hold after the write (the motor's rule), except
+  writes of both words of 0x0C or 0x16, which answer the current absolute position (5.3b).
+* A cache write that comes too fast (the motor's TOO_FAST) answers 0x86 code 0x05 when the
+  frame asked for a reply (0x3xx) and is dropped silently otherwise (0x1xx), counted.
+* Motors answer on their power-on address (register 0x15 takes effect after a power cycle).
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from servobus.errors import FramingError
+from servobus.families import yzaim
+from servobus.protocols.easycan import codec
+from servobus.protocols.easycan.functions import (
+    CACHE_ERROR_FUNCTION,
+    MAX_READ_WORDS,
+    POSITION_ECHO_ADDRESSES,
+    ErrorCode,
+)
+from servobus.protocols.easycan.messages import (
+    ClearPosition,
+    EmergencyStop,
+    EmergencyStopReply,
+    ErrorReply,
+    PositionCacheWrite,
+    PositionReply,
+    ReadMultipleReply,
+    ReadMultipleRequest,
+    ReadReply,
+    ReadRequest,
+    Reply,
+    Request,
+    WriteReply,
+    WriteRequest,
+)
+from servobus.sim.realtime import RealtimeClock
+from servobus.sim.yzaim_motor import MotorRefused, Refusal, YzaimMotor
+from servobus.transport.can_bus import FramePort
+
+_ABS_LOW = yzaim.PAIR_BY_NAME["absolute_position"].low
+_CODES: dict[Refusal, ErrorCode] = {
+    Refusal.ILLEGAL_ADDRESS: ErrorCode.ILLEGAL_ADDRESS,
+    Refusal.TOO_FAST: ErrorCode.INTERPOLATION_TOO_FAST,
+}
+
+
+@dataclass
+class NodeStats:
+    frames: int = 0
+    replies: int = 0
+    errors: int = 0
+    ignored: int = 0  # not a request (or for no motor here)
+    cache_dropped: int = 0  # silent cache frames refused as too fast
+
+
+class EasyCanNetwork:
+    """Several YzaimMotors as EasyCan nodes on one bus."""
+
+    def __init__(self, motors: Sequence[YzaimMotor]) -> None:
+        self.motors = list(motors)
+        self.stats = NodeStats()
+
+    @property
+    def drives(self) -> list[YzaimMotor]:
+        return self.motors
+
+    def motor(self, address: int) -> YzaimMotor | None:
+        for m in self.motors:
+            if m.address == address:
+                return m
+        return None
+
+    def handle_raw(self, arbitration_id: int, data: bytes) -> list[tuple[int, bytes]]:
+        self.stats.frames += 1
+        try:
+            request = codec.decode_request(arbitration_id, data)
+        except codec.MalformedRequest as bad:
+            if self.motor(bad.slave) is None:
+                self.stats.ignored += 1
+                return []
+            return self._out(bad.error_reply())
+        except FramingError:
+            self.stats.ignored += 1
+            return []
+        motor = self.motor(request.slave)
+        if motor is None:
+            self.stats.ignored += 1
+            return []
+        return self._out(self.execute(motor, request))
+
+    def _out(self, reply: Reply | None) -> list[tuple[int, bytes]]:
+        if reply is None:
+            return []
+        self.stats.replies += 1
+        if isinstance(reply, ErrorReply):
+            self.stats.errors += 1
+        return [codec.encode(reply)]
+
+    def execute(self, motor: YzaimMotor, request: Request) -> Reply | None:
+        try:
+            return _execute(motor, request)
+        except MotorRefused as exc:
+            code = _CODES[exc.reason]
+            if not isinstance(request, PositionCacheWrite):
+                return ErrorReply(request.slave, int(request.function), code, request.host)
+            if not request.reply:
+                self.stats.cache_dropped += 1
+                return None
+            return ErrorReply(request.slave, int(CACHE_ERROR_FUNCTION), code)
+
+
+def _execute(motor: YzaimMotor, request: Request) -> Reply | None:
+    match request:
+        case ReadRequest():
+            if not 1 <= request.count <= MAX_READ_WORDS:
+                return ErrorReply(request.slave, request.function,
+                                  ErrorCode.ILLEGAL_DATA_LENGTH, request.host)
+            words = motor.read_words(request.address, request.count)
+            return ReadReply(request.slave, request.address, words, request.host)
+        case WriteRequest():
+            words = motor.write_words(request.address, request.values)
+            if request.address in POSITION_ECHO_ADDRESSES and len(words) == 2:
+                words = motor.read_words(_ABS_LOW, 2)  # 5.3b: the current absolute position
+            return WriteReply(request.slave, request.address, words, request.host)
+        case EmergencyStop():
+            motor.emergency_stop()
+            return EmergencyStopReply(request.slave, request.host)
+        case ClearPosition():
+            motor.clear_position()
+            return None
+        case ReadMultipleRequest():
+            for a in request.addresses:
+                motor.read_words(a, 1)  # MotorRefused before any value is read
+            words = tuple(motor.read_word(a) for a in request.addresses)
+            return ReadMultipleReply(request.slave, words, request.host)
+        case PositionCacheWrite():
+            position = motor.write_position_cache(request.position)
+            return PositionReply(position) if request.reply else None
+    return None  # pragma: no cover
+
+
+async def serve(network: EasyCanNetwork, port: FramePort, *,
+                clock: RealtimeClock | None = None,
+                stop: asyncio.Event | None = None) -> None:
+    """Answer host frames on ``port`` until ``stop`` is set or the port closes.
+
+    With a ``clock`` the motors run in wall-clock time (advanced before each frame and by the
+    clock's ticker); without one the caller steps them (tests).
+    """
+    stop = stop or asyncio.Event()
+    if clock is not None:
+        clock.start()
+    try:
+        while not stop.is_set():
+            try:
+                raw = await port.recv(0.1)
+            except ConnectionError:
+                break
+            if raw is None or raw.is_extended_id:
+                continue
+            if clock is not None:
+                clock.sync()
+            for arbitration_id, data in network.handle_raw(raw.arbitration_id, raw.data):
+                await port.send(arbitration_id, data)
+    finally:
+        if clock is not None:
+            await clock.stop()

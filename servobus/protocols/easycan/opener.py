@@ -1,0 +1,44 @@
+"""Open an EasyCan Axis from ``easycan+<interface>://<channel>`` (docs/easycan.md).
+
+The part after ``+`` is a python-can interface name; the channel follows ``//``. For
+socketcand the channel is ``host:port[/can0]``. ``?bitrate=`` goes to python-can where the
+interface takes one (EasyCan runs at 1 Mbit/s, manual 1); the client's own options
+(``timeout``, ``retries``, ``late_reply_s``) too. Without an id the motor at address 1.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from servobus.axis.url import DriveUrl, merge_options
+from servobus.errors import ArgumentRangeError
+from servobus.protocols.easycan import commands as cmds
+from servobus.protocols.easycan.axis import EasyCanAxis
+from servobus.protocols.easycan.client import open_easycan_client
+
+FACTORY_ADDRESS = 1
+OPTIONS: dict[str, type] = {
+    "bitrate": int, "timeout": float, "retries": int, "late_reply_s": float,
+}
+
+
+def can_spec(url: DriveUrl) -> tuple[str, dict[str, str]]:
+    """``INTERFACE:CHANNEL`` for python-can, and the socketcand bus name if the URL gives one."""
+    if not url.transport:
+        raise ArgumentRangeError(
+            f"{url.raw!r} names no CAN interface: use easycan+<interface>://<channel>, "
+            "e.g. easycan+pcan://PCAN_USBBUS1 or easycan+socketcand://127.0.0.1:29536/can0")
+    channel = url.target
+    if url.transport == "socketcand" and "/" in channel:
+        address, _, bus = channel.partition("/")
+        return f"socketcand:{address}", ({"channel": bus} if bus else {})
+    return f"{url.transport}:{channel}", {}
+
+
+async def open_axis(url: DriveUrl, *, drive_id: int | None = None,
+                    **keywords: Any) -> EasyCanAxis:
+    options = merge_options(url, keywords, OPTIONS)
+    address = FACTORY_ADDRESS if drive_id is None else cmds.check_address(drive_id)
+    spec, extra = can_spec(url)
+    client = await open_easycan_client(spec, **extra, **options)  # type: ignore[arg-type]
+    return EasyCanAxis(client, address)

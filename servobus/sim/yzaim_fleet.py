@@ -1,0 +1,27 @@
+"""Build the virtual YZ-AIM motors a server or an in-process ``sim://`` bus holds (any protocol)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from servobus.families import yzaim
+from servobus.sim.fleet import parse_ids
+from servobus.sim.yzaim_motor import YzaimMotor
+from servobus.sim.yzaim_store import YzaimStore
+
+FACTORY_ADDRESS = 1  # a motor's address when none is asked for (decision)
+_ADDRESS = yzaim.BY_NAME["device_address"]
+
+
+def parse_addresses(text: str) -> tuple[int, ...]:
+    """``"1,2,3"`` -> (1, 2, 3): device addresses 1..254 (register 0x15's range)."""
+    return parse_ids(text, min_id=_ADDRESS.minimum, max_id=_ADDRESS.maximum)
+
+
+def make_motors(addresses: Sequence[int], *, state: str | None = None,
+                model: str = yzaim.DEFAULT_MODEL) -> list[YzaimMotor]:
+    """One motor per address; with ``state`` each keeps its EEPROM under key str(address)."""
+    yzaim.model(model)  # ArgumentRangeError naming the known models
+    return [YzaimMotor(a, model=model,
+                       store=YzaimStore(state, key=str(a)) if state else None)
+            for a in addresses]
