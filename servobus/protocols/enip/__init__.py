@@ -1,6 +1,14 @@
 """EtherNet/IP (CIP) for the DMM DYN5: encapsulation, CPF, Message Router, Connection
-Manager and Class 1 codecs (pure), the virtual DYN5 adapter and its asyncio server.
+Manager and Class 1 codecs (pure), the virtual DYN5 adapter and its asyncio server, the
+explicit-messaging client, the Axis and the Class 1 scanner, docs/enip.md.
 
-Spec: DMM "DYN5 EtherNet/IP Specification" 1.1A (docs/enip.md); the device model (Parameter
-instances, Identity values, quirks) is ``servobus.families.dyn5``.
+URLs: ``enip://192.168.50.18[:44818]``; ``sim://enip`` (in-process adapters on loopback).
+Spec: DMM "DYN5 EtherNet/IP Specification" 1.1A; the device model (Parameter instances,
+Identity values, quirks) is ``servobus.families.dyn5``.
 """
+
+SCHEMES: dict[str, str] = {"enip": "servobus.protocols.enip.opener:open_axis"}
+SIM: dict[str, str] = {"enip": "servobus.protocols.enip.inprocess:open_sim_axis"}
+CLI = "servobus.protocols.enip.cli:register"
+PARAMS: dict[str, str] = {"enip": "servobus.families.dyn5_family:PARAM_NAMES"}
+FAMILIES: dict[str, str] = {"enip": "dmm-dyn5"}

@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING
 
 from servobus.axis import checks
 from servobus.axis.base import DEFAULT_WAIT_TIMEOUT_S, AsyncAxis, AxisTraceHook, check_int
+from servobus.axis.transaction import DEFAULT_RETRIES
 from servobus.errors import (
     ArgumentRangeError,
     ConnectionLost,
@@ -53,12 +54,7 @@ from servobus.families.dmm.family import counts_to_command
 from servobus.families.dyn5 import Instance
 from servobus.families.dyn5_family import DYN5, PARAM_INSTANCES, axis_status
 from servobus.protocols.enip.cip import ClassCode
-from servobus.protocols.enip.client import (
-    CONNECT_TIMEOUT_S,
-    DEFAULT_RETRIES,
-    DEFAULT_TIMEOUT_S,
-    AsyncEnipClient,
-)
+from servobus.protocols.enip.client import CONNECT_TIMEOUT_S, DEFAULT_TIMEOUT_S, AsyncEnipClient
 from servobus.protocols.enip.encap import TCP_PORT
 from servobus.protocols.enip.identity import IdentityReply
 
@@ -338,7 +334,7 @@ class EnipAxis(AsyncAxis):
         return await self.read_instance(_I["motor_torque"].number)
 
     async def current(self) -> float:
-        return -dyn5.torque_to_amps(await self.torque_raw(), self.options.peak_current_a)
+        return 0.0 - dyn5.torque_to_amps(await self.torque_raw(), self.options.peak_current_a)
 
     async def identity(self) -> IdentityReply:
         """Identity object instance 1, Get_Attributes_All (4.2)."""
@@ -410,16 +406,21 @@ class EnipAxis(AsyncAxis):
         if frames is not None:
             checks.positive_int("frames", frames)
         limit = checks.optional_seconds("duration", duration)
-        async with self.io(rpi_ms=rpi_ms) as cyclic:
-            end = None if limit is None else time.monotonic() + limit
+        cyclic = self.io(rpi_ms=rpi_ms)
+        stream = cyclic.frames()  # before the open: from the very first frame
+        async with cyclic:
             seen = 0
-            async for frame in cyclic.frames(timeout=None if end is None else limit):
-                on_frame(frame)
-                seen += 1
-                if frames is not None and seen >= frames:
-                    break
-                if end is not None and time.monotonic() >= end:
-                    break
+            deadline = asyncio.timeout(limit)
+            try:
+                async with deadline:
+                    async for frame in stream:
+                        on_frame(frame)
+                        seen += 1
+                        if frames is not None and seen >= frames:
+                            break
+            except TimeoutError:
+                if not deadline.expired():
+                    raise
             return cyclic.stats.as_dict()
 
     # ------------------------------------------------------------- housekeeping

@@ -7,32 +7,32 @@ unconnected data item with one Message Router request. The client registers a se
 Get_Attributes_All, and the Connection Manager's Forward_Open / Forward_Close for cyclic I/O
 (:mod:`servobus.protocols.enip.scanner`). UnregisterSession on close.
 
-Matching: every request carries its own sender context (a 64-bit counter), which the
-adapter echoes (CIP Vol. 2 2-3). A reply whose context is not awaited any more (it came
-after its deadline) is counted in ``stats.late_replies`` and dropped, so a late reply
-never answers a later request.
+Transactions follow the shared policy, :class:`servobus.axis.transaction.TransactionManager`:
+every call carries its own sender context (a 64-bit counter), which the adapter echoes
+(CIP Vol. 2 2-3) and which is the key its reply is matched on; each attempt waits
+``timeout`` (default 0.5 s: a DYN5 answers within milliseconds on a LAN, manual 7) from
+when the packet left; reads (Get services, ListIdentity) are re-sent up to ``retries``
+times (default 2) with the same context; a Set or a Connection Manager request is sent
+once and never re-sent (a resend could move twice). A reply that comes after its call gave
+up is dropped (``stats.late_replies``): a context is never used by a later call, so a late
+reply never answers one. Requests run one at a time on a session.
 
-Policy (:class:`RequestPolicy`, the one place to change it): each attempt has a deadline
-(``timeout``, default 0.5 s: a DYN5 answers within milliseconds on a LAN, 7); reads
-(Get services, ListIdentity) are retried up to ``retries`` times (default 2) with a fresh
-context; a Set or a Connection Manager request is sent once and never re-sent (a resend
-could move twice). Errors are typed: no reply -> DriveTimeout; a refused request (CIP
-general status, e.g. the DYN5's "05 error") -> DriveError with ``code`` = the general
-status; a bad encapsulation status or malformed reply -> ProtocolError; the TCP
-connection gone -> ConnectionLost, at once for a waiting request and for every call after.
+Errors are typed: no reply -> DriveTimeout; a refused request (CIP general status, e.g.
+the DYN5's "05 error") -> DriveError with ``code`` = the general status
+(``stats.error_replies``); a bad encapsulation status or a malformed reply -> ProtocolError;
+the TCP connection gone -> ConnectionLost, at once for a waiting request and for every
+call after.
 """
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import logging
 import struct
-import time
 from collections.abc import Callable
-from dataclasses import dataclass
 
 from servobus.axis import checks
+from servobus.axis.transaction import DEFAULT_RETRIES, TransactionManager, TransactionStats
 from servobus.errors import (
     ConnectionLost,
     DriveError,
@@ -66,7 +66,6 @@ from servobus.transport.tcp_stream import TcpStream
 log = logging.getLogger("servobus.enip")
 
 DEFAULT_TIMEOUT_S = 0.5
-DEFAULT_RETRIES = 2
 CONNECT_TIMEOUT_S = 2.0
 #: Replies are small; a bound well above any DYN5 reply keeps the framer's memory bounded.
 MAX_REPLY_DATA = 4096
@@ -94,37 +93,6 @@ STATUS_TEXT: dict[int, str] = {
 }
 
 
-@dataclass
-class ClientStats:
-    requests: int = 0
-    replies: int = 0
-    retries: int = 0
-    timeouts: int = 0
-    late_replies: int = 0
-    refused: int = 0
-
-
-class RequestPolicy:
-    """Per-attempt deadline and read retries of one client (see the module docstring).
-
-    Kept in one class so that the policy can move to a shared transaction manager without
-    touching the request path.
-    """
-
-    def __init__(self, timeout: float = DEFAULT_TIMEOUT_S, retries: int = DEFAULT_RETRIES) -> None:
-        self.timeout = checks.seconds("timeout", timeout)
-        self.retries = checks.count("retries", retries)
-
-    def attempts(self, *, read: bool, retries: int | None = None) -> int:
-        """1 for anything but a read; 1 + retries for a read."""
-        if not read:
-            return 1
-        return 1 + (self.retries if retries is None else checks.count("retries", retries))
-
-    def deadline_s(self, timeout: float | None = None) -> float:
-        return self.timeout if timeout is None else checks.seconds("timeout", timeout)
-
-
 def status_text(status: int) -> str:
     return STATUS_TEXT.get(status, f"CIP status 0x{status:02X}")
 
@@ -137,16 +105,20 @@ class AsyncEnipClient:
         self.stream = stream
         self.host = host
         self.port = port
-        self.policy = RequestPolicy(timeout, retries)
-        self.stats = ClientStats()
+        self.timeout = checks.seconds("timeout", timeout)
         self.session = 0
+        self.transactions: TransactionManager[bytes, bytes, EncapPacket] = TransactionManager(
+            stream.write, link=f"EtherNet/IP session with {host}:{port}",
+            describe_key=_describe_context, describe_request=self._describe_packet,
+            trace_request=_trace_item, retries=retries)
         self._framer = EncapFramer(MAX_REPLY_DATA)
-        self._pending: dict[bytes, asyncio.Future[EncapPacket | None]] = {}
         self._context = 0
-        self._dead: ConnectionLost | None = None
-        self._hooks: list[TraceHook] = []
         self._messages: dict[tuple[int, int, int, int | None], bytes] = {}
         stream.set_receiver(self._received)
+
+    @property
+    def stats(self) -> TransactionStats:
+        return self.transactions.stats
 
     # ---------------------------------------------------------------- lifecycle
     @classmethod
@@ -154,8 +126,9 @@ class AsyncEnipClient:
                       timeout: float = DEFAULT_TIMEOUT_S, retries: int = DEFAULT_RETRIES,
                       connect_timeout: float = CONNECT_TIMEOUT_S) -> AsyncEnipClient:
         """Open TCP and register a session. Nothing listening, or no answer within
-        ``connect_timeout``: DriveTimeout naming the address (nothing was sent)."""
-        RequestPolicy(timeout, retries)  # checked before anything is opened
+        ``connect_timeout``: DriveTimeout naming the address."""
+        checks.seconds("timeout", timeout)  # checked before anything is opened
+        checks.count("retries", retries)
         checks.seconds("connect_timeout", connect_timeout)
         try:
             stream = await TcpStream.connect(host, port, timeout=connect_timeout)
@@ -184,55 +157,39 @@ class AsyncEnipClient:
 
     @property
     def closed(self) -> bool:
-        return self._dead is not None
+        return self.transactions.dead is not None
 
     async def close(self) -> None:
-        """UnregisterSession (no reply is sent by the target), then close; idempotent."""
-        if self._dead is not None:
+        """UnregisterSession (the target sends no reply), then close; idempotent."""
+        if self.transactions.closed:
             return
-        if self.session:
-            with contextlib.suppress(ServobusError):
+        if self.session and self.transactions.dead is None:
+            with contextlib.suppress(ServobusError, OSError):
                 await self.stream.write(self._packet(Command.UNREGISTER_SESSION, b""))
-        self._die(ConnectionLost(f"connection to {self.host}:{self.port} is closed"))
+        self.transactions.close()
         await self.stream.close()
-
-    def _die(self, error: ConnectionLost) -> None:
-        if self._dead is None:
-            self._dead = error
-        pending, self._pending = self._pending, {}
-        for fut in pending.values():
-            if not fut.done():
-                fut.set_exception(self._dead)
 
     # ---------------------------------------------------------------- tracing
     def add_trace(self, hook: TraceHook) -> None:
-        """``hook(direction, item, t)``: each Message Router request/response (decoded) and
-        each encapsulation packet of another kind."""
-        self._hooks.append(hook)
-
-    def _trace(self, direction: Direction, item: object) -> None:
-        t = time.monotonic()
-        for hook in self._hooks:
-            hook(direction, item, t)
+        """``hook(direction, item, t)``: each Message Router request/response (decoded),
+        other encapsulation packets, and each timeout."""
+        self.transactions.add_trace(hook)
 
     # ---------------------------------------------------------------- reception
     def _received(self, data: bytes | None) -> None:
+        tm = self.transactions
         if data is None:
-            self._die(ConnectionLost(f"{self.host}:{self.port} closed the connection"))
+            tm.lost(ConnectionLost(f"{self.host}:{self.port} closed the connection"))
             return
         for item in self._framer.feed(data):
             if isinstance(item, EncapReject):
-                fut = self._pending.pop(item.header.context, None)
-                if fut is not None and not fut.done():
-                    fut.set_exception(FramingError(
-                        f"reply of {item.header.length} bytes exceeds {MAX_REPLY_DATA}"))
+                error = FramingError(f"reply of {item.header.length} bytes exceeds "
+                                     f"{MAX_REPLY_DATA}")
+                if not tm.reject(error, item.header.context):
+                    tm.stray(error)
                 continue
-            fut = self._pending.pop(item.context, None)
-            if fut is None or fut.done():
-                self.stats.late_replies += 1
-                log.debug("late or unsolicited reply (command 0x%04X) dropped", item.command)
-                continue
-            fut.set_result(item)
+            if not (tm.answer(item.context, item) or tm.late(item.context)):
+                tm.stray(item)
 
     # ---------------------------------------------------------------- requests
     def _packet(self, command: int, data: bytes, context: bytes = bytes(8)) -> bytes:
@@ -242,41 +199,33 @@ class AsyncEnipClient:
         self._context = (self._context + 1) & 0xFFFF_FFFF_FFFF_FFFF
         return _CONTEXT.pack(self._context)
 
+    def _describe_packet(self, packet: bytes) -> str:
+        where = f"{self.host}:{self.port}"
+        try:
+            pkt = EncapPacket.decode(packet)
+            if pkt.command != Command.SEND_RR_DATA:
+                return f"{where} to {Command(pkt.command).name}"
+            items = RRData.decode(pkt.data).items
+            return f"{where} to {describe(UnconnectedMessage.from_items(items).message)}"
+        except (FramingError, ValueError):
+            return where
+
     async def _exchange(self, command: int, data: bytes, *, read: bool,
-                        timeout: float | None = None, retries: int | None = None,
-                        what: str = "") -> EncapPacket:
-        """Send one encapsulation packet and wait for the reply with its context."""
-        if self._dead is not None:
-            raise ConnectionLost(str(self._dead))
-        attempts = self.policy.attempts(read=read, retries=retries)
-        deadline_s = self.policy.deadline_s(timeout)
-        loop = asyncio.get_running_loop()
-        for attempt in range(attempts):
-            if attempt:
-                self.stats.retries += 1
-                log.debug("retry %d of %s", attempt, what or f"command 0x{command:04X}")
-            context = self._next_context()
-            fut: asyncio.Future[EncapPacket | None] = loop.create_future()
-            self._pending[context] = fut
-            timer = loop.call_later(deadline_s, _expire, fut)
-            try:
-                await self.stream.write(self._packet(command, data, context))
-                reply = await fut
-            except OSError as exc:
-                error = ConnectionLost(f"{self.host}:{self.port}: {exc}")
-                self._die(error)
-                raise error from exc
-            finally:
-                timer.cancel()
-                self._pending.pop(context, None)
-            if reply is not None:
-                return reply
-            self.stats.timeouts += 1
-        detail = what or f"encapsulation command 0x{command:04X}"
-        sent = (f"{attempts} attempt(s)" if read else
-                "sent once and not re-sent (it may have been carried out)")
-        raise DriveTimeout(f"no reply from {self.host}:{self.port} to {detail} within "
-                           f"{deadline_s:g} s ({sent})")
+                        timeout: float | None = None, retries: int | None = None) -> EncapPacket:
+        """Send one encapsulation packet and return the reply carrying its context."""
+        deadline_s = self.timeout if timeout is None else checks.seconds("timeout", timeout)
+        if retries is not None:
+            checks.count("retries", retries)
+        context = self._next_context()
+        try:
+            return await self.transactions.request(
+                context, self._packet(command, data, context), deadline_s=deadline_s,
+                retry_safe=read, retries=retries)
+        except DriveTimeout as exc:
+            if read:
+                raise
+            raise DriveTimeout(f"{exc}; sent once and not re-sent (it may have been carried "
+                               "out)") from None
 
     def _rr_data(self, message: bytes, extra: tuple[CpfItem, ...]) -> bytes:
         data = _RR_HEAD + _ITEM.pack(ItemType.UNCONNECTED_DATA, len(message)) + message
@@ -300,12 +249,8 @@ class AsyncEnipClient:
         service = message[0]
         if read is None:
             read = service in _READ_SERVICES
-        self.stats.requests += 1
-        if self._hooks:
-            self._trace(Direction.TX, _decoded_request(message))
         reply = await self._exchange(Command.SEND_RR_DATA, self._rr_data(message, extra),
-                                     read=read, timeout=timeout, retries=retries,
-                                     what=f"service 0x{service:02X}")
+                                     read=read, timeout=timeout, retries=retries)
         if reply.status != EncapStatus.SUCCESS:
             raise ProtocolError(f"{self.host}:{self.port} answered encapsulation status "
                                 f"0x{reply.status:04X} to a SendRRData")
@@ -318,9 +263,8 @@ class AsyncEnipClient:
         if response.service != service:
             raise ProtocolError(f"reply to service 0x{response.service:02X}, expected "
                                 f"0x{service:02X}")
-        self.stats.replies += 1
-        if self._hooks:
-            self._trace(Direction.RX, response)
+        if self.transactions.tracing:
+            self.transactions.trace(Direction.RX, response)
         return response, unconnected
 
     async def call(self, message: bytes, *, read: bool | None = None,
@@ -328,7 +272,7 @@ class AsyncEnipClient:
         """:meth:`request`, then the response data; DriveError when the target refuses."""
         response, _ = await self.request(message, read=read, timeout=timeout, retries=retries)
         if not response.ok:
-            self.stats.refused += 1
+            self.stats.error_replies += 1
             raise DriveError(f"{self.host} refused {describe(message)}: "
                              f"{status_text(response.general_status)}",
                              code=response.general_status)
@@ -362,8 +306,7 @@ class AsyncEnipClient:
 
     async def list_identity(self, timeout: float | None = None) -> discovery.IdentityItem:
         """ListIdentity over this TCP connection (a read: retried)."""
-        reply = await self._exchange(Command.LIST_IDENTITY, b"", read=True, timeout=timeout,
-                                     what="ListIdentity")
+        reply = await self._exchange(Command.LIST_IDENTITY, b"", read=True, timeout=timeout)
         if reply.status != EncapStatus.SUCCESS:
             raise ProtocolError(f"ListIdentity answered status 0x{reply.status:04X}")
         return discovery.decode_identity_reply(reply.data)
@@ -372,9 +315,21 @@ class AsyncEnipClient:
         return f"<AsyncEnipClient {self.host}:{self.port} session 0x{self.session:08X}>"
 
 
-def _expire(fut: asyncio.Future[EncapPacket | None]) -> None:
-    if not fut.done():
-        fut.set_result(None)
+def _describe_context(context: bytes) -> str:
+    return f"the reply with sender context {context.hex()}"
+
+
+def _trace_item(packet: bytes) -> object:
+    """What trace hooks get for a request: the decoded Message Router request of a
+    SendRRData, else the encapsulation packet."""
+    try:
+        pkt = EncapPacket.decode(packet)
+        if pkt.command == Command.SEND_RR_DATA:
+            items = RRData.decode(pkt.data).items
+            return MessageRouterRequest.decode(UnconnectedMessage.from_items(items).message)
+        return pkt
+    except FramingError as exc:
+        return exc
 
 
 def describe(message: bytes) -> str:
@@ -391,10 +346,3 @@ def describe(message: bytes) -> str:
     where = f"class 0x{target.class_id:02X} instance 0x{target.instance:02X}"
     return f"{name} {where}" + ("" if target.attribute is None else
                                 f" attribute {target.attribute}")
-
-
-def _decoded_request(message: bytes) -> object:
-    try:
-        return MessageRouterRequest.decode(message)
-    except FramingError as exc:
-        return exc

@@ -496,6 +496,43 @@ def make_drive(host: str, *, state: str | None = None, model: str | None = None
     return VirtualDrive(drive_id, eeprom=eeprom, **kwargs)
 
 
+@dataclass
+class EnipFleet:
+    """Started virtual DYN5s sharing one realtime clock (stop them with :meth:`stop`)."""
+
+    servers: list[EnipServer]
+    clock: RealtimeClock
+
+    async def stop(self) -> None:
+        for server in self.servers:
+            await server.stop()
+        await self.clock.stop()
+
+
+async def start_fleet(hosts: str | Sequence[str] = "127.0.0.1", tcp_port: int = TCP_PORT,
+                      udp_port: int = io.UDP_PORT, state: str | None = None, *,
+                      model: str | None = None,
+                      reset_downtime_s: float = dyn5.RESET_DOWNTIME_S) -> EnipFleet:
+    """One started virtual DYN5 per address. With port 0 the first server picks a free port
+    and every other address uses the same number (real drives all listen on 44818); the
+    UDP I/O port is picked per address when ``udp_port`` is 0."""
+    host_list = parse_hosts(hosts) if isinstance(hosts, str) else list(hosts)
+    drives = [make_drive(h, state=state, model=model) for h in host_list]
+    clock = RealtimeClock(drives)
+    fleet = EnipFleet([], clock)
+    try:
+        for drive, host in zip(drives, host_list, strict=True):
+            server = EnipServer(drive, host, tcp_port=tcp_port, udp_port=udp_port,
+                                clock=clock, reset_downtime_s=reset_downtime_s)
+            fleet.servers.append(await server.start())
+            tcp_port = server.tcp_port
+    except BaseException:
+        await fleet.stop()
+        raise
+    clock.start()
+    return fleet
+
+
 async def serve_enip(hosts: str | Sequence[str] = "127.0.0.1", tcp_port: int = TCP_PORT,
                      udp_port: int = io.UDP_PORT, state: str | None = None, *,
                      model: str | None = None, stop: asyncio.Event | None = None,
@@ -507,28 +544,18 @@ async def serve_enip(hosts: str | Sequence[str] = "127.0.0.1", tcp_port: int = T
 
     What ``servobus sim enip --listen HOSTS --tcp-port N --udp-port M --state FILE`` runs.
     ``on_ready`` gets the started servers (their bound ports) before serving begins."""
-    host_list = parse_hosts(hosts) if isinstance(hosts, str) else list(hosts)
-    drives = [make_drive(h, state=state, model=model) for h in host_list]
-    clock = RealtimeClock(drives)
-    servers = [EnipServer(d, h, tcp_port=tcp_port, udp_port=udp_port, clock=clock,
-                          reset_downtime_s=reset_downtime_s)
-               for d, h in zip(drives, host_list, strict=True)]
+    fleet = await start_fleet(hosts, tcp_port, udp_port, state, model=model,
+                              reset_downtime_s=reset_downtime_s)
     stop = stop or asyncio.Event()
-    started: list[EnipServer] = []
     try:
-        for server in servers:
-            started.append(await server.start())
-        clock.start()
         if on_ready is not None:
-            on_ready(started)
+            on_ready(fleet.servers)
         if duration is not None:
             asyncio.get_running_loop().call_later(duration, stop.set)
         await stop.wait()
     finally:
-        for server in started:
-            await server.stop()
-        await clock.stop()
-    return servers
+        await fleet.stop()
+    return fleet.servers
 
 
 class BackgroundEnip:
