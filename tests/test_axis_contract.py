@@ -21,6 +21,7 @@ CONTRACT_URLS = [
     "sim://dyn232?fast=1",
     "sim://dyncan?fast=1",
     "sim://easycan?fast=1",
+    "sim://enip",
 ]
 DRIVE = 1
 ABSENT = 9
