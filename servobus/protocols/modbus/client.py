@@ -2,35 +2,31 @@
 
 One :class:`ModbusClient` per line (any number of devices on it). It moves register words;
 what the registers mean is the device family's (:mod:`servobus.protocols.modbus.axis`).
-The transaction rules are the :class:`~servobus.protocols.modbus.policy.RtuPolicy`'s
-(deadlines, retries, gaps), in one place so that a shared transaction manager can replace
-it; the rest is RTU's own:
+The transaction rules are the shared :class:`~servobus.axis.transaction.TransactionManager`'s
+(one lane: RS-485 has one master; deadlines measured from when the request left; reads
+retried, writes sent exactly once; late replies; dead links; stats; trace); the timing is
+the :class:`~servobus.protocols.modbus.policy.RtuPolicy`'s. What is RTU's own:
 
-* One transaction at a time per line (asyncio lock): RS-485 has one master, and RTU
-  replies carry no transaction id - only the address, the function and (reads) the byte
-  count (Modbus over Serial Line v1.02 2.4, 2.5.1).
-* Stale input is dropped before each request (bytes buffered by the stream and by the reply
-  framer), so a reply can only be taken from bytes that arrived after the request left.
-  The :class:`~servobus.protocols.modbus.framer.ReplyFramer` takes only the normal reply or
-  the exception reply of the one outstanding request and skips anything else (garbage,
-  frames failing their CRC, replies of other shapes), so sync is never lost.
-* Silence: no valid reply within the per-attempt deadline is a timeout; reads are re-sent
-  up to ``retries`` times, writes never (a write may move the motor or start an action:
-  sent exactly once, also when its reply is lost). When every attempt failed:
-  DriveTimeout, or ChecksumError when the last attempt got a reply that failed its CRC.
-* Late replies: a reply that comes after its deadline would answer the next request of the
-  same address and function. Each timed-out attempt owes one; bytes that arrive between
-  transactions are framed and pay those debts, and a request whose (address, function) is
-  owed first waits until the debts are paid or ``late_reply_s`` passed quiet
-  (:mod:`servobus.axis.late_replies`).
+* Replies carry no transaction id - only the address, the function and (reads) the byte
+  count (Modbus over Serial Line v1.02 2.4, 2.5.1). Stale input is dropped before each
+  request (the stream's buffer and the reply framer's), so a reply can only be taken from
+  bytes that arrived after the request left; the
+  :class:`~servobus.protocols.modbus.framer.ReplyFramer` then takes only the normal reply
+  or the exception reply of the one outstanding request and skips anything else (garbage,
+  frames failing their CRC, replies of other shapes): sync is never lost.
+* The key a late reply is matched on is (address, function). Bytes that arrive between
+  transactions are framed by content and pay the debts of timed-out attempts.
+* A reply candidate of the expected shape that fails its CRC fails the attempt at once
+  (ChecksumError: a read is retried); silence fails it at its deadline (DriveTimeout).
 * Exception replies raise :class:`~servobus.errors.DriveError` naming the function, the
   register(s) and the exception code; they are answers (never re-sent).
-* Broadcast (address 0): sent, nothing awaited (Serial Line 2.1).
-* A dead link raises ConnectionLost at once, also in a call waiting for its reply, and in
-  every call after.
+* The host keeps t3.5 of silence before each frame (Serial Line 2.5.1.1), after the last
+  byte it received, or the wire time of its last frame when nothing came back.
+* Broadcast (address 0): written once, nothing awaited (Serial Line 2.1).
 
 Streams that push (TCP, ``sim://``, the pair) hand each chunk to :meth:`_on_data`; streams
-that only ``read()`` (pyserial, the pull-only pair) get a reader task that does the same.
+that only ``read()`` (pyserial, the pull-only pair) are read by the manager through
+``pull`` whenever a reply or a late reply is due.
 """
 
 from __future__ import annotations
@@ -38,13 +34,19 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 from servobus.axis import checks
 from servobus.axis.base import AxisTraceHook
 from servobus.axis.eeprom_guard import EepromGuard
 from servobus.axis.late_replies import DEFAULT_LATE_REPLY_S, LateReplies
+from servobus.axis.transaction import (
+    DEFAULT_RETRIES,
+    TransactionManager,
+    TransactionStats,
+    check_call,
+)
 from servobus.errors import (
     ArgumentRangeError,
     ChecksumError,
@@ -54,29 +56,28 @@ from servobus.errors import (
 )
 from servobus.protocols.modbus import codec as C
 from servobus.protocols.modbus.framer import GapFramer, ReplyFramer
-from servobus.protocols.modbus.policy import DEFAULT_RETRIES, DEFAULT_TURNAROUND_S, RtuPolicy
+from servobus.protocols.modbus.policy import DEFAULT_TURNAROUND_S, RtuPolicy
 from servobus.protocols.modbus.sniff import REGISTER_NAMES, reply_event, request_event
 from servobus.protocols.modbus.timing import DEFAULT_BAUD, wire_time_s
 from servobus.transport.base import ByteStream, Direction, set_receiver
 
 log = logging.getLogger(__name__)
 
-#: What a late reply is matched on: (address, function) - all an RTU reply is sure to carry.
+GAP_YIELD_S = 0.001  # the end of the frame gap is waited by yielding (see _keep_gap)
+#: What a reply is matched on: (address, function) - all an RTU reply is sure to carry.
 ReplyKey = tuple[int, int]
 
 
-@dataclass
-class LineStats:
-    """Counters of one line (all devices on it)."""
+@dataclass(frozen=True)
+class Outgoing:
+    """One request as the line takes it: the decoded request and its frame."""
 
-    sent: int = 0
-    replies: int = 0
-    retries: int = 0
-    timeouts: int = 0
-    checksum_errors: int = 0  # reply candidates that failed their CRC
-    exceptions: int = 0  # exception replies
-    unmatched: int = 0  # frames with a good CRC that answered nothing waiting
-    stray_bytes: int = 0  # bytes dropped between transactions
+    request: C.Request
+    raw: bytes
+
+    @property
+    def key(self) -> ReplyKey:
+        return key_of(self.request)
 
 
 def key_of(request: C.Request) -> ReplyKey:
@@ -84,11 +85,11 @@ def key_of(request: C.Request) -> ReplyKey:
 
 
 def _describe_key(key: ReplyKey) -> str:
-    return f"{C.function_name(key[1])} reply from address {key[0]}"
+    return f"{C.function_name(key[1])} reply from drive {key[0]}"
 
 
 def registers_text(request: C.Request) -> str:
-    """``0x0016 absolute_position_low`` or ``0x0016..0x0017 (absolute_position_low, ...)``."""
+    """``register 0x0016 (absolute_position_low)`` or ``registers 0x0016..0x0017 (...)``."""
     if isinstance(request, C.WriteSingleRequest):
         start, count = request.register, 1
     else:
@@ -103,6 +104,12 @@ def registers_text(request: C.Request) -> str:
     names = ", ".join(name(a) for a in range(start, min(last, start + 3) + 1))
     more = ", ..." if count > 4 else ""
     return f"registers 0x{start:04X}..0x{last:04X} ({names}{more})"
+
+
+def _describe_request(out: Outgoing) -> str:
+    request = out.request
+    return (f"drive {request.address} to {C.function_name(request.function)} of "
+            f"{registers_text(request)}")
 
 
 def exception_error(request: C.Request, reply: C.ExceptionReply) -> DriveError:
@@ -126,46 +133,72 @@ class ModbusClient:
         timeout: float | None = None,
         late_reply_s: float = DEFAULT_LATE_REPLY_S,
         eeprom_guard: EepromGuard | None = None,
+        frame_gap_s: float | None = None,
     ) -> None:
         self.stream = stream
-        self.policy = RtuPolicy(baud=baud, retries=retries, turnaround_s=turnaround_s,
-                                timeout=timeout)
-        self.late_replies: LateReplies[ReplyKey] = LateReplies(
-            checks.non_negative_seconds("late_reply_s", late_reply_s), _describe_key)
-        self.guard = eeprom_guard if eeprom_guard is not None else EepromGuard()
-        self.stats = LineStats()
+        self.policy = RtuPolicy(baud=baud, turnaround_s=turnaround_s, timeout=timeout,
+                                frame_gap_s=frame_gap_s)
         self._framer = ReplyFramer()
         self._idle = GapFramer(self.policy.baud, eager=True)  # bytes between transactions
-        self._lock = asyncio.Lock()
-        self._hooks: list[AxisTraceHook] = []
-        self._dead: ConnectionLost | None = None
-        self._closed = False
-        self._waiting: asyncio.Future[C.Reply] | None = None
+        self._armed: ReplyKey | None = None  # the key of the request the framer answers
         self._crc_mark = 0
         self._quiet_at = 0.0  # monotonic time from which our next frame may start
-        self._reader: asyncio.Task[None] | None = None
         self._push = set_receiver(stream, self._on_data)
+        #: The line's transaction manager: one lane, one transaction at a time.
+        self.transactions: TransactionManager[ReplyKey, Outgoing, C.Reply] = \
+            TransactionManager(
+                self._write, link="Modbus RTU link", describe_key=_describe_key,
+                describe_request=_describe_request, trace_request=_trace_request,
+                retries=retries, late_reply_s=late_reply_s, eeprom_guard=eeprom_guard,
+                pull=None if self._push else self._pull_once, flush=self._flush)
+        tm = self.transactions
+        self.stats: TransactionStats = tm.stats
+        self.late_replies: LateReplies[ReplyKey] = tm.late_replies
+        self.guard: EepromGuard = tm.guard
 
     @property
     def baud(self) -> int:
         return self.policy.baud
 
+    @property
+    def retries(self) -> int:
+        return self.transactions.retries
+
+    @staticmethod
+    def check_options(options: Mapping[str, object]) -> None:
+        """Check constructor keywords before anything is opened (ArgumentRangeError)."""
+        checkers: dict[str, Callable[[str, object], object]] = {
+            "baud": checks.positive_int, "retries": checks.count,
+            "turnaround_s": checks.non_negative_seconds,
+            "timeout": checks.optional_seconds, "late_reply_s": checks.non_negative_seconds,
+            "frame_gap_s": checks.non_negative_seconds,
+        }
+        for name, value in options.items():
+            if name == "eeprom_guard":
+                if value is not None and not isinstance(value, EepromGuard):
+                    raise ArgumentRangeError(f"eeprom_guard must be an EepromGuard, got "
+                                             f"{value!r}")
+                continue
+            check = checkers.get(name)
+            if check is None:
+                raise ArgumentRangeError(f"unknown Modbus client option {name!r}")
+            check(name, value)
+
     # ------------------------------------------------------------- tracing
     def add_trace(self, hook: AxisTraceHook) -> None:
         """``hook(direction, item, t)``: every frame sent/received (decoded) and every error."""
-        self._hooks.append(hook)
-
-    def _trace(self, direction: Direction, item: object) -> None:
-        t = time.monotonic()
-        for hook in self._hooks:
-            hook(direction, item, t)
+        self.transactions.add_trace(hook)
 
     # ------------------------------------------------------------- public transactions
     async def read(self, address: int, start: int, count: int = 1, *,
                    retries: int | None = None, timeout: float | None = None) -> tuple[int, ...]:
         """Read ``count`` holding registers (function 0x03) from device ``address``."""
-        request = C.ReadHoldingRequest(_device("read", address), start, count)
-        reply = await self.transact(request, retries=retries, timeout=timeout)
+        if isinstance(address, bool) or not isinstance(address, int):
+            raise ArgumentRangeError(f"device address must be an integer, got {address!r}")
+        if address == C.BROADCAST:
+            raise ArgumentRangeError("a read cannot be broadcast (address 0 gets no reply)")
+        reply = await self.transact(C.ReadHoldingRequest(address, start, count),
+                                    retries=retries, timeout=timeout)
         assert isinstance(reply, C.ReadHoldingReply)
         return reply.values
 
@@ -184,195 +217,116 @@ class ModbusClient:
     async def transact(self, request: C.Request, *, retries: int | None = None,
                        timeout: float | None = None) -> C.Reply | None:
         """Send ``request`` and return its reply (None for a broadcast). Reads are retried,
-        writes sent exactly once (:class:`RtuPolicy`)."""
-        if self._dead is not None:
-            raise ConnectionLost(str(self._dead))
-        raw = C.encode_request(request)  # ArgumentRangeError before anything is sent
-        attempts = self.policy.attempts(request, retries)
-        per_try = self.policy.deadline_s(request, timeout)
-        async with self._lock:
-            if self._dead is not None:
-                raise ConnectionLost(str(self._dead))
-            self._start_reader()
-            if not C.expects_reply(request):
-                await self._send(raw)
-                return None
-            return await self._transact(request, raw, attempts, per_try)
-
-    # ------------------------------------------------------------- one transaction
-    async def _transact(self, request: C.Request, raw: bytes, attempts: int,
-                        per_try: float) -> C.Reply:
-        key = key_of(request)
-        late = self.late_replies
-        if late and late.owed(key):
-            await late.drain([key])
-        last: DriveTimeout | ChecksumError | None = None
-        for attempt in range(attempts):
-            if attempt:
-                self.stats.retries += 1
-                log.debug("retry %d of %d: %s to drive %d after %s", attempt, attempts - 1,
-                          C.function_name(request.function), request.address,
-                          type(last).__name__)
-            try:
-                reply = await self._attempt(request, raw, per_try)
-            except DriveTimeout as exc:
-                late.owe(key)  # its reply may still come: never to a later call
-                last = exc
-                continue
-            except ChecksumError as exc:
-                last = exc
-                continue
-            if isinstance(reply, C.ExceptionReply):
-                self.stats.exceptions += 1
-                raise exception_error(request, reply)
-            self.stats.replies += 1
-            return reply
-        assert last is not None
-        if isinstance(last, DriveTimeout):
-            raise DriveTimeout(
-                f"no reply from drive {request.address} to {C.function_name(request.function)} "
-                f"of {registers_text(request)} after {attempts} attempt(s) of "
-                f"{per_try * 1000:.1f} ms" + ("" if isinstance(request, C.ReadHoldingRequest)
-                                              else "; a write is sent once and not re-sent"))
-        raise last
-
-    async def _attempt(self, request: C.Request, raw: bytes, per_try: float) -> C.Reply:
-        loop = asyncio.get_running_loop()
-        await self._wait_quiet()
-        self.stream.discard_input()
-        framer = self._framer
-        framer.expect(request)  # stale bytes are dropped here
-        self._crc_mark = framer.crc_errors
-        fut: asyncio.Future[C.Reply] = loop.create_future()
-        self._waiting = fut
-        timer = None
+        writes sent exactly once. An exception reply raises DriveError."""
+        tm = self.transactions
+        tm.check_alive()
+        check_call(retries, timeout)
+        out = Outgoing(request, C.encode_request(request))  # ArgumentRangeError: nothing sent
+        if not C.expects_reply(request):
+            async with tm.lane():
+                await tm.send(out)
+            return None
+        is_read = isinstance(request, C.ReadHoldingRequest)
         try:
-            await self._send(raw)
-            if not fut.done():
-                timer = loop.call_later(per_try, _expire, fut)
-            return await fut
-        except TimeoutError:
-            raise self._timeout(request, per_try) from None
-        finally:
-            self._waiting = None
-            if timer is not None:
-                timer.cancel()
+            reply = await tm.request(out.key, out, deadline_s=self.policy.deadline_s(
+                request, timeout), retry_safe=is_read, retries=retries)
+        except DriveTimeout as exc:
+            if is_read:
+                raise
+            raise DriveTimeout(f"{exc}; a write is sent once and not re-sent: the motor may "
+                               "have taken it") from None
+        if isinstance(reply, C.ExceptionReply):
+            tm.stats.error_replies += 1
+            raise exception_error(request, reply)
+        return reply
 
-    async def _send(self, raw: bytes) -> None:
-        if self._hooks:
-            self._trace(Direction.TX, request_event(raw))
-        self.stats.sent += 1
-        try:
-            await self.stream.write(raw)
-        except OSError as exc:
-            raise self._link_failed(exc) from exc
-        # The frame occupies the line for its wire time, then t3.5 must pass (2.5.1.1).
-        self._quiet_at = max(self._quiet_at, time.monotonic()) + wire_time_s(
-            len(raw), self.policy.baud) + self.policy.gap_s
+    # ------------------------------------------------------------- the medium
+    async def _write(self, out: Outgoing) -> None:
+        """Hand one frame to the line after t3.5 of silence; arm the reply framer first."""
+        await self._keep_gap()
+        if C.expects_reply(out.request):
+            self._framer.expect(out.request)  # bytes still buffered are dropped here
+            self._armed = out.key
+            self._crc_mark = self._framer.crc_errors
+        # The frame occupies the line for its wire time, then t3.5 must pass (2.5.1.1);
+        # a reply (even one that comes during the write, in-process) moves this on.
+        self._quiet_at = time.monotonic() + wire_time_s(
+            len(out.raw), self.policy.baud) + self.policy.gap_s
+        await self.stream.write(out.raw)
 
-    async def _wait_quiet(self) -> None:
-        """Keep t3.5 of silence before our next frame (after the last byte either way)."""
-        wait = self._quiet_at - time.monotonic()
-        if wait > 0:
-            await asyncio.sleep(wait)
+    async def _keep_gap(self) -> None:
+        """Wait until the line has been quiet for the frame gap. An epoll loop wakes only to
+        the millisecond (a 1.8 ms sleep lasts 2+ ms, 2 % of a one-register read), so the
+        last ``GAP_YIELD_S`` are waited by yielding to the loop: other tasks still run."""
+        while True:
+            wait = self._quiet_at - time.monotonic()
+            if wait <= 0:
+                return
+            await asyncio.sleep(wait - GAP_YIELD_S if wait > GAP_YIELD_S else 0)
 
-    def _timeout(self, request: C.Request, per_try: float) -> DriveTimeout:
-        self.stats.timeouts += 1
-        exc = DriveTimeout(f"no reply from drive {request.address} to "
-                           f"{C.function_name(request.function)} within {per_try * 1000:.1f} ms")
-        self._trace(Direction.RX, exc)
-        log.debug("%s", exc)
-        return exc
+    def _flush(self) -> None:
+        """Before each attempt: stale bytes (late replies, noise) must not answer it."""
+        if not self._push:
+            self.stream.discard_input()
+        self._armed = None
+
+    async def _pull_once(self) -> None:
+        """Pull streams: one ``read()`` through the receive path."""
+        self._on_data(await self.stream.read())
 
     # ------------------------------------------------------------- reception
     def _on_data(self, data: bytes | None) -> None:
-        """Every received chunk (stream callback or reader task); None: the link died."""
-        fut = self._waiting
+        """Every received chunk (push callback or ``pull``); None: the link died."""
+        tm = self.transactions
         if data is None:
-            lost = self._link_failed(ConnectionLost("stream closed"))
-            if fut is not None and not fut.done():
-                fut.set_exception(ConnectionLost(f"{lost} while waiting for a reply"))
+            tm.lost(ConnectionLost("stream closed"))
             return
         now = time.monotonic()
-        self._quiet_at = max(self._quiet_at, now + self.policy.gap_s)
-        if fut is None or fut.done():
+        # Bytes from the line: the line is busy until now (a reply also proves that our
+        # request has left), quiet t3.5 after.
+        self._quiet_at = now + self.policy.gap_s
+        key = self._armed
+        if key is None or not tm.awaiting_reply:
             self._between(data, now)
             return
         framer = self._framer
         reply = framer.feed(data)
         if reply is not None:
-            if self._hooks:
-                self._trace(Direction.RX, reply_event(C.encode_reply(reply)))
-            fut.set_result(reply)
+            self._armed = None
+            if tm.answer(key, reply) and tm.tracing:
+                tm.trace(Direction.RX, reply_event(C.encode_reply(reply)))
             return
         if framer.crc_errors != self._crc_mark and not framer.pending:
-            self.stats.checksum_errors += framer.crc_errors - self._crc_mark
+            self._crc_mark = framer.crc_errors
             exc = ChecksumError(f"a reply failed its CRC: {bytes(data).hex(' ')}", bytes(data))
-            self._trace(Direction.RX, exc)
-            fut.set_exception(exc)
+            tm.trace(Direction.RX, exc)
+            tm.stray(exc)
+            tm.reject(exc)  # the attempt fails now; a read is retried
 
     def _between(self, data: bytes, now: float) -> None:
-        """Bytes while no request waits: owed late replies pay their debt; else dropped."""
-        late = self.late_replies
-        if not late:
-            self.stats.stray_bytes += len(data)
+        """Bytes while no request waits: owed late replies pay their debt; else strays."""
+        tm = self.transactions
+        if not tm.late_replies:
             log.debug("dropped %d byte(s) received between transactions", len(data))
             return
         for frame in self._idle.feed(data, now):
             key = (frame.raw[0], frame.raw[1] & ~C.EXCEPTION_FLAG)
-            if late.take(key):
-                self._trace(Direction.RX, reply_event(frame.raw))
+            event = reply_event(frame.raw)
+            if tm.late(key):
+                if tm.tracing:
+                    tm.trace(Direction.RX, event)
             else:
-                self.stats.unmatched += 1
-
-    def _start_reader(self) -> None:
-        """Pull-only streams: one task reads and hands each chunk to :meth:`_on_data`."""
-        if self._push or (self._reader is not None and not self._reader.done()):
-            return
-        self._reader = asyncio.get_running_loop().create_task(self._read_loop(),
-                                                              name="modbus-rx")
-
-    async def _read_loop(self) -> None:
-        try:
-            while True:
-                self._on_data(await self.stream.read())
-        except OSError:  # ConnectionLost and its kin: the link is gone
-            self._on_data(None)
-
-    def _link_failed(self, exc: BaseException) -> BaseException:
-        out = checks.lost(exc, "Modbus link lost")
-        if isinstance(out, ConnectionLost) and self._dead is None:
-            self._dead = out
-            self.late_replies.hang_up(ConnectionLost(str(out)))
-            log.debug("link lost: %s", out)
-        return out
+                tm.stray(event)
 
     # ------------------------------------------------------------- lifetime
     async def close(self) -> None:
-        if self._closed:
-            return
-        self._closed = True
-        if self._dead is None:
-            self._dead = ConnectionLost("client is closed")
-        reader, self._reader = self._reader, None
-        if reader is not None:
-            reader.cancel()
-        await self.stream.close()
+        if self.transactions.close():
+            await self.stream.close()
 
     @property
     def closed(self) -> bool:
-        return self._closed
+        return self.transactions.closed
 
 
-def _device(what: str, address: int) -> int:
-    if isinstance(address, bool) or not isinstance(address, int):
-        raise ArgumentRangeError(f"device address must be an integer, got {address!r}")
-    if address == C.BROADCAST:
-        raise ArgumentRangeError(f"a {what} cannot be broadcast (address 0 gets no reply)")
-    return address
-
-
-def _expire(fut: asyncio.Future[C.Reply]) -> None:
-    if not fut.done():
-        fut.set_exception(TimeoutError())
-
+def _trace_request(out: Outgoing) -> object:
+    return request_event(out.raw)

@@ -29,14 +29,13 @@ from __future__ import annotations
 import asyncio
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Protocol
 
 from servobus.protocols.modbus.crc import crc_ok
 from servobus.protocols.modbus.framer import GapFramer
 from servobus.protocols.modbus.timing import DEFAULT_BAUD, char_time_s, inter_frame_gap_s
-from servobus.sim.drive import VirtualDrive
-from servobus.sim.realtime import RealtimeClock
+from servobus.sim.realtime import Clocked, RealtimeClock
 from servobus.sim.wire import COARSE_S, SPIN_S, TimedReleases, WireClock
 from servobus.transport.base import Direction, TraceHook
 
@@ -48,7 +47,7 @@ class FrameHandler(Protocol):
     """The device side of the line: one request frame (good CRC) in, reply bytes out."""
 
     @property
-    def drives(self) -> list[VirtualDrive]: ...
+    def drives(self) -> Sequence[Clocked]: ...
 
     def handle(self, raw: bytes) -> bytes: ...
 
@@ -65,6 +64,7 @@ class RtuPort:
         self._deliver = deliver
         self.closed = False
         self.pending = 0  # paced replies scheduled for this port, not yet released
+        self.on_idle: Callable[[], None] | None = None  # called when ``pending`` drops to 0
         self.flush_at: float | None = None  # when the framer's pending run closes
         self.rx_queued = 0  # bytes accepted, not yet arrived (paced receive buffer)
         self.rx_inflight: deque[tuple[float, int]] = deque()  # (arrival of the last, count)
@@ -125,6 +125,7 @@ class RtuLineRunner:
     def close_port(self, port: RtuPort) -> None:
         """The host has gone: its pending replies are dropped."""
         port.closed = True
+        port.on_idle = None
         if port.pending or port.flush_at is not None:
             self.releases.drop(port)
             port.pending = 0
@@ -213,6 +214,8 @@ class RtuLineRunner:
             if self.taps:
                 self._tap(Direction.RX, reply, when)
             port.deliver(reply)
+            if not port.pending and port.on_idle is not None:
+                port.on_idle()
 
         return release
 
