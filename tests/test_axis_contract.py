@@ -22,6 +22,7 @@ CONTRACT_URLS = [
     "sim://dyncan?fast=1",
     "sim://easycan?fast=1",
     "sim://enip",
+    "sim://modbus?fast=1",
 ]
 DRIVE = 1
 ABSENT = 9

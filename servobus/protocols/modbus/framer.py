@@ -81,6 +81,8 @@ def _lengths(buf: bytearray, i: int, decide: bool,
             return ([] if requests_only else [FIXED_FRAME_LENGTH]), True
         return ([] if requests_only else [FIXED_FRAME_LENGTH]) + [9 + buf[i + 6]], False
     if decide:
+        if requests_only:  # a device: a frame of unknown length is what the silence ends
+            return [n - i], False
         return good_lengths(buf, i, MIN_FRAME, MAX_FRAME), False
     return [], True
 
@@ -102,6 +104,10 @@ class GapFramer:
     9 + byte count, which removes the request/reply ambiguity of both (with both
     directions, an eager framer would take a read request starting at 0x02xx whose CRC
     ends in 0x00 for a one-register reply one byte short; YZ-AIM registers are 0x00-0x1D).
+    It also takes a frame of an unknown function code only as the whole run up to the
+    silence, as a device does (Serial Line 2.5.1.1), never a CRC match inside a run: the
+    5 bytes ``03 00 02 00 01`` inside a read of register 0x0002 pass the CRC, and a
+    corrupted read must not become a frame for device 3.
     """
 
     def __init__(self, baud: int = DEFAULT_BAUD, *, bits_per_char: int = BITS_PER_CHAR,
@@ -253,8 +259,13 @@ class ReplyFramer:
 
     @property
     def pending(self) -> int:
-        """Bytes held that may still start the answer (0 after a reply or a skipped run)."""
-        return len(self._buf)
+        """Bytes held that may still start the answer (0 after a reply or a skipped run; a
+        lone byte that is not the request's address cannot start it)."""
+        buf = self._buf
+        request = self._request
+        if len(buf) == 1 and request is not None and buf[0] != request.address:
+            return 0
+        return len(buf)
 
     @property
     def needed(self) -> int:
