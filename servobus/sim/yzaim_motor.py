@@ -44,13 +44,15 @@ Behaviour, with the manual's sections (docs/yzaim.md) and servobus decisions whe
 * **Synchronous cache** (0x1A-0x1C, 5.4c/d): a cache value written since the last take is
   pending. With 0x1C = 0 it only waits. Writing 0x1C > 0 (not 255) is the synchronisation
   signal (5.2 0x1B): a pending cache is taken at once and the drive's 2 ms time base
-  restarts there, so motors loaded first and then signalled start together (a power-on
-  cache of 0 is never pending, so the signal alone never moves a motor); from then on the
-  newest cache value is taken every 2 ms: with
-  the drive's curve below 60000 (5.4c, "accumulating": it may lag), at 60000 and above
-  interpolated linearly over the next 2 ms cycle at no more than the speed limit 0x02 (5.4d,
-  "no lag"). 0x1C = 255 takes the cache on each ``dir_edge()``. While 0x1C is not 0, a
-  cache write while the previous one is still pending is refused (TOO_FAST), not stored.
+  restarts there (at the instant the frame arrived, ``at=``, when a front end handles it
+  late), so motors loaded first and then signalled start together (a power-on cache of 0 is
+  never pending, so the signal alone never moves a motor). From then on the newest cache
+  value is taken every 2 ms: with the drive's curve below 60000 (5.4c, "accumulating": it
+  may lag), at 60000 and above interpolated linearly over the next 2 ms cycle at no more
+  than the speed limit 0x02 (5.4d, "no lag"). 0x1C = 255 takes the cache on each
+  ``dir_edge()``. While 0x1C is not 0, a cache write while the previous one is still
+  pending is refused (TOO_FAST), not stored; a write handled after the tick of its cycle
+  is taken at once.
 * **Save** (0x14): 1 stores every saved register at once (reads 2 afterwards), 3 also the
   single-turn origin (reads 2); 0 and 2 are only stored. A new device address 0x15 takes
   effect at the next power cycle.
@@ -148,6 +150,7 @@ class YzaimMotor:
         self._speed_mode = False
         self._cache_pending = False
         self._next_tick = self.drive.time + TICK_S
+        self._at = self.drive.time  # arrival time of the frame being executed
         drive = self.drive
         drive.disable()
         drive.enable()
@@ -262,9 +265,14 @@ class YzaimMotor:
                 return int(self._save_flag)
         raise KeyError(name)  # pragma: no cover
 
-    def write_words(self, address: int, words: Sequence[int]) -> tuple[int, ...]:
-        """Write consecutive registers; returns what they hold afterwards (see module doc)."""
+    def write_words(self, address: int, words: Sequence[int], *,
+                    at: float | None = None) -> tuple[int, ...]:
+        """Write consecutive registers; returns what they hold afterwards (see module doc).
+
+        ``at``: the simulated time the frame reached the motor, when the front end handles
+        it later than that (the 2 ms cycle it belongs to; default: now)."""
         self._check_span(address, len(words))
+        self._at = self.time if at is None else min(at, self.time)
         for w in words:
             if not 0 <= w <= yzaim.WORD_MAX:
                 raise ValueError(f"register word {w} is outside 0..{yzaim.WORD_MAX}")
@@ -355,12 +363,14 @@ class YzaimMotor:
         self._offset -= self.position
         return True
 
-    def write_position_cache(self, position: int) -> int:
+    def write_position_cache(self, position: int, *, at: float | None = None) -> int:
         """A position-cache frame (5.3c): store ``position``; returns the current position.
 
-        MotorRefused(TOO_FAST) when the previous cache value was not taken yet."""
+        MotorRefused(TOO_FAST) when the previous cache value was not taken yet. ``at`` as for
+        :meth:`write_words`."""
         if not yzaim.INT32_MIN <= position <= yzaim.INT32_MAX:
             raise ValueError(f"cache position {position} is not a signed 32-bit value")
+        self._at = self.time if at is None else min(at, self.time)
         if self._ram["modbus_enable"]:
             if self._cache_is_pending():
                 self._refuse_cache()
@@ -531,6 +541,8 @@ class YzaimMotor:
         low, high = yzaim.split32(position)
         self._ram["position_cache_low"], self._ram["position_cache_high"] = low, high
         self._cache_pending = True
+        if self._sync_internal() and self._at < self._next_tick - TICK_S:
+            self._take_cache()  # handled late: the tick that takes it has already run
 
     def _cache(self) -> int:
         return yzaim.join32(self._ram["position_cache_low"], self._ram["position_cache_high"])
@@ -552,7 +564,7 @@ class YzaimMotor:
         if self._sync_internal():
             if self._cache_pending:
                 self._take_cache()
-            self._next_tick = self.time + TICK_S
+            self._next_tick = self._at + TICK_S
 
 
 _ALARM = yzaim.ALARM_BY_NAME

@@ -45,6 +45,9 @@ _STATUS = ("output_enable", "alarm_code", "motor_speed")
 _CURRENT = ("system_current", "output_pwm")
 _SPEED = yzaim.BY_NAME["target_speed"]
 _ORIGIN_TARGET = 1  # 5.4a: "going back to the origin, send 1" (module docstring)
+_PARAMS: tuple[ParamInfo, ...] = tuple(p for p in YZAIM.params
+                                       if p.name in set(cmds.REACHABLE_PARAMS))
+_PARAM_BY_NAME: dict[str, ParamInfo] = {p.name: p for p in _PARAMS}
 
 
 class EasyCanAxis(AsyncAxis):
@@ -55,6 +58,7 @@ class EasyCanAxis(AsyncAxis):
         self._owns_client = owns_client
         self._closers: list[Callable[[], Awaitable[None]]] = []
         self._reads: dict[tuple[object, ...], cmds.EasyCanCommand] = {}
+        self._params: dict[str, cmds.EasyCanCommand] = {}  # parameter reads, built once
         self._target: int | None = None  # last commanded absolute target, counts
         self._speed_mode: bool | None = None  # None: unknown (another host may have set it)
         self._cruise_rpm: int | None = None  # target_speed replaced by turn()
@@ -191,8 +195,11 @@ class EasyCanAxis(AsyncAxis):
 
     # ------------------------------------------------------------- parameters and id
     def parameters(self) -> tuple[ParamInfo, ...]:
-        reach = set(cmds.REACHABLE_PARAMS)
-        return tuple(p for p in YZAIM.params if p.name in reach)
+        return _PARAMS
+
+    def param_info(self, name: str) -> ParamInfo:
+        found = _PARAM_BY_NAME.get(name) if isinstance(name, str) else None
+        return found if found is not None else super().param_info(name)
 
     def _check_param(self, name: str, value: object) -> int:
         checked = super()._check_param(name, value)
@@ -200,8 +207,11 @@ class EasyCanAxis(AsyncAxis):
         return checked
 
     async def read_param(self, name: str) -> int:
-        self.param_info(checks.param_name(name))
-        return await self.client.read(self._read_cmd(cmds.make_read, name))
+        command = self._params.get(name) if isinstance(name, str) else None
+        if command is None:
+            self.param_info(checks.param_name(name))
+            command = self._params[name] = cmds.make_read(self._id, name)
+        return await self.client.read(command)
 
     async def write_param(self, name: str, value: int) -> None:
         checked = self._check_param(name, value)
@@ -223,6 +233,7 @@ class EasyCanAxis(AsyncAxis):
         await self.save_parameters()
         self._id = new_id
         self._reads.clear()
+        self._params.clear()
 
     async def ping(self, timeout: float = 0.05) -> bool:
         try:

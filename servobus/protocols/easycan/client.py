@@ -68,6 +68,7 @@ from servobus.transport.can_bus import AsyncCanBus, CanFrame, FramePort, set_rec
 
 log = logging.getLogger(__name__)
 
+DECODED_CACHE = 4096  # distinct reply frames remembered (then forgotten at once)
 POSITION_KEY = (-1, 0x300)  # late-reply key of position-cache replies (no motor address)
 Key = tuple[int, int]
 
@@ -139,6 +140,8 @@ class AsyncEasyCanClient:
         self.late_replies: LateReplies[Key] = LateReplies(self.policy.late_reply_s,
                                                           _describe_key)
         self._hooks: list[AxisTraceHook] = []
+        #: Decoded replies by data bytes (frozen, so shared): polling repeats the same frames.
+        self._decoded: dict[bytes, Reply] = {}
         self._waiters: list[_Waiter] = []
         self._locks: dict[int, asyncio.Lock] = {}
         self._position_lock = asyncio.Lock()
@@ -182,12 +185,18 @@ class AsyncEasyCanClient:
             return
         if raw.is_extended_id or raw.arbitration_id != self.host:
             return  # requests (ours echoed by some adapters, another host's): not replies
-        try:
-            reply = codec.decode_reply(raw.arbitration_id, raw.data)
-        except FramingError as exc:
-            self.stats.unmatched += 1
-            log.debug("undecodable frame on 0x%03X: %s", raw.arbitration_id, exc)
-            return
+        data = bytes(raw.data)
+        reply = self._decoded.get(data)
+        if reply is None:
+            try:
+                reply = codec.decode_reply(raw.arbitration_id, data)
+            except FramingError as exc:
+                self.stats.unmatched += 1
+                log.debug("undecodable frame on 0x%03X: %s", raw.arbitration_id, exc)
+                return
+            if len(self._decoded) >= DECODED_CACHE:
+                self._decoded.clear()
+            self._decoded[data] = reply
         if self._hooks:
             self._trace(Direction.RX, reply)
         for w in self._waiters:

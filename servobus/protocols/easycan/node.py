@@ -16,11 +16,15 @@ maps frames. Decisions where the manual is silent:
 * A cache write that comes too fast (the motor's TOO_FAST) answers 0x86 code 0x05 when the
   frame asked for a reply (0x3xx) and is dropped silently otherwise (0x1xx), counted.
 * Motors answer on their power-on address (register 0x15 takes effect after a power cycle).
+* Timing: a frame is executed as of the instant it reached the bus (its receive timestamp),
+  not when this process got round to it, so the 2 ms cycle a cache frame belongs to does not
+  depend on the simulator's own scheduling delays.
 """
 
 from __future__ import annotations
 
 import asyncio
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -51,7 +55,7 @@ from servobus.protocols.easycan.messages import (
 )
 from servobus.sim.realtime import RealtimeClock
 from servobus.sim.yzaim_motor import MotorRefused, Refusal, YzaimMotor
-from servobus.transport.can_bus import FramePort
+from servobus.transport.can_bus import CanFrame, FramePort
 
 _ABS_LOW = yzaim.PAIR_BY_NAME["absolute_position"].low
 _CODES: dict[Refusal, ErrorCode] = {
@@ -86,7 +90,11 @@ class EasyCanNetwork:
                 return m
         return None
 
-    def handle_raw(self, arbitration_id: int, data: bytes) -> list[tuple[int, bytes]]:
+    def handle_raw(self, arbitration_id: int, data: bytes,
+                   now: float | None = None) -> list[tuple[int, bytes]]:
+        """Execute one frame that reached the bus at simulated time ``now``: it first
+        advances the motor it addresses (only that one: O(1) per frame however many motors
+        share the bus); a motor already past ``now`` executes it as of ``now``."""
         self.stats.frames += 1
         try:
             request = codec.decode_request(arbitration_id, data)
@@ -102,7 +110,9 @@ class EasyCanNetwork:
         if motor is None:
             self.stats.ignored += 1
             return []
-        return self._out(self.execute(motor, request))
+        if now is not None and now > motor.time:
+            motor.advance_to(now)
+        return self._out(self.execute(motor, request, now))
 
     def _out(self, reply: Reply | None) -> list[tuple[int, bytes]]:
         if reply is None:
@@ -112,9 +122,10 @@ class EasyCanNetwork:
             self.stats.errors += 1
         return [codec.encode(reply)]
 
-    def execute(self, motor: YzaimMotor, request: Request) -> Reply | None:
+    def execute(self, motor: YzaimMotor, request: Request,
+                at: float | None = None) -> Reply | None:
         try:
-            return _execute(motor, request)
+            return _execute(motor, request, at)
         except MotorRefused as exc:
             code = _CODES[exc.reason]
             if not isinstance(request, PositionCacheWrite):
@@ -125,7 +136,7 @@ class EasyCanNetwork:
             return ErrorReply(request.slave, int(CACHE_ERROR_FUNCTION), code)
 
 
-def _execute(motor: YzaimMotor, request: Request) -> Reply | None:
+def _execute(motor: YzaimMotor, request: Request, at: float | None) -> Reply | None:
     match request:
         case ReadRequest():
             if not 1 <= request.count <= MAX_READ_WORDS:
@@ -134,7 +145,7 @@ def _execute(motor: YzaimMotor, request: Request) -> Reply | None:
             words = motor.read_words(request.address, request.count)
             return ReadReply(request.slave, request.address, words, request.host)
         case WriteRequest():
-            words = motor.write_words(request.address, request.values)
+            words = motor.write_words(request.address, request.values, at=at)
             if request.address in POSITION_ECHO_ADDRESSES and len(words) == 2:
                 words = motor.read_words(_ABS_LOW, 2)  # 5.3b: the current absolute position
             return WriteReply(request.slave, request.address, words, request.host)
@@ -150,9 +161,18 @@ def _execute(motor: YzaimMotor, request: Request) -> Reply | None:
             words = tuple(motor.read_word(a) for a in request.addresses)
             return ReadMultipleReply(request.slave, words, request.host)
         case PositionCacheWrite():
-            position = motor.write_position_cache(request.position)
+            position = motor.write_position_cache(request.position, at=at)
             return PositionReply(position) if request.reply else None
     return None  # pragma: no cover
+
+
+def arrival(frame: CanFrame) -> float:
+    """The monotonic instant a frame reached the bus, from its wall-clock timestamp (python-can
+    and the socketcand hub stamp frames on arrival; the node may handle them later)."""
+    now = time.monotonic()
+    if frame.timestamp <= 0:
+        return now
+    return min(now, now - (time.time() - frame.timestamp))
 
 
 async def serve(network: EasyCanNetwork, port: FramePort, *,
@@ -160,8 +180,8 @@ async def serve(network: EasyCanNetwork, port: FramePort, *,
                 stop: asyncio.Event | None = None) -> None:
     """Answer host frames on ``port`` until ``stop`` is set or the port closes.
 
-    With a ``clock`` the motors run in wall-clock time (advanced before each frame and by the
-    clock's ticker); without one the caller steps them (tests).
+    With a ``clock`` the motors run in wall-clock time (the addressed one advanced before
+    each frame, all of them by the clock's ticker); without one the caller steps them.
     """
     stop = stop or asyncio.Event()
     if clock is not None:
@@ -174,9 +194,8 @@ async def serve(network: EasyCanNetwork, port: FramePort, *,
                 break
             if raw is None or raw.is_extended_id:
                 continue
-            if clock is not None:
-                clock.sync()
-            for arbitration_id, data in network.handle_raw(raw.arbitration_id, raw.data):
+            now = None if clock is None else clock.sim_time(arrival(raw))
+            for arbitration_id, data in network.handle_raw(raw.arbitration_id, raw.data, now):
                 await port.send(arbitration_id, data)
     finally:
         if clock is not None:
