@@ -29,8 +29,9 @@ from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, DriveConfig, ServoMode
 from servobus.protocols.dyn232 import codec as c
-from servobus.transport.base import Direction
-from servobus.transport.pair import Fault
+from servobus.protocols.dyn232.client import AsyncDyn232Client, Dyn232Axis
+from servobus.transport.base import ByteReceiver, Direction, TraceHook
+from servobus.transport.pair import Fault, PairStream, PushPairStream
 
 pytestmark = pytest.mark.timeout(20)
 #: A servoed motor settles within OnRange of its target (default 10/16384 rev = 40 counts).
@@ -315,14 +316,66 @@ async def test_checksum_notice_from_drive_is_not_an_alarm() -> None:
 
 @arun
 async def test_query_pacing_spaces_queries() -> None:
-    async with bench((0,), query_interval_s=0.02) as b:
+    """Measured where the bytes leave (the cable's TX trace, stamped in its write): the
+    client's pacing clock is stamped after that write returned, so no CPU load can bring
+    two queries closer than the interval (it used to be stamped when the send was decided,
+    and this test failed 2 runs in 8 under load with a 1 ms allowance)."""
+    interval = 0.02
+    async with bench((0,), query_interval_s=interval) as b:
         ax = b.axis(0)
         sends: list[float] = []
         b.host.add_trace(lambda d, data, t: sends.append(t) if d is Direction.TX else None)
-        for _ in range(4):
+        for _ in range(6):
             await ax.status()
         gaps = [later - earlier for earlier, later in itertools.pairwise(sends)]
-        assert min(gaps) >= 0.019
+        assert len(gaps) == 5 and min(gaps) >= interval, gaps
+
+
+class SlowWrites:
+    """A push stream whose writes take time before the bytes leave (a draining serial port,
+    a loaded host): delegates to ``inner`` after sleeping ``delays`` in turn."""
+
+    def __init__(self, inner: PairStream, delays: list[float]) -> None:
+        self.inner = inner
+        self.delays = delays
+        self.left: list[float] = []
+
+    async def write(self, data: bytes) -> None:
+        if self.delays:
+            await asyncio.sleep(self.delays.pop(0))
+        self.left.append(time.monotonic())
+        await self.inner.write(data)
+
+    async def read(self, max_bytes: int = 4096) -> bytes:
+        return await self.inner.read(max_bytes)
+
+    def discard_input(self) -> None:
+        self.inner.discard_input()
+
+    async def close(self) -> None:
+        await self.inner.close()
+
+    def add_trace(self, hook: TraceHook) -> None:
+        self.inner.add_trace(hook)
+
+    def set_receiver(self, receiver: ByteReceiver | None) -> None:
+        assert isinstance(self.inner, PushPairStream)
+        self.inner.set_receiver(receiver)
+
+
+@arun
+async def test_query_pacing_holds_when_writes_take_time() -> None:
+    """Regression (issue #9): a write that takes 15 ms before its bytes leave let the next
+    query leave 5 ms after it while the pacing clock was stamped at the send decision."""
+    interval = 0.02
+    async with bench((0,)) as b:
+        slow = SlowWrites(b.host, [0.015, 0.0, 0.012, 0.0, 0.018, 0.0])
+        client = AsyncDyn232Client(slow, query_interval_s=interval)
+        ax = Dyn232Axis(client, 0, owns_client=False)
+        for _ in range(6):
+            await ax.status()
+        gaps = [later - earlier for earlier, later in itertools.pairwise(slow.left)]
+        assert min(gaps) >= interval, gaps
 
 
 @arun

@@ -1,7 +1,9 @@
 """The client's two reception paths keep the same fault rules.
 
-Push (``set_receiver``: TCP, ``sim://``) and pull (``read()``: pyserial) are separate code in
-the client, so each fault test runs over a push-capable and a pull-only in-process cable.
+Push (``set_receiver``: TCP, ``sim://``) and pull (``read()``: pyserial) reach the client
+differently (the stream calls its receive callback; the transaction manager's ``pull`` and
+``flush`` hooks read and discard), so each fault test runs over a push-capable and a
+pull-only in-process cable.
 """
 
 from __future__ import annotations

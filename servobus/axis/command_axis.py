@@ -1,7 +1,10 @@
 """CommandAxis: the AsyncAxis of a DMM protocol whose client executes pure ``make_*`` commands.
 
-A protocol supplies a commands module (the :class:`CommandSet` vocabulary) and a client with
-``execute``; this class maps the Axis API onto them once, in the Axis units: counts are
+A protocol supplies a commands module (the :class:`CommandSet` vocabulary, whose builders
+return :class:`Request` objects typed by their result) and a client with ``execute``
+(:class:`CommandClient`: a ``Request[T]`` in, its ``T`` out, by the rules of
+:mod:`servobus.axis.transaction`); this class maps the Axis API onto them once, in the Axis
+units: counts are
 converted to the drive's command units through GEAR_NUM (read from the drive once, then
 tracked through this axis's own writes; see :mod:`servobus.families.dmm.family`), the
 status byte becomes an AxisStatus, the torque readout amperes. Dyn232Axis and DynCanAxis
@@ -13,7 +16,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Awaitable, Callable
-from typing import Any, ClassVar, Protocol
+from typing import ClassVar, Never, Protocol, TypeVar, cast
 
 from servobus.axis import checks
 from servobus.axis.base import DEFAULT_WAIT_TIMEOUT_S, AsyncAxis, AxisTraceHook, check_int
@@ -24,40 +27,61 @@ from servobus.families.dmm import units as U
 from servobus.families.dmm.family import DYN2, axis_status, counts_to_command
 from servobus.families.dmm.registers import DriveConfig, DriveStatus
 
+T = TypeVar("T")
+T_co = TypeVar("T_co", covariant=True)
+
+
+class Request(Protocol[T_co]):
+    """A pure command of some protocol; executing it gives ``T_co`` (None: no reply).
+
+    A protocol's command class is generic in its result (``Command[DriveStatus]``) and has
+    ``parse``: reply -> result. What a reply is (an int, a CAN frame) is the protocol's
+    business, so the seam only knows that ``parse`` takes *something* (``Never``: any
+    one-argument callable fits) and what it returns.
+    """
+
+    @property
+    def drive_id(self) -> int: ...
+    @property
+    def parse(self) -> Callable[[Never], T_co]: ...
+
 
 class CommandSet(Protocol):
     """The pure builders a protocol's commands module offers (range checks happen there)."""
 
     def check_drive_id(self, drive_id: int) -> int: ...
-    def make_move_absolute(self, drive_id: int, position: int) -> Any: ...
-    def make_move_relative(self, drive_id: int, distance: int) -> Any: ...
-    def make_turn_const_speed(self, drive_id: int, rpm: int) -> Any: ...
-    def make_square_wave(self, drive_id: int, amplitude: int) -> Any: ...
-    def make_sine_wave(self, drive_id: int, amplitude: int) -> Any: ...
-    def make_wave_frequency(self, drive_id: int, hz: int) -> Any: ...
-    def make_set_origin(self, drive_id: int) -> Any: ...
-    def make_enable(self, drive_id: int) -> Any: ...
-    def make_disable(self, drive_id: int) -> Any: ...
-    def make_reset(self, drive_id: int) -> Any: ...
-    def make_read_status(self, drive_id: int) -> Any: ...
-    def make_read_config(self, drive_id: int) -> Any: ...
-    def make_set_config(self, drive_id: int, config: DriveConfig | int) -> Any: ...
-    def make_read_position(self, drive_id: int) -> Any: ...
-    def make_read_speed(self, drive_id: int) -> Any: ...
-    def make_read_torque(self, drive_id: int) -> Any: ...
-    def make_read_param(self, drive_id: int, name: str) -> Any: ...
-    def make_set_param(self, drive_id: int, name: str, value: int) -> Any: ...
-    def make_read_id(self, drive_id: int) -> Any: ...
-    def make_assign_id(self, drive_id: int, new_id: int) -> Any: ...
+    def make_move_absolute(self, drive_id: int, position: int) -> Request[None]: ...
+    def make_move_relative(self, drive_id: int, distance: int) -> Request[None]: ...
+    def make_turn_const_speed(self, drive_id: int, rpm: int) -> Request[None]: ...
+    def make_square_wave(self, drive_id: int, amplitude: int) -> Request[None]: ...
+    def make_sine_wave(self, drive_id: int, amplitude: int) -> Request[None]: ...
+    def make_wave_frequency(self, drive_id: int, hz: int) -> Request[None]: ...
+    def make_set_origin(self, drive_id: int) -> Request[None]: ...
+    def make_enable(self, drive_id: int) -> Request[None]: ...
+    def make_disable(self, drive_id: int) -> Request[None]: ...
+    def make_reset(self, drive_id: int) -> Request[None]: ...
+    def make_read_status(self, drive_id: int) -> Request[DriveStatus]: ...
+    def make_read_config(self, drive_id: int) -> Request[DriveConfig]: ...
+    def make_set_config(self, drive_id: int, config: DriveConfig | int) -> Request[None]: ...
+    def make_read_position(self, drive_id: int) -> Request[int]: ...
+    def make_read_speed(self, drive_id: int) -> Request[int]: ...
+    def make_read_torque(self, drive_id: int) -> Request[int]: ...
+    def make_read_param(self, drive_id: int, name: str) -> Request[int]: ...
+    def make_set_param(self, drive_id: int, name: str, value: int) -> Request[None]: ...
+    def make_read_id(self, drive_id: int) -> Request[int]: ...
+    def make_assign_id(self, drive_id: int, new_id: int) -> Request[None]: ...
     @property
     def REACHABLE_PARAMS(self) -> tuple[str, ...]: ...
 
 
 class CommandClient(Protocol):
-    guard: EepromGuard
+    """What CommandAxis needs of a protocol client. ``execute`` refuses (ArgumentRangeError)
+    a Request built by another protocol's CommandSet."""
 
-    async def execute(self, command: Any, *, retries: int | None = None,
-                      timeout: float | None = None) -> Any: ...
+    @property
+    def guard(self) -> EepromGuard: ...
+    async def execute(self, command: Request[T], *, retries: int | None = None,
+                      timeout: float | None = None) -> T: ...
     def add_trace(self, hook: AxisTraceHook) -> None: ...
     async def close(self) -> None: ...
 
@@ -78,7 +102,9 @@ class CommandAxis(AsyncAxis):
         self.client = client
         self._id = self.commands.check_drive_id(drive_id)
         self._owns_client = owns_client
-        self._reads: dict[tuple[object, ...], Any] = {}  # read commands are immutable
+        #: Read commands of this drive, built once (they are immutable; polling reuses them).
+        self._reads: dict[Callable[[int], Request[object]], Request[object]] = {}
+        self._param_reads: dict[str, Request[int]] = {}
         self._closers: list[Callable[[], Awaitable[None]]] = []
         self._gear_num: int | None = None  # read on the first move (Axis units -> command)
 
@@ -86,16 +112,21 @@ class CommandAxis(AsyncAxis):
         """Run ``closer`` after the client closes (e.g. an in-process virtual drive's task)."""
         self._closers.append(closer)
 
-    def _read(self, factory: Callable[..., Any], *args: Any) -> Any:
-        """The read command for this drive, built once (polling loops reuse it)."""
-        key = (factory, *args)
-        command = self._reads.get(key)
+    def _read(self, factory: Callable[[int], Request[T]]) -> Request[T]:
+        """The read command of ``factory`` for this drive, built once."""
+        command = self._reads.get(factory)
         if command is None:
-            command = self._reads[key] = factory(self._id, *args)
+            command = self._reads[factory] = factory(self._id)
+        return cast("Request[T]", command)  # stored under its own factory: the same T
+
+    def _read_param(self, name: str) -> Request[int]:
+        command = self._param_reads.get(name)
+        if command is None:
+            command = self._param_reads[name] = self.commands.make_read_param(self._id, name)
         return command
 
-    async def _run(self, command: Any, **kw: Any) -> Any:
-        return await self.client.execute(command, **kw)
+    async def _run(self, command: Request[T]) -> T:
+        return await self.client.execute(command)
 
     @property
     def drive_id(self) -> int:
@@ -174,28 +205,26 @@ class CommandAxis(AsyncAxis):
     # ------------------------------------------------------------- registers and readouts
     async def drive_status(self) -> DriveStatus:
         """The DYN2 status byte as decoded by the family (7.3)."""
-        result: DriveStatus = await self._run(self._read(self.commands.make_read_status))
-        return result
+        return await self._run(self._read(self.commands.make_read_status))
 
     async def status(self) -> AxisStatus:
         return axis_status(await self.drive_status())
 
     async def config(self) -> DriveConfig:
-        result: DriveConfig = await self._run(self._read(self.commands.make_read_config))
-        return result
+        return await self._run(self._read(self.commands.make_read_config))
 
     async def set_config(self, cfg: DriveConfig) -> None:
         await self._run(self.commands.make_set_config(self._id, cfg))
 
     async def position(self) -> int:
-        return int(await self._run(self._read(self.commands.make_read_position)))
+        return await self._run(self._read(self.commands.make_read_position))
 
     async def speed(self) -> float:
         return float(await self._run(self._read(self.commands.make_read_speed)))
 
     async def torque_raw(self) -> int:
         """The protocol's torque readout as sent (see ``amps_per_torque_unit``)."""
-        return int(await self._run(self._read(self.commands.make_read_torque)))
+        return await self._run(self._read(self.commands.make_read_torque))
 
     async def current(self) -> float:
         return await self.torque_raw() * self.amps_per_torque_unit
@@ -225,7 +254,7 @@ class CommandAxis(AsyncAxis):
 
     async def read_param(self, name: str) -> int:
         checks.param_name(name)  # before it keys the read cache
-        return int(await self._run(self._read(self.commands.make_read_param, name)))
+        return await self._run(self._read_param(name))
 
     async def write_param(self, name: str, value: int) -> None:
         self._check_param(name, value)
@@ -234,7 +263,7 @@ class CommandAxis(AsyncAxis):
             self._gear_num = value
 
     async def read_id(self) -> int:
-        return int(await self._run(self._read(self.commands.make_read_id)))
+        return await self._run(self._read(self.commands.make_read_id))
 
     async def assign_id(self, new_id: int) -> None:
         """Assign_Drive_ID; after the protocol's settle time this axis addresses ``new_id``."""
@@ -244,6 +273,7 @@ class CommandAxis(AsyncAxis):
         self.client.guard.rename_drive(self._id, new_id)
         self._id = new_id
         self._reads.clear()
+        self._param_reads.clear()
 
     async def ping(self, timeout: float = 0.05) -> bool:
         """One status read without retry. A corrupt reply still proves something answered."""
@@ -258,7 +288,9 @@ class CommandAxis(AsyncAxis):
 
     # ------------------------------------------------------------- connection
     async def sibling(self, drive_id: int) -> CommandAxis:
-        return type(self)(self.client, drive_id, owns_client=False)
+        axis = type(self)(self.client, drive_id, owns_client=False)
+        axis.capture_source = self.capture_source  # same connection, same drives' traces
+        return axis
 
     async def add_trace(self, hook: AxisTraceHook) -> None:
         self.client.add_trace(hook)

@@ -127,16 +127,6 @@ class _Expired(Exception):
     """An attempt's deadline passed (internal: becomes DriveTimeout)."""
 
 
-class _Pending(Generic[V]):
-    """The attempt waiting for the reply of one key."""
-
-    __slots__ = ("deadline", "future")
-
-    def __init__(self, future: asyncio.Future[V]) -> None:
-        self.future = future
-        self.deadline: float | None = None  # loop time; None until the request has left
-
-
 class TransactionManager(Generic[K, P, V]):
     """The transaction rules of one link (see the module docstring).
 
@@ -181,8 +171,11 @@ class TransactionManager(Generic[K, P, V]):
         self._flush = flush
         self._owed_keys = owed_keys
         self._hooks: list[AxisTraceHook] = []
+        #: Any trace hook installed (read only; skip decoding for the trace when False).
+        self.tracing = False
         self._lanes: dict[Hashable, asyncio.Lock] = {}
-        self._waiting: dict[K, _Pending[V]] = {}
+        self._waiting: dict[K, asyncio.Future[V]] = {}  # the attempt waiting per key
+        self._deadlines: dict[K, float] = {}  # loop time, set once its request has left
         self._last_query = -1e9  # time.monotonic() when the last request's write returned
         self._timer: asyncio.TimerHandle | None = None
         self._timer_at = 0.0
@@ -193,11 +186,7 @@ class TransactionManager(Generic[K, P, V]):
     def add_trace(self, hook: AxisTraceHook) -> None:
         """``hook(direction, item, t)``: every request sent, every reply and error met."""
         self._hooks.append(hook)
-
-    @property
-    def tracing(self) -> bool:
-        """Any trace hook installed (skip decoding for the trace when not)."""
-        return bool(self._hooks)
+        self.tracing = True
 
     def trace(self, direction: Direction, item: object) -> None:
         t = time.monotonic()
@@ -239,39 +228,35 @@ class TransactionManager(Generic[K, P, V]):
         lock = self._lanes.get(lane)
         if lock is None:
             lock = self.lane(lane)
-        async with lock:
-            return await self._transact(key, payload, deadline_s, retry_safe, retries)
-
-    async def _transact(self, key: K, payload: P, deadline_s: float, retry_safe: bool,
-                        retries: int | None) -> V:
-        n_retries = (self.retries if retries is None else retries) if retry_safe else 0
-        late = self.late_replies
-        if late:
-            keys = (key,) if self._owed_keys is None else self._owed_keys(key)
-            await late.drain(keys, pull=self._pull_checked if self._pull else None)
-        last: DriveTimeout | ChecksumError | None = None
-        for attempt in range(n_retries + 1):
-            if attempt:
-                self.stats.retries += 1
-                if log.isEnabledFor(logging.DEBUG):
-                    log.debug("retry %d of %d: %s after %s", attempt, n_retries,
-                              self._describe_request(payload), type(last).__name__)
-            if self.query_interval_s > 0:
-                await self._pace()
-            if self._pull is not None and late:
-                await self._absorb()
-            if self._flush is not None:
-                self._flush()
-            try:
-                reply = await self._attempt(key, payload, deadline_s)
-            except _Expired:
-                last = self._timed_out(payload, deadline_s)
-                continue
-            except ChecksumError as exc:
-                last = exc
-                continue
-            self.stats.replies += 1
-            return reply
+        async with lock:  # the attempts run inline: one coroutine frame less per call
+            n_retries = (self.retries if retries is None else retries) if retry_safe else 0
+            late = self.late_replies
+            if late:
+                keys = (key,) if self._owed_keys is None else self._owed_keys(key)
+                await late.drain(keys, pull=self._pull_checked if self._pull else None)
+            last: DriveTimeout | ChecksumError | None = None
+            for attempt in range(n_retries + 1):
+                if attempt:
+                    self.stats.retries += 1
+                    if log.isEnabledFor(logging.DEBUG):
+                        log.debug("retry %d of %d: %s after %s", attempt, n_retries,
+                                  self._describe_request(payload), type(last).__name__)
+                if self.query_interval_s > 0:
+                    await self._pace()
+                if self._pull is not None and late:
+                    await self._absorb()
+                if self._flush is not None:
+                    self._flush()
+                try:
+                    reply = await self._attempt(key, payload, deadline_s)
+                except _Expired:
+                    last = self._timed_out(payload, deadline_s)
+                    continue
+                except ChecksumError as exc:
+                    last = exc
+                    continue
+                self.stats.replies += 1
+                return reply
         if isinstance(last, DriveTimeout):
             raise DriveTimeout(f"no reply from {self._describe_request(payload)} after "
                                f"{n_retries + 1} attempt(s) of {deadline_s * 1000:.1f} ms")
@@ -281,18 +266,24 @@ class TransactionManager(Generic[K, P, V]):
     async def _attempt(self, key: K, payload: P, deadline_s: float) -> V:
         loop = asyncio.get_running_loop()
         fut: asyncio.Future[V] = loop.create_future()
-        pending = _Pending(fut)
-        self._waiting[key] = pending
+        self._waiting[key] = fut
         try:
-            await self._put(payload)
+            if self._hooks:
+                self.trace(Direction.TX, payload if self._trace_request is None
+                           else self._trace_request(payload))
+            self.stats.sent += 1
+            try:
+                await self._write(payload)
+            except OSError as exc:
+                raise self.lost(exc) from exc
             self._last_query = time.monotonic()  # the bytes have left: the pacing clock
             if not fut.done():  # an in-process medium may have answered during write
                 if self._pull is None:
-                    pending.deadline = when = loop.time() + deadline_s
+                    self._deadlines[key] = when = loop.time() + deadline_s
                     if self._timer is None or self._timer_at > when:
                         self._arm(loop, when)
                 else:
-                    await self._pull_until(key, pending, loop.time() + deadline_s)
+                    await self._pull_until(key, fut, loop.time() + deadline_s)
             return await fut
         except BaseException:
             if fut.done() and not fut.cancelled():
@@ -300,6 +291,8 @@ class TransactionManager(Generic[K, P, V]):
             raise
         finally:
             del self._waiting[key]
+            if self._deadlines:
+                self._deadlines.pop(key, None)
 
     async def _put(self, payload: P) -> None:
         if self._hooks:
@@ -341,20 +334,20 @@ class TransactionManager(Generic[K, P, V]):
         self._timer = None
         now = loop.time()
         nearest: float | None = None
-        for key, pending in list(self._waiting.items()):
-            when = pending.deadline
-            if when is None or pending.future.done():
+        for key, when in list(self._deadlines.items()):
+            fut = self._waiting[key]
+            if fut.done():
                 continue
             if when <= now:
-                self._expire(key, pending)
+                self._expire(key, fut)
             elif nearest is None or when < nearest:
                 nearest = when
         if nearest is not None:
             self._arm(loop, nearest)
 
-    def _expire(self, key: K, pending: _Pending[V]) -> None:
+    def _expire(self, key: K, fut: asyncio.Future[V]) -> None:
         self.late_replies.owe(key)  # its reply may still come: never to a later call
-        pending.future.set_exception(_Expired())
+        fut.set_exception(_Expired())
 
     # ------------------------------------------------------------- pull media
     async def _pull_checked(self) -> None:
@@ -366,13 +359,12 @@ class TransactionManager(Generic[K, P, V]):
         except OSError as exc:
             raise self.lost(exc) from exc
 
-    async def _pull_until(self, key: K, pending: _Pending[V], end: float) -> None:
+    async def _pull_until(self, key: K, fut: asyncio.Future[V], end: float) -> None:
         loop = asyncio.get_running_loop()
-        fut = pending.future
         while not fut.done():
             left = end - loop.time()
             if left <= 0:
-                self._expire(key, pending)
+                self._expire(key, fut)
                 return
             try:
                 async with asyncio.timeout(left):
@@ -393,11 +385,8 @@ class TransactionManager(Generic[K, P, V]):
     # ------------------------------------------------------------- the receive path
     def answer(self, key: K, reply: V) -> bool:
         """``reply`` arrived for ``key``: True if a request waited for it (it returns it)."""
-        pending = self._waiting.get(key)
-        if pending is None:
-            return False
-        fut = pending.future
-        if fut.done():
+        fut = self._waiting.get(key)
+        if fut is None or fut.done():
             return False
         fut.set_result(reply)
         return True
@@ -407,20 +396,20 @@ class TransactionManager(Generic[K, P, V]):
         a corrupt reply on a line with one request at a time). ChecksumError fails only the
         attempt (a read is retried); any other error ends the call. True if one waited."""
         hit = False
-        for k, pending in self._waiting.items():
-            if (key is None or k == key) and not pending.future.done():
-                pending.future.set_exception(exc)
+        for k, fut in self._waiting.items():
+            if (key is None or k == key) and not fut.done():
+                fut.set_exception(exc)
                 hit = True
         return hit
 
     @property
     def awaiting_reply(self) -> bool:
         """A request waits for its reply now."""
-        return any(not p.future.done() for p in self._waiting.values())
+        return any(not fut.done() for fut in self._waiting.values())
 
     def waiting_keys(self) -> list[K]:
         """Keys of the requests waiting for their reply now."""
-        return [k for k, p in self._waiting.items() if not p.future.done()]
+        return [k for k, fut in self._waiting.items() if not fut.done()]
 
     def late(self, key: K) -> bool:
         """A reply of ``key`` that no request waits for: True if a timed-out attempt owed
@@ -457,9 +446,9 @@ class TransactionManager(Generic[K, P, V]):
         dead = self._dead
         assert dead is not None
         self.late_replies.hang_up(ConnectionLost(str(dead)))
-        for key, pending in self._waiting.items():
-            if not pending.future.done():
-                pending.future.set_exception(ConnectionLost(
+        for key, fut in self._waiting.items():
+            if not fut.done():
+                fut.set_exception(ConnectionLost(
                     f"{dead} while waiting for {self._describe_key(key)}"))
 
     def close(self) -> bool:

@@ -8,8 +8,8 @@ drive.params) before a byte exists, so bad input never reaches the wire. The bro
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
-from typing import Any
+from dataclasses import dataclass, field, replace
+from typing import Generic, TypeVar
 
 from servobus.axis import checks
 from servobus.errors import ArgumentRangeError
@@ -21,22 +21,28 @@ from servobus.protocols.dyn232 import codec as c
 
 H = c.HostFunction
 GR = c.GeneralReadSelector
+T = TypeVar("T")
 
 
 def _identity(v: int) -> int:
     return v
 
 
+def _no_reply(v: int) -> None:
+    """``parse`` of a command without a reply (never called: nothing comes back)."""
+
+
 @dataclass(frozen=True)
-class Command:
-    """One host packet plus what to expect back. ``parse`` maps the reply value."""
+class Command(Generic[T]):
+    """One host packet plus what to expect back. ``parse`` maps the reply value to the
+    result of executing the command (``Command[None]``: no reply)."""
 
     drive_id: int
     function: c.HostFunction
     value: int = 0
     reply: c.DriveFunction | None = None
     kind: c.Kind = c.Kind.ACTION
-    parse: Callable[[int], Any] = _identity
+    parse: Callable[[int], T] = field(kw_only=True)
     param: str | None = None
 
     def to_bytes(self) -> bytes:
@@ -74,39 +80,48 @@ def _check_value(function: c.HostFunction, value: object, what: str) -> int:
     return value
 
 
-def _cmd(drive_id: int, function: c.HostFunction, value: int = 0, **kw: Any) -> Command:
+def _cmd(drive_id: int, function: c.HostFunction, value: int = 0, *,
+         parse: Callable[[int], T], reply: c.DriveFunction | None = None,
+         param: str | None = None) -> Command[T]:
     spec = c.HOST_SPECS[function]
     return Command(check_drive_id(drive_id), function, value,
-                   reply=kw.pop("reply", spec.reply), kind=spec.kind, **kw)
+                   reply=spec.reply if reply is None else reply, kind=spec.kind, parse=parse,
+                   param=param)
+
+
+def _send(drive_id: int, function: c.HostFunction, value: int = 0, *,
+          param: str | None = None) -> Command[None]:
+    """A command without a reply (motion, settings)."""
+    return _cmd(drive_id, function, value, parse=_no_reply, param=param)
 
 
 # ------------------------------------------------------------------ motion
-def make_move_absolute(drive_id: int, position: int) -> Command:
-    return _cmd(drive_id, H.GO_ABSOLUTE_POS, _check_value(H.GO_ABSOLUTE_POS, position, "position"))
+def make_move_absolute(drive_id: int, position: int) -> Command[None]:
+    return _send(drive_id, H.GO_ABSOLUTE_POS, _check_value(H.GO_ABSOLUTE_POS, position, "position"))
 
 
-def make_move_relative(drive_id: int, distance: int) -> Command:
-    return _cmd(drive_id, H.GO_RELATIVE_POS, _check_value(H.GO_RELATIVE_POS, distance, "distance"))
+def make_move_relative(drive_id: int, distance: int) -> Command[None]:
+    return _send(drive_id, H.GO_RELATIVE_POS, _check_value(H.GO_RELATIVE_POS, distance, "distance"))
 
 
-def make_turn_const_speed(drive_id: int, rpm: int) -> Command:
-    return _cmd(drive_id, H.TURN_CONST_SPEED, _check_value(H.TURN_CONST_SPEED, rpm, "rpm"))
+def make_turn_const_speed(drive_id: int, rpm: int) -> Command[None]:
+    return _send(drive_id, H.TURN_CONST_SPEED, _check_value(H.TURN_CONST_SPEED, rpm, "rpm"))
 
 
-def make_square_wave(drive_id: int, amplitude: int) -> Command:
-    return _cmd(drive_id, H.SQUARE_WAVE, _check_value(H.SQUARE_WAVE, amplitude, "amplitude"))
+def make_square_wave(drive_id: int, amplitude: int) -> Command[None]:
+    return _send(drive_id, H.SQUARE_WAVE, _check_value(H.SQUARE_WAVE, amplitude, "amplitude"))
 
 
-def make_sine_wave(drive_id: int, amplitude: int) -> Command:
-    return _cmd(drive_id, H.SIN_WAVE, _check_value(H.SIN_WAVE, amplitude, "amplitude"))
+def make_sine_wave(drive_id: int, amplitude: int) -> Command[None]:
+    return _send(drive_id, H.SIN_WAVE, _check_value(H.SIN_WAVE, amplitude, "amplitude"))
 
 
-def make_wave_frequency(drive_id: int, hz: int) -> Command:
-    return _cmd(drive_id, H.SS_FREQUENCY, _check_value(H.SS_FREQUENCY, hz, "frequency"))
+def make_wave_frequency(drive_id: int, hz: int) -> Command[None]:
+    return _send(drive_id, H.SS_FREQUENCY, _check_value(H.SS_FREQUENCY, hz, "frequency"))
 
 
-def make_set_origin(drive_id: int) -> Command:
-    return _cmd(drive_id, H.SET_ORIGIN)
+def make_set_origin(drive_id: int) -> Command[None]:
+    return _send(drive_id, H.SET_ORIGIN)
 
 
 def _check_feedrate(feedrate: int, allow_negative: bool) -> int:
@@ -118,18 +133,18 @@ def _check_feedrate(feedrate: int, allow_negative: bool) -> int:
     return feedrate
 
 
-def make_linear_line(dx: int, dy: int, dz: int, feedrate: int) -> list[Command]:
+def make_linear_line(dx: int, dy: int, dz: int, feedrate: int) -> list[Command[None]]:
     """Example 7: four broadcast packets dX, dY, dZ, feedrate (1..127)."""
     _check_feedrate(feedrate, allow_negative=False)
     words = [_check_value(H.MAKE_LINEAR_LINE, v, n) for v, n in ((dx, "dx"), (dy, "dy"),
                                                                    (dz, "dz"))]
-    return [Command(c.BROADCAST_ID, H.MAKE_LINEAR_LINE, v, kind=c.Kind.MOTION)
+    return [Command(c.BROADCAST_ID, H.MAKE_LINEAR_LINE, v, kind=c.Kind.MOTION, parse=_no_reply)
             for v in [*words, feedrate]]
 
 
 def make_circular_arc(
     start: tuple[int, int], end: tuple[int, int], *, plane: int = 0, feedrate: int = 1
-) -> list[Command]:
+) -> list[Command[None]]:
     """Example 8: start and end relative to the centre, then (plane << 8) + feedrate.
 
     plane 0 = XY, 1 = YZ, 2 = ZX; positive feedrate CW, negative CCW. Servobus packs a
@@ -141,7 +156,8 @@ def make_circular_arc(
     points = (_point("start", start), _point("end", end))
     words = [_check_value(H.MAKE_CIRCULAR_ARC, v, "arc coordinate")
              for point in points for v in point]
-    return [Command(c.BROADCAST_ID, H.MAKE_CIRCULAR_ARC, v, kind=c.Kind.MOTION)
+    return [Command(c.BROADCAST_ID, H.MAKE_CIRCULAR_ARC, v, kind=c.Kind.MOTION,
+                    parse=_no_reply)
             for v in [*words, pack_arc_word(plane, feedrate)]]
 
 
@@ -152,75 +168,80 @@ def _point(what: str, point: object) -> tuple[object, ...]:
 
 
 # ------------------------------------------------------------------ actions (no reply)
-def make_reset(drive_id: int) -> Command:
+def _action(drive_id: int, selector: c.GeneralReadSelector) -> Command[None]:
+    return Command(check_drive_id(drive_id), H.GENERAL_READ, int(selector), kind=c.Kind.ACTION,
+                   parse=_no_reply)
+
+
+def make_reset(drive_id: int) -> Command[None]:
     """Drive reset (counts as a power cycle: clears a latched alarm)."""
-    return Command(check_drive_id(drive_id), H.GENERAL_READ, int(GR.RESET), kind=c.Kind.ACTION)
+    return _action(drive_id, GR.RESET)
 
 
-def make_enable(drive_id: int) -> Command:
-    return Command(check_drive_id(drive_id), H.GENERAL_READ, int(GR.ENABLE), kind=c.Kind.ACTION)
+def make_enable(drive_id: int) -> Command[None]:
+    return _action(drive_id, GR.ENABLE)
 
 
-def make_disable(drive_id: int) -> Command:
-    return Command(check_drive_id(drive_id), H.GENERAL_READ, int(GR.DISABLE), kind=c.Kind.ACTION)
+def make_disable(drive_id: int) -> Command[None]:
+    return _action(drive_id, GR.DISABLE)
 
 
 # ------------------------------------------------------------------ settings (EEPROM)
-def make_set_param(drive_id: int, name: str, value: int) -> Command:
+def make_set_param(drive_id: int, name: str, value: int) -> Command[None]:
     spec = P.spec(checks.param_name(name))
     set_fn, _ = _param_functions(spec.name)
-    return _cmd(drive_id, set_fn, spec.check(value), param=spec.name)
+    return _send(drive_id, set_fn, spec.check(value), param=spec.name)
 
 
-def make_set_config(drive_id: int, config: DriveConfig | int) -> Command:
+def make_set_config(drive_id: int, config: DriveConfig | int) -> Command[None]:
     value = config.to_byte() if isinstance(config, DriveConfig) else config
-    return _cmd(drive_id, H.SET_DRIVE_CONFIG, _check_value(H.SET_DRIVE_CONFIG, value, "config"))
+    return _send(drive_id, H.SET_DRIVE_CONFIG, _check_value(H.SET_DRIVE_CONFIG, value, "config"))
 
 
-def make_assign_id(drive_id: int, new_id: int) -> Command:
-    return _cmd(drive_id, H.ASSIGN_DRIVE_ID, _check_value(H.ASSIGN_DRIVE_ID, new_id, "new id"))
+def make_assign_id(drive_id: int, new_id: int) -> Command[None]:
+    return _send(drive_id, H.ASSIGN_DRIVE_ID, _check_value(H.ASSIGN_DRIVE_ID, new_id, "new id"))
 
 
 # ------------------------------------------------------------------ reads
-def make_read_param(drive_id: int, name: str) -> Command:
+def make_read_param(drive_id: int, name: str) -> Command[int]:
     spec = P.spec(checks.param_name(name))
     _, read_fn = _param_functions(spec.name)
-    return _cmd(drive_id, read_fn, param=spec.name)
+    return _cmd(drive_id, read_fn, parse=_identity, param=spec.name)
 
 
-def make_read_status(drive_id: int) -> Command:
+def make_read_status(drive_id: int) -> Command[DriveStatus]:
     return _cmd(drive_id, H.READ_DRIVE_STATUS, parse=DriveStatus.from_byte)
 
 
-def make_read_config(drive_id: int) -> Command:
+def make_read_config(drive_id: int) -> Command[DriveConfig]:
     return _cmd(drive_id, H.READ_DRIVE_CONFIG, parse=DriveConfig.from_byte)
 
 
-def make_read_id(drive_id: int) -> Command:
-    return _cmd(drive_id, H.READ_DRIVE_ID)
+def make_read_id(drive_id: int) -> Command[int]:
+    return _cmd(drive_id, H.READ_DRIVE_ID, parse=_identity)
 
 
-def _general_read(drive_id: int, selector: c.GeneralReadSelector) -> Command:
-    return _cmd(drive_id, H.GENERAL_READ, int(selector),
+def _general_read(drive_id: int, selector: c.GeneralReadSelector) -> Command[int]:
+    return _cmd(drive_id, H.GENERAL_READ, int(selector), parse=_identity,
                 reply=c.GENERAL_READ_REPLIES[selector])
 
 
-def make_read_position(drive_id: int) -> Command:
+def make_read_position(drive_id: int) -> Command[int]:
     """Absolute position in encoder counts (65,536 per revolution)."""
     return _general_read(drive_id, GR.POSITION)
 
 
-def make_read_speed(drive_id: int) -> Command:
+def make_read_speed(drive_id: int) -> Command[int]:
     """Motor speed in rpm."""
     return _general_read(drive_id, GR.SPEED)
 
 
-def make_read_torque(drive_id: int) -> Command:
+def make_read_torque(drive_id: int) -> Command[int]:
     """Torque current, DYN232M relative unit."""
     return _general_read(drive_id, GR.TORQUE)
 
 
-def broadcast(command: Command) -> Command:
+def broadcast(command: Command[T]) -> Command[T]:
     """Re-target a no-reply command to every drive (id 127). Reads cannot be broadcast."""
     if command.expects_reply:
         raise ArgumentRangeError(

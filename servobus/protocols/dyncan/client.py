@@ -5,20 +5,24 @@ python-can users write it (extra keywords go to ``can.Bus``) and returns an Asyn
 ``connect(can=...)`` calls it. One :class:`AsyncDynCanClient` per bus serves any number of
 drives (``axis.sibling(id)``, :meth:`AsyncDynCanClient.sync_move`, streaming).
 
-Transaction rules (servobus decisions; the manual gives none):
+Transaction rules (servobus decisions; the manual gives none). The rules every protocol
+shares (deadline, retries, stats, trace, EEPROM guard, late replies, dead links) are
+:mod:`servobus.axis.transaction`'s; ``client.transactions`` is the bus's manager
+(``stats``, ``late_replies`` and ``guard`` are its). How DYN CAN applies them:
 
 * A reply matches a pending read when its identifier (drive id, function) and its data
   length fit the table (a read request has a different length from its reply, so another
   host's request on the same identifier is not taken for a reply). A read sent to the
   broadcast id 0 accepts the first reply from any drive.
-* Reads to one drive run one at a time (replies carry no sequence number); different
-  drives are served concurrently. No-reply commands are sent at once.
+* Reads to one drive run one at a time (one lane per drive id: replies carry no sequence
+  number); different drives are served concurrently. No-reply commands are sent at once.
 * Per-attempt deadline ``timeout`` (default 50 ms: a drive answers within about a
   millisecond at 500 kbit/s; the margin covers USB adapters, socketcand over TCP and a
   loaded host). Only reads are re-sent, at most ``retries`` times (default 2); motion and
   settings are sent exactly once.
-* Drive Error 0xFF fails the read in flight to that drive, or is raised as DriveError by
-  that drive's next call (a no-reply command cannot be answered in-line).
+* Drive Error 0xFF fails the read in flight to that drive (not re-sent: the drive refused
+  it), or is raised as DriveError by that drive's next call (a no-reply command cannot be
+  answered in-line). Counted in ``stats.error_replies``; alarm pushes in ``stats.alarms``.
 * Drive Error 0xEE (alarm push) calls every ``on_alarm`` callback at once and raises a
   DriveAlarm on that drive's next call (once); Position Direct streaming stops on it.
 * EEPROM writes (config, id, parameter groups 1 and 3) pass the EepromGuard first. Group 2
@@ -40,16 +44,21 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import time
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from dataclasses import dataclass
+from typing import Any, ClassVar, TypeVar, cast
 
 from servobus.axis import checks
 from servobus.axis.base import AsyncAxis, AxisTraceHook
-from servobus.axis.command_axis import CommandAxis, CommandSet
+from servobus.axis.command_axis import CommandAxis, CommandSet, Request
 from servobus.axis.eeprom_guard import EepromGuard
 from servobus.axis.late_replies import DEFAULT_LATE_REPLY_S, LateReplies
+from servobus.axis.transaction import (
+    DEFAULT_RETRIES,
+    TransactionManager,
+    TransactionStats,
+    check_call,
+)
 from servobus.errors import (
     ArgumentRangeError,
     ConnectionLost,
@@ -67,23 +76,17 @@ from servobus.transport.can_bus import AsyncCanBus, CanFrame, FramePort, set_rec
 
 log = logging.getLogger(__name__)
 
+T = TypeVar("T")
+#: What a reply is matched on: (drive id, function) - its 11-bit identifier.
+ReplyKey = tuple[int, int]
+
 DEFAULT_TIMEOUT_S = 0.05
-DEFAULT_RETRIES = 2
 ID_REINIT_S = 0.010  # section 6: wait 10 ms for the drive to re-initialise its CAN port
 _GUARD_EXEMPT = frozenset({"max_speed", "max_accel"})
 
 AlarmCallback = Callable[[int], None]  # called with the alarming drive's id
-
-
-@dataclass
-class BusStats:
-    sent: int = 0
-    replies: int = 0
-    retries: int = 0
-    timeouts: int = 0
-    drive_errors: int = 0
-    alarms: int = 0
-    unmatched: int = 0
+#: The counters of a bus (the one stats class of every protocol).
+BusStats = TransactionStats
 
 
 @dataclass
@@ -94,21 +97,20 @@ class StreamStats:
     max_lateness_s: float = 0.0
 
 
-@dataclass
-class _Waiter:
-    drive_id: int
-    function: int
-    future: asyncio.Future[c.Frame] = field(repr=False)
-
-
-def _expire(future: asyncio.Future[c.Frame]) -> None:
-    if not future.done():
-        future.set_exception(TimeoutError())
-
-
-def _describe_key(key: tuple[int, int]) -> str:
+def _describe_key(key: ReplyKey) -> str:
     drive_id, function = key
     return f"{c.function_name(function)} from drive {drive_id}"
+
+
+def _describe_request(frame: c.Frame) -> str:
+    return f"drive {frame.drive_id} to {c.function_name(frame.function)}"
+
+
+def _own(command: Request[T]) -> CanCommand[T]:
+    """A DYN CAN command, or ArgumentRangeError (a request of another protocol)."""
+    if not isinstance(command, CanCommand):
+        raise ArgumentRangeError(f"not a DYN CAN command: {command!r}")
+    return command
 
 
 class AsyncDynCanClient:
@@ -120,40 +122,39 @@ class AsyncDynCanClient:
                  late_reply_s: float = DEFAULT_LATE_REPLY_S) -> None:
         checked = checks.optional_seconds("timeout", timeout)
         self.timeout = DEFAULT_TIMEOUT_S if checked is None else checked
-        self.retries = checks.count("retries", retries)
         if on_alarm is not None and not callable(on_alarm):
             raise ArgumentRangeError(f"on_alarm must be callable, got {on_alarm!r}")
-        #: Replies owed by timed-out reads (``late_replies.late``, ``.given_up``).
-        self.late_replies: LateReplies[tuple[int, int]] = LateReplies(
-            checks.non_negative_seconds("late_reply_s", late_reply_s), _describe_key)
         self.port = port
-        self.guard = eeprom_guard if eeprom_guard is not None else EepromGuard()
-        self.stats = BusStats()
+        #: The bus's transaction manager: one lane per drive id.
+        self.transactions: TransactionManager[ReplyKey, c.Frame, c.Frame] = TransactionManager(
+            self._write, link="CAN bus", describe_key=_describe_key,
+            describe_request=_describe_request, retries=retries, late_reply_s=late_reply_s,
+            eeprom_guard=eeprom_guard, owed_keys=self._owed_keys)
+        tm = self.transactions
+        self.stats: TransactionStats = tm.stats
+        #: Replies owed by timed-out reads (``late_replies.late``, ``.given_up``).
+        self.late_replies: LateReplies[ReplyKey] = tm.late_replies
+        self.guard: EepromGuard = tm.guard
         self._alarm_callbacks: list[AlarmCallback] = [on_alarm] if on_alarm else []
-        self._hooks: list[AxisTraceHook] = []
-        self._waiters: list[_Waiter] = []
-        self._locks: dict[int, asyncio.Lock] = {}
         self._pending: dict[int, ServobusError] = {}
-        self._closed = False
-        self._dead: ConnectionLost | None = None  # set when closed or the bus died
         self._rx_task: asyncio.Task[None] | None = None
         if not set_receiver(port, self._on_frame):  # push: one task switch less per reply
             self._rx_task = asyncio.get_running_loop().create_task(self._receive_loop(),
                                                                    name="dyncan-rx")
 
+    @property
+    def retries(self) -> int:
+        """Default re-sends of a read (per call: ``execute(..., retries=)``)."""
+        return self.transactions.retries
+
     # ------------------------------------------------------------- hooks
     def add_trace(self, hook: AxisTraceHook) -> None:
         """``hook(direction, item, t)``: every Frame sent/received and every error met."""
-        self._hooks.append(hook)
+        self.transactions.add_trace(hook)
 
     def on_alarm(self, callback: AlarmCallback) -> None:
         """``callback(drive_id)`` runs on the loop when a drive pushes Drive Error 0xEE."""
         self._alarm_callbacks.append(callback)
-
-    def _trace(self, direction: Direction, item: object) -> None:
-        t = time.monotonic()
-        for hook in self._hooks:
-            hook(direction, item, t)
 
     # ------------------------------------------------------------- receiving
     async def _receive_loop(self) -> None:
@@ -161,60 +162,53 @@ class AsyncDynCanClient:
             try:
                 raw = await self.port.recv(None)
             except OSError as exc:  # ConnectionLost, or a foreign port's own error
-                self._bus_failed(exc)
+                self.transactions.lost(exc)
                 self._on_frame(None)
                 return
             if raw is not None:
                 self._on_frame(raw)
 
     def _on_frame(self, raw: CanFrame | None) -> None:
+        tm = self.transactions
         if raw is None:  # the port closed or failed: every waiting read fails now
-            dead = self._bus_failed(ConnectionLost("CAN bus closed"))
-            for w in self._waiters:
-                if not w.future.done():
-                    w.future.set_exception(ConnectionLost(
-                        f"{dead} while drive {w.drive_id} was to answer "
-                        f"{c.function_name(w.function)}"))
+            tm.lost(ConnectionLost("CAN bus closed"))
             return
         if raw.is_extended_id or raw.arbitration_id > c.MAX_ARBITRATION_ID:
-            self.stats.unmatched += 1
+            tm.stray(raw)
             return
         self._dispatch(c.decode(raw.arbitration_id, raw.data[:c.MAX_DATA]))
 
     def _dispatch(self, frame: c.Frame) -> None:
-        if self._hooks:
-            self._trace(Direction.RX, frame)
-        if frame.function == c.Function.DRIVE_ERROR and len(frame.data) == 1:
+        tm = self.transactions
+        if tm.tracing:
+            tm.trace(Direction.RX, frame)
+        function = frame.function
+        if function == c.Function.DRIVE_ERROR and len(frame.data) == 1:
             self._drive_error(frame.drive_id, frame.data[0])
             return
-        for w in self._waiters:
-            if (w.function == frame.function and w.drive_id in (frame.drive_id, c.BROADCAST_ID)
-                    and not w.future.done() and c.is_reply_shape(frame)):
-                w.future.set_result(frame)
+        if c.is_reply_shape(frame):
+            key = (frame.drive_id, function)
+            if tm.answer(key, frame) or tm.answer((c.BROADCAST_ID, function), frame):
                 return
-        late = self.late_replies
-        if late and c.is_reply_shape(frame) and (
-                late.take((frame.drive_id, frame.function))
-                or late.take((c.BROADCAST_ID, frame.function))):
-            return
-        self.stats.unmatched += 1
-        log.debug("unmatched frame %s", frame)
+            if tm.late_replies and (tm.late(key) or tm.late((c.BROADCAST_ID, function))):
+                return
+        tm.stray(frame)
 
     def _drive_error(self, drive_id: int, code: int) -> None:
+        tm = self.transactions
         if code == c.DriveErrorCode.ALARM:
-            self.stats.alarms += 1
+            tm.stats.alarms += 1
             self._pending[drive_id] = DriveAlarm(
                 f"drive {drive_id} pushed an alarm (Drive Error 0xEE); read status() for the "
                 "code, reset() clears it", code=code, drive_id=drive_id)
             for cb in list(self._alarm_callbacks):
                 cb(drive_id)
             return
-        self.stats.drive_errors += 1
+        tm.stats.error_replies += 1
         err = DriveError(f"drive {drive_id} answered Drive Error 0x{code:02x} (invalid data)",
                          code=code, drive_id=drive_id)
-        for w in self._waiters:
-            if w.drive_id in (drive_id, c.BROADCAST_ID) and not w.future.done():
-                w.future.set_exception(err)
+        for key in tm.waiting_keys():
+            if key[0] in (drive_id, c.BROADCAST_ID) and tm.reject(err, key):
                 return
         self._pending[drive_id] = err
 
@@ -231,94 +225,37 @@ class AsyncDynCanClient:
         raise self._pending.pop(key)
 
     # ------------------------------------------------------------- sending
-    async def _send(self, frame: c.Frame) -> None:
-        if self._hooks:
-            self._trace(Direction.TX, frame)
-        self.stats.sent += 1
-        try:
-            await self.port.send(*c.encode(frame))
-        except OSError as exc:
-            raise self._bus_failed(exc) from exc
+    async def _write(self, frame: c.Frame) -> None:
+        await self.port.send(*c.encode(frame))
 
-    def _bus_failed(self, exc: BaseException) -> BaseException:
-        """``exc`` from the port as the client raises it; a dead bus stays dead."""
-        out = checks.lost(exc, "CAN bus lost")
-        if isinstance(out, ConnectionLost) and self._dead is None:
-            self._dead = out
-            self.late_replies.hang_up(ConnectionLost(str(out)))
-            log.debug("bus lost: %s", out)
-        return out
-
-    def _check_alive(self) -> None:
-        if self._dead is not None:
-            raise ConnectionLost(str(self._dead))
-
-    def _guard(self, command: CanCommand) -> None:
+    def _guard(self, command: CanCommand[T]) -> None:
         if command.kind is c.Kind.SETTING and command.guard_item:
             for item in command.guard_item.split(","):
                 if item not in _GUARD_EXEMPT:
-                    self.guard.check(command.drive_id, item)
+                    self.transactions.check_eeprom(command.drive_id, item)
 
-    async def execute(self, command: CanCommand, *, retries: int | None = None,
-                      timeout: float | None = None) -> Any:
+    async def execute(self, command: Request[T], *, retries: int | None = None,
+                      timeout: float | None = None) -> T:
         """Send ``command``; for reads return the parsed reply, else None."""
-        self._check_alive()
-        if retries is not None:
-            checks.count("retries", retries)
-        if timeout is not None:
-            checks.seconds("timeout", timeout)
-        self.raise_pending(command.drive_id)
-        self._guard(command)
-        if not command.expects_reply:
-            await self._send(command.frame)
-            return None
-        lock = self._locks.get(command.drive_id)
-        if lock is None:
-            lock = self._locks[command.drive_id] = asyncio.Lock()
-        async with lock:
-            return await self._transact(command, retries, timeout)
+        tm = self.transactions
+        tm.check_alive()
+        if retries is not None or timeout is not None:
+            check_call(retries, timeout)
+        own = _own(command)
+        drive_id = own.drive_id
+        if self._pending:
+            self.raise_pending(drive_id)
+        if own.kind is c.Kind.SETTING:
+            self._guard(own)
+        if not own.expects_reply:
+            await tm.send(own.frame)
+            return cast(T, None)  # a command without a reply is a Request[None]
+        reply = await tm.request((drive_id, own.frame.function), own.frame,
+                                 deadline_s=self.timeout if timeout is None else timeout,
+                                 retry_safe=own.retry_safe, retries=retries, lane=drive_id)
+        return own.parse(reply)
 
-    async def _transact(self, command: CanCommand, retries: int | None,
-                        timeout: float | None) -> Any:
-        n_retries = (self.retries if retries is None else retries) if command.retry_safe else 0
-        per_try = self.timeout if timeout is None else timeout
-        loop = asyncio.get_running_loop()
-        key = (command.drive_id, int(command.function))
-        late = self.late_replies
-        if late:
-            await late.drain(self._owed_keys(key))
-        for attempt in range(n_retries + 1):
-            if attempt:
-                self.stats.retries += 1
-                log.debug("retry %d of %d: %s to drive %d after a timeout", attempt,
-                          n_retries, command.function.name, command.drive_id)
-            waiter = _Waiter(command.drive_id, command.function, loop.create_future())
-            self._waiters.append(waiter)
-            # A plain timer on the future is cheaper than asyncio.timeout() per transaction.
-            timer = loop.call_later(per_try, _expire, waiter.future)
-            try:
-                await self._send(command.frame)
-                reply = await waiter.future
-            except TimeoutError:
-                self.stats.timeouts += 1
-                late.owe(key)  # its reply may still come: never to a later call
-                exc = DriveTimeout(f"no reply from drive {command.drive_id} to "
-                                   f"{command.function.name} within {per_try * 1000:.1f} ms")
-                log.debug("%s", exc)
-                if self._hooks:
-                    self._trace(Direction.RX, exc)
-                continue
-            finally:
-                timer.cancel()
-                self._waiters.remove(waiter)
-            self.stats.replies += 1
-            return command.parse(reply)
-        raise DriveTimeout(
-            f"no reply from drive {command.drive_id} to {command.function.name} after "
-            f"{n_retries + 1} attempt(s) of {per_try * 1000:.1f} ms"
-        )
-
-    def _owed_keys(self, key: tuple[int, int]) -> list[tuple[int, int]]:
+    def _owed_keys(self, key: ReplyKey) -> list[ReplyKey]:
         """Owed keys whose late frames this read could take for its answer: its own and a
         broadcast read's of the same function; for a broadcast read, every drive's."""
         drive_id, function = key
@@ -326,10 +263,11 @@ class AsyncDynCanClient:
             return self.late_replies.keys(lambda k: k[1] == function)
         return [key, (c.BROADCAST_ID, function)]
 
-    async def execute_all(self, commands: Iterable[CanCommand]) -> None:
+    async def execute_all(self, commands: Iterable[CanCommand[None]]) -> None:
         """Send no-reply commands back to back (checked and guarded first)."""
-        self._check_alive()
-        batch = list(commands)
+        tm = self.transactions
+        tm.check_alive()
+        batch = [_own(command) for command in commands]
         for command in batch:
             if command.expects_reply:
                 raise ArgumentRangeError("execute_all is for commands without a reply")
@@ -337,7 +275,7 @@ class AsyncDynCanClient:
         for command in batch:
             self._guard(command)
         for command in batch:
-            await self._send(command.frame)
+            await tm.send(command.frame)
 
     # ------------------------------------------------------------- multi-axis helpers
     async def sync_move(self, targets: Mapping[int, int], *, relative: bool = False) -> None:
@@ -361,7 +299,7 @@ class AsyncDynCanClient:
         loop = asyncio.get_running_loop()
         t0 = loop.time()
         while iters:
-            tick: list[CanCommand] = []
+            tick: list[CanCommand[None]] = []
             for drive_id, it in list(iters.items()):
                 try:
                     tick.append(cmds.make_position_direct(drive_id, next(it)))
@@ -379,15 +317,14 @@ class AsyncDynCanClient:
             for command in tick:
                 self.raise_pending(command.drive_id)
             for command in tick:
-                await self._send(command.frame)
+                await self.transactions.send(command.frame)
             stats.frames += len(tick)
             stats.ticks += 1
         return stats
 
     async def heartbeat(self, drive_id: int) -> int:
         """One diagnostic-counter read (the counter steps by 1 per read, 255 -> 0)."""
-        result: int = await self.execute(cmds.make_read_counter(drive_id))
-        return result
+        return await self.execute(cmds.make_read_counter(drive_id))
 
     def start_heartbeat(self, drive_id: int, period: float,
                         on_lost: Callable[[int, BaseException], None]) -> Heartbeat:
@@ -398,11 +335,8 @@ class AsyncDynCanClient:
         return hb
 
     async def close(self) -> None:
-        if self._closed:
+        if not self.transactions.close():
             return
-        self._closed = True
-        if self._dead is None:
-            self._dead = ConnectionLost("client is closed")
         await self.port.close()
         if self._rx_task is not None:
             self._rx_task.cancel()
@@ -411,7 +345,7 @@ class AsyncDynCanClient:
 
     @property
     def closed(self) -> bool:
-        return self._closed
+        return self.transactions.closed
 
 
 class Heartbeat:
@@ -481,8 +415,7 @@ class DynCanAxis(CommandAxis):
         await self._run(cmds.make_sync_load(self._id, value, relative=relative))
 
     async def echo(self, data: bytes) -> bytes:
-        result: bytes = await self._run(cmds.make_echo(self._id, data))
-        return result
+        return await self._run(cmds.make_echo(self._id, data))
 
     async def counter(self) -> int:
         return await self.client.heartbeat(self._id)

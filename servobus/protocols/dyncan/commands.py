@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, replace
-from typing import Any
+from dataclasses import dataclass, field, replace
+from typing import Generic, TypeVar
 
 from servobus.axis import checks
 from servobus.errors import ArgumentRangeError
@@ -26,19 +26,25 @@ from servobus.protocols.dyncan import codec as c
 
 F = c.Function
 Kind = c.Kind
+T = TypeVar("T")
 
 
 def _frame_value(frame: c.Frame) -> int:
     return frame.value
 
 
+def _no_reply(frame: c.Frame) -> None:
+    """``parse`` of a command without a reply (never called: nothing comes back)."""
+
+
 @dataclass(frozen=True)
-class CanCommand:
-    """One request frame plus how to read its reply."""
+class CanCommand(Generic[T]):
+    """One request frame plus how to read its reply: ``parse`` maps the reply frame to the
+    result of executing the command (``CanCommand[None]``: no reply)."""
 
     frame: c.Frame
     kind: Kind
-    parse: Callable[[c.Frame], Any] = _frame_value
+    parse: Callable[[c.Frame], T] = field(kw_only=True)
     guard_item: str | None = None  # EEPROM item for the write guard (settings only)
 
     @property
@@ -89,8 +95,8 @@ _NO_DATA = _NoData()
 
 
 def _cmd(drive_id: int, function: F, value: int | _NoData = _NO_DATA, *, what: str = "value",
-         parse: Callable[[c.Frame], Any] = _frame_value, guard_item: str | None = None,
-         raw: bytes | None = None) -> CanCommand:
+         parse: Callable[[c.Frame], T], guard_item: str | None = None,
+         raw: bytes | None = None) -> CanCommand[T]:
     """Every value a caller gives is checked, ``None`` included (it would encode as 0 and
     move the motor to 0); only builders of requests without data omit ``value``."""
     spec = c.SPECS[function]
@@ -100,96 +106,103 @@ def _cmd(drive_id: int, function: F, value: int | _NoData = _NO_DATA, *, what: s
     data: int | None = None
     if not isinstance(value, _NoData):
         data = check_value(function, value, what)
-    return CanCommand(c.request(drive_id, function, data, raw=raw), spec.kind, parse,
-                      guard_item)
+    return CanCommand(c.request(drive_id, function, data, raw=raw), spec.kind, parse=parse,
+                      guard_item=guard_item)
+
+
+def _send(drive_id: int, function: F, value: int | _NoData = _NO_DATA, *, what: str = "value",
+          guard_item: str | None = None) -> CanCommand[None]:
+    """A command without a reply (motion, settings, actions)."""
+    return _cmd(drive_id, function, value, what=what, parse=_no_reply, guard_item=guard_item)
 
 
 # ------------------------------------------------------------------ motion
-def make_move_absolute(drive_id: int, position: int) -> CanCommand:
-    return _cmd(drive_id, F.GO_ABSOLUTE_POS, position, what="position")
+def make_move_absolute(drive_id: int, position: int) -> CanCommand[None]:
+    return _send(drive_id, F.GO_ABSOLUTE_POS, position, what="position")
 
 
-def make_move_relative(drive_id: int, distance: int) -> CanCommand:
-    return _cmd(drive_id, F.GO_RELATIVE_POS, distance, what="distance")
+def make_move_relative(drive_id: int, distance: int) -> CanCommand[None]:
+    return _send(drive_id, F.GO_RELATIVE_POS, distance, what="distance")
 
 
-def make_linear_line_word(drive_id: int, value: int) -> CanCommand:
+def make_linear_line_word(drive_id: int, value: int) -> CanCommand[None]:
     """One Make_LinearLine word (the CAN manual gives no word order; see DYN232M 7.5)."""
-    return _cmd(drive_id, F.MAKE_LINEAR_LINE, value, what="line word")
+    return _send(drive_id, F.MAKE_LINEAR_LINE, value, what="line word")
 
 
-def make_circular_arc_word(drive_id: int, value: int) -> CanCommand:
-    return _cmd(drive_id, F.MAKE_CIRCULAR_ARC, value, what="arc word")
+def make_circular_arc_word(drive_id: int, value: int) -> CanCommand[None]:
+    return _send(drive_id, F.MAKE_CIRCULAR_ARC, value, what="arc word")
 
 
-def make_turn_const_speed(drive_id: int, rpm: int) -> CanCommand:
-    return _cmd(drive_id, F.TURN_CONST_SPEED, rpm, what="rpm")
+def make_turn_const_speed(drive_id: int, rpm: int) -> CanCommand[None]:
+    return _send(drive_id, F.TURN_CONST_SPEED, rpm, what="rpm")
 
 
-def make_square_wave(drive_id: int, amplitude: int) -> CanCommand:
-    return _cmd(drive_id, F.SQUARE_WAVE, amplitude, what="amplitude")
+def make_square_wave(drive_id: int, amplitude: int) -> CanCommand[None]:
+    return _send(drive_id, F.SQUARE_WAVE, amplitude, what="amplitude")
 
 
-def make_sine_wave(drive_id: int, amplitude: int) -> CanCommand:
-    return _cmd(drive_id, F.SIN_WAVE, amplitude, what="amplitude")
+def make_sine_wave(drive_id: int, amplitude: int) -> CanCommand[None]:
+    return _send(drive_id, F.SIN_WAVE, amplitude, what="amplitude")
 
 
-def make_wave_frequency(drive_id: int, hz: int) -> CanCommand:
-    return _cmd(drive_id, F.SS_FREQUENCY, hz, what="frequency")
+def make_wave_frequency(drive_id: int, hz: int) -> CanCommand[None]:
+    return _send(drive_id, F.SS_FREQUENCY, hz, what="frequency")
 
 
-def make_sync_load(drive_id: int, value: int, *, relative: bool = False) -> CanCommand:
+def make_sync_load(drive_id: int, value: int, *, relative: bool = False) -> CanCommand[None]:
     """Load a synchronized move (motion starts at the Sync_Trigger)."""
     fn = F.GO_RELATIVE_POS_SYNC if relative else F.GO_ABSOLUTE_POS_SYNC
-    return _cmd(check_drive_id(drive_id, allow_broadcast=False), fn, value,
+    return _send(check_drive_id(drive_id, allow_broadcast=False), fn, value,
                 what="distance" if relative else "position")
 
 
-def make_sync_trigger(*, relative: bool = False, drive_id: int = c.BROADCAST_ID) -> CanCommand:
+def make_sync_trigger(*, relative: bool = False,
+                      drive_id: int = c.BROADCAST_ID) -> CanCommand[None]:
     code = c.SyncTrigger.RELATIVE if relative else c.SyncTrigger.ABSOLUTE
-    return _cmd(drive_id, F.SYNC_TRIGGER, int(code))
+    return _send(drive_id, F.SYNC_TRIGGER, int(code))
 
 
-def make_position_direct(drive_id: int, step: int) -> CanCommand:
+def make_position_direct(drive_id: int, step: int) -> CanCommand[None]:
     """Position Direct relative step, -16384..16384, no profile (0x1C)."""
-    return _cmd(drive_id, F.POSITION_DIRECT, step, what="position direct step")
+    return _send(drive_id, F.POSITION_DIRECT, step, what="position direct step")
 
 
-def make_set_origin(drive_id: int) -> CanCommand:
+def make_set_origin(drive_id: int) -> CanCommand[None]:
     """Sent as one byte 0xFF (section 6); the node also accepts no data."""
-    return _cmd(drive_id, F.SET_ORIGIN, c.ORIGIN_CODE)
+    return _send(drive_id, F.SET_ORIGIN, c.ORIGIN_CODE)
 
 
 # ------------------------------------------------------------------ actions
-def make_servo(drive_id: int, enable: bool) -> CanCommand:
+def make_servo(drive_id: int, enable: bool) -> CanCommand[None]:
     code = c.ServoCommand.ENABLE if enable else c.ServoCommand.DISABLE
-    return _cmd(drive_id, F.SERVO_DISABLE, int(code))
+    return _send(drive_id, F.SERVO_DISABLE, int(code))
 
 
-def make_enable(drive_id: int) -> CanCommand:
+def make_enable(drive_id: int) -> CanCommand[None]:
     return make_servo(drive_id, True)
 
 
-def make_disable(drive_id: int) -> CanCommand:
+def make_disable(drive_id: int) -> CanCommand[None]:
     return make_servo(drive_id, False)
 
 
-def make_reset(drive_id: int) -> CanCommand:
+def make_reset(drive_id: int) -> CanCommand[None]:
     """General_Read 0x1C: drive reset, as on DYN232M (same firmware; not in the CAN manual)."""
     return CanCommand(c.request(check_drive_id(drive_id), F.GENERAL_READ, int(GR.RESET)),
-                      Kind.ACTION)
+                      Kind.ACTION, parse=_no_reply)
 
 
 # ------------------------------------------------------------------ settings (EEPROM)
-def make_set_config(drive_id: int, config: DriveConfig | int) -> CanCommand:
+def make_set_config(drive_id: int, config: DriveConfig | int) -> CanCommand[None]:
     value = config.to_byte() if isinstance(config, DriveConfig) else config
-    return _cmd(drive_id, F.SET_DRIVE_CONFIG, value, what="config", guard_item="config")
+    return _send(drive_id, F.SET_DRIVE_CONFIG, value, what="config", guard_item="config")
 
 
-def make_assign_id(drive_id: int, new_id: int) -> CanCommand:
+def make_assign_id(drive_id: int, new_id: int) -> CanCommand[None]:
     """New ids are 1..63 (the drive accepts 0..64, but 0 is broadcast and 64 has no id bits)."""
     check_drive_id(new_id, allow_broadcast=False)
-    return _cmd(check_drive_id(drive_id), F.ASSIGN_DRIVE_ID, new_id, what="new id",
+    return _send(check_drive_id(drive_id), F.ASSIGN_DRIVE_ID, new_id, what="new id",
                 guard_item="drive_id")
 
 
@@ -205,7 +218,7 @@ def group_of(name: str) -> tuple[F, F, int]:
         ) from None
 
 
-def make_set_params(drive_id: int, values: Mapping[str, int]) -> list[CanCommand]:
+def make_set_params(drive_id: int, values: Mapping[str, int]) -> list[CanCommand[None]]:
     """One group write per group touched; the other fields of a group are sent as 0
     (= leave unchanged). Every value is checked before any frame is built."""
     groups: dict[F, list[int]] = {}
@@ -220,17 +233,17 @@ def make_set_params(drive_id: int, values: Mapping[str, int]) -> list[CanCommand
         names.setdefault(set_fn, []).append(P.spec(name).name)
     check_drive_id(drive_id)
     return [CanCommand(c.request(drive_id, fn, fields=tuple(vals)), Kind.SETTING,
-                       guard_item=",".join(names[fn]))
+                       parse=_no_reply, guard_item=",".join(names[fn]))
             for fn, vals in groups.items()]
 
 
-def make_set_param(drive_id: int, name: str, value: int) -> CanCommand:
+def make_set_param(drive_id: int, name: str, value: int) -> CanCommand[None]:
     (command,) = make_set_params(drive_id, {checks.param_name(name): value})
     return command
 
 
 # ------------------------------------------------------------------ reads
-def make_read_group(drive_id: int, function: F) -> CanCommand:
+def make_read_group(drive_id: int, function: F) -> CanCommand[dict[str, int]]:
     if not isinstance(function, F):
         raise ArgumentRangeError(f"{function!r} is not a DYN CAN function")
     spec = c.SPECS[function]
@@ -244,10 +257,14 @@ def make_read_group(drive_id: int, function: F) -> CanCommand:
     return _cmd(drive_id, function, parse=parse)
 
 
-def make_read_param(drive_id: int, name: str) -> CanCommand:
+def make_read_param(drive_id: int, name: str) -> CanCommand[int]:
     _, read_fn, index = group_of(name)
     group = make_read_group(drive_id, read_fn)
-    return replace(group, parse=lambda frame: frame.fields()[index])
+
+    def parse(frame: c.Frame) -> int:
+        return frame.fields()[index]
+
+    return CanCommand(group.frame, group.kind, parse=parse)
 
 
 def _unsigned(frame: c.Frame) -> int:
@@ -255,54 +272,58 @@ def _unsigned(frame: c.Frame) -> int:
 
 
 @functools.cache  # immutable result: built once per drive id (hot polling path)
-def make_read_status(drive_id: int) -> CanCommand:
+def make_read_status(drive_id: int) -> CanCommand[DriveStatus]:
     return _cmd(drive_id, F.READ_DRIVE_STATUS,
                 parse=lambda f: DriveStatus.from_byte(f.unsigned))
 
 
 @functools.cache  # immutable result: built once per drive id (hot polling path)
-def make_read_config(drive_id: int) -> CanCommand:
+def make_read_config(drive_id: int) -> CanCommand[DriveConfig]:
     return _cmd(drive_id, F.READ_DRIVE_CONFIG,
                 parse=lambda f: DriveConfig.from_byte(f.unsigned))
 
 
 @functools.cache  # immutable result: built once per drive id (hot polling path)
-def make_read_id(drive_id: int) -> CanCommand:
+def make_read_id(drive_id: int) -> CanCommand[int]:
     return _cmd(drive_id, F.READ_DRIVE_ID, parse=_unsigned)
 
 
 @functools.cache  # immutable result: built once per drive id (hot polling path)
-def make_read_position(drive_id: int) -> CanCommand:
+def make_read_position(drive_id: int) -> CanCommand[int]:
     """General_Read 0x1B: absolute position, encoder counts (reply on 0x0E)."""
-    return _cmd(drive_id, F.GENERAL_READ, int(GR.POSITION))
+    return _cmd(drive_id, F.GENERAL_READ, int(GR.POSITION), parse=_frame_value)
 
 
 @functools.cache  # immutable result: built once per drive id (hot polling path)
-def make_read_torque(drive_id: int) -> CanCommand:
+def make_read_torque(drive_id: int) -> CanCommand[int]:
     """General_Read 0x1E: torque, 700 = peak current, positive = CCW."""
-    return _cmd(drive_id, F.GENERAL_READ, int(GR.TORQUE))
+    return _cmd(drive_id, F.GENERAL_READ, int(GR.TORQUE), parse=_frame_value)
 
 
 @functools.cache  # immutable result: built once per drive id (hot polling path)
-def make_read_speed(drive_id: int) -> CanCommand:
+def make_read_speed(drive_id: int) -> CanCommand[int]:
     """Read_Motor_Speed (0x1A): rpm, 2 bytes."""
-    return _cmd(drive_id, F.READ_MOTOR_SPEED)
+    return _cmd(drive_id, F.READ_MOTOR_SPEED, parse=_frame_value)
 
 
 @functools.cache  # immutable result: built once per drive id (hot polling path)
-def make_read_counter(drive_id: int) -> CanCommand:
+def make_read_counter(drive_id: int) -> CanCommand[int]:
     return _cmd(drive_id, F.DIAGNOSTIC_COUNTER, parse=_unsigned)
 
 
 ECHO_LENGTH = 4  # section 6: Echo carries four data bytes and returns them
 
 
-def make_echo(drive_id: int, data: bytes) -> CanCommand:
+def _frame_data(frame: c.Frame) -> bytes:
+    return frame.data
+
+
+def make_echo(drive_id: int, data: bytes) -> CanCommand[bytes]:
     payload = checks.data_bytes("echo", data, ECHO_LENGTH)
-    return _cmd(drive_id, F.ECHO, raw=payload, parse=lambda f: f.data)
+    return _cmd(drive_id, F.ECHO, raw=payload, parse=_frame_data)
 
 
-def broadcast(command: CanCommand) -> CanCommand:
+def broadcast(command: CanCommand[T]) -> CanCommand[T]:
     """Re-target a no-reply command to every drive (id 0)."""
     if command.expects_reply:
         raise ArgumentRangeError(f"{command.function.name} expects a reply: address one drive")
