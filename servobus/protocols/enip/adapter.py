@@ -234,10 +234,14 @@ class Dyn5Adapter:
         return self.handle(us.message, origin)
 
     # ---------------------------------------------------------------- implicit I/O
-    def input_image(self) -> io.InputImage:
+    def input_values(self) -> tuple[int, int, int, int]:
+        """Assembly 100 now: position, speed, torque, status (section 5)."""
         d = self.drive
-        return io.InputImage(dyn5.wrap_position(d.position), round(d.speed_rpm),
-                             torque_readout(d), status_word(d))
+        return (dyn5.wrap_position(d.position), round(d.speed_rpm), torque_readout(d),
+                status_word(d))
+
+    def input_image(self) -> io.InputImage:
+        return io.InputImage(*self.input_values())
 
     def consume(self, frame: io.IoFrame, source_ip: str, now: float) -> Consumed | None:
         """An O->T frame: applies a new enable/disable word; None if it was not taken."""

@@ -83,6 +83,7 @@ class EnipOptions:
     connect_timeout: float = CONNECT_TIMEOUT_S
     peak_current_a: float = DEFAULT_PEAK_CURRENT_A
     reset_timeout: float = DEFAULT_RESET_TIMEOUT_S
+    max_in_flight: int = 1
 
     def checked(self) -> EnipOptions:
         """Every field checked (ArgumentRangeError) before anything is opened."""
@@ -93,6 +94,7 @@ class EnipOptions:
         checks.count("retries", self.retries)
         checks.seconds("connect_timeout", self.connect_timeout)
         checks.seconds("reset_timeout", self.reset_timeout)
+        checks.positive_int("max_in_flight", self.max_in_flight)
         peak = checks.seconds("peak_current_a", self.peak_current_a)  # finite and > 0
         return replace(self, peak_current_a=peak)
 
@@ -138,7 +140,8 @@ class EnipAxis(AsyncAxis):
         o = self.options
         client = await AsyncEnipClient.connect(
             self.ip, o.port, timeout=o.timeout, retries=o.retries,
-            connect_timeout=o.connect_timeout if connect_timeout is None else connect_timeout)
+            connect_timeout=o.connect_timeout if connect_timeout is None else connect_timeout,
+            max_in_flight=o.max_in_flight)
         for hook in self._hooks:
             client.add_trace(hook)
         return client

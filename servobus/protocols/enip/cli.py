@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import selectors
 import signal
 import sys
 import time
@@ -96,9 +97,18 @@ def sim_enip_cmd(hosts: str, tcp_port: int, udp_port: int, state: str | None, mo
         raise click.BadParameter(str(exc), param_hint="--listen") from None
     click.echo(f"servobus sim enip: {len(host_list)} virtual DYN5 ({model}) on "
                f"{', '.join(host_list)}", err=True)
-    asyncio.run(run_adapters(hosts, tcp_port, udp_port, state, model, duration,
-                             reset_downtime))
+    with asyncio.Runner(loop_factory=precise_loop) as runner:
+        runner.run(run_adapters(hosts, tcp_port, udp_port, state, model, duration,
+                                reset_downtime))
     click.echo("stopped", err=True)
+
+
+def precise_loop() -> asyncio.AbstractEventLoop:
+    """An event loop whose timers keep microseconds: epoll (asyncio's default selector on
+    Linux) sleeps in whole milliseconds, rounded up, so a T->O frame due 0.3 ms from now
+    would leave up to 1 ms late; select() takes microseconds. A simulator serves a few
+    dozen sockets, far below select()'s limit."""
+    return asyncio.SelectorEventLoop(selectors.SelectSelector())
 
 
 # ---------------------------------------------------------------- discover

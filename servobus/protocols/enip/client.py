@@ -15,7 +15,12 @@ when the packet left; reads (Get services, ListIdentity) are re-sent up to ``ret
 times (default 2) with the same context; a Set or a Connection Manager request is sent
 once and never re-sent (a resend could move twice). A reply that comes after its call gave
 up is dropped (``stats.late_replies``): a context is never used by a later call, so a late
-reply never answers one. Requests run one at a time on a session.
+reply never answers one. Requests run one at a time on a session unless ``max_in_flight``
+allows more: the encapsulation matches replies by context, so concurrent calls (several
+asyncio tasks on one axis) may then have up to that many requests outstanding, pipelined
+on the one TCP connection. Default 1: the manual says nothing about how many outstanding
+requests a DYN5 queues, so a real drive is never asked to hold more than one. SendRRData
+carries timeout 0 (the encapsulation layer adds no timeout of its own; CIP Vol. 2 2-4.7).
 
 Errors are typed: no reply -> DriveTimeout; a refused request (CIP general status, e.g.
 the DYN5's "05 error") -> DriveError with ``code`` = the general status
@@ -26,6 +31,7 @@ call after.
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import logging
 import struct
@@ -49,7 +55,14 @@ from servobus.protocols.enip.cip import (
     Service,
     request_target,
 )
-from servobus.protocols.enip.cpf import CpfItem, ItemType, RRData, UnconnectedMessage
+from servobus.protocols.enip.cpf import (
+    CpfItem,
+    RRData,
+    UnconnectedMessage,
+    plain_rr_data,
+    unconnected,
+    unconnected_message,
+)
 from servobus.protocols.enip.encap import (
     HEADER,
     TCP_PORT,
@@ -70,10 +83,6 @@ CONNECT_TIMEOUT_S = 2.0
 #: Replies are small; a bound well above any DYN5 reply keeps the framer's memory bounded.
 MAX_REPLY_DATA = 4096
 _CONTEXT = struct.Struct("<Q")
-_ITEM = struct.Struct("<HH")
-#: SendRRData data before the message: interface handle 0, timeout 0 (the encapsulation
-#: layer adds no timeout of its own), 2 items, null address item (type 0, length 0).
-_RR_HEAD = struct.pack("<IHH", 0, 0, 2) + _ITEM.pack(ItemType.NULL_ADDRESS, 0)
 _READ_SERVICES = frozenset({Service.GET_ATTRIBUTES_ALL, Service.GET_ATTRIBUTE_SINGLE})
 
 TraceHook = Callable[[Direction, object, float], None]
@@ -101,17 +110,20 @@ class AsyncEnipClient:
     """One registered session on one adapter; every method runs on one event loop."""
 
     def __init__(self, stream: TcpStream, host: str, port: int = TCP_PORT, *,
-                 timeout: float = DEFAULT_TIMEOUT_S, retries: int = DEFAULT_RETRIES) -> None:
+                 timeout: float = DEFAULT_TIMEOUT_S, retries: int = DEFAULT_RETRIES,
+                 max_in_flight: int = 1) -> None:
         self.stream = stream
+        self.max_in_flight = checks.positive_int("max_in_flight", max_in_flight)
         self.host = host
         self.port = port
         self.timeout = checks.seconds("timeout", timeout)
         self.session = 0
         self.transactions: TransactionManager[bytes, bytes, EncapPacket] = TransactionManager(
-            stream.write, link=f"EtherNet/IP session with {host}:{port}",
+            self._write, link=f"EtherNet/IP session with {host}:{port}",
             describe_key=_describe_context, describe_request=self._describe_packet,
             trace_request=_trace_item, retries=retries)
         self._framer = EncapFramer(MAX_REPLY_DATA)
+        self._out: list[bytes] = []
         self._context = 0
         self._messages: dict[tuple[int, int, int, int | None], bytes] = {}
         stream.set_receiver(self._received)
@@ -124,12 +136,14 @@ class AsyncEnipClient:
     @classmethod
     async def connect(cls, host: str, port: int = TCP_PORT, *,
                       timeout: float = DEFAULT_TIMEOUT_S, retries: int = DEFAULT_RETRIES,
-                      connect_timeout: float = CONNECT_TIMEOUT_S) -> AsyncEnipClient:
+                      connect_timeout: float = CONNECT_TIMEOUT_S,
+                      max_in_flight: int = 1) -> AsyncEnipClient:
         """Open TCP and register a session. Nothing listening, or no answer within
         ``connect_timeout``: DriveTimeout naming the address."""
         checks.seconds("timeout", timeout)  # checked before anything is opened
         checks.count("retries", retries)
         checks.seconds("connect_timeout", connect_timeout)
+        checks.positive_int("max_in_flight", max_in_flight)
         try:
             stream = await TcpStream.connect(host, port, timeout=connect_timeout)
         except ServobusError as exc:
@@ -137,7 +151,8 @@ class AsyncEnipClient:
             text = str(reason) or type(reason).__name__
             raise DriveTimeout(f"no EtherNet/IP adapter answers at {host}:{port} ({text})"
                                ) from exc
-        client = cls(stream, host, port, timeout=timeout, retries=retries)
+        client = cls(stream, host, port, timeout=timeout, retries=retries,
+                     max_in_flight=max_in_flight)
         try:
             await client.register_session(connect_timeout)
         except BaseException:
@@ -195,6 +210,22 @@ class AsyncEnipClient:
     def _packet(self, command: int, data: bytes, context: bytes = bytes(8)) -> bytes:
         return HEADER.pack(command, len(data), self.session, 0, context, 0) + data
 
+    async def _write(self, packet: bytes) -> None:
+        """One request to the socket. With ``max_in_flight`` > 1, the requests that tasks
+        make in one event-loop pass leave in one write (the first waits one pass for the
+        others), so a pipelined burst costs one system call, not one per request."""
+        if self.max_in_flight == 1:
+            await self.stream.write(packet)
+            return
+        out = self._out
+        out.append(packet)
+        if len(out) > 1:
+            return  # the first writer of this pass sends it
+        await asyncio.sleep(0)
+        data = b"".join(out)
+        out.clear()
+        await self.stream.write(data)
+
     def _next_context(self) -> bytes:
         self._context = (self._context + 1) & 0xFFFF_FFFF_FFFF_FFFF
         return _CONTEXT.pack(self._context)
@@ -217,25 +248,22 @@ class AsyncEnipClient:
         if retries is not None:
             checks.count("retries", retries)
         context = self._next_context()
+        lane = None if self.max_in_flight == 1 else self._context % self.max_in_flight
         try:
             return await self.transactions.request(
                 context, self._packet(command, data, context), deadline_s=deadline_s,
-                retry_safe=read, retries=retries)
+                retry_safe=read, retries=retries, lane=lane)
         except DriveTimeout as exc:
             if read:
                 raise
             raise DriveTimeout(f"{exc}; sent once and not re-sent (it may have been carried "
                                "out)") from None
 
-    def _rr_data(self, message: bytes, extra: tuple[CpfItem, ...]) -> bytes:
-        data = _RR_HEAD + _ITEM.pack(ItemType.UNCONNECTED_DATA, len(message)) + message
+    @staticmethod
+    def _rr_data(message: bytes, extra: tuple[CpfItem, ...]) -> bytes:
         if not extra:
-            return data
-        out = bytearray(data)
-        out[6:8] = struct.pack("<H", 2 + len(extra))  # the CPF item count
-        for item in extra:
-            out += _ITEM.pack(item.type_id, len(item.data)) + item.data
-        return bytes(out)
+            return plain_rr_data(message)
+        return RRData(unconnected(message, *extra)).encode()
 
     async def request(self, message: bytes, *, read: bool | None = None,
                       timeout: float | None = None, retries: int | None = None,
@@ -255,9 +283,8 @@ class AsyncEnipClient:
             raise ProtocolError(f"{self.host}:{self.port} answered encapsulation status "
                                 f"0x{reply.status:04X} to a SendRRData")
         try:
-            items = RRData.decode(reply.data).items
-            unconnected = UnconnectedMessage.from_items(items)
-            response = MessageRouterResponse.decode(unconnected.message)
+            items, _ = unconnected_message(reply.data)
+            response = MessageRouterResponse.decode(items.message)
         except FramingError as exc:
             raise FramingError(f"malformed SendRRData reply from {self.host}: {exc}") from None
         if response.service != service:
@@ -265,7 +292,7 @@ class AsyncEnipClient:
                                 f"0x{service:02X}")
         if self.transactions.tracing:
             self.transactions.trace(Direction.RX, response)
-        return response, unconnected
+        return response, items
 
     async def call(self, message: bytes, *, read: bool | None = None,
                    timeout: float | None = None, retries: int | None = None) -> bytes:

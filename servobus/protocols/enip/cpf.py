@@ -131,6 +131,33 @@ class SequencedAddress:
         return cls(*_SEQUENCED.unpack(raw))
 
 
+#: SendRRData data of the common shape: interface handle, timeout, item count 2, null address
+#: item (type 0, length 0), unconnected data item header; the message follows.
+_PLAIN_RR = struct.Struct("<IHHHHHH")
+
+
+def plain_rr_data(message: bytes, timeout: int = 0) -> bytes:
+    """SendRRData data: null address + unconnected data ``message`` (interface handle 0)."""
+    return _PLAIN_RR.pack(0, timeout, 2, ItemType.NULL_ADDRESS, 0, ItemType.UNCONNECTED_DATA,
+                          len(message)) + message
+
+
+def unconnected_message(raw: bytes) -> tuple[UnconnectedMessage, int]:
+    """SendRRData data -> (the message and its sockaddr items, interface handle).
+
+    The plain shape (null address + unconnected data, nothing else) is read with one struct
+    (the hot path of every explicit request and reply); any other shape goes through
+    :meth:`RRData.decode` and :meth:`UnconnectedMessage.from_items`, with their checks."""
+    if len(raw) >= _PLAIN_RR.size:
+        handle, _, count, null, null_len, kind, length = _PLAIN_RR.unpack_from(raw)
+        if (count == 2 and null == ItemType.NULL_ADDRESS and null_len == 0
+                and kind == ItemType.UNCONNECTED_DATA
+                and length == len(raw) - _PLAIN_RR.size):
+            return UnconnectedMessage(raw[_PLAIN_RR.size:]), handle
+    rr = RRData.decode(raw)
+    return UnconnectedMessage.from_items(rr.items), rr.interface_handle
+
+
 def unconnected(message: bytes, *extra: CpfItem) -> tuple[CpfItem, ...]:
     """Null address + unconnected data (+ e.g. sockaddr items): an unconnected message."""
     return (CpfItem(ItemType.NULL_ADDRESS), CpfItem(ItemType.UNCONNECTED_DATA, message), *extra)

@@ -63,11 +63,11 @@ async def open_sim_axis(url: DriveUrl, *, drive_id: int | None = None,
         if wanted in ids:
             client = await AsyncEnipClient.connect(ip, port, timeout=checked.timeout,
                                                    retries=checked.retries,
-                                                   connect_timeout=checked.connect_timeout)
+                                                   connect_timeout=checked.connect_timeout,
+                                                   max_in_flight=checked.max_in_flight)
     except BaseException:
         await fleet.stop()
         raise
     axis = EnipAxis(client, ip, checked)
     axis.on_close(fleet.stop)
-    axis.fleet = fleet  # type: ignore[attr-defined]
     return axis

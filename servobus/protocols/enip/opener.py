@@ -2,7 +2,8 @@
 
 HOST is the drive's IPv4 address or a name that resolves to one; PORT defaults to 44818.
 Options (query or keywords): ``timeout``, ``retries``, ``connect_timeout``,
-``peak_current_a`` (amperes at torque 2000, default 20 A, the DYN5-H01), ``reset_timeout``.
+``peak_current_a`` (amperes at torque 2000, default 20 A, the DYN5-H01), ``reset_timeout``,
+``max_in_flight`` (requests outstanding at once on the session, default 1).
 
 ``drive_id`` (the CLI's ``--id``) is the last address byte B0 (docs/enip.md): with an id,
 the axis opens B3.B2.B1.<id> of the URL's address, the drive of the same daisy chain;
@@ -23,7 +24,7 @@ from servobus.protocols.enip.encap import TCP_PORT
 
 OPTIONS: dict[str, type] = {
     "timeout": float, "retries": int, "connect_timeout": float, "peak_current_a": float,
-    "reset_timeout": float,
+    "reset_timeout": float, "max_in_flight": int,
 }
 
 
@@ -63,10 +64,13 @@ async def open_axis(url: DriveUrl, *, drive_id: int | None = None,
     options = merge_options(url, keywords, OPTIONS)
     host, port = split_target(url)
     checked = axis_options(options, port)
+    if drive_id is not None:
+        with_last_octet("0.0.0.0", drive_id)  # checked before the name is resolved
     ip = await resolve(host, port)
     if drive_id is not None:
         ip = with_last_octet(ip, drive_id)
     client = await AsyncEnipClient.connect(ip, port, timeout=checked.timeout,
                                            retries=checked.retries,
-                                           connect_timeout=checked.connect_timeout)
+                                           connect_timeout=checked.connect_timeout,
+                                           max_in_flight=checked.max_in_flight)
     return EnipAxis(client, ip, checked)

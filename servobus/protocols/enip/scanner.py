@@ -11,12 +11,13 @@ header). :class:`CyclicIo` opens it with Forward_Open over the axis's explicit s
 * the connection path ``20 04 24 00 2C 65 2C 64`` (config instance 0, consumed point 101,
   produced point 100), O->T size 10 and T->O size 18 (sequence count included), the same
   RPI both ways, point-to-point, scheduled priority, class 1 cyclic;
-* O->T frames every RPI on absolute times (``loop.call_at``; a late tick does not shift the
-  grid), run bit set. The word starts at 0 (no command), so opening I/O does not change
-  the servo state. :meth:`CyclicIo.enable` / :meth:`CyclicIo.disable` send a new command at
-  once: a frame with the no-command word, then the command, each with a new 16-bit sequence
-  count, so every call is an edge the drive acts on (like writing instance 0x0D), also
-  after the servo state was changed another way;
+* O->T frames every RPI on absolute times (a late tick does not shift the grid; every
+  connection on the loop shares one timer, ``production.py``), run bit set. The word
+  starts at 0 (no command), so opening I/O does not change the servo state.
+  :meth:`CyclicIo.enable` / :meth:`CyclicIo.disable` send a new command at once: a frame
+  with the no-command word, then the command, each with a new 16-bit sequence count, so
+  every call is an edge the drive acts on (like writing instance 0x0D), also after the
+  servo state was changed another way;
 * input frames are taken only from the adapter's address, for the T->O connection id, with
   a newer 32-bit sequence number; gaps count as ``missed``, older or repeated frames as
   ``stale``. Each frame keeps its arrival time (``time.monotonic()``).
@@ -76,6 +77,7 @@ from servobus.protocols.enip.connection_manager import (
 )
 from servobus.protocols.enip.cpf import ItemType, SockaddrInfo
 from servobus.protocols.enip.epath import LogicalType, Segment, logical
+from servobus.protocols.enip.production import Producer, ProductionWheel
 
 if TYPE_CHECKING:
     from servobus.protocols.enip.axis import EnipAxis
@@ -221,7 +223,10 @@ class CyclicIo:
 
     def __init__(self, axis: EnipAxis, *, rpi_ms: float = 10.0,
                  multiplier: int = DEFAULT_MULTIPLIER, reconnect: bool = True,
-                 queue: int = DEFAULT_QUEUE) -> None:
+                 queue: int = DEFAULT_QUEUE,
+                 on_frame: Callable[[InputFrame], None] | None = None) -> None:
+        """``on_frame`` (optional) is called with each input frame as it arrives, on the
+        event loop, before the frame iterators see it: the low-latency path (keep it short)."""
         rpi_s = checks.seconds("rpi_ms", rpi_ms) / 1e3
         self.rpi_us = round(rpi_s * 1e6)
         if self.rpi_us < dyn5.MIN_RPI_US:
@@ -235,6 +240,9 @@ class CyclicIo:
         self.multiplier = multiplier
         self.reconnect = bool(reconnect)
         self.queue = checks.positive_int("queue", queue)
+        if on_frame is not None and not callable(on_frame):
+            raise ArgumentRangeError(f"on_frame must be callable, got {on_frame!r}")
+        self.on_frame = on_frame
         self.stats = IoStats()
         self.latest: InputFrame | None = None
         self.watchdog_s = watchdog_s(self.rpi_us, multiplier)
@@ -252,8 +260,7 @@ class CyclicIo:
         self._word = NO_COMMAND
         self._last_seq: int | None = None
         self._last_rx = 0.0
-        self._next_at = 0.0
-        self._tick: asyncio.TimerHandle | None = None
+        self._tick: Producer | None = None
         self._watch: asyncio.TimerHandle | None = None
         self._reconnecting: asyncio.Task[None] | None = None
         self._streams: set[FrameStream] = set()
@@ -313,10 +320,12 @@ class CyclicIo:
             stream.finish()
 
     def _stop_timers(self) -> None:
-        for handle in (self._tick, self._watch):
-            if handle is not None:
-                handle.cancel()
-        self._tick = self._watch = None
+        if self._tick is not None and self._loop is not None:
+            ProductionWheel.for_loop(self._loop).remove(self._tick)
+        if self._watch is not None:
+            self._watch.cancel()
+        self._tick = None
+        self._watch = None
 
     # ---------------------------------------------------------------- Connection Manager
     async def _forward_open(self) -> None:
@@ -361,8 +370,8 @@ class CyclicIo:
         assert self._loop is not None
         now = self._loop.time()
         self._last_rx = now
-        self._next_at = now
-        self._tick = self._loop.call_at(now, self._produce)
+        self._tick = ProductionWheel.for_loop(self._loop).add(
+            Producer(self.api_us[0] / 1e6, now, self._send))
         self._watch = self._loop.call_at(now + self.watchdog_s, self._check_watchdog)
         log.info("Class 1 I/O with %s open: O->T 0x%08X to %s:%d, T->O 0x%08X to %s:%d, "
                  "RPI %.1f ms", self.axis.ip, self._o_t_id, *self._o_t_dest, self._t_o_id,
@@ -382,17 +391,6 @@ class CyclicIo:
                      _connection_status(response.general_status, response.additional_status))
 
     # ---------------------------------------------------------------- O->T
-    def _produce(self) -> None:
-        loop = self._loop
-        assert loop is not None
-        self._send()
-        period = self.api_us[0] / 1e6
-        self._next_at += period
-        now = loop.time()
-        if self._next_at < now - period:  # fell behind by more than a period: new grid
-            self._next_at = now + period
-        self._tick = loop.call_at(self._next_at, self._produce)
-
     def _send(self) -> None:
         if self._udp is None or self._packer is None or not self._connected:
             return
@@ -485,6 +483,8 @@ class CyclicIo:
         frame = InputFrame(now, seq, count, image)
         self.latest = frame
         self.stats.frames += 1
+        if self.on_frame is not None:
+            self.on_frame(frame)
         for stream in self._streams:
             stream.push(frame)
 

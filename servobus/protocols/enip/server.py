@@ -15,11 +15,12 @@ CPF items do not parse 0x0003. The connection stays open after each of these. Th
 context is echoed in every reply. SendUnitData is dropped: the DYN5 has no Class 3
 connections (manual 1: explicit messaging is unconnected).
 
-Class 1: T->O frames go every T->O RPI (scheduled on absolute times, a late tick does not
-shift the grid) to the originator's Sockaddr Info 0x8001 when it sent one, else to port
-2222 of its IP. A Forward_Open reply carries a 0x8000 item naming the O->T port when it is
-not 2222. Reset (0x21 = 0xABCD): the reply is sent, then every connection and session is
-dropped, the drive power-cycles and the adapter ignores traffic for ``reset_downtime_s``
+Class 1: T->O frames go every T->O RPI (on absolute times, a late tick does not shift the
+grid; every connection of every server on the loop shares one timer, ``production.py``) to
+the originator's Sockaddr Info 0x8001 when it sent one, else to port 2222 of its IP. A
+Forward_Open reply carries a 0x8000 item naming the O->T port when it is not 2222.
+Reset (0x21 = 0xABCD): the reply is sent, then every connection and session is dropped,
+the drive power-cycles and the adapter ignores traffic for ``reset_downtime_s``
 (3 s like the drive; tests shorten it). Every TCP client has a bounded input buffer (one
 packet) and output buffer (``MAX_OUTPUT`` bytes; a client that does not read is cut off).
 """
@@ -28,6 +29,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import ipaddress
 import itertools
 import logging
@@ -43,7 +45,13 @@ from servobus.families.dyn5 import Identity
 from servobus.protocols.enip import discovery, io
 from servobus.protocols.enip.adapter import Dyn5Adapter, Origin, Outcome
 from servobus.protocols.enip.connections import IoConnection
-from servobus.protocols.enip.cpf import RRData, SockaddrInfo, UnconnectedMessage
+from servobus.protocols.enip.cpf import (
+    RRData,
+    SockaddrInfo,
+    UnconnectedMessage,
+    plain_rr_data,
+    unconnected_message,
+)
 from servobus.protocols.enip.encap import (
     MAX_DATA,
     TCP_PORT,
@@ -55,6 +63,7 @@ from servobus.protocols.enip.encap import (
     EncapStatus,
     RegisterSessionData,
 )
+from servobus.protocols.enip.production import Producer, ProductionWheel
 from servobus.sim.drive import VirtualDrive
 from servobus.sim.eeprom import EepromStore
 from servobus.sim.realtime import RealtimeClock
@@ -70,14 +79,16 @@ STOP_POLL_S = 0.005
 @dataclass
 class _Producer:
     conn: IoConnection
-    next_at: float
-    produce: asyncio.TimerHandle | None = None
+    packer: io.FramePacker
+    wheel: ProductionWheel
+    tick: Producer | None = None
     watchdog: asyncio.TimerHandle | None = None
 
     def cancel(self) -> None:
-        for handle in (self.produce, self.watchdog):
-            if handle is not None:
-                handle.cancel()
+        if self.tick is not None:
+            self.wheel.remove(self.tick)
+        if self.watchdog is not None:
+            self.watchdog.cancel()
 
 
 @dataclass
@@ -259,9 +270,8 @@ class EnipServer:
 
     def _send_rr_data(self, pkt: EncapPacket, client: _TcpClient) -> EncapPacket | None:
         try:
-            rr = RRData.decode(pkt.data)
-            msg = UnconnectedMessage.from_items(rr.items)
-            if rr.interface_handle or not msg.message:
+            msg, handle = unconnected_message(pkt.data)
+            if handle or not msg.message:
                 raise FramingError("interface handle must be 0 and the message not empty")
         except FramingError as exc:
             self.stats.malformed += 1
@@ -271,12 +281,14 @@ class EnipServer:
         self._sync()
         now = self._now()
         outcome = self.adapter.handle(msg.message, Origin(client.peer_ip, msg.sockaddr_t_o, now))
-        o_t = None
+        response = outcome.response.encode()
         if outcome.opened is not None and self.udp_port != io.UDP_PORT:
-            o_t = SockaddrInfo(self.udp_port, self.host)
-        reply = UnconnectedMessage(outcome.response.encode(), sockaddr_o_t=o_t)
+            reply = UnconnectedMessage(response, SockaddrInfo(self.udp_port, self.host))
+            data = RRData(reply.items()).encode()
+        else:
+            data = plain_rr_data(response)
         self._after(outcome, now)
-        return pkt.reply(RRData(reply.items()).encode())
+        return pkt.reply(data)
 
     def _after(self, outcome: Outcome, now: float) -> None:
         if outcome.opened is not None:
@@ -290,9 +302,11 @@ class EnipServer:
     # ---------------------------------------------------------------- Class 1
     def _start_producer(self, conn: IoConnection, now: float) -> None:
         assert self._loop is not None
-        prod = _Producer(conn, now)
+        prod = _Producer(conn, io.input_packer(conn.t_o_id),
+                         ProductionWheel.for_loop(self._loop))
         self._producers[conn.o_t_id] = prod
-        prod.produce = self._loop.call_at(now, self._produce, prod)
+        prod.tick = prod.wheel.add(Producer(conn.t_o_rpi_s, now,
+                                            functools.partial(self._produce, prod)))
         prod.watchdog = self._loop.call_at(conn.deadline, self._watch, prod)
 
     def _stop_producer(self, conn: IoConnection) -> None:
@@ -301,19 +315,15 @@ class EnipServer:
             prod.cancel()
 
     def _produce(self, prod: _Producer) -> None:
-        assert self._loop is not None and self._io is not None
+        """One T->O frame (called by the production wheel on the connection's grid)."""
+        assert self._io is not None
         conn = prod.conn
         self._sync()
         seq, count = conn.next_production()
-        frame = io.input_frame(conn.t_o_id, seq, count, self.adapter.input_image())
+        frame = prod.packer.pack(seq, count, *self.adapter.input_values())
         with contextlib.suppress(OSError):
             self._io.sendto(frame, conn.destination)
         self.stats.frames_out += 1
-        now = self._loop.time()
-        prod.next_at += conn.t_o_rpi_s
-        if prod.next_at < now - conn.t_o_rpi_s:  # fell behind by more than a period
-            prod.next_at = now + conn.t_o_rpi_s
-        prod.produce = self._loop.call_at(prod.next_at, self._produce, prod)
 
     def _watch(self, prod: _Producer) -> None:
         assert self._loop is not None
@@ -411,7 +421,11 @@ class _TcpClient(asyncio.Protocol):
         transport = self.transport
         if transport is None:
             return
+        out: list[bytes] = []  # the replies to one chunk's SendRRData go out in one write
         for item in self.framer.feed(data):
+            if out and (isinstance(item, EncapReject) or item.command != Command.SEND_RR_DATA):
+                transport.write(b"".join(out))  # before a packet that may end the session
+                out.clear()
             try:
                 reply = self.server.handle_packet(item, self)
             except Exception:  # a bug must not take the adapter down: log it, drop the client
@@ -421,7 +435,9 @@ class _TcpClient(asyncio.Protocol):
             if self.transport is None:
                 return
             if reply is not None:
-                transport.write(reply.encode())
+                out.append(reply.encode())
+        if out:
+            transport.write(b"".join(out))
         if transport.get_write_buffer_size() > MAX_OUTPUT:
             log.info("client %s does not read its replies: disconnected", self.peer_ip)
             self.close(abort=True)

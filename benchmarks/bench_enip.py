@@ -1,0 +1,309 @@
+"""EtherNet/IP (DYN5): explicit round trips and Class 1 implicit I/O, measured in one run.
+
+1. Explicit messaging: Get_Attribute_Single round trips/s (Parameter 0x1D, motor position)
+   against the same virtual DYN5 (``servobus sim enip`` in its own process), one request at
+   a time: the servobus client, pycomm3's ``CIPDriver.generic_message`` (unconnected,
+   ``route_path=False``) and a raw blocking socket with a prebuilt request (the ceiling: no
+   client work at all). Rounds alternate between the three; the best round of each counts.
+   Target: servobus >= 1.5 x pycomm3.
+2. Implicit I/O: 16 adapters (127.0.0.1 .. 127.0.0.16, one process) x 1 connection at RPI
+   5 ms, scanner (the servobus ``CyclicIo``) in this process. Input frames delivered vs
+   expected (target >= 99.9 %), p99 of |interval - RPI| between consecutive frames of one
+   connection as the scanner receives them (target <= 1 ms), CPU share of both processes.
+
+The machine's load is printed first: other work on the host shows in these figures.
+Run: ``python -m benchmarks enip`` or ``python -m benchmarks.bench_enip``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import socket
+import statistics
+import struct
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+from benchmarks.verdict import mark, percent, summary
+from servobus.axis import connect_async
+from servobus.protocols.enip.axis import EnipAxis
+from servobus.protocols.enip.client import AsyncEnipClient
+from servobus.protocols.enip.scanner import InputFrame
+
+PARAM, POSITION, ATTRIBUTE = 0x0F, 0x1D, 1
+ROUND_S = 1.5
+ROUNDS = 3
+IN_FLIGHT = 8
+IO_ADAPTERS = 16
+IO_RPI_MS = 5.0
+IO_SECONDS = 6.0
+IO_SETTLE_S = 1.0  # after every connection is open, before the measured window
+
+
+@contextmanager
+def adapters(count: int, seconds: float) -> Iterator[tuple[subprocess.Popen[str],
+                                                            list[tuple[str, int]]]]:
+    """``servobus sim enip`` on 127.0.0.1 .. 127.0.0.<count> in its own process."""
+    hosts = ",".join(f"127.0.0.{i}" for i in range(1, count + 1))
+    proc = subprocess.Popen([sys.executable, "-m", "servobus", "sim", "enip", "--listen",
+                             hosts, "--tcp-port", "0", "--udp-port", "0", "--duration",
+                             str(seconds)], stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, text=True)
+    assert proc.stdout is not None
+    found: list[tuple[str, int]] = []
+    try:
+        while len(found) < count:
+            line = proc.stdout.readline()
+            if not line:
+                raise RuntimeError("servobus sim enip did not start")
+            address = line.split("enip://", 1)[1].split()[0]
+            host, port = address.rsplit(":", 1)
+            found.append((host, int(port)))
+        yield proc, found
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
+def cpu_seconds(pid: int) -> float | None:
+    """User + system CPU time of a process (Linux /proc), None elsewhere."""
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+# ---------------------------------------------------------------- explicit
+async def servobus_rate(host: str, port: int, seconds: float, in_flight: int = 1) -> float:
+    """``in_flight`` tasks reading on one session with ``max_in_flight=in_flight``."""
+    client = await AsyncEnipClient.connect(host, port, max_in_flight=in_flight)
+    done = [0]
+    t0 = 0.0
+
+    async def reader() -> None:
+        while time.perf_counter() - t0 < seconds:
+            await client.get_attribute_single(PARAM, POSITION, ATTRIBUTE)
+            done[0] += 1
+
+    try:
+        for _ in range(200):
+            await client.get_attribute_single(PARAM, POSITION, ATTRIBUTE)
+        t0 = time.perf_counter()
+        await asyncio.gather(*(reader() for _ in range(in_flight)))
+        return done[0] / (time.perf_counter() - t0)
+    finally:
+        await client.close()
+
+
+class _Floor(asyncio.Protocol):
+    """A bare asyncio protocol: one future per reply, no framing beyond the length."""
+
+    def __init__(self) -> None:
+        self.waiter: asyncio.Future[bytes] | None = None
+        self.buf = b""
+
+    def data_received(self, data: bytes) -> None:
+        self.buf += data
+        if len(self.buf) >= 24 and len(self.buf) >= 24 + struct.unpack_from("<H", self.buf, 2)[0]:
+            packet, self.buf = self.buf, b""
+            if self.waiter is not None and not self.waiter.done():
+                self.waiter.set_result(packet)
+
+
+async def asyncio_floor_rate(host: str, port: int, seconds: float) -> float:
+    """The same request bytes over a bare asyncio protocol: what any asyncio client pays."""
+    loop = asyncio.get_running_loop()
+    transport, proto = await loop.create_connection(_Floor, host, port)
+
+    async def exchange(packet: bytes) -> bytes:
+        proto.waiter = loop.create_future()
+        transport.write(packet)
+        return await proto.waiter
+
+    try:
+        reply = await exchange(struct.pack("<HHII8sI", 0x65, 4, 0, 0, bytes(8), 0)
+                               + b"\x01\x00\x00\x00")
+        packet = _request_packet(struct.unpack_from("<I", reply, 4)[0])
+        for _ in range(200):
+            await exchange(packet)
+        n, t0 = 0, time.perf_counter()
+        while time.perf_counter() - t0 < seconds:
+            await exchange(packet)
+            n += 1
+        return n / (time.perf_counter() - t0)
+    finally:
+        transport.close()
+
+
+def _request_packet(session: int) -> bytes:
+    mr = bytes((0x0E, 3, 0x20, PARAM, 0x24, POSITION, 0x30, ATTRIBUTE))
+    data = struct.pack("<IHHHHHH", 0, 0, 2, 0, 0, 0xB2, len(mr)) + mr
+    return struct.pack("<HHII8sI", 0x6F, len(data), session, 0, b"rawbench", 0) + data
+
+
+def pycomm3_rate(host: str, port: int, seconds: float) -> float:
+    from pycomm3 import DINT, CIPDriver
+
+    with CIPDriver(f"{host}:{port}") as plc:
+        def read() -> None:
+            tag = plc.generic_message(service=0x0E, class_code=PARAM, instance=POSITION,
+                                      attribute=ATTRIBUTE, data_type=DINT, connected=False,
+                                      route_path=False)
+            if tag.error:
+                raise RuntimeError(f"pycomm3: {tag.error}")
+
+        for _ in range(200):
+            read()
+        n, t0 = 0, time.perf_counter()
+        while time.perf_counter() - t0 < seconds:
+            read()
+            n += 1
+        return n / (time.perf_counter() - t0)
+
+
+def _recv_packet(sock: socket.socket) -> bytes:
+    head = b""
+    while len(head) < 24:
+        head += sock.recv(24 - len(head))
+    (length,) = struct.unpack_from("<H", head, 2)
+    body = b""
+    while len(body) < length:
+        body += sock.recv(length - len(body))
+    return head + body
+
+
+def raw_rate(host: str, port: int, seconds: float) -> float:
+    """Blocking socket, request bytes built once: the round-trip ceiling of this adapter."""
+    with socket.create_connection((host, port), timeout=5) as sock:
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        sock.sendall(struct.pack("<HHII8sI", 0x65, 4, 0, 0, bytes(8), 0) + b"\x01\x00\x00\x00")
+        packet = _request_packet(struct.unpack_from("<I", _recv_packet(sock), 4)[0])
+        for _ in range(200):
+            sock.sendall(packet)
+            _recv_packet(sock)
+        n, t0 = 0, time.perf_counter()
+        while time.perf_counter() - t0 < seconds:
+            sock.sendall(packet)
+            _recv_packet(sock)
+            n += 1
+        return n / (time.perf_counter() - t0)
+
+
+def bench_explicit() -> None:
+    names = ("raw socket", "asyncio floor", "pycomm3", "servobus", f"servobus x{IN_FLIGHT}")
+    best = dict.fromkeys(names, 0.0)
+    with adapters(1, ROUNDS * len(names) * (ROUND_S + 1) + 30) as (_, [(host, port)]):
+        for _ in range(ROUNDS):
+            rates = (raw_rate(host, port, ROUND_S),
+                     asyncio.run(asyncio_floor_rate(host, port, ROUND_S)),
+                     pycomm3_rate(host, port, ROUND_S),
+                     asyncio.run(servobus_rate(host, port, ROUND_S)),
+                     asyncio.run(servobus_rate(host, port, ROUND_S, IN_FLIGHT)))
+            for name, rate in zip(names, rates, strict=True):
+                best[name] = max(best[name], rate)
+    ceiling = best["raw socket"]
+    notes = {"raw socket": "blocking socket, prebuilt request: the ceiling",
+             "asyncio floor": "bare asyncio protocol, prebuilt request",
+             "pycomm3": "CIPDriver.generic_message, one at a time",
+             "servobus": "AsyncEnipClient, one request at a time",
+             f"servobus x{IN_FLIGHT}": f"{IN_FLIGHT} tasks, max_in_flight={IN_FLIGHT}, one "
+                                      "session"}
+    for name, rate in best.items():
+        print(f"explicit Get_Attribute_Single, {name:>13}: {rate:8.0f}/s "
+              f"({rate / ceiling:6.1%} of the raw socket; {notes[name]})")
+    one = best["servobus"] / best["pycomm3"]
+    floor = best["servobus"] / best["asyncio floor"]
+    print(f"one at a time: servobus / pycomm3 = {one:.2f}x, servobus / asyncio floor = "
+          f"{floor:.0%} (a blocking client waits in recv; any asyncio client pays a loop "
+          "wake-up per reply)")
+    ratio = best[f"servobus x{IN_FLIGHT}"] / best["pycomm3"]
+    verdict = mark(f"enip: servobus ({IN_FLIGHT} in flight) vs pycomm3 round trips", ratio,
+                   at_least=1.5, show="{:g}x".format)
+    print(f"servobus ({IN_FLIGHT} in flight) / pycomm3 = {ratio:.2f}x  {verdict}")
+
+
+# ---------------------------------------------------------------- implicit
+@dataclass
+class Recorder:
+    times: list[float] = field(default_factory=list)
+    sequences: list[int] = field(default_factory=list)
+
+    def __call__(self, frame: InputFrame) -> None:
+        self.times.append(frame.time)
+        self.sequences.append(frame.sequence)
+
+
+async def run_scanner(endpoints: list[tuple[str, int]], adapter_pid: int
+                      ) -> tuple[list[Recorder], float, float, float | None, int]:
+    axes: list[EnipAxis] = []
+    for host, port in endpoints:
+        axis = await connect_async(f"enip://{host}:{port}", timeout=1.0)
+        assert isinstance(axis, EnipAxis)
+        axes.append(axis)
+    recorders = [Recorder() for _ in axes]
+    ios = [axis.io(rpi_ms=IO_RPI_MS, on_frame=rec) for axis, rec in
+           zip(axes, recorders, strict=True)]
+    for cyclic in ios:
+        await cyclic.open()
+    await asyncio.sleep(IO_SETTLE_S)
+    for rec in recorders:
+        rec.times.clear()
+        rec.sequences.clear()
+    cpu0, wall0, child0 = time.process_time(), time.monotonic(), cpu_seconds(adapter_pid)
+    await asyncio.sleep(IO_SECONDS)
+    cpu1, wall1, child1 = time.process_time(), time.monotonic(), cpu_seconds(adapter_pid)
+    losses = sum(c.stats.losses for c in ios)
+    for cyclic in ios:
+        await cyclic.close()
+    for axis in axes:
+        await axis.close()
+    wall = wall1 - wall0
+    child = None if child0 is None or child1 is None else (child1 - child0) / wall
+    return recorders, wall, (cpu1 - cpu0) / wall, child, losses
+
+
+def bench_implicit() -> None:
+    with adapters(IO_ADAPTERS, IO_SECONDS + IO_SETTLE_S + 60) as (proc, endpoints):
+        recorders, wall, scanner_cpu, adapter_cpu, losses = asyncio.run(
+            run_scanner(endpoints, proc.pid))
+    rpi = IO_RPI_MS / 1e3
+    expected = IO_ADAPTERS * wall / rpi
+    delivered = sum(len(r.times) for r in recorders)
+    ratio = min(delivered / expected, 1.0)
+    errors = [abs(b - a - rpi) for r in recorders
+              for a, b in zip(r.times, r.times[1:], strict=False)]
+    p99_ms = statistics.quantiles(errors, n=100)[98] * 1e3 if len(errors) > 100 else float("inf")
+    missed = sum(b - a - 1 for r in recorders
+                 for a, b in zip(r.sequences, r.sequences[1:], strict=False))
+    print(f"implicit I/O, {IO_ADAPTERS} adapters x 1 connection at RPI {IO_RPI_MS:g} ms, "
+          f"{wall:.1f} s: {delivered} of {expected:.0f} frames ({delivered / wall:.0f}/s), "
+          f"{missed} sequence gaps, {losses} connection losses")
+    print(f"  delivered {delivered / expected:8.3%}  "
+          f"{mark('enip: implicit frames delivered', ratio, at_least=0.999, show=percent)}")
+    print(f"  p99 interval error {p99_ms:.3f} ms (median "
+          f"{statistics.median(errors) * 1e3:.3f} ms, max {max(errors) * 1e3:.2f} ms)  "
+          f"{mark('enip: implicit p99 interval error (ms)', p99_ms, at_most=1.0)}")
+    child = "n/a" if adapter_cpu is None else f"{adapter_cpu:.1%}"
+    print(f"  CPU share of one core: scanner {scanner_cpu:.1%}, 16 adapters {child}")
+
+
+def main() -> None:
+    load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
+    print(f"EtherNet/IP benchmarks (load average {load[0]:.2f}, {os.cpu_count()} cores)")
+    bench_explicit()
+    bench_implicit()
+
+
+if __name__ == "__main__":
+    main()
+    print(summary())
