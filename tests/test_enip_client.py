@@ -207,3 +207,20 @@ async def test_a_bad_encapsulation_status_is_a_protocol_error() -> None:
 async def test_nothing_listening_is_a_drive_timeout_naming_the_address() -> None:
     with pytest.raises(DriveTimeout, match=r"127\.0\.0\.1:1"):
         await AsyncEnipClient.connect("127.0.0.1", 1, connect_timeout=0.5)
+
+
+async def test_pipelined_requests_leave_together_and_each_gets_its_reply() -> None:
+    async with adapters() as fleet:
+        s = fleet.servers[0]
+        client = await AsyncEnipClient.connect(s.host, s.tcp_port, max_in_flight=8)
+        writes: list[int] = []
+        client.stream.add_trace(lambda d, data, t: writes.append(len(data))
+                                if d is Direction.TX else None)
+        values = await asyncio.gather(*(client.get_attribute_single(PARAM, 0xFF, 1)
+                                         for _ in range(16)))
+        assert sorted(struct.unpack("<I", v)[0] for v in values) == list(range(1, 17))
+        packet = 24 + 16 + 8  # header, plain SendRRData, Get_Attribute_Single request
+        assert sum(writes) == 16 * packet and len(writes) < 16  # several per write
+        await client.close()
+    with pytest.raises(ValueError):
+        await AsyncEnipClient.connect("127.0.0.1", 1, max_in_flight=0)

@@ -10,5 +10,6 @@ Identity values, quirks) is ``servobus.families.dyn5``.
 SCHEMES: dict[str, str] = {"enip": "servobus.protocols.enip.opener:open_axis"}
 SIM: dict[str, str] = {"enip": "servobus.protocols.enip.inprocess:open_sim_axis"}
 CLI = "servobus.protocols.enip.cli:register"
+DECODERS: dict[str, str] = {"enip": "servobus.protocols.enip.sniff:DECODER"}
 PARAMS: dict[str, str] = {"enip": "servobus.families.dyn5_family:PARAM_NAMES"}
 FAMILIES: dict[str, str] = {"enip": "dmm-dyn5"}
