@@ -113,15 +113,19 @@ def _fits(request: Any, reply: Reply) -> bool:
     return codec.answers(request, reply)
 
 
+def _name(address: int) -> str:
+    return register_name(address) if address in yzaim.BY_ADDRESS else "no register"
+
+
 def _what_register(command: EasyCanCommand) -> str:
     request = command.request
     if isinstance(request, ReadRequest | WriteRequest):
         pair = yzaim.PAIR_BY_LOW.get(request.address)
         span = len(request.values) if isinstance(request, WriteRequest) else request.count
-        name = pair.name if pair is not None and span == 2 else register_name(request.address)
+        name = pair.name if pair is not None and span == 2 else _name(request.address)
         return f"{name} (0x{request.address:02X})"
     if isinstance(request, ReadMultipleRequest):
-        return ", ".join(f"{register_name(a)} (0x{a:02X})" for a in request.addresses)
+        return ", ".join(f"{_name(a)} (0x{a:02X})" for a in request.addresses)
     if isinstance(request, PositionCacheWrite):
         return "position_cache (0x1A)"
     return Function(request.function).name
@@ -297,15 +301,15 @@ class AsyncEasyCanClient:
         if isinstance(reply, ErrorReply):
             self.stats.drive_errors += 1
             raise DriveError(
-                f"motor {reply.slave} refused {command.what} on {_what_register(command)}: "
+                f"motor {reply.slave} refused {command.what} [{_what_register(command)}]: "
                 f"error 0x{reply.code:02X} {error_text(reply.code)}",
                 code=reply.code, drive_id=reply.slave)
         if (command.echo is not None and isinstance(reply, WriteReply)
                 and reply.values != command.echo):
             shown = "/".join(str(v) for v in reply.values)
             raise DriveError(
-                f"motor {reply.slave} did not apply {command.what} on "
-                f"{_what_register(command)}: it holds {shown} (read-only, out of range, or "
+                f"motor {reply.slave} did not apply {command.what} "
+                f"[{_what_register(command)}]: it holds {shown} (read-only, out of range, or "
                 "modbus_enable 0)", drive_id=reply.slave)
         return reply
 
