@@ -64,6 +64,9 @@ async def test_loaded_caches_wait_for_the_signal_then_start_together() -> None:
         assert [m.position for m in network.motors] == [0, 0, 0]  # nothing moves yet
         await group.signal()  # the trigger
         await asyncio.sleep(0.04)  # mid-acceleration: 400 rpm, ~220 counts per ms
+        now = max(m.time for m in network.motors)
+        for m in network.motors:  # the same instant for all (each runs on its own clock)
+            m.advance_to(now)
         spread = max(m.position for m in network.motors) - min(m.position
                                                                 for m in network.motors)
         assert min(m.position for m in network.motors) > 0 and spread < 150

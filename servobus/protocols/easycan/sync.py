@@ -20,9 +20,11 @@ slot and then yields to the loop (``sleep(0)``) until the slot: on time within t
 microseconds, at the cost of keeping the loop busy for that stretch of every cycle
 (``spin_s=0`` turns it off). A cycle whose slot passed by more than 1.5 ms would reach the
 motors in the next slot's cycle: it is skipped, not sent late (every cache value is an
-absolute position, the next one supersedes it; ``StreamStats.skipped``). After the last
-cycle the stream waits one cycle, so the motors have taken the last positions before a
-``stop()``. Every position of a cycle is range-checked before any frame of it is sent.
+absolute position, the next one supersedes it; ``StreamStats.skipped``). The final
+positions are sent once more in the slot after the last cycle (a skipped or refused last
+cycle would otherwise be lost; resending an absolute position is harmless), and the stream
+then waits one cycle, so the motors have taken them before a ``stop()``. Every position of
+a cycle is range-checked before any frame of it is sent.
 """
 
 from __future__ import annotations
@@ -114,8 +116,9 @@ class SyncGroup:
         stats = StreamStats()
         begin = loop.time()
         slot = max(0, int((begin - self._t0) // self.cycle) + 1)
+        last: list[cmds.EasyCanCommand] = []
         for targets in cycles:
-            caches = self._caches(targets)  # checked before any frame of the cycle
+            caches = last = self._caches(targets)  # checked before any frame of the cycle
             due = self._t0 + slot * self.cycle
             delay = due - loop.time()
             if delay > self.spin_s:
@@ -134,8 +137,12 @@ class SyncGroup:
             stats.frames += len(caches)
             stats.cycles += 1
             slot += 1
-        if stats.cycles:
-            await asyncio.sleep(self.cycle)  # the motors take the last positions
+        if last:  # the final positions once more (skipped or refused, they would be lost)
+            delay = self._t0 + slot * self.cycle - loop.time()
+            if delay > 0:
+                await asyncio.sleep(delay)
+            await self.client.send_only(*last)
+            await asyncio.sleep(self.cycle)  # the motors take them
         stats.elapsed_s = loop.time() - begin
         return stats
 
