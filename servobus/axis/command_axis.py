@@ -288,9 +288,7 @@ class CommandAxis(AsyncAxis):
 
     # ------------------------------------------------------------- connection
     async def sibling(self, drive_id: int) -> CommandAxis:
-        axis = type(self)(self.client, drive_id, owns_client=False)
-        axis.capture_source = self.capture_source  # same connection, same drives' traces
-        return axis
+        return type(self)(self.client, drive_id, owns_client=False)
 
     async def add_trace(self, hook: AxisTraceHook) -> None:
         self.client.add_trace(hook)
