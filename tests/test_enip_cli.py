@@ -114,3 +114,20 @@ def test_drive_commands_over_enip(adapters: list[tuple[str, int, int]]) -> None:
 def test_sim_enip_refuses_bad_addresses() -> None:
     done = servobus("sim", "enip", "--listen", "localhost", "--duration", "0")
     assert done.returncode == 2 and "IPv4" in done.stderr
+
+
+def test_io_ends_normally_on_sigterm(adapters: list[tuple[str, int, int]]) -> None:
+    host, port, _ = adapters[1]
+    proc = subprocess.Popen([sys.executable, "-m", "servobus", "--url",
+                             f"enip://{host}:{port}", "io"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    assert proc.stdout is not None
+    try:
+        assert proc.stdout.readline().startswith("seq")  # watching
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=10)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0 and "stopped by SIGTERM" in err
+    again = servobus("--url", f"enip://{host}:{port}", "io", "--count", "1")
+    assert again.returncode == 0, again.stderr  # the drive takes a new owner

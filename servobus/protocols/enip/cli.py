@@ -180,12 +180,15 @@ def io_cmd(ctx: CliContext, rpi: float, frames: int | None, duration: float | No
             else:
                 click.echo(frame_line(frame))
 
+        stopped = ""
         try:
             stats = axis.monitor_io(on_frame, rpi_ms=rpi, frames=frames, duration=duration)
-        except KeyboardInterrupt:
-            stats = None
+        except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM: the normal end of watching
+            stats, stopped = None, getattr(exc, "signal_name", "Ctrl-C")
+        if show is not None:
+            click.echo()
     if stats is None:
-        note("stopped by Ctrl-C")
+        note(f"stopped by {stopped}")
     else:
         note("I/O: " + ", ".join(f"{k} {v}" for k, v in stats.items()))
 
