@@ -42,6 +42,10 @@ async def test_frames_at_the_rpi_with_sequences_and_timestamps() -> None:
         assert seqs == list(range(seqs[0], seqs[0] + 30))  # consecutive, none missed
         intervals = [b.time - a.time for a, b in itertools.pairwise(frames)]
         assert statistics.median(intervals) == pytest.approx(0.010, abs=0.002)
+        wire = [b.wire_time - a.wire_time for a, b in itertools.pairwise(frames)]
+        assert statistics.median(wire) == pytest.approx(0.010, abs=0.002)
+        # the socket's (kernel) receive time is never after the process saw the frame
+        assert all(-0.001 < f.time - f.wire_time < 0.5 for f in frames)
         assert cyclic.stats.frames >= 30 and cyclic.stats.stale == 0
         assert cyclic.latest is not None and cyclic.latest.sequence >= seqs[-1]
         await asyncio.sleep(0.05)

@@ -20,7 +20,8 @@ header). :class:`CyclicIo` opens it with Forward_Open over the axis's explicit s
   servo state was changed another way;
 * input frames are taken only from the adapter's address, for the T->O connection id, with
   a newer 32-bit sequence number; gaps count as ``missed``, older or repeated frames as
-  ``stale``. Each frame keeps its arrival time (``time.monotonic()``).
+  ``stale``. Each frame keeps its arrival time (``time.monotonic()``) and, on Linux, the
+  kernel's receive time (``wire_time``, ``udp.py``).
 
 Loss detection and reconnect (decisions): the connection is lost when no input frame came
 for the watchdog time, T->O RPI x 4 x 2^``multiplier`` (CIP's connection timeout;
@@ -43,7 +44,6 @@ import itertools
 import logging
 import random
 import socket
-import time
 from collections import deque
 from collections.abc import AsyncIterator, Callable
 from dataclasses import asdict, dataclass
@@ -78,6 +78,7 @@ from servobus.protocols.enip.connection_manager import (
 from servobus.protocols.enip.cpf import ItemType, SockaddrInfo
 from servobus.protocols.enip.epath import LogicalType, Segment, logical
 from servobus.protocols.enip.production import Producer, ProductionWheel
+from servobus.protocols.enip.udp import UdpSocket
 
 if TYPE_CHECKING:
     from servobus.protocols.enip.axis import EnipAxis
@@ -100,13 +101,15 @@ _serials = itertools.count(random.getrandbits(16))
 
 @dataclass(frozen=True)
 class InputFrame:
-    """One T->O frame: arrival time (monotonic s), 32-bit sequence number, 16-bit sequence
-    count and the input image (position counts, speed rpm, torque 2000 = peak, status)."""
+    """One T->O frame: arrival time in this process and at the socket (``time.monotonic()``
+    base, s; ``udp.py``), 32-bit sequence number, 16-bit sequence count and the input image
+    (position counts, speed rpm, torque 2000 = peak, status)."""
 
     time: float
     sequence: int
     count: int
     image: io.InputImage
+    wire_time: float = 0.0  # when the network delivered it (kernel stamp, udp.py); = time
 
     @property
     def position(self) -> int:
@@ -125,7 +128,8 @@ class InputFrame:
         return axis_status(self.image.status)
 
     def as_dict(self) -> dict[str, object]:
-        return {"time": self.time, "sequence": self.sequence, "count": self.count,
+        return {"time": self.time, "wire_time": self.wire_time, "sequence": self.sequence,
+                "count": self.count,
                 "position": self.position, "speed": self.speed, "torque": self.torque,
                 "status": self.image.status}
 
@@ -203,14 +207,6 @@ class FrameStream:
         self._owner.forget(self)
 
 
-class _Receiver(asyncio.DatagramProtocol):
-    def __init__(self, on_datagram: Callable[[bytes, tuple[str, int]], None]) -> None:
-        self.on_datagram = on_datagram
-
-    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
-        self.on_datagram(data, addr)
-
-
 def local_address_for(ip: str) -> str:
     """The local IPv4 address the host routes ``ip`` through (no packet is sent)."""
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
@@ -248,7 +244,7 @@ class CyclicIo:
         self.watchdog_s = watchdog_s(self.rpi_us, multiplier)
         self.api_us = (self.rpi_us, self.rpi_us)  # O->T, T->O as the adapter granted them
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._udp: asyncio.DatagramTransport | None = None
+        self._udp: UdpSocket | None = None
         self._local: tuple[str, int] = ("", 0)
         self._triad: Triad | None = None
         self._o_t_id = 0
@@ -285,13 +281,11 @@ class CyclicIo:
 
     async def open(self) -> None:
         """UDP socket, Forward_Open, O->T production; raises DriveError when refused."""
-        self._loop = loop = asyncio.get_running_loop()
+        self._loop = asyncio.get_running_loop()
         await self.axis.client()
         local_ip = local_address_for(self.axis.ip)
-        transport, _ = await loop.create_datagram_endpoint(
-            lambda: _Receiver(self._datagram), local_addr=(local_ip, 0))
-        self._udp = transport
-        self._local = (local_ip, self._udp.get_extra_info("sockname")[1])
+        self._udp = await UdpSocket.open((local_ip, 0), self._datagram)
+        self._local = self._udp.sockname
         try:
             await self._forward_open()
         except BaseException:
@@ -396,8 +390,7 @@ class CyclicIo:
             return
         self._sequence = (self._sequence + 1) & 0xFFFF_FFFF
         frame = self._packer.pack(self._sequence, self._count, io.RUN_BIT, self._word)
-        with contextlib.suppress(OSError):
-            self._udp.sendto(frame, self._o_t_dest)
+        self._udp.sendto(frame, self._o_t_dest)
         self.stats.sent += 1
 
     def _new_data(self, word: int) -> None:
@@ -462,8 +455,7 @@ class CyclicIo:
         finally:
             self.forget(cast(FrameStream, stream))
 
-    def _datagram(self, data: bytes, addr: tuple[str, int]) -> None:
-        now = time.monotonic()
+    def _datagram(self, data: bytes, addr: tuple[str, int], now: float, wire: float) -> None:
         try:
             conn, seq, count, image = io.unpack_input(data)
         except FramingError:
@@ -480,7 +472,7 @@ class CyclicIo:
             self.stats.missed += (seq - last - 1) & 0xFFFF_FFFF
         self._last_seq = seq
         self._last_rx = now
-        frame = InputFrame(now, seq, count, image)
+        frame = InputFrame(now, seq, count, image, wire)
         self.latest = frame
         self.stats.frames += 1
         if self.on_frame is not None:
