@@ -115,6 +115,18 @@ def test_packer_bytes_equal_the_codec_s(conn: int, seq: int, count: int, pos: in
     assert io.unpack_input(packed) == (conn, seq, count, image)
     out = bytes(io.output_packer(conn).pack(seq, count, io.RUN_BIT, status))
     assert out == io.output_frame(conn, seq, count, io.OutputImage(status))
+    assert io.decode_frame(out) == io.IoFrame.decode(out)  # the adapter's fast path
+
+
+@given(st.binary(min_size=22, max_size=22))
+def test_decode_frame_equals_the_full_decoder(data: bytes) -> None:
+    try:
+        expected = io.IoFrame.decode(data)
+    except FramingError:
+        with pytest.raises(FramingError):
+            io.decode_frame(data)
+        return
+    assert io.decode_frame(data) == expected
 
 
 @given(st.binary(max_size=60))

@@ -177,6 +177,23 @@ def unpack_input(raw: bytes) -> tuple[int, int, int, InputImage]:
     return conn, seq, count, InputImage(*_INPUT.unpack_from(raw, _DATAGRAM.size))
 
 
+_OUTPUT_DATA_LEN = _COUNT.size + _OUTPUT.size
+_OUTPUT_DATAGRAM_SIZE = _DATAGRAM.size + _OUTPUT.size
+
+
+def decode_frame(raw: bytes) -> IoFrame:
+    """:meth:`IoFrame.decode` with a one-struct path for the DYN5's O->T datagram (the
+    adapter reads one per connection every RPI); any other shape takes the full decoder."""
+    if len(raw) == _OUTPUT_DATAGRAM_SIZE:
+        items, addr_type, addr_len, conn, seq, data_type, data_len, count = (
+            _DATAGRAM.unpack_from(raw))
+        if (items, addr_type, addr_len, data_type, data_len) == (
+                2, ItemType.SEQUENCED_ADDRESS, _SEQUENCED_LENGTH, ItemType.CONNECTED_DATA,
+                _OUTPUT_DATA_LEN):
+            return IoFrame(conn, seq, count, raw[_DATAGRAM.size:])
+    return IoFrame.decode(raw)
+
+
 def seq32_newer(new: int, last: int) -> bool:
     """Serial-number order of 32-bit sequence numbers (wraps)."""
     diff = (new - last) & 0xFFFF_FFFF

@@ -352,7 +352,7 @@ class EnipServer:
         if self.down:
             return
         try:
-            frame = io.IoFrame.decode(data)
+            frame = io.decode_frame(data)
         except FramingError as exc:
             self.stats.frames_dropped += 1
             log.debug("malformed Class 1 datagram from %s: %s", addr[0], exc)
