@@ -37,6 +37,7 @@ from collections.abc import Callable, Iterable, Mapping
 from types import TracebackType
 
 from servobus.axis import checks
+from servobus.axis.capture import Capture, CaptureSource
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveTimeout, NotSupported
 from servobus.families.base import AxisStatus, Family, ParamInfo
 from servobus.transport.base import Direction
@@ -174,6 +175,20 @@ class AsyncAxis(ABC):
 
     async def wave_frequency(self, hz: int) -> None:
         raise self.unsupported("waves")
+
+    #: Where :meth:`trace_buffer` reads; set by the in-process virtual drives
+    #: (servobus.sim.capture), None on a link to a drive that keeps no trace.
+    capture_source: CaptureSource | None = None
+
+    async def trace_buffer(self) -> Capture:
+        """The drive's own samples (position, position error, speed, current, status) taken
+        since the previous call, in the Axis units (servobus.axis.capture). The first call
+        starts the recording. NotSupported where the drive keeps no such trace: poll."""
+        source = self.capture_source
+        if source is None:
+            raise NotSupported(f"{self.family.title} over {self.protocol} keeps no sample "
+                               "trace a host can read; poll the axis", family=self.family.name)
+        return source.read(self.drive_id).rescaled(self.counts_per_rev)
 
     # ------------------------------------------------------------- units
     def param_info(self, name: str) -> ParamInfo:

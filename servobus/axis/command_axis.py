@@ -288,7 +288,9 @@ class CommandAxis(AsyncAxis):
 
     # ------------------------------------------------------------- connection
     async def sibling(self, drive_id: int) -> CommandAxis:
-        return type(self)(self.client, drive_id, owns_client=False)
+        axis = type(self)(self.client, drive_id, owns_client=False)
+        axis.capture_source = self.capture_source  # same connection, same drives' traces
+        return axis
 
     async def add_trace(self, hook: AxisTraceHook) -> None:
         self.client.add_trace(hook)

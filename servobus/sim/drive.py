@@ -68,6 +68,7 @@ from servobus.families.dmm.registers import (
     ServoMode,
 )
 from servobus.families.dmm.vocabulary import WAVE_AMPLITUDE_MAX, WAVE_FREQUENCY_MAX_HZ
+from servobus.sim import capture as _capture
 from servobus.sim.core import constants as K
 from servobus.sim.core import interp
 from servobus.sim.core.engine import Gen, Ref, Servo, ServoEngine
@@ -75,6 +76,7 @@ from servobus.sim.core.io import PulseDecoder, PulseFormat
 from servobus.sim.eeprom import EepromStore
 
 AlarmListener = Callable[["VirtualDrive", AlarmCode], None]
+PeriodObserver = Callable[["VirtualDrive"], None]
 
 CONTROL_HZ = K.CONTROL_HZ  # fixed control period (see servobus.sim.core.constants)
 DEFAULT_AXIS_IDS = (1, 2, 3)  # drive ids of X, Y, Z for broadcast interpolation
@@ -106,7 +108,11 @@ class VirtualDrive:
         self._analog_v = 0.0
         self._decoder = PulseDecoder()
         self.zri_count = 0
+        #: Called after every control period when set (servobus.sim.capture records the
+        #: drive's 4 kHz trace with it); None runs the periods in one batch.
+        self.period_observer: PeriodObserver | None = None
         self._power_on()
+        _capture.note_created(self)
 
     # ---------------------------------------------------------------- lifecycle
     def _power_on(self) -> None:
@@ -274,6 +280,12 @@ class VirtualDrive:
             motion_busy=self._engine.busy,
             jp3_pin2=self._analog_v > K.JP3_PIN2_HIGH_V,
         )
+
+    def trace_flags(self) -> tuple[bool, bool, bool, bool]:
+        """(servo on, motion busy, on position, alarm) as peek_status has them, without
+        building a DriveStatus (servobus.sim.capture reads it every control period)."""
+        return (not self.servo_free, self._engine.busy, self._on_position(),
+                self._alarm is not AlarmCode.NONE or self._crc_notice)
 
     def _on_position(self) -> bool:
         eng = self._engine
@@ -636,6 +648,16 @@ class VirtualDrive:
         return round(self._engine.p - self._origin)
 
     @property
+    def position_error(self) -> float:
+        """Commanded reference - actual position, counts (what a drive's trace shows)."""
+        return self._engine.ref - self._engine.p
+
+    @property
+    def periods(self) -> int:
+        """Control periods run since creation (period ``k`` ends at ``k / CONTROL_HZ`` s)."""
+        return self._engine.steps
+
+    @property
     def speed_rpm(self) -> float:
         return U.counts_per_s_to_rpm(self._engine.w)
 
@@ -670,7 +692,11 @@ class VirtualDrive:
         rev0 = math.floor(eng.p / U.COUNTS_PER_REV)
         while n > 0:
             before = eng.steps
-            eng.run(n)
+            observer = self.period_observer
+            if observer is None:
+                eng.run(n)
+            elif eng.run(1):
+                observer(self)
             n -= eng.steps - before
             if eng.trip_code is not AlarmCode.NONE:
                 self._latch(eng.trip_code)

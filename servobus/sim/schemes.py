@@ -7,6 +7,9 @@ in-process virtual drive in its ``SIM`` table (``sim://dyn232``, ``sim://dyncan`
 Options every protocol's virtual drive takes: ``ids=1,2,3`` (default: the id asked for, else
 the protocol's factory id), ``fast=1`` (no wire pacing), ``state=FILE`` (EEPROM kept in a
 JSON file), ``model=NAME`` (motor/drive model).
+
+Every ``sim://`` axis reads its virtual drives' 4 kHz trace with ``trace_buffer()``
+(servobus.sim.capture), whatever the protocol.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 from servobus.axis import registry
 from servobus.axis.url import DriveUrl
 from servobus.errors import ArgumentRangeError
+from servobus.sim import capture
 
 if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis
@@ -37,5 +41,8 @@ async def open_axis(url: DriveUrl, *, drive_id: int | None = None, **keywords: A
             f"no virtual drive {name!r} in {url.raw!r}; known: sim://"
             + ", sim://".join(sorted(sim_protocols())))
     opener = registry.load(target)
-    axis: AsyncAxis = await opener(url, drive_id=drive_id, **keywords)
+    with capture.collecting() as drives:  # the virtual drives this axis talks to
+        axis: AsyncAxis = await opener(url, drive_id=drive_id, **keywords)
+    if drives and axis.capture_source is None:
+        axis.capture_source = capture.SimCapture(drives)  # trace_buffer(): their 4 kHz trace
     return axis
