@@ -262,6 +262,9 @@ def test_sine_wave_after_frequency(adapter: Dyn5Adapter) -> None:
 
 
 def test_torque_mode(adapter: Dyn5Adapter) -> None:
+    # a load: the bare rotor would reach its back-EMF speed limit (docs/virtual-drive.md)
+    # within 0.1 s, where the torque - and so the current - falls away
+    adapter.drive.set_load(inertia=5e-3)
     assert value(adapter, 0x26) == 0
     assert status(put(adapter, 0x25, 0xFFFF)) == 0 and value(adapter, 0x25) == 0xFFFF
     assert status(put(adapter, 0x26, 150)) == 0 and value(adapter, 0x26) == 150

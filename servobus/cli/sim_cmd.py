@@ -13,7 +13,10 @@ def sim_group() -> None:
 
 
 def register(group: click.Group) -> None:
+    from servobus.cli.sim_control_cmd import control_group
+
     group.add_command(sim_group)
+    sim_group.add_command(control_group)  # the control channel client (no protocol)
 
 
 def add_sim_command(group: click.Group, command: click.Command,

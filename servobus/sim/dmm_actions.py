@@ -12,7 +12,7 @@ from collections.abc import Callable
 from servobus.families.dmm.vocabulary import GeneralReadSelector as GR
 from servobus.sim.drive import VirtualDrive
 
-ACTIONS: dict[GR, Callable[[VirtualDrive], None]] = {
+ACTIONS: dict[GR, Callable[[VirtualDrive], object]] = {
     GR.RESET: VirtualDrive.reset,
     GR.ENABLE: VirtualDrive.enable,
     GR.DISABLE: VirtualDrive.disable,

@@ -16,6 +16,15 @@ servo free, wrong servo/command mode, invalid value); the front end decides what
 says about that. Motion commands are accepted in position servo mode with the RS232 command
 mode (manual 4.4: in pulse/analog modes the serial port only sets and reads parameters).
 
+**Commands versus reads, in one place** (``accepts_commands``): while an alarm is latched
+(6.1: "All commands including pulse, analog and RS232 will be ignored"), while an absolute
+mode drive returns to its zero after power-on (7.3 b2; DYN CAN 6: it "moves to the set
+absolute zero position, then starts accepting command") and while the drive is powered off,
+every command is ignored and returns False: motion, pulses, parameter / group / config / id
+writes, Set_Origin, servo on/off, waves, torque mode. Nothing reaches the EEPROM. Reads are
+always answered while powered (6.1: "Power still remains in the logic circuit for drive
+diagnostic and drive status reading"); ``reset()`` (the power cycle) always works.
+
 Public additions beyond the DYN232M set (contract for the other front ends and tests):
 
 * ``move_direct(command) -> bool``: DYN CAN Position Direct (0x1C): relative to the current
@@ -34,7 +43,14 @@ Public additions beyond the DYN232M set (contract for the other front ends and t
 * Outputs: ``onpos_output`` (None when JP3-9 is BKO), ``alarm_output``, ``zri_output``,
   ``zri_count``, ``brake_released`` (BKO, only when OnRange was 127 at power-on, else None).
 * World: ``set_load(inertia=, friction=)``, ``set_disturbance(nm)``, ``set_blocked(bool)``,
-  ``set_bus_voltage(volts)`` (> 80 V trips over voltage), ``current_a``, ``heat_fraction``.
+  ``set_bus_voltage(volts)`` (> 80 V trips over voltage; the motor's top speed follows the
+  bus, see servobus.sim.core.constants), ``set_encoder_fault(bool)`` (lost phase while set),
+  ``overheat(temperature_c)``, ``current_a``, ``heat_fraction``, ``temperature_c``,
+  ``reference_counts``, ``following_error_counts``.
+* Power: ``powered``, ``power_cycle(off_s)`` (off for ``off_s`` simulated seconds, then the
+  power-on of ``reset()``), ``supply_dip(volts, seconds)`` (the bus at ``volts`` for a while;
+  below the 24 V minimum input (2.5) the drive is off meanwhile and powers on afterwards).
+  A powered-off drive answers nothing: front ends skip it (``powered``).
 
 Hooks for front ends of other families (YZ-AIM, servobus.sim.yzaim_motor), which keep their
 own registers and units on top of this core:
@@ -72,7 +88,7 @@ from servobus.sim import capture as _capture
 from servobus.sim.core import constants as K
 from servobus.sim.core import interp
 from servobus.sim.core.engine import Gen, Ref, Servo, ServoEngine
-from servobus.sim.core.io import PulseDecoder, PulseFormat
+from servobus.sim.core.io import PulseDecoder, PulseFormat, pulse_period
 from servobus.sim.eeprom import EepromStore
 
 AlarmListener = Callable[["VirtualDrive", AlarmCode], None]
@@ -108,6 +124,11 @@ class VirtualDrive:
         self._analog_v = 0.0
         self._decoder = PulseDecoder()
         self.zri_count = 0
+        self._powered = True
+        self._encoder_fault = False
+        self._line_direction: tuple[float, float, float] | None = None  # the running line
+        self._timers: list[tuple[float, int, Callable[[], None]]] = []  # (time, seq, action)
+        self._timer_seq = 0
         #: Called after every control period when set (servobus.sim.capture records the
         #: drive's 4 kHz trace with it); None runs the periods in one batch.
         self.period_observer: PeriodObserver | None = None
@@ -130,6 +151,9 @@ class VirtualDrive:
         self._group2_writes = 0
         self._feed_scale = 1.0
         self._bko_mode = self._ram["on_range"] == 127  # 4.6: takes effect after power cycle
+        self._powered = True
+        self._homing = False
+        self._line_direction = None
         eng.power_on()
         eng.servo = Servo.FREE
         self._apply_params()
@@ -142,11 +166,73 @@ class VirtualDrive:
             self._origin = eng.p  # relative mode: reads 0 after power-on
         self._apply_servo()
         if self._config.absolute and eng.servo == Servo.POSITION:
+            self._homing = True  # commands are ignored until the zero is reached (7.3)
             self._go(self._origin)
 
     def reset(self) -> None:
         """Power cycle (also the DYN232M General_Read 0x1C selector): clears a latched alarm."""
+        self._timers = [tm for tm in self._timers if tm[2] != self._power_on]
         self._power_on()
+
+    @property
+    def powered(self) -> bool:
+        return self._powered
+
+    def power_cycle(self, off_s: float = 0.0) -> None:
+        """Power off for ``off_s`` simulated seconds (the shaft coasts, nothing answers),
+        then power on as ``reset()`` does; 0 is ``reset()`` at once."""
+        if off_s <= 0.0:
+            self.reset()
+            return
+        self._power_off()
+        self._at(self.time + off_s, self._power_on)
+
+    def _power_off(self) -> None:
+        self._powered = False
+        self._homing = False
+        self._timers = [tm for tm in self._timers if tm[2] != self._power_on]
+        self._apply_servo()
+
+    def supply_dip(self, volts: float, seconds: float) -> None:
+        """The DC supply at ``volts`` for ``seconds``, then back to where it was. Decision:
+        below the 24 V minimum operating input (2.5) the drive is off for the dip and powers
+        on when the supply returns (a brown-out is a power cycle); above it the drive keeps
+        running with the lower voltage limit (speed falls, following error grows)."""
+        before = self.bus_voltage
+        off = volts < K.MIN_INPUT_V
+        if off:
+            self._power_off()
+        self.set_bus_voltage(volts)
+
+        def restore() -> None:
+            self.set_bus_voltage(before)
+            if off:
+                self._power_on()
+
+        self._at(self.time + max(0.0, seconds), restore)
+
+    def _at(self, when: float, action: Callable[[], None]) -> None:
+        """Run ``action`` when simulated time reaches ``when`` (advance_to splits there)."""
+        self._timer_seq += 1
+        self._timers.append((when, self._timer_seq, action))
+        self._timers.sort(key=lambda tm: (tm[0], tm[1]))
+
+    @property
+    def accepts_commands(self) -> bool:
+        """False while alarmed, homing in absolute mode or powered off (module docstring)."""
+        return self._powered and not self._alarm.latching and not self._homing
+
+    @property
+    def homing(self) -> bool:
+        """Absolute mode after power-on: returning to the stored zero (commands ignored)."""
+        return self._homing
+
+    def _update_homing(self) -> None:
+        eng = self._engine
+        if self._homing and (eng.servo != Servo.POSITION or not eng.busy):
+            self._homing = False
+            if self._config.command_mode is CommandMode.ANALOG:
+                self._apply_analog()  # the analog position input takes over from the zero
 
     # ---------------------------------------------------------------- identity
     @property
@@ -155,7 +241,7 @@ class VirtualDrive:
 
     def assign_id(self, new_id: int) -> bool:
         """Takes effect at once and persists (EEPROM)."""
-        if not 0 <= new_id <= 126:
+        if not 0 <= new_id <= 126 or not self.accepts_commands:
             return False
         self.eeprom.write_id(new_id)
         return True
@@ -180,6 +266,8 @@ class VirtualDrive:
         spec = P.spec(name)
         if isinstance(value, bool) or not isinstance(value, int) or not spec.valid(value):
             return False
+        if not self.accepts_commands:
+            return False
         self._ram[spec.name] = value
         if not ram_only and spec.storage is P.Storage.EEPROM:
             self.eeprom.write_param(spec.name, value)
@@ -190,6 +278,8 @@ class VirtualDrive:
         """DYN CAN Set_Param_Group2 (see class docstring for the EEPROM quirk)."""
         values = {"max_speed": max_speed, "max_accel": max_accel}
         if any(v != 0 and not P.spec(n).valid(v) for n, v in values.items()):
+            return False
+        if not self.accepts_commands:
             return False
         to_eeprom = self._group2_writes < K.GROUP2_EEPROM_WRITES
         self._group2_writes += 1
@@ -308,7 +398,7 @@ class VirtualDrive:
 
     def set_config(self, value: int) -> bool:
         """Config byte (7.3); stored in EEPROM. b6 is TBD and dropped."""
-        if not 0 <= value <= 0x7F:
+        if not 0 <= value <= 0x7F or not self.accepts_commands:
             return False
         cfg = DriveConfig.from_byte(value)  # drops the undefined b6
         self._config = cfg
@@ -318,25 +408,32 @@ class VirtualDrive:
 
     @property
     def servo_free(self) -> bool:
-        return self._config.free or self._alarm.latching or not self._enable_input
+        return (self._config.free or self._alarm.latching or not self._enable_input
+                or not self._powered)
 
     @property
     def alarm(self) -> AlarmCode:
         return self._alarm
 
-    def enable(self) -> None:
+    def enable(self) -> bool:
         """Servo on (General_Read 0x20). Decision: RAM only, to spare the EEPROM."""
+        if not self.accepts_commands:
+            return False
         self._config = replace(self._config, free=False)
         self._apply_servo()
+        return True
 
-    def disable(self) -> None:
+    def disable(self) -> bool:
         """Servo off, motor free (General_Read 0x21). RAM only, like enable()."""
+        if not self.accepts_commands:
+            return False
         self._config = replace(self._config, free=True)
         self._apply_servo()
+        return True
 
     def trip(self, code: AlarmCode) -> None:
         """Latch an alarm: motor free, commands ignored until reset()."""
-        if self._alarm.latching or not code.latching:
+        if self._alarm.latching or not code.latching or not self._powered:
             return
         self._engine._trip(code)
         self._latch(code)
@@ -363,12 +460,14 @@ class VirtualDrive:
             if mode == Servo.FREE:
                 eng.tq = eng.tq_cmd = 0.0
             eng.speed_ref = 0.0
+            self._update_homing()
             self._apply_analog()
         eng.wake()
 
     # ---------------------------------------------------------------- motion
     def _accepts_motion(self) -> bool:
-        return (not self.servo_free and self._config.servo_mode is ServoMode.POSITION
+        return (self.accepts_commands and not self.servo_free
+                and self._config.servo_mode is ServoMode.POSITION
                 and self._config.command_mode is CommandMode.RS232)
 
     def _counts(self, command: float) -> float:
@@ -390,11 +489,14 @@ class VirtualDrive:
         dist = abs(target - eng.ref)
         eng.go_to(target, self._smoothing(dist) if smooth else 0.0)
 
-    def set_origin(self) -> None:
+    def set_origin(self) -> bool:
         """The current motor position becomes 0; stored as the absolute zero (EEPROM)."""
+        if not self.accepts_commands:
+            return False
         eng = self._engine
         self._origin = eng.p
         self.eeprom.write_origin(round(eng.p) % U.COUNTS_PER_REV)
+        return True
 
     def move_absolute(self, command: int) -> bool:
         if not self._accepts_motion():
@@ -433,6 +535,8 @@ class VirtualDrive:
         """DYN5 Command Mode Switch: torque servo (True) or position/speed servo (False).
 
         RAM only, like enable(); the current reference restarts at 0 A."""
+        if not self.accepts_commands:
+            return
         mode = ServoMode.TORQUE if torque else ServoMode.POSITION
         if self._config.servo_mode is not mode:
             self._config = replace(self._config, servo_mode=mode)
@@ -467,7 +571,7 @@ class VirtualDrive:
 
     def set_wave_frequency(self, hz: int) -> bool:
         """SS_Frequency in Hz (shared by both waves); 0 stops the wave."""
-        if not 0 <= hz <= WAVE_FREQUENCY_MAX_HZ:
+        if not 0 <= hz <= WAVE_FREQUENCY_MAX_HZ or not self.accepts_commands:
             return False
         self._wave_hz = hz
         if self._accepts_motion():
@@ -485,6 +589,8 @@ class VirtualDrive:
 
     def linear_line_word(self, value: int) -> bool:
         """One of the four broadcast Make_LinearLine words (dX, dY, dZ, feedrate)."""
+        if not self.accepts_commands:
+            return False
         self._line_words.append(value)
         if len(self._line_words) < 4:
             return True
@@ -498,6 +604,8 @@ class VirtualDrive:
 
     def circular_arc_word(self, value: int) -> bool:
         """One of the five broadcast Make_CircularArc words."""
+        if not self.accepts_commands:
+            return False
         self._arc_words.append(value)
         if len(self._arc_words) < 5:
             return True
@@ -509,13 +617,31 @@ class VirtualDrive:
             return False
         plane, _ = PR.unpack_arc_word(words[4])
         if plane in interp.PLANES and axis not in interp.PLANES[plane]:
+            self._line_direction = None  # the path every axis shares is no longer a line
             return True  # the third axis does not move
         return self._run_path(interp.arc_path(words, axis, self._counts(1)))
 
     def _run_path(self, path: interp.AxisPath | None) -> bool:
+        """Start a path where the reference is now (its end point is exact) and carry the
+        speed under way over (DTPU, 7.5; servobus.sim.core.engine.ServoEngine.go_path).
+
+        Decision: a line that interrupts a running line starts at the old line's path speed
+        projected on its direction (every axis drive runs every line, so all axes compute
+        the same start and stay on the path; a line in the same direction keeps cruising).
+        Any other path starts from rest. What the path does not take over of this axis'
+        reference speed is handed over and decays within Max Accel. A point-to-point move or
+        constant speed during a path continues from the axis reference's speed (the S-curve
+        generator's own DTPU)."""
         if path is None:
             return False
         eng = self._engine
+        start_speed = 0.0
+        old = self._line_direction
+        if old is not None and path.direction is not None and eng.path is not None:
+            cosine = sum(a * b for a, b in zip(old, path.direction, strict=True))
+            start_speed = max(0.0, eng.path_speed * cosine)
+        self._line_direction = path.direction
+        axis_speed = eng.vff if eng.servo == Servo.POSITION else 0.0
         self._feed_scale = path.feed_scale
         self._apply_profile()
         start = eng.ref
@@ -524,7 +650,8 @@ class VirtualDrive:
         def to_counts(s: float) -> float:
             return start + at(s)
 
-        eng.go_path(path.length, to_counts, self._smoothing(path.length))
+        eng.go_path(path.length, to_counts, self._smoothing(path.length),
+                    start_speed=start_speed, handover=axis_speed - start_speed * path.slope)
         return True
 
     # ---------------------------------------------------------------- inputs (JP3)
@@ -539,7 +666,8 @@ class VirtualDrive:
         self._decoder.format = PulseFormat(fmt)
 
     def _accepts_pulses(self) -> bool:
-        return (not self.servo_free and self._config.servo_mode is ServoMode.POSITION
+        return (self.accepts_commands and not self.servo_free
+                and self._config.servo_mode is ServoMode.POSITION
                 and self._config.command_mode in (CommandMode.CW_CCW, CommandMode.PULSE_DIR))
 
     def input_pulses(self, count: int, seconds: float = 0.0) -> bool:
@@ -552,22 +680,53 @@ class VirtualDrive:
     def input_pulse_levels(self, samples: Iterable[tuple[bool, bool]],
                            seconds: float = 0.0) -> int:
         """Decode (pin 6, pin 4) level samples; returns the pulses taken (0 if ignored)."""
+        count = self._decode(samples)
+        return count if count and self.input_pulses(count, seconds) else 0
+
+    def _decode(self, samples: Iterable[tuple[bool, bool]]) -> int:
         dec = self._decoder
         if self._config.command_mode is CommandMode.CW_CCW:
             saved, dec.format = dec.format, PulseFormat.CW_CCW
             count = dec.feed(samples)
             dec.format = saved
-        else:
-            count = dec.feed(samples)
-        return count if count and self.input_pulses(count, seconds) else 0
+            return count
+        return dec.feed(samples)
+
+    def input_pulse_train(self, fmt: PulseFormat | str, count: int,
+                          seconds: float = 0.0) -> int:
+        """A train of ``count`` signed pulses in ``fmt`` on JP3-3..6 over ``seconds``, as
+        the drive decodes it (its own format: a train in another format counts what that
+        decoder sees, as on a miswired machine). Returns the pulses taken (0 if ignored).
+
+        Decoded one period at a time: the train is periodic, so the first period and one
+        steady period give the count of any length without sampling every edge."""
+        if count == 0:
+            return 0
+        period = pulse_period(PulseFormat(fmt), count > 0)
+        first = self._decode(period)
+        steady = self._decode(period) if abs(count) > 1 else 0
+        total = first + (abs(count) - 1) * steady
+        return total if total and self.input_pulses(total, seconds) else 0
 
     def set_analog_input(self, volts: float) -> None:
         """JP3-2 analog reference (clamped to the +-12 V input limit)."""
-        self._analog_v = max(-12.0, min(12.0, float(volts)))
+        lim = K.ANALOG_INPUT_MAX_V
+        self._analog_v = max(-lim, min(lim, float(volts)))
         self._apply_analog()
+
+    @property
+    def analog_input(self) -> float:
+        return self._analog_v
+
+    @property
+    def enable_input(self) -> bool:
+        """JP3-11 ENA as last set: True = drive enabled (no disable signal)."""
+        return self._enable_input
 
     def _apply_analog(self) -> None:
         eng = self._engine
+        if self._homing:
+            return  # the level is applied once the zero is reached (_update_homing)
         v = self._analog_v
         if eng.servo == Servo.SPEED:
             eng.speed_target = U.rpm_to_counts_per_s(v * U.ANALOG_SPEED_RPM_PER_V)
@@ -599,11 +758,13 @@ class VirtualDrive:
     @property
     def alarm_output(self) -> bool:
         """JP3-8 ALM: True (transistor ON, LOW) while an alarm is latched."""
-        return self._alarm.latching
+        return self._alarm.latching and self._powered
 
     @property
     def zri_output(self) -> bool:
         """JP3-10 ZRI: True (LOW) while the shaft is at the encoder's zero index."""
+        if not self._powered:
+            return False  # every output transistor is off (HIGH) without power
         a = self._engine.p % U.COUNTS_PER_REV
         return min(a, U.COUNTS_PER_REV - a) <= K.ZRI_HALF_WIDTH_COUNTS
 
@@ -629,18 +790,41 @@ class VirtualDrive:
             self._engine.w = 0.0
         self._engine.wake()
 
+    def world(self) -> dict[str, float | bool]:
+        """The simulated world around the drive as set by set_load, set_disturbance,
+        set_blocked and set_encoder_fault (the control channel's state readout)."""
+        eng = self._engine
+        return {"load_inertia_kgm2": eng.load_inertia, "load_friction_nm": eng.load_friction,
+                "load_torque_nm": eng.disturbance, "blocked": eng.blocked,
+                "encoder_fault": self._encoder_fault}
+
     @property
     def bus_voltage(self) -> float:
         return self._engine.bus_voltage
 
     def set_bus_voltage(self, volts: float) -> None:
         """DC bus; above 80 V the over-voltage alarm trips (2.5)."""
-        self._engine.bus_voltage = float(volts)
-        self._check_bus()
+        self._engine.set_bus_voltage(volts)
+        self._check_faults()
 
-    def _check_bus(self) -> None:
-        if self._protections and self._engine.bus_voltage > U.OVER_VOLTAGE_V:
+    def set_encoder_fault(self, faulty: bool) -> None:
+        """Encoder feedback lost (cable, sensor): the drive cannot resolve the motor position
+        and trips lost phase (6.1: "The encoder has detected an irresolvable position error")
+        at once, and again after every power cycle while the fault stays."""
+        self._encoder_fault = bool(faulty)
+        self._check_faults()
+
+    @property
+    def encoder_fault(self) -> bool:
+        return self._encoder_fault
+
+    def _check_faults(self) -> None:
+        if not self._protections:
+            return
+        if self._engine.bus_voltage > U.OVER_VOLTAGE_V:
             self.trip(AlarmCode.OVER_VOLTAGE)
+        elif self._encoder_fault:
+            self.trip(AlarmCode.LOST_PHASE)
 
     # ---------------------------------------------------------------- readouts
     @property
@@ -675,12 +859,47 @@ class VirtualDrive:
         """I^2 t thermal state relative to the over-power trip level (1.0 trips)."""
         return self._engine.heat / self._engine.heat_trip
 
+    @property
+    def temperature_c(self) -> float:
+        """Power stage temperature, read from the I^2 t state (constants.OVERHEAT_C)."""
+        return K.AMBIENT_C + (K.OVERHEAT_C - K.AMBIENT_C) * self.heat_fraction
+
+    def overheat(self, temperature_c: float) -> None:
+        """The power stage at ``temperature_c`` (from outside: a blocked heat sink, a hot
+        cabinet); at or above the trip temperature the overheat alarm trips at once. It then
+        cools with the I^2 t time constant, like a warm drive across a power cycle (a reset
+        before it has cooled below the trip level trips again, 6.1: fix the cause first)."""
+        eng = self._engine
+        frac = (float(temperature_c) - K.AMBIENT_C) / (K.OVERHEAT_C - K.AMBIENT_C)
+        eng.heat = max(0.0, frac) * eng.heat_trip
+        eng.wake()
+        if frac >= 1.0 and self._protections:
+            self.trip(AlarmCode.OVERHEAT)
+
+    @property
+    def reference_counts(self) -> float:
+        """Where the reference (Pset) is now, counts from the origin."""
+        return self._engine.ref - self._origin
+
+    @property
+    def following_error_counts(self) -> float:
+        """Pset - Pmotor in counts (positive: the motor lags a positive move)."""
+        eng = self._engine
+        return eng.ref - eng.p
+
     # ---------------------------------------------------------------- time
     def advance(self, seconds: float) -> None:
         self.advance_to(self.time + seconds)
 
     def advance_to(self, t: float) -> None:
-        """Run every control period up to simulated time ``t``."""
+        """Run every control period up to simulated time ``t`` (and any timed event)."""
+        while self._timers and self._timers[0][0] <= t:
+            when, _, action = self._timers.pop(0)
+            self._step_to(when)
+            action()
+        self._step_to(t)
+
+    def _step_to(self, t: float) -> None:
         if t <= self.time:
             return
         self.time = t
@@ -688,7 +907,7 @@ class VirtualDrive:
         n = math.floor(t * CONTROL_HZ + 1e-6) - eng.steps
         if n <= 0:
             return
-        self._check_bus()
+        self._check_faults()
         rev0 = math.floor(eng.p / U.COUNTS_PER_REV)
         while n > 0:
             before = eng.steps
@@ -702,4 +921,5 @@ class VirtualDrive:
                 self._latch(eng.trip_code)
             elif eng.steps == before:
                 break
+        self._update_homing()
         self.zri_count += abs(math.floor(eng.p / U.COUNTS_PER_REV) - rev0)

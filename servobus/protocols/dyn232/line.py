@@ -30,6 +30,14 @@ Decisions where the manual is silent (kept here, in one place):
   Assign_Drive_ID accepts 0..63 only (64..126 are reserved, 127 is broadcast).
 * **Readouts that do not fit the packet.** The position readout is the low 28 bits of the
   drive's position counter, as two's complement (the wire carries 28-bit signed data).
+* **During an alarm** (6.1: "All commands including pulse, analog and RS232 will be
+  ignored") the drive core ignores every command (``VirtualDrive.accepts_commands``):
+  motion, parameter, config and id writes, Set_Origin, servo on/off; none of them replies
+  on DYN232M anyway, so the wire shows nothing. Reads (status, config, id, parameters,
+  General_Read position/speed/torque) are answered, and the 0x1C reset (a power cycle)
+  works. The same while an absolute-mode drive returns to its zero after power-on (7.3).
+* **Powered off** (``VirtualDrive.power_cycle``, ``supply_dip``): the drive neither
+  executes nor answers anything.
 * ForMotorDefine (0x0F) is DMM-internal and ignored; unknown General_Read selectors are
   ignored (no reply).
 """
@@ -122,8 +130,8 @@ class Dyn232Line:
 
     def addressed(self, drive_id: int) -> list[VirtualDrive]:
         if drive_id == c.BROADCAST_ID:
-            return list(self.drives)
-        return [d for d in self.drives if d.drive_id == drive_id]
+            return [d for d in self.drives if d.powered]
+        return [d for d in self.drives if d.drive_id == drive_id and d.powered]
 
     def execute(self, packet: c.Packet) -> bytes:
         """Run a valid host packet on every drive it addresses; return the reply bytes."""
@@ -169,7 +177,7 @@ class Dyn232Line:
         reply = b""
         n_replies = 0
         for drive in self.drives:  # every addressed drive executes, answering or not
-            if target != c.BROADCAST_ID and drive.drive_id != target:
+            if (target != c.BROADCAST_ID and drive.drive_id != target) or not drive.powered:
                 continue
             result = handler(drive, value)
             if reply_fn is not None and result is not None:

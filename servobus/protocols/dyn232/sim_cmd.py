@@ -5,6 +5,7 @@ stdout gets one line per endpoint, flushed at once, so scripts and tests can rea
     listening on tcp://127.0.0.1:40123
     pty /dev/pts/7
     tap on tcp://127.0.0.1:40124
+    control on tcp://127.0.0.1:40125
 
 Everything else (drive list, warnings, one line per abuse event, statistics) goes to stderr.
 An address that cannot be bound ends the command with one ``error: ...`` line, exit code 2.
@@ -15,6 +16,7 @@ from __future__ import annotations
 import click
 
 from servobus.cli.sim_cmd import add_sim_command
+from servobus.cli.sim_control import control_option, start_control
 from servobus.errors import ArgumentRangeError
 from servobus.families.dmm import units as U
 from servobus.protocols.dyn232.codec import FACTORY_ID
@@ -52,8 +54,10 @@ def _tcp(option: str, value: str | None) -> tuple[str, int] | None:
 @click.option("--max-clients", type=click.IntRange(min=1), default=DEFAULT_MAX_CLIENTS,
               show_default=True, help="TCP connections (line and tap) served at once; more "
                                       "are closed at once")
+@control_option
 def sim_dyn2_cmd(listen: str | None, ids: str | None, pty: bool, fast: bool, state: str | None,
-                 tap: str | None, model: str, duration: float | None, max_clients: int) -> None:
+                 tap: str | None, model: str, duration: float | None, max_clients: int,
+                 control: tuple[str, int] | None) -> None:
     """Virtual DYN2/DC2 drives sharing one RS485 line (DYN232M protocol)."""
     log_to_stderr()
     try:
@@ -68,9 +72,13 @@ def sim_dyn2_cmd(listen: str | None, ids: str | None, pty: bool, fast: bool, sta
     pacing = "unpaced (--fast)" if fast else "paced at 38400 8N1"
     banner = (f"servobus sim dyn232: {len(drives)} {model} drive(s), ids "
               f"{','.join(str(d.drive_id) for d in drives)}, {pacing}")
+
+    def ready() -> None:
+        click.echo(banner, err=True)
+        start_control(control, drives)
+
     server = run_server(drives, listen=endpoint, pty=pty, tap=tap_endpoint, paced=not fast,
-                        duration=duration, max_clients=max_clients,
-                        ready=lambda: click.echo(banner, err=True))
+                        duration=duration, max_clients=max_clients, ready=ready)
     line = server.line
     click.echo(f"stopped: {line.packets} packet(s), {line.checksum_errors} checksum error(s), "
                f"{line.framing_errors} framing error(s), {server.runner.rx_dropped} byte(s) "

@@ -30,6 +30,16 @@ Decisions where the manual is silent (kept here, in one place):
   disable (the DYN232M selectors: same firmware).
 * **Alarm push:** when a drive alarms the node queues Drive Error 0xEE on its own
   identifier (``DynCanNetwork.outbox``); servers send it at once.
+* **During an alarm** (6.1: "All commands ... will be ignored") every command is ignored
+  by the drive core (``VirtualDrive.accepts_commands``: motion, sync loads, parameter,
+  config and id writes, Set_Origin, servo on/off, waves) and nothing is answered: the
+  manual's Drive Error codes are 0xFF "data not within range" and 0xEE "alarmed", and 0xEE
+  was pushed when the alarm tripped. A frame whose data is outside its range is still
+  answered 0xFF: that check is on the frame, before the drive acts on it. Reads are
+  answered (6.1: the logic stays powered "for drive diagnostic and drive status reading").
+  The same holds while an absolute-mode drive returns to its zero after power-on (section
+  6, Set_Origin: "then starts accepting command").
+* **Powered off** (``VirtualDrive.power_cycle``, ``supply_dip``): the node answers nothing.
 * **Diagnostic counter:** unsigned 8 bits, starts at 0 at power-on, the value sent is the
   count before the increment (+1 per read, 255 wraps to 0).
 """
@@ -132,8 +142,8 @@ class DynCanNetwork:
 
     def addressed(self, drive_id: int) -> list[DynCanNode]:
         if drive_id == c.BROADCAST_ID:
-            return list(self.nodes)
-        return [n for n in self.nodes if n.drive_id == drive_id]
+            return [n for n in self.nodes if n.drive.powered]
+        return [n for n in self.nodes if n.drive_id == drive_id and n.drive.powered]
 
     def handle_raw(self, arbitration_id: int, data: bytes) -> list[c.Frame]:
         try:
@@ -216,6 +226,8 @@ def _assign_id(node: DynCanNode, frame: c.Frame) -> None:
 def _load_sync(absolute: bool) -> Handler:
     def load(node: DynCanNode, frame: c.Frame) -> None:
         value = _checked(frame)
+        if not node.drive.accepts_commands:  # 6.1: ignored during an alarm, not loaded
+            return
         if absolute:
             node.sync_absolute = value
         else:

@@ -3,6 +3,7 @@
 stdout gets one line, flushed at once, so scripts and tests can read the port::
 
     listening on socketcand 127.0.0.1:40123
+    control on tcp://127.0.0.1:40124          (with --control)
 
 Connect with python-can (``interface="socketcand", host=..., port=..., channel="can0"``) or
 ``servobus --can socketcand:127.0.0.1:40123 --id 1 status``. Everything else (warnings, one
@@ -21,6 +22,7 @@ from collections.abc import Sequence
 import click
 
 from servobus.cli.sim_cmd import add_sim_command
+from servobus.cli.sim_control import control_option, start_control
 from servobus.errors import ArgumentRangeError
 from servobus.families.dmm import units as U
 from servobus.protocols.dyncan import codec as c
@@ -38,6 +40,7 @@ async def run_socketcand_nodes(drives: Sequence[VirtualDrive], host: str, port: 
                                bitrate: int = 1_000_000,
                                max_clients: int = DEFAULT_MAX_CLIENTS,
                                banner: str | None = None,
+                               control: tuple[str, int] | None = None,
                                ) -> tuple[DynCanNetwork, SocketcandHub]:
     """Serve ``drives`` as DYN CAN nodes until ``duration`` passes or SIGINT/SIGTERM."""
     network = DynCanNetwork(drives)
@@ -55,8 +58,14 @@ async def run_socketcand_nodes(drives: Sequence[VirtualDrive], host: str, port: 
             loop.add_signal_handler(sig, stop.set)
     if duration is not None:
         loop.call_later(duration, stop.set)
+    clock = RealtimeClock(network.drives)
     try:
-        await serve(network, node_port, clock=RealtimeClock(network.drives), stop=stop)
+        controller = start_control(control, network.drives, clock=clock)
+        try:
+            await serve(network, node_port, clock=clock, stop=stop)
+        finally:
+            if controller is not None:
+                await controller.close()
     finally:
         await hub.close()
     return network, hub
@@ -79,8 +88,10 @@ async def run_socketcand_nodes(drives: Sequence[VirtualDrive], host: str, port: 
               help="stop by itself after this many seconds [default: run until Ctrl-C]")
 @click.option("--max-clients", type=click.IntRange(min=1), default=DEFAULT_MAX_CLIENTS,
               show_default=True, help="socketcand clients served at once; more are refused")
+@control_option
 def sim_dyncan_cmd(address: str, ids: str, fast: bool, bitrate: int, state: str | None,
-                   model: str, duration: float | None, max_clients: int) -> None:
+                   model: str, duration: float | None, max_clients: int,
+                   control: tuple[str, int] | None) -> None:
     """Virtual DYN2/DYN4 drives on one CAN bus (DYN CAN protocol, socketcand rawmode)."""
     log_to_stderr()
     try:
@@ -98,7 +109,8 @@ def sim_dyncan_cmd(address: str, ids: str, fast: bool, bitrate: int, state: str 
     max_clients = fit_fd_limit(max_clients)
     network, hub = asyncio.run(run_socketcand_nodes(drives, host, port, fast=fast,
                                                     duration=duration, bitrate=bitrate,
-                                                    max_clients=max_clients, banner=banner))
+                                                    max_clients=max_clients, banner=banner,
+                                                    control=control))
     s = network.stats
     click.echo(f"stopped: {s.frames} frame(s), {s.replies} repl(ies), {s.drive_errors} drive "
                f"error(s), {s.malformed} malformed, {s.alarms_pushed} alarm push(es), "

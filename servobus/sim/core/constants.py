@@ -55,6 +55,31 @@ THERMAL_TAU_S = 20.0
 THERMAL_TRIP_FACTOR = 1.5
 #: Bus voltage at power-on (rated 60 V DC, manual 1.1).
 DEFAULT_BUS_VOLTAGE = 60.0
+#: Minimum operating input (2.5: "minimum operation input of +24VDC"): below it the drive
+#: is off (VirtualDrive.supply_dip).
+MIN_INPUT_V = 24.0
+#: Power stage temperature read from the I^2 t state: ambient at 0, the overheat trip at 1
+#: (decision: the manuals give no temperatures; 0-55 degC is the operating range, 1.1).
+AMBIENT_C = 25.0
+OVERHEAT_C = 85.0
+
+# ---------------------------------------------------------------- voltage (back-EMF) limit
+#: The bus voltage the motor figures below are given at (rated 60 V DC, manual 1.1).
+RATED_BUS_VOLTAGE = 60.0
+#: No-load speed at the rated bus = this x the model's maximum speed (DYN2: 5,000 rpm, the
+#: speed control range of 1.1) -> 5,500 rpm: the whole range is reachable with torque to
+#: spare; +10 V in speed mode (6,000 rpm, 4.2) saturates near 5,480 rpm at 60 V and is
+#: reached from about 66 V up (75 V is the permissible maximum, 1.1).
+NO_LOAD_SPEED_FACTOR = 1.1
+#: Peak torque is available up to this fraction of the no-load speed (3,300 rpm at 60 V),
+#: then falls linearly to zero at the no-load speed (motoring only; braking is not limited).
+FULL_TORQUE_SPEED_FRACTION = 0.6
+#: Below this the bus is treated as this (a drive at 0 V is off; the limit stays defined).
+MIN_MODELLED_BUS_V = 1.0
+#: Path handover (DTPU for lines and arcs, engine.go_path): the peak of |q''| for
+#: q(x) = x - 6x^3 + 8x^4 - 3x^5, at x = (192 - sqrt(10944)) / 360.
+_X_PEAK = (192.0 - 10944.0 ** 0.5) / 360.0
+HANDOVER_Q2_PEAK = abs(-36.0 * _X_PEAK + 96.0 * _X_PEAK**2 - 60.0 * _X_PEAK**3)
 
 # ---------------------------------------------------------------- settling (quiescent path)
 #: A drive whose position error, speed and torque change are below these is at an exact
@@ -64,6 +89,10 @@ SETTLED_SPEED_CPS = 1e-3
 SETTLED_TORQUE_NM = 1e-7
 
 # ---------------------------------------------------------------- signals
+#: JP3-2 analog input: +-10 V reference, +-12 V maximum input (1.1, 2.3); the drive clamps.
+ANALOG_INPUT_MAX_V = 12.0
+#: Pulse inputs: maximum input frequency (1.1, 4.1). The control channel refuses faster trains.
+PULSE_RATE_MAX_HZ = 500_000.0
 #: ZRI output is LOW while the shaft is within this many counts of the zero index.
 ZRI_HALF_WIDTH_COUNTS = 64
 #: JP3 pin 2 (status b6) reads high above this analog level (TTL threshold; decision).

@@ -11,9 +11,11 @@ Per control period, in position servo mode:
    Speed, brake at the last moment so it lands exactly; a new target simply replaces the old
    one, which is DTPU) -> moving-average smoothing -> optional path mapping (line/arc), or a
    wave, or external pulses/analog;
+   A new path during motion hands the reference's speed over (see :meth:`go_path`);
 2. position loop P (Main Gain) with velocity feed-forward -> speed loop PI (Speed Gain,
-   Integration Gain) -> torque clamp (peak current x Kt, torque limit) -> torque filter
-   a/(s+a), a = 26 x TrqCons;
+   Integration Gain) -> torque clamp (peak current x Kt, torque limit; above the corner
+   speed the motoring torque falls with the back-EMF to zero at the no-load speed, which
+   scales with the bus voltage) -> torque filter a/(s+a), a = 26 x TrqCons;
 3. mechanics: J dw/dt = torque - friction + disturbance (semi-implicit Euler), or a blocked
    shaft;
 4. alarms: lost phase (> 180 deg at once, >= 90 deg for 2 s), over current (peak current
@@ -77,6 +79,8 @@ class ServoEngine:
         self.bus_voltage = K.DEFAULT_BUS_VOLTAGE
         self.heat = 0.0  # filtered I^2, A^2 (thermal state persists like a warm motor)
         self.steps = 0
+        self.bl_n = self.bl_k = 0  # path handover: total and elapsed control periods
+        self.bl_amp = 0.0  # handover amplitude, counts (speed x duration)
         self.set_protections(True)
         self.power_on()
         self.set_gains(40, 40, 20, 127, 127)
@@ -137,11 +141,29 @@ class ServoEngine:
         self.alpha = 1.0 - math.exp(-K.TORQUE_FILTER_PER_UNIT * trq * self.h)
         self.tmax = m.peak_current_a * m.torque_constant_nm_a * min(1.0, torque_limit / 127)
         self.inv_kt = 1.0 / m.torque_constant_nm_a
+        self._apply_voltage_limit()
         self.fc = m.friction_nm + self.load_friction
         self.fb = m.friction_nm * K.VISCOUS_PER_1000RPM / U.rpm_to_counts_per_s(1000.0)
         self.inv_fs = 1.0 / K.FRICTION_SMOOTH_CPS
         self.heat_beta = self.h / K.THERMAL_TAU_S
         self.heat_trip = (self.thermal_trip_factor * m.rated_current_a) ** 2
+        self.wake()
+
+    def _apply_voltage_limit(self) -> None:
+        """Back-EMF: full torque up to the corner speed, then linearly less motoring torque
+        down to none at the no-load speed; both scale with the bus voltage (2.5: "voltage /
+        speed gradient of the servo motor"). Braking torque is not limited."""
+        m = self.model
+        volts = max(self.bus_voltage, K.MIN_MODELLED_BUS_V)
+        w_nl = (U.rpm_to_counts_per_s(m.max_speed_rpm * K.NO_LOAD_SPEED_FACTOR)
+                * volts / K.RATED_BUS_VOLTAGE)
+        self.w_corner = w_nl * K.FULL_TORQUE_SPEED_FRACTION
+        self.w_noload = w_nl
+        self.tv_slope = m.peak_current_a * m.torque_constant_nm_a / (w_nl - self.w_corner)
+
+    def set_bus_voltage(self, volts: float) -> None:
+        self.bus_voltage = float(volts)
+        self._apply_voltage_limit()
         self.wake()
 
     def set_protections(self, enabled: bool) -> None:
@@ -211,11 +233,14 @@ class ServoEngine:
         self.dsum = d * n
         self.idle_steps = 0
         self.path = None
+        self.bl_n = self.bl_k = 0
 
     def _gen_speed_now(self) -> float:
         """Reference speed (counts/s) the next generator motion continues from."""
-        if self.ref_mode == Ref.GEN and self.path is None:
-            return self.dsum / (self.n_smooth * self.h)
+        if self.ref_mode == Ref.GEN:
+            if self.path is None:
+                return self.dsum / (self.n_smooth * self.h)
+            return self.vff  # a path: the axis reference's own speed (DTPU out of a path)
         if self.ref_mode == Ref.SINE:
             return self.wave_amp * self.wave_step / self.h * math.cos(self.wave_phase)
         return 0.0
@@ -249,14 +274,33 @@ class ServoEngine:
         self.idle_steps = 0
         self.wake()
 
-    def go_path(self, length: float, path: PathMap, smoothing_s: float) -> None:
-        """Run the generator 0 -> ``length`` along ``path`` (maps coordinate -> counts)."""
+    @property
+    def path_speed(self) -> float:
+        """Speed of the running path coordinate (path counts/s; 0 without a path)."""
+        if self.ref_mode != Ref.GEN or self.path is None:
+            return 0.0
+        return self.dsum / (self.n_smooth * self.h)
+
+    def go_path(self, length: float, path: PathMap, smoothing_s: float, *,
+                start_speed: float = 0.0, handover: float = 0.0) -> None:
+        """Run the generator 0 -> ``length`` along ``path`` (maps coordinate -> counts),
+        starting at ``start_speed`` (path counts/s).
+
+        DTPU for paths (7.5): ``handover`` is the axis reference speed (counts/s) the path
+        does not take over. It is added as h(t) = v0 T q(t/T), q(x) = x - 6x^3 + 8x^4 - 3x^5:
+        speed v0 and no acceleration at the start, none of position, speed or acceleration
+        at the end, so the reference keeps its speed, the path's end point is exact and the
+        acceleration stays continuous. max |q''| = 3.94, hence T = 3.94 v0 / Max Accel keeps
+        the handover's own acceleration within Max Accel (constants.HANDOVER_Q2_PEAK)."""
         n = max(1, round(smoothing_s / self.h))
         if n != self.n_smooth:
             self.n_smooth = n
             self.buf = [0.0] * n
         self.bidx = 0
-        self._reset_gen(0.0, 0.0)
+        self._reset_gen(0.0, start_speed)
+        if handover:
+            steps = max(1, math.ceil(K.HANDOVER_Q2_PEAK * abs(handover) / self.amax / self.h))
+            self.bl_n, self.bl_k, self.bl_amp = steps, 0, handover * steps * self.h
         self.path = path
         self.gT = length
         self.gen = Gen.POS
@@ -375,6 +419,7 @@ class ServoEngine:
         kp, kv, ki_h, alpha, kaff = self.kp, self.kv, self.ki_h, self.alpha, self.kaff
         vff = self.vff
         tmax, inv_kt, inv_j = self.tmax, self.inv_kt, self.inv_j
+        w_corner, w_noload, tv_slope = self.w_corner, self.w_noload, self.tv_slope
         fc, fb, inv_fs = self.fc, self.fb, self.inv_fs
         dist, blocked = self.disturbance, self.blocked
         beta, heat_trip = self.heat_beta, self.heat_trip
@@ -389,6 +434,8 @@ class ServoEngine:
         inv_n = 1.0 / nsm
         idle = self.idle_steps
         path = self.path
+        bl_n, bl_k, bl_amp = self.bl_n, self.bl_k, self.bl_amp
+        inv_bl_n = 1.0 / bl_n if bl_n else 0.0
         vmax, ah, inv_ah2x2 = self.vmax, self.ah, self.inv_ah2x2
         arrive = ah * h
         w_amp, w_phase, w_step, w_center = (self.wave_amp, self.wave_phase, self.wave_step,
@@ -446,7 +493,7 @@ class ServoEngine:
                 sref += dsum * inv_n
                 if gen == 0:
                     idle += 1
-                    if idle >= nsm:  # filter flushed: land exactly
+                    if idle >= nsm and bl_k >= bl_n:  # filter flushed: land exactly
                         sref = gp
                         dsum = 0.0
                         mode = 0
@@ -455,6 +502,10 @@ class ServoEngine:
                 else:
                     idle = 0
                 ref = sref if path is None else path(sref)
+                if bl_k < bl_n:  # path handover (go_path)
+                    bl_k += 1
+                    x = bl_k * inv_bl_n
+                    ref += bl_amp * x * (1.0 - x * x * (6.0 - x * (8.0 - 3.0 * x)))
             elif mode == 2:  # SINE
                 w_phase += w_step
                 if w_phase >= TWO_PI:
@@ -475,10 +526,20 @@ class ServoEngine:
             vff = (ref - ref_prev) * inv_h
             ev = vff + kp * e - w
             tc = kv * ev + integ + (vff - vff_prev) * inv_h * kaff
-            if tc > tmax:
-                tc = tmax
-            elif tc < -tmax:
-                tc = -tmax
+            hi = tmax
+            lo = -tmax
+            if w > w_corner:  # back-EMF: less motoring torque at speed
+                lim = tv_slope * (w_noload - w)
+                if lim < hi:
+                    hi = lim if lim > 0.0 else 0.0
+            elif w < -w_corner:
+                lim = tv_slope * (w_noload + w)
+                if lim < hi:
+                    lo = -lim if lim > 0.0 else 0.0
+            if tc > hi:
+                tc = hi
+            elif tc < lo:
+                tc = lo
             else:
                 integ += kv * ki_h * ev  # conditional integration = anti-windup
             tq += (tc - tq) * alpha
@@ -530,6 +591,7 @@ class ServoEngine:
         self.ref_mode = Ref(mode)
         self.gen, self.gp, self.gv, self.gT = Gen(gen), gp, gv, g_t
         self.sref, self.dsum, self.bidx, self.idle_steps = sref, dsum, bidx, idle
+        self.bl_k = bl_k
         self.wave_phase = w_phase
         self.ext_left = ext_left
         self.busy = busy
@@ -573,6 +635,7 @@ class ServoEngine:
         h = self.h
         p, w, integ, tq, heat = self.p, self.w, self.integ, self.tq, self.heat
         kv, ki_h, alpha, tmax, inv_kt = self.kv, self.ki_h, self.alpha, self.tmax, self.inv_kt
+        w_corner, w_noload, tv_slope = self.w_corner, self.w_noload, self.tv_slope
         fc, fb, inv_fs, inv_j = self.fc, self.fb, self.inv_fs, self.inv_j
         dist, blocked, beta, heat_trip = self.disturbance, self.blocked, self.heat_beta, \
             self.heat_trip
@@ -586,21 +649,31 @@ class ServoEngine:
         while k < n:
             k += 1
             sref += (target - sref) * ss
+            hi = tmax
+            lo = -tmax
+            if w > w_corner:  # back-EMF, as in _run_position
+                lim = tv_slope * (w_noload - w)
+                if lim < hi:
+                    hi = lim if lim > 0.0 else 0.0
+            elif w < -w_corner:
+                lim = tv_slope * (w_noload + w)
+                if lim < hi:
+                    lo = -lim if lim > 0.0 else 0.0
             if speed_mode:
                 ev = sref - w
                 tc = kv * ev + integ
-                if tc > tmax:
-                    tc = tmax
-                elif tc < -tmax:
-                    tc = -tmax
+                if tc > hi:
+                    tc = hi
+                elif tc < lo:
+                    tc = lo
                 else:
                     integ += kv * ki_h * ev
             else:
                 tc = sref * kt
-                if tc > tmax:
-                    tc = tmax
-                elif tc < -tmax:
-                    tc = -tmax
+                if tc > hi:
+                    tc = hi
+                elif tc < lo:
+                    tc = lo
             tq += (tc - tq) * alpha
             if blocked:
                 w = 0.0

@@ -28,11 +28,16 @@ FEEDRATE_MAX = 127
 
 @dataclass(frozen=True)
 class AxisPath:
-    """One axis' share of a path: ``length`` in path counts, ``at(s)`` -> offset in counts."""
+    """One axis' share of a path: ``length`` in path counts, ``at(s)`` -> offset in counts.
+
+    ``slope`` is d at / ds at the start (this axis' counts per path count); ``direction``
+    the unit vector of a line in (X, Y, Z), the same on every axis (None for an arc)."""
 
     length: float
     feed_scale: float  # |F| / 127
     at: Callable[[float], float]
+    slope: float = 0.0
+    direction: tuple[float, float, float] | None = None
 
 
 def line_path(words: list[int], axis: int, counts_per_unit: float) -> AxisPath | None:
@@ -45,11 +50,13 @@ def line_path(words: list[int], axis: int, counts_per_unit: float) -> AxisPath |
     if length == 0.0:
         return None
     ratio = deltas[axis] * counts_per_unit / length
+    norm = math.sqrt(sum(d * d for d in deltas))
+    dx, dy, dz = (d / norm for d in deltas)
 
     def at(s: float) -> float:
         return ratio * s
 
-    return AxisPath(length, f / FEEDRATE_MAX, at)
+    return AxisPath(length, f / FEEDRATE_MAX, at, slope=ratio, direction=(dx, dy, dz))
 
 
 def arc_path(words: list[int], axis: int, counts_per_unit: float) -> AxisPath | None:
@@ -79,4 +86,8 @@ def arc_path(words: list[int], axis: int, counts_per_unit: float) -> AxisPath | 
         r = r0 + (r1 - r0) * frac
         return ((r * math.cos(th) if use_cos else r * math.sin(th)) - start) * k
 
-    return AxisPath(length, abs(feed) / FEEDRATE_MAX, at)
+    # d/ds at s = 0: radius change plus rotation, per path count
+    dr, dth = (r1 - r0) / length, sign * sweep / length
+    slope = ((dr * math.cos(th0) - r0 * math.sin(th0) * dth) if use_cos
+             else (dr * math.sin(th0) + r0 * math.cos(th0) * dth)) * k
+    return AxisPath(length, abs(feed) / FEEDRATE_MAX, at, slope=slope)

@@ -42,3 +42,21 @@ class PulseDecoder:
             a0, b0 = a, b
         self._last = (a0, b0)
         return count
+
+
+#: One pulse of a train (4.1 "Reference Pulse Format"), as (pin 6, pin 4) level samples,
+#: forward and reverse. Pulse/Dir: one STEP pulse with DIR high (forward) or low; CW/CCW: a
+#: pulse on CW (pin 6) or CCW (pin 4); A/B: one quadrature cycle, A leading B forward.
+_PERIODS: dict[tuple[PulseFormat, bool], tuple[tuple[bool, bool], ...]] = {
+    (PulseFormat.PULSE_DIR, True): ((False, True), (True, True)),
+    (PulseFormat.PULSE_DIR, False): ((False, False), (True, False)),
+    (PulseFormat.CW_CCW, True): ((False, False), (True, False)),
+    (PulseFormat.CW_CCW, False): ((False, False), (False, True)),
+    (PulseFormat.AB, True): ((False, False), (True, False), (True, True), (False, True)),
+    (PulseFormat.AB, False): ((False, False), (False, True), (True, True), (True, False)),
+}
+
+
+def pulse_period(fmt: PulseFormat, forward: bool) -> tuple[tuple[bool, bool], ...]:
+    """Level samples of one pulse of a ``fmt`` train, forward (CW) or reverse."""
+    return _PERIODS[(fmt, forward)]
