@@ -261,7 +261,7 @@ def test_paced_receive_buffer_drops_beyond_its_size_and_a_gone_port_frees_its_re
         runner.submit(port, burst)  # still full: everything lost
         assert port.rx_dropped == 2 * len(burst) - RX_BUFFER_BYTES
         runner.close_port(port)
-        assert port.pending == 0 and not runner._heap  # nothing left to release
+        assert port.pending == 0 and not runner.releases  # nothing left to release
         await asyncio.sleep(0.05)
         assert got == []
         await runner.close()

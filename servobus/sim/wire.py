@@ -10,8 +10,8 @@ microsecond, hence the smaller ``FINE_COARSE_S``), a blocking ``time.sleep`` for
 the rest, then a spin for the final ``spin_s``. The loop is blocked at most ``coarse_s``
 per release; a serial line is serial anyway.
 
-(The DYN232M line's runner, ``protocols/dyn232/pacing.py``, keeps its own copy of these
-for now; this module is where both belong.)
+Both paced serial lines use them: DYN232M (``protocols/dyn232/pacing.py``) and Modbus RTU
+(``protocols/modbus/pacing.py``).
 """
 
 from __future__ import annotations

@@ -8,13 +8,15 @@ Model (both directions, full duplex as the manual's 7.1 table says):
 * Drives -> host: a reply starts when its packet was executed (or when the previous reply has
   left) and is handed to the host once its last byte has left: never faster than 260.4 us/byte.
 
-Implementation: times are computed against a monotonic wire clock, never by sleeping per
-byte. A packet is executed as soon as it is framed, with the drives advanced to its wire
-arrival time (which may lie up to the queued wire time ahead of the wall clock). Nobody can
-observe the difference: the only way to see the drives is a reply, and replies are released
-only when their wire time has come. So the runner waits once per reply, with a precise wait:
-an asyncio sleep for all but the last ``coarse_s`` (event loops using epoll wake only to the
-millisecond), a blocking ``time.sleep`` for most of the rest, then a short spin (``spin_s``)
+Implementation (the wire clock and the release queue are the protocol-free
+:mod:`servobus.sim.wire`, shared with the Modbus RTU line): times are computed against a
+monotonic wire clock, never by sleeping per byte. A packet is executed as soon as it is
+framed, with the drives advanced to its wire arrival time (which may lie up to the queued
+wire time ahead of the wall clock). Nobody can observe the difference: the only way to see
+the drives is a reply, and replies are released only when their wire time has come. So the
+runner waits once per reply, with a precise wait: an asyncio sleep for all but the last
+``coarse_s`` (event loops using epoll wake only to the millisecond), a blocking
+``time.sleep`` for most of the rest, then a short spin (``spin_s``)
 for the final microseconds. The loop is blocked at most ``coarse_s`` per reply; the line is
 serial anyway. ``paced=False`` (``--fast``) executes and answers at once.
 
@@ -30,10 +32,6 @@ Replies still pending for a port that closes are dropped (:meth:`LineRunner.clos
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
-import heapq
-import itertools
 import time
 from collections import deque
 from collections.abc import Callable, Iterator
@@ -41,28 +39,15 @@ from collections.abc import Callable, Iterator
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232.line import Dyn232Line
 from servobus.sim.realtime import RealtimeClock
+from servobus.sim.wire import COARSE_S, FINE_COARSE_S, SPIN_S, TimedReleases, WireClock
 from servobus.transport.base import Direction, TraceHook
 
+__all__ = ["BYTE_TIME_S", "COARSE_S", "FINE_COARSE_S", "MAX_PENDING_TAP", "RX_BUFFER_BYTES",
+           "SPIN_S", "HostPort", "LineRunner", "WireClock"]
+
 BYTE_TIME_S = c.wire_time_s(1)  # 10 bits at 38400 baud = 260.4 us
-COARSE_S = 0.0015  # epoll-based loops round timeouts up to 1 ms (+ wake-up jitter)
-FINE_COARSE_S = 0.0004  # for loops on a microsecond selector (sim.fine_selector)
 MAX_PENDING_TAP = 4096  # host bytes held for the tap until their packet completes
 RX_BUFFER_BYTES = 256  # per host port, accepted ahead of the wire (see the module doc)
-SPIN_S = 0.00012  # time.sleep overshoots by ~50-100 us (timer slack): spin the last part
-
-
-class WireClock:
-    """One direction of an 8N1 wire: when each byte has passed."""
-
-    def __init__(self, byte_time_s: float = BYTE_TIME_S) -> None:
-        self.byte_time_s = byte_time_s
-        self.free_at = 0.0  # monotonic time the wire is next idle
-
-    def send(self, n_bytes: int, ready_at: float) -> tuple[float, float]:
-        """Occupy the wire with ``n_bytes`` ready at ``ready_at``; return (start, end)."""
-        start = max(ready_at, self.free_at)
-        self.free_at = start + n_bytes * self.byte_time_s
-        return start, self.free_at
 
 
 class HostPort:
@@ -107,28 +92,19 @@ class LineRunner:
         self.rx_buffer_bytes = RX_BUFFER_BYTES
         self.rx_dropped = 0  # bytes lost to full receive buffers, all ports
         self.taps: list[TraceHook] = []
-        self._heap: list[tuple[float, int, HostPort | None, Callable[[], None]]] = []
-        self._seq = itertools.count()
-        self._task: asyncio.Task[None] | None = None
-        self._waiter: asyncio.Future[None] | None = None
+        self.releases = TimedReleases(coarse_s=coarse_s, spin_s=spin_s)
         self.max_late_s = 0.0  # worst lateness of a release (diagnostics / benchmarks)
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
         """Start the clock ticker and the release task on the running loop (idempotent)."""
         self.clock.start()
-        if self.paced and (self._task is None or self._task.done()):
-            self._task = asyncio.get_running_loop().create_task(self._release_loop(),
-                                                                name="sim-line")
+        if self.paced:
+            self.releases.start()
 
     async def close(self) -> None:
         await self.clock.stop()
-        task, self._task = self._task, None
-        if task is not None:
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
-        self._heap.clear()
+        await self.releases.close()
 
     def open_port(self, deliver: Callable[[bytes], None]) -> HostPort:
         return HostPort(deliver)
@@ -139,8 +115,7 @@ class LineRunner:
         port.on_idle = None
         if port.pending:
             port.pending = 0
-            self._heap[:] = [e for e in self._heap if e[2] is not port]
-            heapq.heapify(self._heap)
+            self.releases.drop(port)
 
     def add_tap(self, hook: TraceHook) -> None:
         """``hook(direction, bytes, monotonic time)`` for every byte of the line, in order."""
@@ -240,9 +215,7 @@ class LineRunner:
 
     # ------------------------------------------------------------------ timed release
     def _at(self, when: float, port: HostPort | None, action: Callable[[], None]) -> None:
-        heapq.heappush(self._heap, (when, next(self._seq), port, action))
-        if self._waiter is not None and not self._waiter.done():
-            self._waiter.set_result(None)
+        self.releases.at(when, action, port)
 
     def _release_cb(self, port: HostPort, reply: bytes, when: float) -> Callable[[], None]:
         def release() -> None:
@@ -261,45 +234,3 @@ class LineRunner:
     def _tap(self, direction: Direction, data: bytes, when: float) -> None:
         for hook in self.taps:
             hook(direction, data, when)
-
-    async def _release_loop(self) -> None:
-        loop = asyncio.get_running_loop()
-        heap = self._heap
-        while True:
-            if not heap:
-                await self._wait(loop, None)
-                continue
-            when = heap[0][0]
-            remaining = when - time.monotonic()
-            if remaining > self.coarse_s:
-                await self._wait(loop, remaining - self.coarse_s)
-                continue  # something earlier may have been queued meanwhile
-            _precise_sleep_until(when, self.spin_s)
-            while heap and heap[0][0] <= time.monotonic():
-                heapq.heappop(heap)[3]()
-            await asyncio.sleep(0)  # let the transports move the bytes
-
-    async def _wait(self, loop: asyncio.AbstractEventLoop, timeout: float | None) -> None:
-        fut: asyncio.Future[None] = loop.create_future()
-        self._waiter = fut
-        handle = None if timeout is None else loop.call_later(timeout, _resolve, fut)
-        try:
-            await fut
-        finally:
-            self._waiter = None
-            if handle is not None:
-                handle.cancel()
-
-
-def _resolve(fut: asyncio.Future[None]) -> None:
-    if not fut.done():
-        fut.set_result(None)
-
-
-def _precise_sleep_until(deadline: float, spin_s: float) -> None:
-    """Block until ``deadline`` (monotonic): sleep, then spin the last ``spin_s``."""
-    remaining = deadline - time.monotonic()
-    if remaining > spin_s:
-        time.sleep(remaining - spin_s)
-    while time.monotonic() < deadline:
-        pass
