@@ -14,7 +14,7 @@ import pytest
 import servobus
 
 ROOT = Path(servobus.__file__).parent
-SHARED = ("axis", "cli", "families", "transport", "sim")
+SHARED = ("axis", "cli", "families", "transport", "sim", "gui")
 CLIENT_MODULES = ("client.py", "opener.py", "commands.py", "codec.py")
 
 
@@ -72,3 +72,10 @@ def test_protocol_packages_stay_light() -> None:
     for protocol in protocols():
         names = imports(ROOT / "protocols" / protocol / "__init__.py")
         assert [n for n in names if n.startswith("servobus")] == [], protocol
+
+
+def test_the_gui_imports_no_simulator() -> None:
+    """The GUI is an ordinary Axis client: virtual drives reach it only through sim:// URLs."""
+    bad = [(str(path.relative_to(ROOT)), name) for path in sources(ROOT / "gui")
+           for name in imports(path) if name.startswith("servobus.sim")]
+    assert bad == []

@@ -32,6 +32,7 @@ COMMAND_MODULES: list[str] = [
     "servobus.cli.scan_cmd",
     "servobus.cli.demo_cmd",
     "servobus.cli.profile_cmd",
+    "servobus.cli.gui_cmd",
 ]
 
 DEBUG_ENV = "SERVOBUS_DEBUG"

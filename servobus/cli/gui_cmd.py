@@ -1,0 +1,75 @@
+"""``servobus gui``: the browser app for every axis on one connection (servobus.gui).
+
+The drive comes from ``gui --url`` or the global ``--url``/``--port``/``--can``/
+SERVOBUS_URL; with none, three built-in virtual drives (ids 1, 2, 3). ``--ids`` names the
+drives on the line or bus, ``--id`` one of them.
+"""
+
+from __future__ import annotations
+
+import click
+
+from servobus.cli.command_class import ServobusCommand
+from servobus.cli.context import CliContext, pass_cli
+from servobus.cli.failures import Interrupted
+
+SHUTDOWN_NOTE = "every axis was stopped and the GUI server closed"
+
+
+def parse_ids(text: str) -> tuple[int, ...]:
+    """``1,2,3`` -> (1, 2, 3): integers 0..255, no duplicates (the protocol checks its range)."""
+    try:
+        ids = tuple(int(part) for part in text.split(",") if part.strip())
+    except ValueError:
+        raise click.BadParameter(f"{text!r}: write drive ids as 1,2,3", param_hint="--ids") \
+            from None
+    if not ids or any(not 0 <= i <= 255 for i in ids) or len(set(ids)) != len(ids):
+        raise click.BadParameter(f"{text!r}: distinct drive ids 0..255, e.g. 1,2,3",
+                                 param_hint="--ids")
+    return ids
+
+
+@click.command("gui", cls=ServobusCommand)
+@click.option("--url", "gui_url", metavar="URL", default=None,
+              help="the drive connection (default: the global --url, else three virtual "
+                   "drives)")
+@click.option("--id", "one_id", type=click.IntRange(0, 255), default=None,
+              help="one drive id on the connection")
+@click.option("--ids", "ids_text", metavar="1,2,3", default=None,
+              help="several drive ids on the connection (one axis each)")
+@click.option("--host", default="127.0.0.1", show_default=True,
+              help="address to listen on; other than loopback needs a token")
+@click.option("--port", type=click.IntRange(0, 65535), default=8080, show_default=True,
+              help="TCP port (0: any free port)")
+@click.option("--no-browser", is_flag=True, help="do not open a browser")
+@click.option("--token", default=None,
+              help="required in the page URL; generated when listening beyond loopback")
+@pass_cli
+def gui(ctx: CliContext, gui_url: str | None, one_id: int | None, ids_text: str | None,
+        host: str, port: int, no_browser: bool, token: str | None) -> None:
+    """Tune, command and watch drives in a browser (live scope, step tests, parameters).
+
+    Binds 127.0.0.1 by default. Ctrl-C stops every axis, then the server.
+    """
+    from servobus.gui.server import ServeOptions, serve
+
+    if one_id is not None and ids_text is not None:
+        raise click.UsageError("give --id or --ids, not both")
+    if ids_text is not None:
+        ids: tuple[int, ...] | None = parse_ids(ids_text)
+    elif (single := one_id if one_id is not None else ctx.drive_id) is not None:
+        ids = (single,)
+    else:
+        ids = None
+    url = gui_url or ctx.named_url
+    options = ServeOptions(url=url, ids=ids, host=host, port=port, token=token,
+                           open_browser=not no_browser)
+    try:
+        serve(options, lambda line: click.echo(line))
+    except KeyboardInterrupt as exc:
+        name = exc.signal_name if isinstance(exc, Interrupted) else "Ctrl-C"
+        raise Interrupted(name, SHUTDOWN_NOTE) from None
+
+
+def register(group: click.Group) -> None:
+    group.add_command(gui)

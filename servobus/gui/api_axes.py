@@ -1,0 +1,135 @@
+"""REST: the axes, motion commands, STOP ALL and diagnostics."""
+
+from __future__ import annotations
+
+import time
+
+from starlette.requests import Request
+from starlette.responses import JSONResponse, Response
+from starlette.routing import Route
+
+from servobus import __version__
+from servobus.errors import ArgumentRangeError
+from servobus.gui.http_util import api, body, handle, integer, number, ok, state
+from servobus.gui.signals import SIGNALS
+from servobus.gui.units import UNITS, to_counts
+
+ACTIONS = ("enable", "disable", "stop", "set_origin", "reset")
+WAVES = ("square", "sine", "off")
+
+
+@api
+async def info(request: Request) -> Response:
+    gui = state(request)
+    return JSONResponse({
+        "version": __version__, "url": gui.fleet.url, "started": time.time(),
+        "axes": [h.identity() for h in gui.fleet.handles.values()],
+        "signals": [{"name": s.name, "unit": s.unit, "label": s.label}
+                    for s in SIGNALS.values()],
+        "units": list(UNITS), "jog_lease_s": gui.jog.lease_s,
+    })
+
+
+@api
+async def axes(request: Request) -> Response:
+    gui = state(request)
+    return JSONResponse([{"identity": h.identity(), "status": gui.monitor.snapshots[i]}
+                         for i, h in gui.fleet.handles.items()])
+
+
+async def _refresh(request: Request, axis_id: int) -> dict[str, object]:
+    """A status read right after a command (the page sees the effect at once)."""
+    gui = state(request)
+    try:
+        return await gui.monitor.read(gui.fleet.get(axis_id))
+    except Exception:  # the periodic monitor reports link problems
+        return gui.monitor.snapshots[axis_id]
+
+
+@api
+async def command(request: Request) -> Response:
+    h = handle(request)
+    action = (await body(request)).get("action")
+    if action not in ACTIONS:
+        raise ArgumentRangeError(f"action {action!r}: one of {', '.join(ACTIONS)}")
+    await h.call(getattr(h.axis, str(action))())
+    if action == "stop":
+        state(request).jog.leases.pop(h.id, None)
+    return ok(status=await _refresh(request, h.id))
+
+
+@api
+async def move(request: Request) -> Response:
+    h = handle(request)
+    doc = await body(request)
+    counts = to_counts(h.axis, number(doc, "value"), str(doc.get("unit", "counts")))
+    relative = bool(doc.get("relative", False))
+    if relative:
+        await h.call(h.axis.move_by(counts))
+    else:
+        await h.call(h.axis.move_to(counts))
+    return ok(counts=counts, relative=relative, status=await _refresh(request, h.id))
+
+
+@api
+async def turn(request: Request) -> Response:
+    h = handle(request)
+    rpm = integer(await body(request), "rpm")
+    await h.call(h.axis.turn(rpm))
+    return ok(rpm=rpm)
+
+
+@api
+async def wave(request: Request) -> Response:
+    """Drive-generated test motion (families with "waves"): frequency first, then the
+    wave; ``off`` sets the frequency to 0 (the drive stops the wave)."""
+    h = handle(request)
+    doc = await body(request)
+    kind = doc.get("kind")
+    if kind not in WAVES:
+        raise ArgumentRangeError(f"wave {kind!r}: one of {', '.join(WAVES)}")
+    if kind == "off":
+        await h.call(h.axis.wave_frequency(0))
+        return ok()
+    await h.call(h.axis.wave_frequency(integer(doc, "hz")))
+    amplitude = integer(doc, "amplitude")
+    if kind == "square":
+        await h.call(h.axis.square_wave(amplitude))
+    else:
+        await h.call(h.axis.sine_wave(amplitude))
+    return ok()
+
+
+@api
+async def stop_all(request: Request) -> Response:
+    results = await state(request).stop_all()
+    return ok(axes={str(k): v for k, v in results.items()},
+              failed=[k for k, v in results.items() if v])
+
+
+@api
+async def diagnostics(request: Request) -> Response:
+    gui = state(request)
+    after = int(request.query_params.get("after", "0") or 0)
+    return JSONResponse({
+        "alarms": list(gui.monitor.log),
+        "links": {str(i): h.link() for i, h in gui.fleet.handles.items()},
+        "traffic": gui.fleet.traffic.recent(300, after),
+        "traffic_counts": gui.fleet.traffic.counts,
+        "samplers": [s.describe() for s in gui.samplers.values()],
+        "scopes": [s.state() for s in gui.sessions],
+        "jog": {"active": {str(k): v.rpm for k, v in gui.jog.leases.items()},
+                "stops": gui.jog.stops},
+    })
+
+
+ROUTES = [
+    Route("/api/info", info),
+    Route("/api/axes", axes),
+    Route("/api/axes/{axis}/command", command, methods=["POST"]),
+    Route("/api/axes/{axis}/move", move, methods=["POST"]),
+    Route("/api/axes/{axis}/turn", turn, methods=["POST"]),
+    Route("/api/axes/{axis}/wave", wave, methods=["POST"]),
+    Route("/api/stop_all", stop_all, methods=["POST"]),
+    Route("/api/diagnostics", diagnostics),
+]

@@ -1,0 +1,56 @@
+"""The GUI's ASGI application: static page, REST API, WebSocket, behind the Guard.
+
+``create_app(url, ids, token=...)`` opens the drives when the server starts (lifespan) and,
+when it stops, stops every axis and closes the connection.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import AsyncIterator, Sequence
+from pathlib import Path
+
+from starlette.applications import Starlette
+from starlette.middleware import Middleware
+from starlette.requests import Request
+from starlette.responses import FileResponse, Response
+from starlette.routing import Mount, Route, WebSocketRoute
+from starlette.staticfiles import StaticFiles
+
+from servobus.gui import api_axes, api_params, ws
+from servobus.gui.auth import Guard
+from servobus.gui.fleet import Fleet
+from servobus.gui.jog import LEASE_S
+from servobus.gui.state import GuiState
+
+STATIC = Path(__file__).parent / "static"
+
+
+async def index(request: Request) -> Response:
+    return FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store"})
+
+
+def create_app(url: str | None = None, ids: Sequence[int] | None = None, *,
+               fleet: Fleet | None = None, token: str | None = None,
+               jog_lease_s: float = LEASE_S) -> Starlette:
+    """The app; it opens ``url`` (or takes an opened ``fleet``) when the server starts."""
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: Starlette) -> AsyncIterator[None]:
+        opened = fleet if fleet is not None else await Fleet.open(url, ids)
+        gui = GuiState.build(opened, jog_lease_s)
+        app.state.gui = gui
+        gui.start()
+        try:
+            yield
+        finally:
+            await gui.shut_down()
+
+    app = Starlette(routes=[
+        Route("/", index),
+        *api_axes.ROUTES,
+        *api_params.ROUTES,
+        WebSocketRoute("/ws", ws.endpoint),
+        Mount("/static", StaticFiles(directory=STATIC), name="static"),
+    ], lifespan=lifespan, middleware=[Middleware(Guard, token=token)])
+    return app

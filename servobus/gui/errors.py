@@ -1,0 +1,35 @@
+"""Typed errors -> HTTP answers: ``{"error": "what happened"}`` with a fitting status."""
+
+from __future__ import annotations
+
+from starlette.responses import JSONResponse
+
+from servobus.cli.params_file import ParamsFileError
+from servobus.errors import (
+    ArgumentRangeError,
+    ConnectionLost,
+    DriveAlarm,
+    DriveTimeout,
+    NotSupported,
+    ServobusError,
+)
+
+#: Most specific first.
+STATUS: tuple[tuple[type[BaseException], int], ...] = (
+    (NotSupported, 501),
+    (ParamsFileError, 400),
+    (ArgumentRangeError, 400),
+    (DriveAlarm, 409),
+    (DriveTimeout, 504),
+    (ConnectionLost, 503),
+    (ServobusError, 502),
+    (ValueError, 400),
+    (KeyError, 404),
+)
+
+
+def error_response(exc: BaseException) -> JSONResponse:
+    for kind, status in STATUS:
+        if isinstance(exc, kind):
+            return JSONResponse({"error": str(exc), "kind": type(exc).__name__}, status)
+    raise exc

@@ -1,0 +1,115 @@
+"""Run the GUI: open the drives, serve the app with uvicorn, print the address, open a browser.
+
+Decisions: the server binds 127.0.0.1 unless told otherwise; on any other address a token
+is required (a generated one when none is given, printed in the URL) and a warning says
+that whoever reaches the address with the token can move the drives. The drives are opened
+before the server starts, so a drive that cannot be opened is one error line (exit 2), not
+a server without axes. On exit (Ctrl-C, SIGTERM) every axis is stopped before the
+connection closes (servobus.gui.state.GuiState.shut_down).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import ipaddress
+import secrets
+import socket
+import webbrowser
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import uvicorn
+
+from servobus.errors import ArgumentRangeError
+from servobus.gui.app import create_app
+from servobus.gui.fleet import DEFAULT_URL, Fleet
+
+DEFAULT_HOST = "127.0.0.1"
+DEFAULT_PORT = 8080
+
+
+def is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+@dataclass(frozen=True)
+class ServeOptions:
+    url: str | None
+    ids: Sequence[int] | None
+    host: str = DEFAULT_HOST
+    port: int = DEFAULT_PORT
+    token: str | None = None
+    open_browser: bool = True
+
+
+def page_url(host: str, port: int, token: str | None) -> str:
+    shown = DEFAULT_HOST if host in ("0.0.0.0", "::", "") else host
+    if ":" in shown and not shown.startswith("["):
+        shown = f"[{shown}]"
+    return f"http://{shown}:{port}/" + (f"?token={token}" if token else "")
+
+
+def bind(host: str, port: int) -> socket.socket:
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host.strip("[]"), port))
+    except OSError as exc:
+        sock.close()
+        raise OSError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
+    sock.listen(128)
+    sock.set_inheritable(True)
+    return sock
+
+
+def serve(options: ServeOptions, say: Callable[[str], None]) -> None:
+    """Serve until interrupted (KeyboardInterrupt propagates after the shutdown)."""
+    token = options.token
+    loopback = is_loopback(options.host)
+    if token is not None and not token.strip():
+        raise ArgumentRangeError("--token must not be empty")
+    if not loopback and token is None:
+        token = secrets.token_urlsafe(18)
+    sock = bind(options.host, options.port)
+    try:
+        asyncio.run(_serve(options, token, loopback, sock, say))
+    finally:
+        sock.close()
+
+
+async def _serve(options: ServeOptions, token: str | None, loopback: bool,
+                 sock: socket.socket, say: Callable[[str], None]) -> None:
+    fleet = await Fleet.open(options.url, options.ids)
+    app = create_app(fleet=fleet, token=token)
+    config = uvicorn.Config(app, log_level="warning", lifespan="on", access_log=False,
+                            ws_per_message_deflate=False)  # scope frames do not compress
+    server = uvicorn.Server(config)
+    port = sock.getsockname()[1]
+    url = page_url(options.host, port, token)
+
+    async def announce() -> None:
+        while not server.started:
+            if server.should_exit:
+                return
+            await asyncio.sleep(0.02)
+        axes = ", ".join(str(i) for i in fleet.handles)
+        if not loopback:
+            say(f"warning: listening on {options.host}: anyone who can reach this address "
+                "and has the token can move the drives")
+        say(f"servobus gui: {url}")
+        say(f"drives: {fleet.url if options.url else DEFAULT_URL + ' (built-in virtual drives)'}"
+            f"; axes {axes}. Ctrl-C stops every axis and the server.")
+        if options.open_browser:
+            await asyncio.get_running_loop().run_in_executor(None, webbrowser.open, url)
+
+    task = asyncio.create_task(announce())
+    try:
+        await server.serve(sockets=[sock])
+    finally:
+        task.cancel()

@@ -1,0 +1,50 @@
+// The Axes panel: one live card per axis (status lights, position, speed, current, alarm).
+import { $, el, fmt } from "./util.js";
+
+const LIGHTS = [["enabled", "enabled"], ["moving", "moving"], ["in_position", "in position"], ["alarm_code", "alarm"]];
+
+export class AxesPanel {
+  constructor(ctx) {
+    this.ctx = ctx;
+    this.cards = new Map();
+    const root = $("#axis-cards");
+    for (const ident of ctx.info.axes) {
+      const card = el("div", { class: "axis-card", "data-axis": ident.id, onclick: () => ctx.select(ident.id) },
+        el("div", { class: "head" },
+          el("span", { class: "name", text: `Axis ${ident.id}` }),
+          el("span", { class: "ident", text: `${ident.protocol} · ${ident.family_title}` })),
+        el("div", { class: "lights" }, ...LIGHTS.map(([k, label]) =>
+          el("span", { class: `light ${k === "alarm_code" ? "alarm" : k}`, "data-light": k, text: label }))),
+        el("div", { class: "values" },
+          el("span", { class: "k", text: "position" }), el("span", { class: "v", "data-v": "position" }),
+          el("span", { class: "k", text: "" }), el("span", { class: "v muted", "data-v": "revolutions" }),
+          el("span", { class: "k", text: "speed" }), el("span", { class: "v", "data-v": "speed" }),
+          el("span", { class: "k", text: "current" }), el("span", { class: "v", "data-v": "current" })),
+        el("div", { class: "alarm-text", "data-v": "alarm" }),
+        el("div", { class: "link-text", "data-v": "link" }));
+      root.append(card);
+      this.cards.set(ident.id, card);
+    }
+    ctx.onSelect((id) => { for (const [aid, c] of this.cards) c.classList.toggle("selected", aid === id); });
+    ctx.onStatus((status) => this.render(status));
+  }
+  render(status) {
+    for (const [id, card] of this.cards) {
+      const s = status.get(id);
+      if (!s) continue;
+      for (const node of card.querySelectorAll("[data-light]")) {
+        const k = node.dataset.light;
+        node.classList.toggle("on", k === "alarm_code" ? Boolean(s.alarm_code) : Boolean(s[k]));
+      }
+      const set = (k, text) => { card.querySelector(`[data-v=${k}]`).textContent = text; };
+      set("position", s.position === undefined ? "–" : `${fmt(s.position)} counts`);
+      set("revolutions", s.revolutions === undefined ? "" : `${s.revolutions.toFixed(4)} rev`);
+      set("speed", `${fmt(s.speed)} rpm`);
+      set("current", `${fmt(s.current)} A`);
+      set("alarm", s.alarm_code ? `alarm ${s.alarm_code}: ${s.alarm}${s.alarm_latched ? " (latched: Reset clears)" : ""}` : "");
+      set("link", s.link || "");
+      card.dataset.position = s.position ?? "";
+      card.dataset.speed = s.speed ?? "";
+    }
+  }
+}

@@ -1,0 +1,112 @@
+// Motion panel: servo on/off, jog while held, moves in counts/rev/deg, constant speed, waves.
+import { api } from "./net.js";
+import { $, $$, el, fmt, message } from "./util.js";
+
+const JOG_REPEAT_MS = 150;  // the server stops a jog not repeated within its lease (0.6 s)
+
+export class MotionPanel {
+  constructor(ctx) {
+    this.ctx = ctx;
+    this.msg = $("#motion-msg");
+    this.jogTimer = null;
+    this.jogAxis = null;
+    for (const b of $$("#panel-motion [data-action]")) {
+      b.addEventListener("click", () => this.run(`/command`, { action: b.dataset.action }, b.textContent));
+    }
+    $("#move-abs").addEventListener("click", () => this.move(false));
+    $("#move-rel").addEventListener("click", () => this.move(true));
+    $("#turn-run").addEventListener("click", () =>
+      this.run("/turn", { rpm: Math.round(Number($("#turn-rpm").value)) }, "constant speed"));
+    $("#wave-start").addEventListener("click", () => this.run("/wave", {
+      kind: $("#wave-kind").value, amplitude: Math.round(Number($("#wave-amp").value)),
+      hz: Math.round(Number($("#wave-hz").value)) }, "test motion"));
+    $("#wave-off").addEventListener("click", () => this.run("/wave", { kind: "off" }, "test motion off"));
+    for (const [id, sign] of [["#jog-plus", 1], ["#jog-minus", -1]]) this.bindJog($(id), sign);
+    window.addEventListener("blur", () => this.jogEnd());
+    document.addEventListener("visibilitychange", () => { if (document.hidden) this.jogEnd(); });
+    ctx.onSelect(() => { this.jogEnd(); this.renderSelection(); });
+    ctx.onStatus(() => this.renderReadout());
+    this.renderSelection();
+  }
+
+  url(path) { return `/api/axes/${this.ctx.selected}${path}`; }
+
+  async run(path, body, what) {
+    try {
+      await api(this.url(path), body);
+      message(this.msg, `${what}: sent to axis ${this.ctx.selected}`, "ok");
+    } catch (err) {
+      message(this.msg, `${what}: ${err.message}`, "error");
+    }
+  }
+
+  move(relative) {
+    const value = Number($("#move-value").value);
+    const unit = $("#move-unit").value;
+    this.run("/move", { value, unit, relative }, `${relative ? "move by" : "move to"} ${value} ${unit}`);
+  }
+
+  bindJog(button, sign) {
+    const start = (ev) => {
+      ev.preventDefault();
+      button.setPointerCapture?.(ev.pointerId);
+      button.classList.add("held");
+      this.jogStart(sign);
+    };
+    const end = () => { button.classList.remove("held"); this.jogEnd(); };
+    button.addEventListener("pointerdown", start);
+    for (const type of ["pointerup", "pointercancel", "lostpointercapture"]) button.addEventListener(type, end);
+    button.addEventListener("contextmenu", (ev) => ev.preventDefault());
+  }
+
+  jogStart(sign) {
+    this.jogEnd();
+    const rpm = sign * Math.max(1, Math.round(Math.abs(Number($("#jog-rpm").value)) || 1));
+    const axis = this.ctx.selected;
+    const send = () => {
+      if (!this.ctx.link.send({ type: "jog", axis, rpm })) {
+        message(this.msg, "jog: no connection to the server", "error");
+        this.jogEnd();
+      }
+    };
+    this.jogAxis = axis;
+    send();
+    this.jogTimer = setInterval(send, JOG_REPEAT_MS);
+    message(this.msg, `jogging axis ${axis} at ${rpm} rpm`, "ok");
+  }
+
+  jogEnd() {
+    if (this.jogTimer === null) return;
+    clearInterval(this.jogTimer);
+    this.jogTimer = null;
+    this.ctx.link.send({ type: "jog_stop", axis: this.jogAxis });
+    for (const b of $$("button.jog")) b.classList.remove("held");
+    message(this.msg, `jog of axis ${this.jogAxis} released`, "");
+    this.jogAxis = null;
+  }
+
+  renderSelection() {
+    const ident = this.ctx.identity(this.ctx.selected);
+    const waves = ident.features.includes("waves");
+    for (const node of $$("#wave-box button, #wave-box input, #wave-box select")) node.disabled = !waves;
+    $("#wave-hint").textContent = waves
+      ? "Amplitude in the drive's own wave units (DMM: 4096 = 180°); the wave runs until Off or Stop."
+      : `${ident.family_title} drives have no drive-generated test motion.`;
+    $("#move-hint").textContent = `1 rev = ${ident.counts_per_rev.toLocaleString("en-US")} counts on ${ident.family_title}.`;
+    this.renderReadout();
+  }
+
+  renderReadout() {
+    const s = this.ctx.status.get(this.ctx.selected) || {};
+    const box = $("#motion-readout");
+    const item = (k, v, big = true) => el("div", {}, el("span", { class: "k", text: k }),
+      el("span", { class: big ? "big" : "", text: v }));
+    box.replaceChildren(
+      item(`axis ${this.ctx.selected} position`, `${fmt(s.position)} counts`),
+      item("revolutions", s.revolutions === undefined ? "–" : s.revolutions.toFixed(4)),
+      item("speed", `${fmt(s.speed)} rpm`),
+      item("current", `${fmt(s.current)} A`),
+      item("state", s.link ? "link error" : s.alarm_code ? `ALARM ${s.alarm_code}` :
+        `${s.enabled ? "enabled" : "disabled"}${s.moving ? ", moving" : ""}${s.in_position ? ", in position" : ""}`, false));
+  }
+}

@@ -1,0 +1,156 @@
+"""The page's WebSocket: live status out, jog and scope control in, scope frames out.
+
+Messages from the page (JSON): ``jog`` {axis, rpm} (repeated while the button is held),
+``jog_stop`` {axis}, ``stop_all``, ``scope`` {settings}, ``scope_run`` {running},
+``scope_arm``, ``scope_csv``, ``ack`` {seq}. To the page: ``hello``, ``status`` (every
+:data:`STATUS_PERIOD_S`), ``scope_state``, ``csv``, ``error``, ``stopped`` (JSON) and scope
+frames (binary, servobus.gui.frames).
+
+When the WebSocket closes, for whatever reason, every jog of this page stops first.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import json
+import logging
+import math
+from collections.abc import Awaitable, Callable
+
+from starlette.websockets import WebSocket, WebSocketDisconnect
+
+from servobus.errors import ServobusError
+from servobus.gui.scope_session import ScopeSession, ScopeSettings
+from servobus.gui.state import GuiState
+
+log = logging.getLogger(__name__)
+STATUS_PERIOD_S = 0.1
+_owners = itertools.count(1)
+
+
+class PageLink:
+    """One connected page."""
+
+    def __init__(self, ws: WebSocket, gui: GuiState) -> None:
+        self.ws, self.gui = ws, gui
+        self.owner = next(_owners)
+        self._lock = asyncio.Lock()
+        self.session = ScopeSession(gui.samplers, self.send_bytes, self.send_json)
+
+    async def send_json(self, doc: dict[str, object]) -> None:
+        async with self._lock:
+            await self.ws.send_text(json.dumps(doc, allow_nan=False, default=_plain))
+
+    async def send_bytes(self, data: bytes) -> None:
+        async with self._lock:
+            await self.ws.send_bytes(data)
+
+    async def push_status(self) -> None:
+        while True:
+            gui = self.gui
+            await self.send_json({
+                "type": "status",
+                "axes": [_finite(s) for s in gui.monitor.snapshots.values()],
+                "jog": {str(k): v.rpm for k, v in gui.jog.leases.items()},
+                "alarms": len(gui.monitor.log),
+            })
+            await asyncio.sleep(STATUS_PERIOD_S)
+
+    async def handle(self, doc: dict[str, object]) -> None:
+        kind = doc.get("type")
+        gui, session = self.gui, self.session
+        if kind == "ack":
+            seq = doc.get("seq")
+            if isinstance(seq, int):
+                session.ack(seq)
+        elif kind == "jog":
+            await gui.jog.jog(self.owner, _int(doc, "axis"), _int(doc, "rpm"))
+        elif kind == "jog_stop":
+            await gui.jog.release(self.owner, _int(doc, "axis"))
+        elif kind == "stop_all":
+            failed = {str(k): v for k, v in (await gui.stop_all()).items() if v}
+            await self.send_json({"type": "stopped", "failed": failed})
+        elif kind == "scope":
+            settings = doc.get("settings")
+            if not isinstance(settings, dict):
+                raise ValueError("scope: settings must be an object")
+            session.configure(ScopeSettings.parse(settings, gui.fleet.handles.keys()))
+            session.set_running(True)
+        elif kind == "scope_run":
+            session.set_running(bool(doc.get("running", True)))
+        elif kind == "scope_arm":
+            session.rearm()
+        elif kind == "scope_csv":
+            await self.send_json({"type": "csv", "text": session.csv()})
+        else:
+            raise ValueError(f"unknown message type {kind!r}")
+
+    async def serve(self) -> None:
+        gui = self.gui
+        await self.ws.accept()
+        gui.sessions.add(self.session)
+        tasks = [asyncio.create_task(_quietly(self.push_status)),
+                 asyncio.create_task(_quietly(self.session.run))]
+        try:
+            await self.send_json({"type": "hello", "owner": self.owner, "url": gui.fleet.url,
+                                  "axes": [h.identity() for h in gui.fleet.handles.values()]})
+            while True:
+                message = await self.ws.receive()
+                if message["type"] == "websocket.disconnect":
+                    break
+                text = message.get("text")
+                if text is None:
+                    continue  # the page sends no binary messages: ignored
+                try:
+                    doc = json.loads(text)
+                    if not isinstance(doc, dict):
+                        raise ValueError("a message is a JSON object")
+                    await self.handle(doc)
+                except (ValueError, ServobusError) as exc:
+                    await self.send_json({"type": "error", "message": str(exc),
+                                          "request": str(doc.get("type")
+                                                         if isinstance(doc, dict) else "")})
+        except (WebSocketDisconnect, RuntimeError):
+            pass  # the page went away (closed, reloaded, network dropped)
+        finally:
+            await gui.jog.release(self.owner)  # first: a jog never outlives its page
+            for task in tasks:
+                task.cancel()
+            for task in tasks:
+                with contextlib.suppress(asyncio.CancelledError):
+                    await task
+            self.session.close()
+            gui.sessions.discard(self.session)
+
+
+async def _quietly(fn: Callable[[], Awaitable[None]]) -> None:
+    """Run a sender until the socket fails (then the receive loop ends the page)."""
+    try:
+        await fn()
+    except (WebSocketDisconnect, RuntimeError, ConnectionError):
+        pass
+    except Exception:  # a bug in a sender must not leave the page silently stale
+        log.exception("GUI WebSocket sender failed")
+
+
+def _int(doc: dict[str, object], key: str) -> int:
+    value = doc.get(key)
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ValueError(f"{key} must be an integer, got {value!r}")
+    return value
+
+
+def _finite(snap: dict[str, object]) -> dict[str, object]:
+    """JSON has no NaN or infinity: such a reading is sent as null."""
+    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+            for k, v in snap.items()}
+
+
+def _plain(value: object) -> object:
+    return str(value)
+
+
+async def endpoint(ws: WebSocket) -> None:
+    await PageLink(ws, ws.app.state.gui).serve()

@@ -1,0 +1,282 @@
+"""The GUI in a real headless Chromium (Selenium + Debian's chromium-driver).
+
+One ``servobus gui`` server (three virtual drives) and one browser for the module; the
+drives are checked through the server's REST API. A screenshot of every panel lands in
+``tests/artifacts/gui/`` (gitignored). Without Chromium, chromedriver or Selenium the
+module is skipped with one line saying which is missing.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import urllib.request
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from conftest import wait_until
+
+CHROMIUM = next((p for p in map(shutil.which, ("chromium", "chromium-browser", "google-chrome"))
+                 if p), None)
+DRIVER = shutil.which("chromedriver")
+try:
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.remote.webdriver import WebDriver
+    from selenium.webdriver.remote.webelement import WebElement
+except ImportError:  # pragma: no cover - the skip below says so
+    webdriver = None  # type: ignore[assignment]
+
+_missing = [name for name, ok in (("chromium", CHROMIUM), ("chromedriver", DRIVER),
+                                  ("selenium (pip install -e '.[test]')", webdriver)) if not ok]
+if _missing:  # one skip for the module, saying what to install
+    pytest.skip("browser tests need " + ", ".join(_missing)
+                + " (Debian: apt-get install chromium chromium-driver)", allow_module_level=True)
+pytestmark = pytest.mark.timeout(90)
+ARTIFACTS = Path(__file__).parent / "artifacts" / "gui"
+CHROME_ARGS = ("--headless=new", "--no-sandbox", "--disable-gpu",
+               "--disable-background-networking", "--disable-component-update",
+               "--disable-sync", "--no-first-run", "--window-size=1400,950")
+
+
+# ------------------------------------------------------------------ fixtures
+@pytest.fixture(scope="module")
+def server() -> Iterator[str]:
+    proc = subprocess.Popen([sys.executable, "-m", "servobus", "gui", "--port", "0",
+                             "--no-browser"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    lines: queue.Queue[str] = queue.Queue()
+    threading.Thread(target=lambda: [lines.put(x) for x in proc.stdout or ()],
+                     daemon=True).start()
+    try:
+        m = re.search(r"http://\S+", lines.get(timeout=20))
+        assert m is not None
+        yield m.group(0)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[WebDriver]:
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM  # type: ignore[assignment]
+    profile = tempfile.mkdtemp(prefix="servobus-chromium-")
+    for arg in (*CHROME_ARGS, f"--user-data-dir={profile}"):
+        options.add_argument(arg)
+    os.environ.setdefault("SE_OFFLINE", "true")  # never let Selenium fetch a driver
+    driver = webdriver.Chrome(service=Service(DRIVER), options=options)
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    try:
+        yield driver
+    finally:
+        driver.quit()
+        shutil.rmtree(profile, ignore_errors=True)
+
+
+@pytest.fixture
+def page(server: str, browser: WebDriver) -> WebDriver:
+    browser.get(server)
+    wait_until(lambda: browser.execute_script("return document.body.dataset.ready"),
+               timeout=10, what="page ready")
+    assert browser.execute_script("return document.body.dataset.ready") == "1"
+    wait_until(lambda: browser.execute_script("return window.servobus.link.open"),
+               what="WebSocket open")
+    return browser
+
+
+# ------------------------------------------------------------------ helpers
+def api(server: str, path: str, body: object | None = None) -> Any:
+    request = urllib.request.Request(server.rstrip("/") + path)
+    if body is not None:
+        request.data = json.dumps(body).encode()
+        request.add_header("Content-Type", "application/json")
+    with urllib.request.urlopen(request, timeout=5) as r:
+        return json.loads(r.read())
+
+
+def status(server: str, axis: int) -> dict[str, Any]:
+    doc: dict[str, Any] = api(server, "/api/axes")[axis - 1]["status"]
+    return doc
+
+
+def tab(driver: WebDriver, name: str) -> None:
+    driver.find_element(By.CSS_SELECTOR, f'#tabs button[data-tab="{name}"]').click()
+
+
+def shot(driver: WebDriver, name: str, element: WebElement | None = None) -> Path:
+    path = ARTIFACTS / f"{name}.png"
+    (element.screenshot(str(path)) if element is not None else driver.save_screenshot(str(path)))
+    return path
+
+
+def hold(driver: WebDriver, button: WebElement, seconds: float,
+     during: Callable[[], None] | None = None) -> None:
+    ActionChains(driver).click_and_hold(button).perform()
+    time.sleep(seconds)
+    if during is not None:
+        during()
+    ActionChains(driver).release(button).perform()
+
+
+def js(driver: WebDriver, script: str) -> Any:
+    return driver.execute_script(script)
+
+
+# ------------------------------------------------------------------ tests
+def test_the_page_shows_three_live_axes(page: WebDriver, server: str) -> None:
+    cards = page.find_elements(By.CSS_SELECTOR, ".axis-card")
+    assert [c.get_attribute("data-axis") for c in cards] == ["1", "2", "3"]
+    wait_until(lambda: all(c.get_attribute("data-position") != "" for c in cards),
+               what="live positions")
+    assert "dyn232" in cards[0].text and "enabled" in cards[0].text
+    assert page.find_element(By.ID, "stop-all").is_displayed()
+    shot(page, "axes", page.find_element(By.ID, "panel-axes"))
+    shot(page, "motion")
+
+
+def test_jog_one_axis_and_see_its_position_on_the_scope(page: WebDriver, server: str) -> None:
+    tab(page, "scope")
+    wait_until(lambda: js(page, "return window.servobus.scope.stats.frames") > 3,
+               what="scope frames")
+    start = status(server, 1)["position"]
+    hold(page, page.find_element(By.ID, "scope-jog-plus"), 0.8)
+    wait_until(lambda: abs(status(server, 1)["speed"]) < 1, timeout=5, what="released jog stops")
+    moved = status(server, 1)["position"]
+    assert moved - start > 500  # 120 rpm for ~0.8 s is about 1.5 rev
+    # the scope's position channel (channel 1) shows the jog: its newest point is where the
+    # drive is, and the window holds the ramp from where it started
+    wait_until(lambda: abs(js(page, "const f = window.servobus.scope.frame;"
+                                    "return f.ys[0][f.n - 1]") - moved) <= 8,
+               timeout=5, what="the scope at the drive's position")
+    low = js(page, "return Math.min(...window.servobus.scope.frame.ys[0].filter(v => v === v))")
+    assert low < start + 200
+    assert js(page, "return window.servobus.scope.stats.fps") >= 10
+    assert "drive trace 4,000 Hz" in page.find_element(By.ID, "scope-status").text
+    page.find_element(By.ID, "scope-run").click()  # pause: the picture holds for the cursors
+    wait_until(lambda: "paused" in page.find_element(By.ID, "scope-status").text)
+    over = page.find_element(By.CSS_SELECTOR, "#scope-plot .u-over")
+    width = over.size["width"]
+    ActionChains(page).move_to_element_with_offset(over, int(-0.2 * width), 0).click().perform()
+    ActionChains(page).key_down("\ue008").move_to_element_with_offset(
+        over, int(0.2 * width), 0).click().key_up("\ue008").perform()  # Shift+click: cursor B
+    cursors = page.find_element(By.ID, "scope-cursors").text
+    dt = js(page, "return window.servobus.scope.cursorB - window.servobus.scope.cursorA")
+    assert 0.7 < dt < 0.9 and "B − A" in cursors and "position" in cursors  # 40 % of 2 s
+    shot(page, "scope")
+    page.find_element(By.ID, "scope-run").click()
+
+
+def test_triggered_captures_overlay_the_last_runs(page: WebDriver, server: str) -> None:
+    tab(page, "scope")
+    start = status(server, 1)["position"]
+    js(page, f"""
+        document.querySelector('#trig-mode').value = 'normal';
+        document.querySelector('#trig-level').value = '{start + 1000}';
+        document.querySelector('#scope-window').value = '0.5';
+        document.querySelector('#trig-overlay').checked = true;
+        window.servobus.scope.configure();""")
+    for _ in range(3):  # up through the level (a rising trigger), then back down
+        api(server, "/api/axes/1/move", {"value": start + 4000, "unit": "counts"})
+        time.sleep(0.6)
+        api(server, "/api/axes/1/move", {"value": start, "unit": "counts"})
+        time.sleep(0.3)
+    wait_until(lambda: js(page, "return window.servobus.scope.overlays.length") == 2,
+               what="two earlier runs overlaid")
+    assert "normal: triggered" in page.find_element(By.ID, "scope-status").text
+    shot(page, "scope-overlay")
+
+
+def test_step_test_reads_its_overshoot(page: WebDriver) -> None:
+    tab(page, "tuning")
+    button = page.find_element(By.ID, "step-plus")
+    wait_until(lambda: page.find_elements(By.CSS_SELECTOR, "#gains-table input"),
+               what="gains table")
+    button.click()
+    msg = page.find_element(By.ID, "tuning-msg")
+    wait_until(lambda: msg.get_attribute("data-overshoot"), timeout=10, what="step result")
+    overshoot = float(msg.get_attribute("data-overshoot") or "nan")
+    assert 0.0 <= overshoot < 20.0
+    assert "overshoot" in msg.text and "drive trace" in msg.text
+    cell = wait_until(lambda: js(page, "const c = document.querySelector("
+                                       "'#runs-table td.overshoot'); return c && c.textContent"),
+                      what="runs table")
+    assert float(cell.rstrip(" %")) == pytest.approx(overshoot, abs=0.01)
+    wait_until(lambda: page.find_elements(By.CSS_SELECTOR, "#step-plot canvas"),
+               what="step plot")
+    shot(page, "tuning")
+
+
+def test_change_a_parameter_and_see_it_on_the_drive(page: WebDriver, server: str) -> None:
+    tab(page, "params")
+    field = wait_until(lambda: page.find_elements(By.CSS_SELECTOR, 'input[data-param="main_gain"]'),
+                       what="parameter table")[0]
+    write = page.find_element(By.ID, "params-write")
+    field.clear()
+    field.send_keys("500")  # out of range: refused before anything is sent
+    wait_until(lambda: "out of range" in page.find_element(By.ID, "params-pending").text)
+    assert not write.is_enabled()
+    field.clear()
+    field.send_keys("57")
+    wait_until(lambda: "1 EEPROM write" in page.find_element(By.ID, "params-pending").text,
+               what="EEPROM writes shown before the save")
+    shot(page, "params")
+    write.click()
+    wait_until(lambda: "wrote 1 parameter" in page.find_element(By.ID, "params-msg").text,
+               what="write done")
+    values = {p["name"]: p["value"] for p in api(server, "/api/axes/1/params")["params"]}
+    assert values["main_gain"] == 57
+    api(server, "/api/axes/1/params", {"values": {"main_gain": 40}})
+
+
+def test_stop_all_stops_every_axis(page: WebDriver, server: str) -> None:
+    for axis in (1, 2, 3):
+        api(server, f"/api/axes/{axis}/turn", {"rpm": 200 + 100 * axis})
+    wait_until(lambda: all(abs(status(server, a)["speed"]) > 150 for a in (1, 2, 3)),
+               timeout=5, what="all turning")
+    page.find_element(By.ID, "stop-all").click()
+    wait_until(lambda: all(abs(status(server, a)["speed"]) < 2 for a in (1, 2, 3)),
+               timeout=5, what="all stopped")
+
+
+def test_closing_the_page_during_a_jog_stops_the_axis(page: WebDriver, server: str) -> None:
+    first = page.current_window_handle
+    page.switch_to.new_window("tab")
+    page.get(server)
+    wait_until(lambda: js(page, "return window.servobus && window.servobus.link.open"),
+               timeout=10, what="second page")
+    page.find_element(By.CSS_SELECTOR, '.axis-card[data-axis="2"]').click()
+    ActionChains(page).click_and_hold(page.find_element(By.ID, "jog-minus")).perform()
+    wait_until(lambda: status(server, 2)["speed"] < -100, timeout=5, what="jogging axis 2")
+    page.close()  # the button is still held down
+    page.switch_to.window(first)
+    t0 = time.monotonic()
+    wait_until(lambda: abs(status(server, 2)["speed"]) < 2, timeout=5, what="axis 2 stopped")
+    assert time.monotonic() - t0 < 3.0
+
+
+def test_diagnostics_show_traffic_links_and_alarms(page: WebDriver) -> None:
+    tab(page, "diag")
+    traffic = page.find_element(By.ID, "traffic")
+    wait_until(lambda: "host -> id" in traffic.text, what="decoded traffic")
+    rows = js(page, "return [...document.querySelectorAll('#link-stats tr')]"
+                    ".map(r => r.textContent)")  # one read: the table is redrawn twice a second
+    assert "round trips" in rows[0] and rows[1].startswith("axis 1")
+    shot(page, "diagnostics")
