@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import itertools
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
 
@@ -23,7 +23,6 @@ from servobus.protocols.easycan.client import AsyncEasyCanClient
 from servobus.protocols.easycan.commands import EasyCanCommand
 from servobus.protocols.easycan.messages import ReadReply, ReadRequest, WriteRequest
 from servobus.protocols.easycan.node import EasyCanNetwork, serve
-from servobus.protocols.easycan.policy import TransactionPolicy
 from servobus.sim.realtime import RealtimeClock
 from servobus.sim.yzaim_motor import YzaimMotor
 from servobus.transport.base import Direction
@@ -44,7 +43,7 @@ class Rig:
 
 
 @asynccontextmanager
-async def rig(*addresses: int, **policy: float) -> AsyncIterator[Rig]:
+async def rig(*addresses: int, timeout: float | None = None) -> AsyncIterator[Rig]:
     """Virtual motors on a python-can virtual bus, in wall-clock time."""
     spec = f"virtual:servobus-easycan-test-{next(_channels)}"
     network = EasyCanNetwork([YzaimMotor(a) for a in addresses])
@@ -52,8 +51,7 @@ async def rig(*addresses: int, **policy: float) -> AsyncIterator[Rig]:
     stop = asyncio.Event()
     server = asyncio.create_task(serve(network, node_port, clock=RealtimeClock(network.motors),
                                        stop=stop))
-    client = AsyncEasyCanClient(await AsyncCanBus.open(spec),
-                                policy=TransactionPolicy.checked(**policy))
+    client = AsyncEasyCanClient(await AsyncCanBus.open(spec), timeout=timeout)
     try:
         yield Rig(network, client)
     finally:
@@ -138,12 +136,14 @@ async def test_the_manuals_frames_as_the_client_sends_them() -> None:
 async def test_bad_input_is_refused_before_sending() -> None:
     bus = ScriptedBus(motor_answers(YzaimMotor(1)))
     axis = EasyCanAxis(AsyncEasyCanClient(bus), 1)
-    for call in (lambda: axis.write_param("target_speed", 3001),
-                 lambda: axis.write_param("special_function", 5),  # undefined (5.2)
-                 lambda: axis.write_param("motor_speed", 1),  # read-only: not a parameter
-                 lambda: axis.move_to(1 << 31),
-                 lambda: axis.move_by(-(1 << 31) - 1),
-                 lambda: axis.turn(3001)):
+    calls: tuple[Callable[[], Awaitable[None]], ...] = (
+        lambda: axis.write_param("target_speed", 3001),
+        lambda: axis.write_param("special_function", 5),  # undefined (5.2)
+        lambda: axis.write_param("motor_speed", 1),  # read-only: not a parameter
+        lambda: axis.move_to(1 << 31),
+        lambda: axis.move_by(-(1 << 31) - 1),
+        lambda: axis.turn(3001))
+    for call in calls:
         with pytest.raises(ArgumentRangeError):
             await call()
     with pytest.raises(ArgumentRangeError):
@@ -190,8 +190,7 @@ async def test_a_lost_reply_times_out_and_the_late_one_never_answers_a_later_rea
                 network.handle_raw(arbitration_id, data)]
 
     bus = ScriptedBus(answer)
-    client = AsyncEasyCanClient(bus, policy=TransactionPolicy.checked(timeout=0.03,
-                                                                      late_reply_s=0.2))
+    client = AsyncEasyCanClient(bus, timeout=0.03, late_reply_s=0.2)
     axis = EasyCanAxis(client, 1)
     # the first attempt's reply comes too late: the retry answers (10000)
     assert await axis.read_param("acceleration") == 10000
@@ -205,8 +204,7 @@ async def test_a_lost_reply_times_out_and_the_late_one_never_answers_a_later_rea
 
 async def test_reads_are_retried_moves_are_sent_once() -> None:
     bus = ScriptedBus(lambda i, d: [])  # a motor that never answers
-    client = AsyncEasyCanClient(bus, policy=TransactionPolicy.checked(timeout=0.01,
-                                                                      late_reply_s=0))
+    client = AsyncEasyCanClient(bus, timeout=0.01, late_reply_s=0)
     axis = EasyCanAxis(client, 1)
     with pytest.raises(DriveTimeout):
         await axis.position()

@@ -1,24 +1,28 @@
 """EasyCan host client over any python-can bus (the shared AsyncCanBus / FramePort).
 
 One :class:`AsyncEasyCanClient` per bus serves any number of motors (EasyCanAxis per
-motor, :class:`servobus.protocols.easycan.sync.SyncStream` for several at once). The retry
-and deadline rules are :class:`servobus.protocols.easycan.policy.TransactionPolicy`'s.
+motor, :class:`servobus.protocols.easycan.sync.SyncGroup` for several at once). The rules
+every protocol shares (deadline from when the frame left, bounded read retries, writes
+sent once, stats, trace, EEPROM guard, late replies, dead links) are the shared
+:class:`~servobus.axis.transaction.TransactionManager`'s: ``client.transactions`` is the
+bus's manager (``stats``, ``late_replies`` and ``guard`` are its). What EasyCan adds
+(servobus decisions, docs/easycan.md):
 
-Matching (servobus decisions, docs/easycan.md):
-
-* Replies travel on the host's identifier 0xFF and name the answering motor (5.3), except
-  the position-cache reply, which is the bare position. A reply answers the waiting request
-  of its motor when the codec says it fits (function, register, count); transactions to one
-  motor run one at a time, different motors concurrently.
-* Position-cache writes with reply (0x300|address) run one at a time on the whole bus, and
-  the client reads single registers with 0x03, never a one-register 0x12: then a 4-byte
-  frame on 0xFF is always a position reply (the codec's ambiguity never arises).
-* An error reply (function | 0x80) fails the waiting request of that motor with DriveError
-  naming the motor, the register and the drive's code; a 0x86 (code 0x05) answers a
-  position-cache write with reply (the codec's decision).
+* Which commands may be re-sent is commands.py's rule (reads and setting writes; moves,
+  saves, sync_control, the cache and the emergency stop are sent once, and their timeout
+  says so); which reply answers which request, and which requests wait one at a time, is
+  matching.py's (key = (motor, function), one lane per motor, one for replied cache writes).
+* Per-attempt deadline ``timeout``, default 50 ms: a motor answers within a frame time
+  (about 0.1 ms at 1 Mbit/s) plus its firmware's turn-around; the margin covers USB
+  adapters, socketcand over TCP and a loaded host (the manual gives no timing).
+* An error reply (function | 0x80) is the answer (never re-sent): DriveError naming the
+  motor, the register and the drive's code; counted in ``stats.error_replies``. A 0x86 with
+  code 0x05 answers a replied cache write (matching.py).
 * A write reply that does not echo the written words raises DriveError: the motor did not
   apply it (servobus's virtual motor echoes what the register holds; see its module).
-* Frames that answer nothing (another host's traffic, a late reply) are dropped and counted.
+* The save flag (0x14 != 0) stores to EEPROM: it passes the EEPROM guard first (commands.py).
+* Frames that answer nothing (another host's traffic, a late reply) are dropped and counted
+  (``unmatched``, ``late_replies``; an undecodable frame in ``framing_errors``).
 * A dead bus raises ConnectionLost in the reads that wait and in every call after.
 """
 
@@ -27,13 +31,18 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import time
-from dataclasses import dataclass, field
 from typing import Any
 
 from servobus.axis import checks
 from servobus.axis.base import AxisTraceHook
-from servobus.axis.late_replies import LateReplies
+from servobus.axis.eeprom_guard import EepromGuard
+from servobus.axis.late_replies import DEFAULT_LATE_REPLY_S, LateReplies
+from servobus.axis.transaction import (
+    DEFAULT_RETRIES,
+    TransactionManager,
+    TransactionStats,
+    check_call,
+)
 from servobus.errors import (
     ArgumentRangeError,
     ConnectionLost,
@@ -45,12 +54,8 @@ from servobus.families import yzaim
 from servobus.protocols.easycan import codec
 from servobus.protocols.easycan.commands import EasyCanCommand
 from servobus.protocols.easycan.describe import register_name
-from servobus.protocols.easycan.functions import (
-    CACHE_ERROR_FUNCTION,
-    HOST_ADDRESS,
-    Function,
-    error_text,
-)
+from servobus.protocols.easycan.functions import HOST_ADDRESS, Function, error_text
+from servobus.protocols.easycan.matching import Key, describe_key, fits, reply_keys
 from servobus.protocols.easycan.messages import (
     ErrorReply,
     PositionCacheWrite,
@@ -59,58 +64,47 @@ from servobus.protocols.easycan.messages import (
     ReadReply,
     ReadRequest,
     Reply,
+    Request,
     WriteReply,
     WriteRequest,
 )
-from servobus.protocols.easycan.policy import TransactionPolicy
 from servobus.transport.base import Direction
 from servobus.transport.can_bus import AsyncCanBus, CanFrame, FramePort, set_receiver
 
 log = logging.getLogger(__name__)
 
+DEFAULT_TIMEOUT_S = 0.05  # per attempt (module docstring)
 DECODED_CACHE = 4096  # distinct reply frames remembered (then forgotten at once)
-POSITION_KEY = (-1, 0x300)  # late-reply key of position-cache replies (no motor address)
-Key = tuple[int, int]
+#: The counters of a bus (the one stats class of every protocol).
+BusStats = TransactionStats
 
 
-@dataclass
-class ClientStats:
-    sent: int = 0
-    replies: int = 0
-    retries: int = 0
-    timeouts: int = 0
-    drive_errors: int = 0
-    unmatched: int = 0
+def check_options(timeout: object = None, retries: object = None,
+                  late_reply_s: object = None, eeprom_guard: object = None) -> None:
+    """The client's options as a user gives them (None: the default); ArgumentRangeError
+    before anything is opened."""
+    checks.optional_seconds("timeout", timeout)
+    if retries is not None:
+        checks.count("retries", retries)
+    if late_reply_s is not None:
+        checks.non_negative_seconds("late_reply_s", late_reply_s)
+    if eeprom_guard is not None and not isinstance(eeprom_guard, EepromGuard):
+        raise ArgumentRangeError(f"eeprom_guard must be an EepromGuard, got {eeprom_guard!r}")
 
 
-@dataclass
-class _Waiter:
-    command: EasyCanCommand
-    future: asyncio.Future[Reply] = field(repr=False)
+def _own(command: object) -> EasyCanCommand:
+    """An EasyCan command, or ArgumentRangeError (a request of another protocol)."""
+    if not isinstance(command, EasyCanCommand):
+        raise ArgumentRangeError(f"not an EasyCan command: {command!r}")
+    return command
 
 
-def _expire(future: asyncio.Future[Reply]) -> None:
-    if not future.done():
-        future.set_exception(TimeoutError())
+def _describe_request(command: EasyCanCommand) -> str:
+    return f"motor {command.slave} to {command.what}"
 
 
-def reply_key(command: EasyCanCommand) -> Key:
-    request = command.request
-    if isinstance(request, PositionCacheWrite):
-        return POSITION_KEY
-    return request.slave, int(request.function)
-
-
-def _describe_key(key: Key) -> str:
-    if key == POSITION_KEY:
-        return "position-cache reply"
-    return f"{Function(key[1]).name} reply from motor {key[0]}"
-
-
-def _fits(request: Any, reply: Reply) -> bool:
-    if isinstance(request, PositionCacheWrite) and isinstance(reply, ErrorReply):
-        return reply.slave == request.slave and reply.function == CACHE_ERROR_FUNCTION
-    return codec.answers(request, reply)
+def _trace_request(command: EasyCanCommand) -> object:
+    return command.request
 
 
 def _name(address: int) -> str:
@@ -134,58 +128,60 @@ def _what_register(command: EasyCanCommand) -> str:
 class AsyncEasyCanClient:
     """Executes EasyCanCommands on one CAN bus."""
 
-    def __init__(self, port: FramePort, *, policy: TransactionPolicy | None = None,
-                 host: int = HOST_ADDRESS) -> None:
-        self.policy = policy if policy is not None else TransactionPolicy()
+    def __init__(self, port: FramePort, *, timeout: float | None = None,
+                 retries: int | None = None, late_reply_s: float | None = None,
+                 eeprom_guard: EepromGuard | None = None, host: int = HOST_ADDRESS) -> None:
+        check_options(timeout, retries, late_reply_s, eeprom_guard)
+        self.timeout = DEFAULT_TIMEOUT_S if timeout is None else timeout
         self.port = port
         self.host = host
-        self.stats = ClientStats()
+        #: The bus's transaction manager: one lane per motor, one for replied cache writes.
+        self.transactions: TransactionManager[Key, EasyCanCommand, Reply] = TransactionManager(
+            self._write, link="CAN bus", describe_key=describe_key,
+            describe_request=_describe_request, trace_request=_trace_request,
+            retries=DEFAULT_RETRIES if retries is None else retries,
+            late_reply_s=DEFAULT_LATE_REPLY_S if late_reply_s is None else late_reply_s,
+            eeprom_guard=eeprom_guard)
+        tm = self.transactions
+        self.stats: TransactionStats = tm.stats
         #: Replies owed by timed-out attempts (``late_replies.late``, ``.given_up``).
-        self.late_replies: LateReplies[Key] = LateReplies(self.policy.late_reply_s,
-                                                          _describe_key)
-        self._hooks: list[AxisTraceHook] = []
+        self.late_replies: LateReplies[Key] = tm.late_replies
+        self.guard: EepromGuard = tm.guard
+        #: The request last sent per key: while one waits it is the one of its key (lanes).
+        self._sent: dict[Key, Request] = {}
         #: Decoded replies by data bytes (frozen, so shared): polling repeats the same frames.
         self._decoded: dict[bytes, Reply] = {}
-        self._waiters: list[_Waiter] = []
-        self._locks: dict[int, asyncio.Lock] = {}
-        self._position_lock = asyncio.Lock()
-        self._closed = False
-        self._dead: ConnectionLost | None = None
         self._rx_task: asyncio.Task[None] | None = None
         if not set_receiver(port, self._on_frame):
             self._rx_task = asyncio.get_running_loop().create_task(self._receive_loop(),
                                                                    name="easycan-rx")
 
+    @property
+    def retries(self) -> int:
+        """Default re-sends of a read or setting (per call: ``execute(..., retries=)``)."""
+        return self.transactions.retries
+
     # ------------------------------------------------------------- tracing
     def add_trace(self, hook: AxisTraceHook) -> None:
         """``hook(direction, item, t)``: every message sent/received and every error met."""
-        self._hooks.append(hook)
-
-    def _trace(self, direction: Direction, item: object) -> None:
-        t = time.monotonic()
-        for hook in self._hooks:
-            hook(direction, item, t)
+        self.transactions.add_trace(hook)
 
     # ------------------------------------------------------------- receiving
     async def _receive_loop(self) -> None:
         while True:
             try:
                 raw = await self.port.recv(None)
-            except OSError as exc:
-                self._bus_failed(exc)
+            except OSError as exc:  # ConnectionLost, or a foreign port's own error
+                self.transactions.lost(exc)
                 self._on_frame(None)
                 return
             if raw is not None:
                 self._on_frame(raw)
 
     def _on_frame(self, raw: CanFrame | None) -> None:
-        if raw is None:
-            dead = self._bus_failed(ConnectionLost("CAN bus closed"))
-            for w in self._waiters:
-                if not w.future.done():
-                    w.future.set_exception(ConnectionLost(
-                        f"{dead} while motor {w.command.slave} was to answer "
-                        f"{w.command.what}"))
+        tm = self.transactions
+        if raw is None:  # the port closed or failed: every waiting request fails now
+            tm.lost(ConnectionLost("CAN bus closed"))
             return
         if raw.is_extended_id or raw.arbitration_id != self.host:
             return  # requests (ours echoed by some adapters, another host's): not replies
@@ -195,111 +191,71 @@ class AsyncEasyCanClient:
             try:
                 reply = codec.decode_reply(raw.arbitration_id, data)
             except FramingError as exc:
-                self.stats.unmatched += 1
-                log.debug("undecodable frame on 0x%03X: %s", raw.arbitration_id, exc)
+                tm.stray(exc)
                 return
             if len(self._decoded) >= DECODED_CACHE:
                 self._decoded.clear()
             self._decoded[data] = reply
-        if self._hooks:
-            self._trace(Direction.RX, reply)
-        for w in self._waiters:
-            if not w.future.done() and _fits(w.command.request, reply):
-                w.future.set_result(reply)
+        if tm.tracing:
+            tm.trace(Direction.RX, reply)
+        keys = reply_keys(reply)
+        sent = self._sent
+        for key in keys:
+            request = sent.get(key)
+            if request is not None and fits(request, reply) and tm.answer(key, reply):
                 return
-        late = self.late_replies
-        key = POSITION_KEY if isinstance(reply, PositionReply) else (reply.slave,
-                                                                    reply.function)
-        if late and late.take(key):
-            return
-        self.stats.unmatched += 1
-        log.debug("unmatched reply %s", reply)
+        if tm.late_replies:
+            for key in keys:
+                if tm.late(key):
+                    return
+        tm.stray(reply)
 
     # ------------------------------------------------------------- sending
-    async def _send(self, command: EasyCanCommand) -> None:
-        if self._hooks:
-            self._trace(Direction.TX, command.request)
-        self.stats.sent += 1
-        try:
-            await self.port.send(*codec.encode(command.request))
-        except OSError as exc:
-            raise self._bus_failed(exc) from exc
-
-    def _bus_failed(self, exc: BaseException) -> BaseException:
-        out = checks.lost(exc, "CAN bus lost")
-        if isinstance(out, ConnectionLost) and self._dead is None:
-            self._dead = out
-            self.late_replies.hang_up(ConnectionLost(str(out)))
-        return out
+    async def _write(self, command: EasyCanCommand) -> None:
+        if command.expects_reply:  # its lane keeps any other request of its key waiting
+            self._sent[command.key] = command.request
+        await self.port.send(*command.frame)
 
     def check_alive(self) -> None:
-        if self._dead is not None:
-            raise ConnectionLost(str(self._dead))
+        """ConnectionLost when the bus died or the client was closed."""
+        self.transactions.check_alive()
 
     async def send_only(self, *commands: EasyCanCommand) -> None:
         """Commands without a reply (silent cache frames, position clear), back to back."""
-        self.check_alive()
+        tm = self.transactions
+        tm.check_alive()
         for command in commands:
-            if codec.expects_reply(command.request):
+            if _own(command).expects_reply:
                 raise ArgumentRangeError(f"{command.what} has a reply: use execute()")
         for command in commands:
-            await self._send(command)
+            await tm.send(command)
 
     async def execute(self, command: EasyCanCommand, *, retries: int | None = None,
                       timeout: float | None = None) -> Reply | None:
         """Send ``command``; its reply (checked), or None for a command without one."""
-        self.check_alive()
-        attempts = self.policy.attempts(command.retry_safe, retries)
-        deadline = self.policy.deadline(timeout)
-        if not codec.expects_reply(command.request):
-            await self._send(command)
+        tm = self.transactions
+        tm.check_alive()
+        if retries is not None or timeout is not None:
+            check_call(retries, timeout)
+        own = _own(command)
+        if own.eeprom_item is not None:
+            tm.check_eeprom(own.slave, own.eeprom_item)
+        if not own.expects_reply:
+            await tm.send(own)
             return None
-        if isinstance(command.request, PositionCacheWrite):
-            lock = self._position_lock
-        else:
-            lock = self._locks.setdefault(command.slave, asyncio.Lock())
-        async with lock:
-            reply = await self._transact(command, attempts, deadline)
-        return self._check(command, reply)
-
-    async def _transact(self, command: EasyCanCommand, attempts: int,
-                        deadline: float) -> Reply:
-        loop = asyncio.get_running_loop()
-        key = reply_key(command)
-        late = self.late_replies
-        if late:
-            await late.drain([key])
-        for attempt in range(attempts):
-            if attempt:
-                self.stats.retries += 1
-                log.debug("retry %d of %d: %s to motor %d", attempt, attempts - 1,
-                          command.what, command.slave)
-            waiter = _Waiter(command, loop.create_future())
-            self._waiters.append(waiter)
-            timer = loop.call_later(deadline, _expire, waiter.future)
-            try:
-                await self._send(command)
-                reply = await waiter.future
-            except TimeoutError:
-                self.stats.timeouts += 1
-                late.owe(key)
-                if self._hooks:
-                    self._trace(Direction.RX, DriveTimeout(
-                        f"no reply from motor {command.slave} to {command.what}"))
-                continue
-            finally:
-                timer.cancel()
-                self._waiters.remove(waiter)
-            self.stats.replies += 1
-            return reply
-        once = "" if command.retry_safe else "; it was sent once and is not re-sent"
-        raise DriveTimeout(
-            f"no reply from motor {command.slave} to {command.what} after {attempts} "
-            f"attempt(s) of {deadline * 1000:.1f} ms{once}")
+        try:
+            reply = await tm.request(own.key, own,
+                                     deadline_s=self.timeout if timeout is None else timeout,
+                                     retry_safe=own.retry_safe, retries=retries, lane=own.lane)
+        except DriveTimeout as exc:
+            if own.retry_safe:
+                raise
+            raise DriveTimeout(f"{exc}; it was sent once and is not re-sent") from None
+        return self._check(own, reply)
 
     def _check(self, command: EasyCanCommand, reply: Reply) -> Reply:
         if isinstance(reply, ErrorReply):
-            self.stats.drive_errors += 1
+            self.stats.error_replies += 1
             raise DriveError(
                 f"motor {reply.slave} refused {command.what} [{_what_register(command)}]: "
                 f"error 0x{reply.code:02X} {error_text(reply.code)}",
@@ -339,11 +295,8 @@ class AsyncEasyCanClient:
 
     # ------------------------------------------------------------- closing
     async def close(self) -> None:
-        if self._closed:
+        if not self.transactions.close():
             return
-        self._closed = True
-        if self._dead is None:
-            self._dead = ConnectionLost("client is closed")
         await self.port.close()
         if self._rx_task is not None:
             self._rx_task.cancel()
@@ -352,19 +305,15 @@ class AsyncEasyCanClient:
 
     @property
     def closed(self) -> bool:
-        return self._closed
+        return self.transactions.closed
 
 
 async def open_easycan_client(can: str, *, timeout: float | None = None,
                               retries: int | None = None, late_reply_s: float | None = None,
+                              eeprom_guard: EepromGuard | None = None,
                               **options: Any) -> AsyncEasyCanClient:
     """Open ``can`` ("INTERFACE:CHANNEL"); other keywords go to ``can.Bus``."""
-    kw: dict[str, object] = {"timeout": timeout}
-    if retries is not None:
-        kw["retries"] = retries
-    if late_reply_s is not None:
-        kw["late_reply_s"] = late_reply_s
-    policy = TransactionPolicy.checked(**kw)  # before the bus is opened
+    check_options(timeout, retries, late_reply_s, eeprom_guard)  # before the bus is opened
     port = await AsyncCanBus.open(can, **options)
-    return AsyncEasyCanClient(port, policy=policy)
-
+    return AsyncEasyCanClient(port, timeout=timeout, retries=retries,
+                              late_reply_s=late_reply_s, eeprom_guard=eeprom_guard)

@@ -7,16 +7,26 @@ Retry rule (servobus decision, docs/easycan.md): reads are re-sent after a timeo
 of a setting (the same value again is harmless) too; a write that moves the motor, saves,
 or signals synchronisation (positions, save flag, sync_control, the position cache) and the
 emergency stop are never re-sent: a second copy could move twice or restart a cycle.
+
+EEPROM rule (servobus decision, docs/easycan.md): parameters are RAM until the save flag
+(0x14) is written (5.2); that write stores every saved register in the EEPROM, so it is the
+one write the client's EEPROM guard counts (item "save_flag"; writing 0 saves nothing).
+
+Each command carries what the client needs on its hot path, computed once when it is
+built: its frame, whether a reply comes, and the key and lane of that reply (matching.py).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Hashable
+from dataclasses import dataclass, field
 
 from servobus.errors import ArgumentRangeError
 from servobus.families import yzaim
 from servobus.families.yzaim_family import PARAM_NAMES
+from servobus.protocols.easycan import codec
 from servobus.protocols.easycan.functions import MAX_MULTI_READ
+from servobus.protocols.easycan.matching import Key, request_key, request_lane
 from servobus.protocols.easycan.messages import (
     ClearPosition,
     EmergencyStop,
@@ -33,6 +43,8 @@ MAX_ADDRESS = yzaim.BY_NAME["device_address"].maximum  # 254
 REACHABLE_PARAMS: tuple[str, ...] = PARAM_NAMES
 #: Registers whose write is never re-sent (module docstring).
 _ONCE = frozenset({"sync_control"})
+#: Registers whose (non-zero) write stores to EEPROM: counted by the EEPROM guard.
+_EEPROM = frozenset({"save_flag"})
 
 
 @dataclass(frozen=True)
@@ -44,6 +56,20 @@ class EasyCanCommand:
     echo: tuple[int, ...] | None = None
     #: The parameter a read returns (decoded with the family table), if any.
     name: str | None = None
+    #: The EEPROM guard's item for a write that stores to EEPROM (None: RAM only).
+    eeprom_item: str | None = None
+    # computed once (module docstring): (arbitration id, data), reply expected, its key/lane
+    frame: tuple[int, bytes] = field(init=False, repr=False, compare=False)
+    expects_reply: bool = field(init=False, repr=False, compare=False)
+    key: Key = field(init=False, repr=False, compare=False)
+    lane: Hashable = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        request = self.request
+        object.__setattr__(self, "frame", codec.encode(request))
+        object.__setattr__(self, "expects_reply", codec.expects_reply(request))
+        object.__setattr__(self, "key", request_key(request))
+        object.__setattr__(self, "lane", request_lane(request))
 
     @property
     def slave(self) -> int:
@@ -92,7 +118,8 @@ def make_write(slave: int, name: str, value: int) -> EasyCanCommand:
     action = isinstance(p, yzaim.Pair) or p.access is yzaim.Access.ACTION
     return EasyCanCommand(WriteRequest(check_address(slave), address, words),
                           f"write {name} = {value}", retry_safe=not (action or name in _ONCE),
-                          echo=None if action else words)
+                          echo=None if action else words,
+                          eeprom_item=name if name in _EEPROM and value else None)
 
 
 def make_move_absolute(slave: int, position: int) -> EasyCanCommand:

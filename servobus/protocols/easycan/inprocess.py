@@ -4,8 +4,9 @@ Each URL opened gets its own virtual channel, so two in-process buses never meet
 ``ids`` (motor addresses 1..254; default: the one asked for, else 1), ``fast=1`` (no
 1 Mbit/s bit-timing model), ``state=FILE`` (saved registers and positions), ``model=NAME``
 (a YZ-AIM model of the manual's tables, default 57AIM30C), plus the client's ``timeout``,
-``retries`` and ``late_reply_s``. The motors come set up for communication control
-(gear numerator 0 saved, so modbus_enable is 1 at power-on: servobus.sim.yzaim_motor).
+``retries``, ``late_reply_s`` and ``eeprom_guard``. The motors come set up for
+communication control (gear numerator 0 saved, so modbus_enable is 1 at power-on:
+servobus.sim.yzaim_motor).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from servobus.transport.can_bus import AsyncCanBus, BitTiming
 
 SIM_OPTIONS: dict[str, type] = {
     "ids": str, "fast": bool, "state": str, "model": str, "timeout": float, "retries": int,
-    "late_reply_s": float,
+    "late_reply_s": float, "eeprom_guard": object,
 }
 _channels = itertools.count()
 

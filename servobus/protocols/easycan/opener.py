@@ -3,7 +3,8 @@
 The part after ``+`` is a python-can interface name; the channel follows ``//``. For
 socketcand the channel is ``host:port[/can0]``. ``?bitrate=`` goes to python-can where the
 interface takes one (EasyCan runs at 1 Mbit/s, manual 1); the client's own options
-(``timeout``, ``retries``, ``late_reply_s``) too. Without an id the motor at address 1.
+(``timeout``, ``retries``, ``late_reply_s``; ``eeprom_guard=`` as a keyword) too. Without
+an id the motor at address 1.
 Decision: over socketcand the client asks python-can for ``tcp_tune`` (TCP_NODELAY and
 QUICKACK) unless ``?tcp_tune=0``: without it Nagle's algorithm holds small frames back and
 sends them in bursts, which the 2 ms position cache cannot take (two values in one cycle).
@@ -22,6 +23,7 @@ from servobus.protocols.easycan.client import open_easycan_client
 FACTORY_ADDRESS = 1
 OPTIONS: dict[str, type] = {
     "bitrate": int, "timeout": float, "retries": int, "late_reply_s": float, "tcp_tune": bool,
+    "eeprom_guard": object,
 }
 
 
