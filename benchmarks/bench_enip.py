@@ -241,8 +241,11 @@ class Recorder:
     times: list[float] = field(default_factory=list)  # in the scanner's Python
     wire: list[float] = field(default_factory=list)  # at the socket (kernel receive time)
     sequences: list[int] = field(default_factory=list)
+    recording: bool = True  # off at the end of the window (closing takes time)
 
     def __call__(self, frame: InputFrame) -> None:
+        if not self.recording:
+            return
         self.times.append(frame.time)
         self.wire.append(frame.wire_time)
         self.sequences.append(frame.sequence)
@@ -280,6 +283,8 @@ async def run_scanner(endpoints: list[tuple[str, int]], adapter_pid: int
     cpu0, wall0, child0 = time.process_time(), time.monotonic(), cpu_seconds(adapter_pid)
     await asyncio.sleep(IO_SECONDS)
     cpu1, wall1, child1 = time.process_time(), time.monotonic(), cpu_seconds(adapter_pid)
+    for rec in recorders:
+        rec.recording = False
     losses = sum(c.stats.losses for c in ios)
     for cyclic in ios:
         await cyclic.close()
