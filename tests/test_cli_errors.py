@@ -85,6 +85,8 @@ CASES: list[Case] = [
          EXIT_USAGE, "PCAN-Basic"),
     Case("unknown-can-interface", ("--can", "nosuchbus:0", "--id", "1", "status"), EXIT_USAGE,
          "cannot open CAN bus dyncan+nosuchbus://0"),
+    Case("dead-enip", ("--url", "enip://127.0.0.1:{closed}", "status"), EXIT_USAGE,
+         "cannot reach enip://127.0.0.1:"),
     Case("bad-serial-device", ("--port", "/dev/servobus-no-such-port", "status"), EXIT_USAGE,
          "cannot open /dev/servobus-no-such-port"),
     Case("bad-sim-option", ("--port", "sim://dyn2?speed=9", "status"), EXIT_USAGE,

@@ -51,6 +51,8 @@ PORT_HINTS: dict[str, str] = {
            "--listen tcp://HOST:PORT`), or fix HOST:PORT",
     "rfc2217": "start the RFC 2217 server, or fix HOST:PORT",
 }
+NETWORK_HINT = ("check that the drive is on and reachable at that address (ping it), the port, "
+                "or start its virtual drive (`servobus sim <protocol>`)")
 PORT_FALLBACK = ("check the port name (Linux /dev/ttyUSB0, Windows COM3), that the adapter is "
                  "plugged in and that you may use it (Linux: the dialout group)")
 
@@ -82,8 +84,15 @@ def open_failure(url: DriveUrl, exc: BaseException) -> CliError:
     if url.transport and url.transport not in PORT_HINTS and "://" not in url.target:
         return CliError(f"cannot open CAN bus {url.raw}: {_reason(exc)}", CAN_FALLBACK)
     scheme = url.transport or url.scheme
+    if scheme not in PORT_HINTS and scheme and _looks_like_host(url.target):
+        return CliError(f"cannot reach {url.raw}: {_reason(exc)}", NETWORK_HINT)
     return CliError(f"cannot open {url.raw}: {_reason(exc)}",
                     PORT_HINTS.get(scheme, PORT_FALLBACK))
+
+
+def _looks_like_host(target: str) -> bool:
+    """``192.168.1.10``, ``drive.local:44818``: a network address, not a serial device."""
+    return bool(target) and not target.startswith("/") and not target.upper().startswith("COM")
 
 
 def _reason(exc: BaseException) -> str:

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import selectors
 import signal
 import sys
 import time
@@ -30,11 +29,13 @@ from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.open_axis import emit_json, note, open_axis
 from servobus.cli.param_types import Seconds
 from servobus.cli.sim_cmd import add_sim_command
+from servobus.cli.sim_control import control_option, start_control
 from servobus.errors import ArgumentRangeError, NotSupported, ServobusError
 from servobus.families import dyn5
 from servobus.families.dmm import units as U
 from servobus.protocols.enip import io
 from servobus.protocols.enip.encap import TCP_PORT
+from servobus.sim.fine_selector import fine_event_loop
 
 if TYPE_CHECKING:
     from servobus.protocols.enip.scanner import InputFrame
@@ -42,6 +43,13 @@ if TYPE_CHECKING:
 
 
 # ---------------------------------------------------------------- sim enip
+def _ready(servers: list[EnipServer], control: tuple[str, int] | None) -> None:
+    """Say where the adapters listen; serve the control channel (JP3 I/O, faults) if asked."""
+    _listening(servers)
+    if servers:
+        start_control(control, [s.drive for s in servers], clock=servers[0].clock)
+
+
 def _listening(servers: list[EnipServer]) -> None:
     for s in servers:
         click.echo(f"listening on enip://{s.host}:{s.tcp_port} (UDP ListIdentity "
@@ -50,7 +58,8 @@ def _listening(servers: list[EnipServer]) -> None:
 
 
 async def run_adapters(hosts: str, tcp_port: int, udp_port: int, state: str | None,
-                       model: str, duration: float | None, reset_downtime_s: float) -> None:
+                       model: str, duration: float | None, reset_downtime_s: float,
+                       control: tuple[str, int] | None = None) -> None:
     from servobus.protocols.enip.server import serve_enip
 
     stop = asyncio.Event()
@@ -61,7 +70,7 @@ async def run_adapters(hosts: str, tcp_port: int, udp_port: int, state: str | No
     try:
         await serve_enip(hosts, tcp_port, udp_port, state, model=model, stop=stop,
                          duration=duration, reset_downtime_s=reset_downtime_s,
-                         on_ready=_listening)
+                         on_ready=lambda servers: _ready(servers, control))
     except OSError as exc:
         raise ServobusError(f"cannot listen on {hosts} (TCP {tcp_port}, UDP {udp_port}): "
                             f"{exc.strerror or exc} - use other ports (0 picks free ones) "
@@ -86,8 +95,10 @@ async def run_adapters(hosts: str, tcp_port: int, udp_port: int, state: str | No
               show_default=True, help="seconds the adapter is silent after a Reset (0x21)")
 @click.option("--duration", type=click.FloatRange(min=0.0), default=None, metavar="SECONDS",
               help="stop by itself after this many seconds [default: run until Ctrl-C]")
+@control_option
 def sim_enip_cmd(hosts: str, tcp_port: int, udp_port: int, state: str | None, model: str,
-                 reset_downtime: float, duration: float | None) -> None:
+                 reset_downtime: float, duration: float | None,
+                 control: tuple[str, int] | None) -> None:
     """Virtual DYN5 drives on EtherNet/IP (explicit messaging, ListIdentity, Class 1 I/O)."""
     from servobus.protocols.enip.server import parse_hosts
 
@@ -97,18 +108,10 @@ def sim_enip_cmd(hosts: str, tcp_port: int, udp_port: int, state: str | None, mo
         raise click.BadParameter(str(exc), param_hint="--listen") from None
     click.echo(f"servobus sim enip: {len(host_list)} virtual DYN5 ({model}) on "
                f"{', '.join(host_list)}", err=True)
-    with asyncio.Runner(loop_factory=precise_loop) as runner:
+    with asyncio.Runner(loop_factory=fine_event_loop) as runner:
         runner.run(run_adapters(hosts, tcp_port, udp_port, state, model, duration,
-                                reset_downtime))
+                                reset_downtime, control))
     click.echo("stopped", err=True)
-
-
-def precise_loop() -> asyncio.AbstractEventLoop:
-    """An event loop whose timers keep microseconds: epoll (asyncio's default selector on
-    Linux) sleeps in whole milliseconds, rounded up, so a T->O frame due 0.3 ms from now
-    would leave up to 1 ms late; select() takes microseconds. A simulator serves a few
-    dozen sockets, far below select()'s limit."""
-    return asyncio.SelectorEventLoop(selectors.SelectSelector())
 
 
 # ---------------------------------------------------------------- discover
