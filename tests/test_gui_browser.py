@@ -280,3 +280,44 @@ def test_diagnostics_show_traffic_links_and_alarms(page: WebDriver) -> None:
                     ".map(r => r.textContent)")  # one read: the table is redrawn twice a second
     assert "round trips" in rows[0] and rows[1].startswith("axis 1")
     shot(page, "diagnostics")
+
+
+def test_io_panel_drives_the_analog_input_in_analog_speed_mode(page: WebDriver,
+                                                               server: str) -> None:
+    from selenium.webdriver.support.ui import Select
+
+    page.find_element(By.CSS_SELECTOR, '.axis-card[data-axis="2"]').click()
+    io_tab = page.find_element(By.ID, "tab-io")
+    assert io_tab.is_displayed()  # axis 2 is a virtual drive: it has the I/O panel
+    io_tab.click()
+    wait_until(lambda: js(page, "const s = document.querySelector('#io-command-mode');"
+                                "return s.options.length > 0 && s.value"), what="config read")
+    def text(css: str) -> str:  # the panel redraws ~10 times a second: read in one go
+        value: str = js(page, f"const n = document.querySelector('{css}');"
+                              "return n ? n.textContent : ''")
+        return value
+
+    wait_until(lambda: "position" in text("#io-state"), what="live internal state")
+    Select(page.find_element(By.ID, "io-command-mode")).select_by_value("analog")
+    Select(page.find_element(By.ID, "io-servo-mode")).select_by_value("speed")
+    page.find_element(By.ID, "io-config-set").click()
+    msg = page.find_element(By.ID, "io-msg")
+    wait_until(lambda: "analog command, speed mode" in msg.text, what="config set")
+    pins = text("#io-pins")
+    volts = page.find_element(By.ID, "io-analog-num")
+    volts.clear()
+    volts.send_keys("1.5\t")  # change event: the slider follows, the value is sent
+    wait_until(lambda: abs(status(server, 2)["speed"] - 900) < 5, timeout=5,
+               what="600 rpm/V x 1.5 V on the drive")
+    assert js(page, "return document.querySelector('#io-analog').value") == "1.5"
+    wait_until(lambda: "900" in text('#io-state [data-state="speed_rpm"]'),
+               what="the panel's state shows 900 rpm")
+    wait_until(lambda: text("#io-pins") != pins, what="the outputs change (ZRI passes)")
+    assert "1.500 V" in text('#io-state [data-state="inputs.analog_v"]')
+    assert js(page, "return document.querySelector('[data-output=\"alarm\"]')"
+                    ".dataset.value") == "false"
+    shot(page, "io")
+    api(server, "/api/axes/2/io", {"analog_v": 0})
+    wait_until(lambda: abs(status(server, 2)["speed"]) < 1, timeout=5, what="0 V stops")
+    api(server, "/api/axes/2/config", {"command_mode": "rs232", "servo_mode": "position"})
+    page.find_element(By.CSS_SELECTOR, '.axis-card[data-axis="1"]').click()

@@ -38,6 +38,7 @@ from types import TracebackType
 
 from servobus.axis import checks
 from servobus.axis.capture import Capture, CaptureSource
+from servobus.axis.virtual_io import VirtualIo, VirtualIoSource
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveTimeout, NotSupported
 from servobus.families.base import AxisStatus, Family, ParamInfo
 from servobus.transport.base import Direction
@@ -189,6 +190,19 @@ class AsyncAxis(ABC):
             raise NotSupported(f"{self.family.title} over {self.protocol} keeps no sample "
                                "trace a host can read; poll the axis", family=self.family.name)
         return source.read(self.drive_id).rescaled(self.counts_per_rev)
+
+    #: Where :meth:`virtual_io` reaches the drive's connector I/O; set on the in-process
+    #: virtual drives of the DMM families (servobus.sim.schemes), None on a real drive.
+    io_source: VirtualIoSource | None = None
+
+    def virtual_io(self) -> VirtualIo:
+        """A virtual drive's JP3 inputs and outputs (servobus.axis.virtual_io): analog
+        reference, pulse train, ENA, outputs, internal state. NotSupported on a real drive."""
+        source = self.io_source
+        if source is None:
+            raise NotSupported(f"{self.family.title} over {self.protocol} is not a virtual "
+                               "drive with connector I/O", family=self.family.name)
+        return source.for_drive(self.drive_id)
 
     # ------------------------------------------------------------- units
     def param_info(self, name: str) -> ParamInfo:

@@ -290,6 +290,7 @@ class CommandAxis(AsyncAxis):
     async def sibling(self, drive_id: int) -> CommandAxis:
         axis = type(self)(self.client, drive_id, owns_client=False)
         axis.capture_source = self.capture_source  # same connection, same drives' traces
+        axis.io_source = self.io_source  # and the same virtual I/O
         return axis
 
     async def add_trace(self, hook: AxisTraceHook) -> None:

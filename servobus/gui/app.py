@@ -17,7 +17,7 @@ from starlette.responses import FileResponse, Response
 from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 
-from servobus.gui import api_axes, api_params, ws
+from servobus.gui import api_axes, api_io, api_params, ws
 from servobus.gui.auth import Guard
 from servobus.gui.fleet import Fleet
 from servobus.gui.jog import LEASE_S
@@ -50,6 +50,7 @@ def create_app(url: str | None = None, ids: Sequence[int] | None = None, *,
         Route("/", index),
         *api_axes.ROUTES,
         *api_params.ROUTES,
+        *api_io.ROUTES,
         WebSocketRoute("/ws", ws.endpoint),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
     ], lifespan=lifespan, middleware=[Middleware(Guard, token=token)])

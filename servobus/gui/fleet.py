@@ -46,6 +46,7 @@ class AxisHandle:
             "features": sorted(fam.features),
             "alarms": {str(k): v for k, v in fam.alarms.items()},
             "params": len(a.parameters()),
+            "virtual_io": a.io_source is not None,
         }
 
     def link(self) -> dict[str, object]:
@@ -77,6 +78,8 @@ class Fleet:
                 sib = await first.sibling(drive_id)
                 if sib.capture_source is None:
                     sib.capture_source = first.capture_source  # same connection
+                if sib.io_source is None:
+                    sib.io_source = first.io_source
                 axes.append(sib)
             traffic = TrafficLog()
             await first.add_trace(traffic.hook)  # siblings share the connection

@@ -2,9 +2,10 @@
 
 Messages from the page (JSON): ``jog`` {axis, rpm} (repeated while the button is held),
 ``jog_stop`` {axis}, ``stop_all``, ``scope`` {settings}, ``scope_run`` {running},
-``scope_arm``, ``scope_csv``, ``ack`` {seq}. To the page: ``hello``, ``status`` (every
-:data:`STATUS_PERIOD_S`), ``scope_state``, ``csv``, ``error``, ``stopped`` (JSON) and scope
-frames (binary, servobus.gui.frames).
+``scope_arm``, ``scope_csv``, ``ack`` {seq}, ``io_watch`` {axis or null}. To the page:
+``hello``, ``status`` (every :data:`STATUS_PERIOD_S`), ``io`` (the watched axis's virtual
+outputs and state, as often), ``scope_state``, ``csv``, ``error``, ``stopped`` (JSON) and
+scope frames (binary, servobus.gui.frames).
 
 When the WebSocket closes, for whatever reason, every jog of this page stops first.
 """
@@ -22,6 +23,7 @@ from collections.abc import Awaitable, Callable
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from servobus.errors import ServobusError
+from servobus.gui.api_io import snapshot
 from servobus.gui.scope_session import ScopeSession, ScopeSettings
 from servobus.gui.state import GuiState
 
@@ -38,6 +40,7 @@ class PageLink:
         self.owner = next(_owners)
         self._lock = asyncio.Lock()
         self.session = ScopeSession(gui.samplers, self.send_bytes, self.send_json)
+        self.io_axis: int | None = None  # the axis whose virtual I/O the page watches
 
     async def send_json(self, doc: dict[str, object]) -> None:
         async with self._lock:
@@ -56,6 +59,20 @@ class PageLink:
                 "jog": {str(k): v.rpm for k, v in gui.jog.leases.items()},
                 "alarms": len(gui.monitor.log),
             })
+            await asyncio.sleep(STATUS_PERIOD_S)
+
+    async def push_io(self) -> None:
+        while True:
+            axis = self.io_axis
+            if axis is not None:
+                try:
+                    doc = await snapshot(self.gui.fleet.get(axis))
+                except ServobusError as exc:  # not a virtual drive, or no such axis
+                    self.io_axis = None
+                    await self.send_json({"type": "error", "message": str(exc),
+                                          "request": "io_watch"})
+                else:
+                    await self.send_json({"type": "io", **doc})
             await asyncio.sleep(STATUS_PERIOD_S)
 
     async def handle(self, doc: dict[str, object]) -> None:
@@ -82,6 +99,9 @@ class PageLink:
             session.set_running(bool(doc.get("running", True)))
         elif kind == "scope_arm":
             session.rearm()
+        elif kind == "io_watch":
+            axis = doc.get("axis")
+            self.io_axis = None if axis is None else _int(doc, "axis")
         elif kind == "scope_csv":
             await self.send_json({"type": "csv", "text": session.csv()})
         else:
@@ -92,7 +112,8 @@ class PageLink:
         await self.ws.accept()
         gui.sessions.add(self.session)
         tasks = [asyncio.create_task(_quietly(self.push_status)),
-                 asyncio.create_task(_quietly(self.session.run))]
+                 asyncio.create_task(_quietly(self.session.run)),
+                 asyncio.create_task(_quietly(self.push_io))]
         try:
             await self.send_json({"type": "hello", "owner": self.owner, "url": gui.fleet.url,
                                   "axes": [h.identity() for h in gui.fleet.handles.values()]})

@@ -9,7 +9,8 @@ the protocol's factory id), ``fast=1`` (no wire pacing), ``state=FILE`` (EEPROM 
 JSON file), ``model=NAME`` (motor/drive model).
 
 Every ``sim://`` axis reads its virtual drives' 4 kHz trace with ``trace_buffer()``
-(servobus.sim.capture), whatever the protocol.
+(servobus.sim.capture), whatever the protocol; the axes of the DMM families reach their
+drives' JP3 inputs and outputs with ``virtual_io()`` (servobus.sim.virtual_io).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 from servobus.axis import registry
 from servobus.axis.url import DriveUrl
 from servobus.errors import ArgumentRangeError
-from servobus.sim import capture
+from servobus.sim import capture, virtual_io
 
 if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis
@@ -45,4 +46,6 @@ async def open_axis(url: DriveUrl, *, drive_id: int | None = None, **keywords: A
         axis: AsyncAxis = await opener(url, drive_id=drive_id, **keywords)
     if drives and axis.capture_source is None:
         axis.capture_source = capture.SimCapture(drives)  # trace_buffer(): their 4 kHz trace
+    if drives and axis.io_source is None and virtual_io.has_jp3(axis.family.name):
+        axis.io_source = virtual_io.SimIoSource(drives)  # virtual_io(): their JP3 I/O
     return axis

@@ -7,6 +7,7 @@ import { ParamsPanel } from "./params.js";
 import { ScopePanel } from "./scope.js";
 import { TuningPanel } from "./tuning.js";
 import { DiagnosticsPanel } from "./diagnostics.js";
+import { IoPanel } from "./io.js";
 
 class Context {
   constructor(info, link) {
@@ -51,7 +52,7 @@ async function main() {
 
   const panels = {
     motion: new MotionPanel(ctx), params: new ParamsPanel(ctx), scope: new ScopePanel(ctx),
-    tuning: new TuningPanel(ctx), diag: new DiagnosticsPanel(ctx),
+    tuning: new TuningPanel(ctx), diag: new DiagnosticsPanel(ctx), io: new IoPanel(ctx),
   };
   ctx.panels = panels;
   panels.motion.bindJog($("#scope-jog-plus"), 1);  // jog while watching the scope
