@@ -46,7 +46,7 @@ if _missing:  # one skip for the module, saying what to install
     pytest.skip("browser tests need " + ", ".join(_missing)
                 + " (Debian: apt-get install chromium chromium-driver)", allow_module_level=True)
 pytestmark = pytest.mark.timeout(90)
-ARTIFACTS = Path(__file__).parent / "artifacts" / "gui"
+ARTIFACTS = Path(__file__).parents[1] / "artifacts" / "gui"
 CHROME_ARGS = ("--headless=new", "--no-sandbox", "--disable-gpu",
                "--disable-background-networking", "--disable-component-update",
                "--disable-sync", "--no-first-run", "--window-size=1400,950")

@@ -21,7 +21,7 @@ import pytest
 from dyn232_rig import PATHS, arun, rig
 
 # benchmarks/ is a top-level package of the repository, not installed with servobus.
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root: benchmarks/
 from benchmarks.stale_reads import StaleCount, dyn232_stale, dyncan_stale
 from servobus.errors import ConnectionLost, DriveTimeout
 from servobus.protocols.dyncan import codec as cc
