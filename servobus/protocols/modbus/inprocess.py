@@ -33,33 +33,19 @@ from servobus.protocols.modbus.client import ModbusClient
 from servobus.protocols.modbus.line import ModbusLine
 from servobus.protocols.modbus.pacing import RtuLineRunner, RtuPort
 from servobus.protocols.modbus.timing import DEFAULT_BAUD
-from servobus.sim.fleet import parse_ids
+from servobus.sim.yzaim_fleet import FACTORY_ADDRESS, make_motors, parse_addresses
 from servobus.sim.yzaim_motor import YzaimMotor
-from servobus.sim.yzaim_store import YzaimStore
 from servobus.transport.base import Direction
 from servobus.transport.buffered import PushInput
 
-FACTORY_ADDRESS = 1  # a YZ-AIM motor's address when none is asked for (decision)
-_ADDRESS = Y.BY_NAME["device_address"]
+__all__ = ["FACTORY_ADDRESS", "SIM_OPTIONS", "SimByteStream", "make_motors", "open_sim_axis",
+           "open_sim_stream", "parse_addresses"]
+
 SIM_OPTIONS: dict[str, type] = {
     "ids": str, "fast": bool, "paced": bool, "state": str, "model": str, "baud": int,
     "timeout": float, "retries": int, "turnaround_s": float, "late_reply_s": float,
     "frame_gap_s": float, "eeprom_guard": object,
 }
-
-
-def parse_addresses(text: str) -> tuple[int, ...]:
-    """``"1,2,3"`` -> (1, 2, 3): device addresses 1..254 (the family's 0x15 range)."""
-    return parse_ids(text, min_id=_ADDRESS.minimum, max_id=_ADDRESS.maximum)
-
-
-def make_motors(addresses: Sequence[int], *, state: str | None = None,
-                model: str = Y.DEFAULT_MODEL) -> list[YzaimMotor]:
-    """One motor per address; with ``state`` each keeps its EEPROM under key str(address)."""
-    Y.model(model)  # ArgumentRangeError naming the known models
-    return [YzaimMotor(a, model=model,
-                       store=YzaimStore(state, key=str(a)) if state else None)
-            for a in addresses]
 
 
 class SimByteStream(PushInput):
