@@ -15,11 +15,12 @@ Position Direct, the 10 ms wait after an id change).
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Awaitable, Callable
+from collections.abc import Callable
 from typing import ClassVar, Never, Protocol, TypeVar, cast
 
 from servobus.axis import checks
-from servobus.axis.base import DEFAULT_WAIT_TIMEOUT_S, AsyncAxis, AxisTraceHook, check_int
+from servobus.axis.base import DEFAULT_WAIT_TIMEOUT_S, AxisTraceHook, check_int
+from servobus.axis.client_axis import ClientAxis
 from servobus.axis.eeprom_guard import EepromGuard
 from servobus.errors import DriveTimeout, ProtocolError
 from servobus.families.base import AxisStatus, Family, ParamInfo
@@ -86,11 +87,10 @@ class CommandClient(Protocol):
     async def close(self) -> None: ...
 
 
-class CommandAxis(AsyncAxis):
+class CommandAxis(ClientAxis[CommandClient]):
     """One drive on one connection, driven through a protocol's CommandSet."""
 
     commands: ClassVar[CommandSet]
-    protocol_name: ClassVar[str]
     family_model: ClassVar[Family] = DYN2
     drive_id_range: ClassVar[range]
     #: Torque readout -> amperes (positive = towards increasing position).
@@ -99,18 +99,14 @@ class CommandAxis(AsyncAxis):
     id_settle_s: ClassVar[float] = 0.0
 
     def __init__(self, client: CommandClient, drive_id: int, *, owns_client: bool = True) -> None:
-        self.client = client
-        self._id = self.commands.check_drive_id(drive_id)
-        self._owns_client = owns_client
+        super().__init__(client, drive_id, owns_client=owns_client)
         #: Read commands of this drive, built once (they are immutable; polling reuses them).
         self._reads: dict[Callable[[int], Request[object]], Request[object]] = {}
         self._param_reads: dict[str, Request[int]] = {}
-        self._closers: list[Callable[[], Awaitable[None]]] = []
         self._gear_num: int | None = None  # read on the first move (Axis units -> command)
 
-    def on_close(self, closer: Callable[[], Awaitable[None]]) -> None:
-        """Run ``closer`` after the client closes (e.g. an in-process virtual drive's task)."""
-        self._closers.append(closer)
+    def _check_id(self, drive_id: int) -> int:
+        return self.commands.check_drive_id(drive_id)
 
     def _read(self, factory: Callable[[int], Request[T]]) -> Request[T]:
         """The read command of ``factory`` for this drive, built once."""
@@ -127,14 +123,6 @@ class CommandAxis(AsyncAxis):
 
     async def _run(self, command: Request[T]) -> T:
         return await self.client.execute(command)
-
-    @property
-    def drive_id(self) -> int:
-        return self._id
-
-    @property
-    def protocol(self) -> str:
-        return self.protocol_name
 
     @property
     def family(self) -> Family:
@@ -285,23 +273,3 @@ class CommandAxis(AsyncAxis):
         except ProtocolError:
             return True
         return True
-
-    # ------------------------------------------------------------- connection
-    async def sibling(self, drive_id: int) -> CommandAxis:
-        axis = type(self)(self.client, drive_id, owns_client=False)
-        axis.capture_source = self.capture_source  # same connection, same drives' traces
-        axis.io_source = self.io_source  # and the same virtual I/O
-        return axis
-
-    async def add_trace(self, hook: AxisTraceHook) -> None:
-        self.client.add_trace(hook)
-
-    async def close(self) -> None:
-        if self._owns_client:
-            await self.client.close()
-            closers, self._closers = self._closers, []
-            for closer in closers:
-                await closer()
-
-    def __repr__(self) -> str:
-        return f"<{type(self).__name__} id {self._id}>"
