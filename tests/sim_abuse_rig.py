@@ -10,7 +10,6 @@ import contextlib
 import os
 import resource
 import select
-import signal
 import socket
 import subprocess
 import sys
@@ -19,6 +18,7 @@ import time
 from collections.abc import Iterator
 
 import pytest
+from subprocess_rig import read_line, stop_process
 
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyncan import codec as cc
@@ -34,22 +34,10 @@ class Sim:
         self.proc = subprocess.Popen([*SERVOBUS, "sim", *args, "--duration", str(duration)],
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         self.stderr = ""
-        self._out = b""
 
     def line(self, timeout: float = 20.0) -> str:
-        """The next stdout line (read from the pipe directly: no buffered-reader surprises)."""
-        assert self.proc.stdout is not None
-        fd = self.proc.stdout.fileno()
-        end = time.monotonic() + timeout
-        while b"\n" not in self._out:
-            ready, _, _ = select.select([fd], [], [], max(0.0, end - time.monotonic()))
-            chunk = os.read(fd, 4096) if ready else b""
-            if not chunk:
-                self.stop()
-                raise AssertionError(f"simulator printed no line; stderr: {self.stderr[-800:]}")
-            self._out += chunk
-        text, _, self._out = self._out.partition(b"\n")
-        return text.decode().strip()
+        """The next stdout line."""
+        return read_line(self.proc, timeout=timeout)
 
     def port(self) -> int:
         text = self.line()
@@ -81,14 +69,7 @@ class Sim:
 
     def stop(self) -> int:
         """SIGTERM and wait; keeps stderr in ``self.stderr``; returns the exit code."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-        try:
-            _, err = self.proc.communicate(timeout=15)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            _, err = self.proc.communicate()
-        self.stderr += err or ""
+        self.stderr += stop_process(self.proc)
         return self.proc.returncode
 
 

@@ -7,7 +7,6 @@ ratio (4.1), each fault trips its alarm code in the status byte (7.3) and clears
 
 from __future__ import annotations
 
-import select
 import socket
 import subprocess
 import sys
@@ -17,6 +16,7 @@ from typing import Any
 
 import pytest
 from conftest import wait_until
+from subprocess_rig import read_line
 
 from servobus.families.dmm.registers import ALARM_SHIFT, StatusBits
 from servobus.protocols.dyn232 import codec as c
@@ -37,23 +37,10 @@ class Bench:
              ",".join(map(str, ids)), "--control", "tcp://127.0.0.1:0",
              "--duration", str(SERVER_S)],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, bufsize=0)
-        line_port = int(self._line("listening on tcp://127.0.0.1:").rsplit(":", 1)[1])
-        self.control_url = self._line("control on tcp://127.0.0.1:").split(" ", 2)[2]
+        line_port = int(read_line(self.proc, "listening on tcp://127.0.0.1:").rsplit(":", 1)[1])
+        self.control_url = read_line(self.proc, "control on tcp://127.0.0.1:").split(" ", 2)[2]
         self.sock = socket.create_connection(("127.0.0.1", line_port), timeout=2)
         self.control = ControlClient(self.control_url)
-
-    def _line(self, prefix: str) -> str:
-        """One stdout line (unbuffered, byte by byte, so select() sees what is left)."""
-        assert self.proc.stdout is not None
-        raw = b""
-        while not raw.endswith(b"\n"):
-            ready, _, _ = select.select([self.proc.stdout], [], [], 20)
-            byte = self.proc.stdout.read(1) if ready else b""
-            assert byte, f"the simulator stopped printing: {raw!r}"
-            raw += byte
-        text = raw.decode().strip()
-        assert text.startswith(prefix), text
-        return text
 
     def close(self) -> None:
         self.control.close()

@@ -5,7 +5,6 @@ writes are ignored and reads answered (6.1); the 0x1C reset clears it; the CLI c
 from __future__ import annotations
 
 import json
-import select
 import subprocess
 import sys
 import time
@@ -13,6 +12,7 @@ from collections.abc import Iterator
 
 import can
 import pytest
+from subprocess_rig import read_line
 
 from servobus.families.dmm.registers import ALARM_SHIFT, StatusBits
 from servobus.protocols.dyncan import codec as c
@@ -23,19 +23,6 @@ F = c.Function
 CLI = [sys.executable, "-m", "servobus"]
 
 
-def _line(proc: subprocess.Popen[bytes], prefix: str) -> str:
-    assert proc.stdout is not None
-    raw = b""
-    while not raw.endswith(b"\n"):
-        ready, _, _ = select.select([proc.stdout], [], [], 20)
-        byte = proc.stdout.read(1) if ready else b""
-        assert byte, f"the simulator stopped printing: {raw!r}"
-        raw += byte
-    text = raw.decode().strip()
-    assert text.startswith(prefix), text
-    return text
-
-
 @pytest.fixture
 def sim() -> Iterator[tuple[int, str]]:
     proc = subprocess.Popen(
@@ -43,8 +30,8 @@ def sim() -> Iterator[tuple[int, str]]:
          "--control", "tcp://127.0.0.1:0", "--duration", "60"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, bufsize=0)
     try:
-        can_port = int(_line(proc, "listening on socketcand 127.0.0.1:").rsplit(":", 1)[1])
-        url = _line(proc, "control on tcp://127.0.0.1:").split(" ", 2)[2]
+        can_port = int(read_line(proc, "listening on socketcand 127.0.0.1:").rsplit(":", 1)[1])
+        url = read_line(proc, "control on tcp://127.0.0.1:").split(" ", 2)[2]
         yield can_port, url
     finally:
         proc.terminate()

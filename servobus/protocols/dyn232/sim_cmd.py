@@ -15,63 +15,44 @@ from __future__ import annotations
 
 import click
 
-from servobus.cli.sim_cmd import add_sim_command
+from servobus.cli.sim_cmd import (
+    add_sim_command,
+    echo_stopped,
+    line_endpoints,
+    option_value,
+    serial_line_options,
+    sim_banner,
+    sim_options,
+)
 from servobus.cli.sim_control import control_option, start_control
-from servobus.errors import ArgumentRangeError
 from servobus.families.dmm import units as U
 from servobus.protocols.dyn232.codec import FACTORY_ID
-from servobus.protocols.dyn232.server import parse_listen_url, run_server
+from servobus.protocols.dyn232.server import run_server
 from servobus.sim.fleet import make_drives, parse_ids
-from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS, log_to_stderr
-
-
-def _tcp(option: str, value: str | None) -> tuple[str, int] | None:
-    if value is None:
-        return None
-    try:
-        return parse_listen_url(value)
-    except ArgumentRangeError as exc:
-        raise click.BadParameter(str(exc), param_hint=option) from None
+from servobus.sim.server_limits import log_to_stderr
 
 
 @click.command("dyn232")
-@click.option("--listen", metavar="tcp://HOST:PORT", default=None,
-              help="serve the line on TCP (pyserial socket://HOST:PORT connects); PORT 0 picks "
-                   "a free port; a missing host means 127.0.0.1  [default: tcp://127.0.0.1:0, "
-                   "or none with --pty]")
-@click.option("--ids", default=None, metavar="1,2,3",
-              help=f"drive ids on the line [default: one drive with the factory id {FACTORY_ID}]")
-@click.option("--pty", is_flag=True, help="serve the line on a pseudo-terminal; prints its path")
-@click.option("--fast", is_flag=True, help="no 38400-baud pacing: answer at once")
-@click.option("--state", metavar="FILE", default=None,
-              help="keep each drive's EEPROM (parameters, config, id) in this JSON file")
-@click.option("--tap", metavar="tcp://HOST:PORT", default=None,
-              help="also serve every byte of the line (both directions) for `servobus sniff`")
-@click.option("--model", type=click.Choice(sorted(U.MODELS)), default=U.DEFAULT_MODEL,
-              show_default=True, help="drive/motor model")
-@click.option("--duration", type=click.FloatRange(min=0.0), default=None, metavar="SECONDS",
-              help="stop by itself after this many seconds [default: run until Ctrl-C]")
-@click.option("--max-clients", type=click.IntRange(min=1), default=DEFAULT_MAX_CLIENTS,
-              show_default=True, help="TCP connections (line and tap) served at once; more "
-                                      "are closed at once")
+@serial_line_options(connects="pyserial socket", tap_carries="byte")
+@sim_options(ids_default=None,
+             ids_help=f"drive ids on the line [default: one drive with the factory id "
+                      f"{FACTORY_ID}]",
+             fast_help="no 38400-baud pacing: answer at once",
+             state_help="keep each drive's EEPROM (parameters, config, id) in this JSON file",
+             models=U.MODELS, model_default=U.DEFAULT_MODEL, model_help="drive/motor model",
+             clients_help="TCP connections (line and tap) served at once; more are closed at "
+                          "once")
 @control_option
 def sim_dyn2_cmd(listen: str | None, ids: str | None, pty: bool, fast: bool, state: str | None,
                  tap: str | None, model: str, duration: float | None, max_clients: int,
                  control: tuple[str, int] | None) -> None:
     """Virtual DYN2/DC2 drives sharing one RS485 line (DYN232M protocol)."""
     log_to_stderr()
-    try:
-        drive_ids = parse_ids(ids) if ids is not None else (FACTORY_ID,)
-    except ArgumentRangeError as exc:
-        raise click.BadParameter(str(exc), param_hint="--ids") from None
-    endpoint = _tcp("--listen", listen)
-    if endpoint is None and not pty:
-        endpoint = ("127.0.0.1", 0)
-    tap_endpoint = _tcp("--tap", tap)
+    drive_ids = option_value("--ids", parse_ids, ids) if ids is not None else (FACTORY_ID,)
+    endpoint, tap_endpoint = line_endpoints(listen, pty, tap)
     drives = make_drives(drive_ids, state=state, model=model)
-    pacing = "unpaced (--fast)" if fast else "paced at 38400 8N1"
-    banner = (f"servobus sim dyn232: {len(drives)} {model} drive(s), ids "
-              f"{','.join(str(d.drive_id) for d in drives)}, {pacing}")
+    banner = sim_banner("dyn232", len(drives), "drive", model, "ids",
+                        (d.drive_id for d in drives), fast, "paced at 38400 8N1")
 
     def ready() -> None:
         click.echo(banner, err=True)
@@ -80,10 +61,11 @@ def sim_dyn2_cmd(listen: str | None, ids: str | None, pty: bool, fast: bool, sta
     server = run_server(drives, listen=endpoint, pty=pty, tap=tap_endpoint, paced=not fast,
                         duration=duration, max_clients=max_clients, ready=ready)
     line = server.line
-    click.echo(f"stopped: {line.packets} packet(s), {line.checksum_errors} checksum error(s), "
-               f"{line.framing_errors} framing error(s), {server.runner.rx_dropped} byte(s) "
-               f"lost to full receive buffers, {server.cap.refused} connection(s) refused, "
-               f"{server.dropped_clients} client(s) dropped for not reading", err=True)
+    echo_stopped(f"{line.packets} packet(s)", f"{line.checksum_errors} checksum error(s)",
+                 f"{line.framing_errors} framing error(s)",
+                 f"{server.runner.rx_dropped} byte(s) lost to full receive buffers",
+                 f"{server.cap.refused} connection(s) refused",
+                 f"{server.dropped_clients} client(s) dropped for not reading")
 
 
 def register(group: click.Group) -> None:

@@ -17,10 +17,9 @@ Model (servobus decisions, docs/modbus.md; Modbus over Serial Line v1.02 2.5.1.1
   has ended), so a reply starts ``t3.5`` after the request's last byte and is handed to the
   host when its own last byte has left: a read of one register takes 8 + 7 bytes + t3.5 =
   9.6 ms at 19200 from request to reply.
-* Receive buffer: each host port may have at most ``RX_BUFFER_BYTES`` = 256 bytes accepted
-  but not yet arrived at the devices (one maximal RTU frame, 133 ms at 19200); bytes beyond
-  are lost, as in a UART or serial bridge that overflows (RTU has no flow control). A host
-  that waits for its replies never loses a byte; a flood costs the line a bounded time.
+* Receive buffer: ``RX_BUFFER_BYTES`` = 256 bytes per host port accepted ahead of the wire
+  (one maximal RTU frame, 133 ms at 19200), as :mod:`servobus.sim.wire` states (RTU has no
+  flow control).
 * ``paced=False`` (``--fast``, ``fast=1``): executed and answered at once.
 """
 
@@ -28,7 +27,6 @@ from __future__ import annotations
 
 import asyncio
 import time
-from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Protocol
 
@@ -36,10 +34,11 @@ from servobus.protocols.modbus.crc import crc_ok
 from servobus.protocols.modbus.framer import GapFramer
 from servobus.protocols.modbus.timing import DEFAULT_BAUD, char_time_s, inter_frame_gap_s
 from servobus.sim.realtime import Clocked, RealtimeClock
-from servobus.sim.wire import COARSE_S, SPIN_S, TimedReleases, WireClock
-from servobus.transport.base import Direction, TraceHook
+from servobus.sim.wire import COARSE_S, RX_BUFFER_BYTES, SPIN_S, PacedLine, PacedPort, WireClock
+from servobus.transport.base import Direction
 
-RX_BUFFER_BYTES = 256  # per host port, accepted ahead of the wire (see the module doc)
+__all__ = ["RX_BUFFER_BYTES", "FrameHandler", "RtuLineRunner", "RtuPort", "whole_request"]
+
 _READ, _WRITE_SINGLE, _WRITE_MULTIPLE = 0x03, 0x06, 0x10
 
 
@@ -56,24 +55,14 @@ class FrameHandler(Protocol):
         the CRC, ``discarded`` bytes in all."""
 
 
-class RtuPort:
+class RtuPort(PacedPort):
     """One host on the line: its framer, its pending replies, its receive buffer."""
 
     def __init__(self, deliver: Callable[[bytes], None], baud: int) -> None:
+        super().__init__(deliver)
         self.framer = GapFramer(baud, eager=True, requests_only=True)
-        self._deliver = deliver
-        self.closed = False
-        self.pending = 0  # paced replies scheduled for this port, not yet released
-        self.on_idle: Callable[[], None] | None = None  # called when ``pending`` drops to 0
         self.flush_at: float | None = None  # when the framer's pending run closes
-        self.rx_queued = 0  # bytes accepted, not yet arrived (paced receive buffer)
-        self.rx_inflight: deque[tuple[float, int]] = deque()  # (arrival of the last, count)
-        self.rx_dropped = 0
         self.noted = (0, 0)  # framer counters (crc_errors, discarded) already reported
-
-    def deliver(self, data: bytes) -> None:
-        if not self.closed:
-            self._deliver(data)
 
 
 def whole_request(data: bytes) -> bool:
@@ -91,53 +80,28 @@ def whole_request(data: bytes) -> bool:
     return n == expected and crc_ok(data)
 
 
-class RtuLineRunner:
+class RtuLineRunner(PacedLine[RtuPort]):
     """Runs a :class:`FrameHandler` in wall-clock time, paced at ``baud`` 8N1 or not."""
 
     def __init__(self, line: FrameHandler, *, paced: bool = True, baud: int = DEFAULT_BAUD,
                  clock: RealtimeClock | None = None, coarse_s: float = COARSE_S,
                  spin_s: float = SPIN_S) -> None:
+        super().__init__(line.drives, clock, paced=paced, coarse_s=coarse_s, spin_s=spin_s)
         self.line = line
-        self.paced = paced
         self.baud = baud
-        self.clock = clock if clock is not None else RealtimeClock(line.drives)
         self.wire = WireClock(char_time_s(baud))  # half duplex: both directions
         self.gap_s = inter_frame_gap_s(baud)
-        self.releases = TimedReleases(coarse_s=coarse_s, spin_s=spin_s)
-        self.rx_buffer_bytes = RX_BUFFER_BYTES
-        self.rx_dropped = 0
-        self.taps: list[TraceHook] = []
-
-    # ------------------------------------------------------------------ lifecycle
-    def start(self) -> None:
-        """Start the clock ticker and the release task on the running loop (idempotent)."""
-        self.clock.start()
-        if self.paced:
-            self.releases.start()
-
-    async def close(self) -> None:
-        await self.clock.stop()
-        await self.releases.close()
 
     def open_port(self, deliver: Callable[[bytes], None]) -> RtuPort:
         return RtuPort(deliver, self.baud)
 
     def close_port(self, port: RtuPort) -> None:
-        """The host has gone: its pending replies are dropped."""
-        port.closed = True
-        port.on_idle = None
-        if port.pending or port.flush_at is not None:
-            self.releases.drop(port)
-            port.pending = 0
+        """The host has gone: its pending replies and armed flush are dropped."""
+        if port.flush_at is not None:
             port.flush_at = None
-
-    def add_tap(self, hook: TraceHook) -> None:
-        """``hook(direction, bytes, monotonic time)`` for every frame on the line, in order."""
-        self.taps.append(hook)
-
-    @property
-    def max_late_s(self) -> float:
-        return self.releases.max_late_s
+            if not port.pending:  # else the base class drops the port's actions
+                self.releases.drop(port)
+        super().close_port(port)
 
     # ------------------------------------------------------------------ host bytes in
     def submit(self, port: RtuPort, data: bytes) -> None:
@@ -158,12 +122,9 @@ class RtuLineRunner:
             self._arm_flush(port)
             return
         self.clock.sync(now)
-        data = self._admit(port, data, now)
+        data, start, end = self._accept(port, data, now, self.wire)
         if not data:
             return
-        start, end = self.wire.send(len(data), now)
-        port.rx_inflight.append((end, len(data)))
-        port.rx_queued += len(data)
         if not port.framer.pending and whole_request(data):
             self._execute(port, data, end)
         else:
@@ -173,19 +134,6 @@ class RtuLineRunner:
                     self._execute(port, frame.raw, frame.time)
             self._note(port)
         self._arm_flush(port)
-
-    def _admit(self, port: RtuPort, data: bytes, now: float) -> bytes:
-        """The part of ``data`` that fits the port's receive buffer (module doc)."""
-        inflight = port.rx_inflight
-        while inflight and inflight[0][0] <= now:
-            port.rx_queued -= inflight.popleft()[1]
-        room = self.rx_buffer_bytes - port.rx_queued
-        if room >= len(data):
-            return data
-        lost = len(data) - max(room, 0)
-        port.rx_dropped += lost
-        self.rx_dropped += lost
-        return data[:room] if room > 0 else b""
 
     # ------------------------------------------------------------------ frames
     def _execute(self, port: RtuPort, raw: bytes, t_end: float) -> None:
@@ -205,19 +153,7 @@ class RtuLineRunner:
             self.releases.at(t_end, lambda: self._tap(Direction.TX, raw, t_end), port)
         if reply:
             _, t_out = self.wire.send(len(reply), t_end + self.gap_s)
-            port.pending += 1
-            self.releases.at(t_out, self._release_cb(port, reply, t_out), port)
-
-    def _release_cb(self, port: RtuPort, reply: bytes, when: float) -> Callable[[], None]:
-        def release() -> None:
-            port.pending -= 1
-            if self.taps:
-                self._tap(Direction.RX, reply, when)
-            port.deliver(reply)
-            if not port.pending and port.on_idle is not None:
-                port.on_idle()
-
-        return release
+            self._reply_at(port, reply, t_out)
 
     def _note(self, port: RtuPort) -> None:
         framer = port.framer
@@ -247,7 +183,3 @@ class RtuLineRunner:
             # the silence ended the frame: the device answers from now on
             self._execute(port, frame.raw, deadline - self.gap_s if self.paced else now)
         self._note(port)
-
-    def _tap(self, direction: Direction, data: bytes, when: float) -> None:
-        for hook in self.taps:
-            hook(direction, data, when)

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import select
-import signal
 import socket
 import statistics
 import subprocess
@@ -16,6 +14,7 @@ from pathlib import Path
 
 import pytest
 import serial
+from subprocess_rig import read_line, stop_process
 
 from servobus.errors import ArgumentRangeError
 from servobus.protocols.dyn232 import codec as c
@@ -37,15 +36,7 @@ class SimProcess:
         )
 
     def line(self, timeout: float = 15.0) -> str:
-        assert self.proc.stdout is not None
-        ready, _, _ = select.select([self.proc.stdout], [], [], timeout)
-        if not ready:
-            raise AssertionError("simulator printed nothing")
-        text = self.proc.stdout.readline().strip()
-        if not text:
-            _, err = self.proc.communicate(timeout=5)
-            raise AssertionError(f"simulator exited: {err}")
-        return text
+        return read_line(self.proc, timeout=timeout)
 
     def tcp_port(self) -> int:
         text = self.line()
@@ -53,14 +44,8 @@ class SimProcess:
         return int(text.rsplit(":", 1)[1])
 
     def stop(self) -> int:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-        try:
-            return self.proc.wait(timeout=10)
-        finally:
-            if self.proc.poll() is None:
-                self.proc.kill()
-                self.proc.wait()
+        stop_process(self.proc, timeout=10)
+        return self.proc.returncode
 
 
 @contextlib.contextmanager

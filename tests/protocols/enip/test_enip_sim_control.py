@@ -3,12 +3,12 @@ control channel on every virtual-drive server), seen through a real enip:// clie
 
 from __future__ import annotations
 
-import select
 import subprocess
 import sys
 from collections.abc import Iterator
 
 import pytest
+from subprocess_rig import read_line
 
 from servobus import connect
 from servobus.errors import DriveAlarm
@@ -18,19 +18,6 @@ pytestmark = pytest.mark.timeout(60)
 CLI = [sys.executable, "-m", "servobus"]
 
 
-def _line(proc: subprocess.Popen[bytes], prefix: str) -> str:
-    assert proc.stdout is not None
-    raw = b""
-    while not raw.endswith(b"\n"):
-        ready, _, _ = select.select([proc.stdout], [], [], 20)
-        byte = proc.stdout.read(1) if ready else b""
-        assert byte, f"the simulator stopped printing: {raw!r}"
-        raw += byte
-    text = raw.decode().strip()
-    assert text.startswith(prefix), text
-    return text
-
-
 @pytest.fixture
 def sim() -> Iterator[tuple[str, str]]:
     proc = subprocess.Popen(
@@ -38,9 +25,9 @@ def sim() -> Iterator[tuple[str, str]]:
          "--control", "tcp://127.0.0.1:0", "--duration", "50"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, bufsize=0)
     try:
-        listening = _line(proc, "listening on enip://127.0.0.1:")
+        listening = read_line(proc, "listening on enip://127.0.0.1:")
         url = listening.split(" ", 3)[2]  # enip://127.0.0.1:PORT
-        control = _line(proc, "control on tcp://127.0.0.1:").split(" ", 2)[2]
+        control = read_line(proc, "control on tcp://127.0.0.1:").split(" ", 2)[2]
         yield url, control
     finally:
         proc.terminate()
