@@ -22,6 +22,14 @@ def _real(name: str, value: object) -> float:
     return number
 
 
+def positive(name: str, value: object, unit: str) -> float:
+    """A finite number > 0 in ``unit`` (e.g. a peak current in A)."""
+    if isinstance(value, bool) or not isinstance(value, int | float) \
+            or not math.isfinite(float(value)) or float(value) <= 0:
+        raise ArgumentRangeError(f"{name}={value!r} must be a finite number of {unit} > 0")
+    return float(value)
+
+
 def seconds(name: str, value: object) -> float:
     """A deadline or period: a finite number > 0."""
     number = _real(name, value)

@@ -6,10 +6,11 @@ from collections.abc import Sequence
 
 from servobus.errors import ArgumentRangeError
 from servobus.families.dmm import units as U
+from servobus.families.dmm.vocabulary import MAX_DRIVE_ID
 from servobus.sim.drive import VirtualDrive
 from servobus.sim.eeprom import EepromStore
 
-DEFAULT_MAX_ID = 63  # DMM: six id bits on both protocols
+DEFAULT_MAX_ID = MAX_DRIVE_ID  # DMM: six id bits on both protocols
 
 
 def parse_ids(text: str, *, min_id: int = 0, max_id: int = DEFAULT_MAX_ID) -> tuple[int, ...]:

@@ -12,6 +12,7 @@ from collections.abc import Iterator
 
 import can
 import pytest
+from conftest import wait_until
 from subprocess_rig import read_line
 
 from servobus.families.dmm.registers import ALARM_SHIFT, StatusBits
@@ -83,7 +84,8 @@ def test_6_1_a_fault_pushes_0xee_writes_are_ignored_reads_answered_reset_clears(
             # powered off for a moment: the node answers nothing, then it is back
             ctl.call("power_cycle", 2, off_s=0.5)
             assert host.ask(c.request(2, F.READ_DRIVE_STATUS), timeout=0.2) is None
-            time.sleep(0.5)
+            wait_until(lambda: host.ask(c.request(2, F.READ_DRIVE_STATUS), timeout=0.1),
+                       timeout=5, what="drive 2 back after the power cycle")
             assert host.alarm_code(2) == 0
     finally:
         host.bus.shutdown()

@@ -26,6 +26,7 @@ from servobus.errors import ArgumentRangeError, ChecksumError, FramingError, Pro
 from servobus.families.dmm.vocabulary import (  # re-exported: the shared DMM vocabulary
     CONST_SPEED_LIMIT_RPM as CONST_SPEED_LIMIT_RPM,
 )
+from servobus.families.dmm.vocabulary import MAX_DRIVE_ID as MAX_DRIVE_ID  # 64..126 reserved
 from servobus.families.dmm.vocabulary import VALUE_MAX as VALUE_MAX
 from servobus.families.dmm.vocabulary import VALUE_MIN as VALUE_MIN
 from servobus.families.dmm.vocabulary import WAVE_AMPLITUDE_MAX as WAVE_AMPLITUDE_MAX
@@ -36,7 +37,6 @@ from servobus.families.dmm.vocabulary import Kind as Kind
 
 BROADCAST_ID = 127
 FACTORY_ID = 0
-MAX_DRIVE_ID = 63  # 64..126 reserved (7.2.3)
 MIN_PACKET = 4
 MAX_PACKET = 7
 BAUD = 38_400

@@ -38,12 +38,14 @@ from servobus.families.dmm.vocabulary import (
     GeneralReadSelector,
 )
 from servobus.families.dmm.vocabulary import (
+    MAX_DRIVE_ID as MAX_DRIVE_ID,  # six identifier bits
+)
+from servobus.families.dmm.vocabulary import (
     Kind as Kind,  # re-exported: the DMM command kinds
 )
 
 BROADCAST_ID = 0
 MIN_DRIVE_ID = 1
-MAX_DRIVE_ID = 63  # six identifier bits
 ASSIGN_ID_MAX = 64  # the range the manual checks (Drive Error outside 0..64)
 FUNCTION_BITS = 5
 MAX_ARBITRATION_ID = 0x7FF

@@ -95,7 +95,7 @@ class EnipOptions:
         checks.seconds("connect_timeout", self.connect_timeout)
         checks.seconds("reset_timeout", self.reset_timeout)
         checks.positive_int("max_in_flight", self.max_in_flight)
-        peak = checks.seconds("peak_current_a", self.peak_current_a)  # finite and > 0
+        peak = checks.positive("peak_current_a", self.peak_current_a, "A")
         return replace(self, peak_current_a=peak)
 
 
