@@ -12,7 +12,7 @@ from servobus.errors import ArgumentRangeError
 
 @pytest.mark.parametrize("bad", [0, -1.5, math.nan, math.inf, True, "20", None])
 def test_positive_refuses_and_names_the_unit(bad: object) -> None:
-    with pytest.raises(ArgumentRangeError, match="peak_current_a=.* number of A > 0"):
+    with pytest.raises(ArgumentRangeError, match=r"peak_current_a=.* number of A > 0"):
         checks.positive("peak_current_a", bad, "A")
 
 
