@@ -66,11 +66,7 @@ from servobus.families.dmm.registers import DriveConfig, DriveStatus
 from servobus.link.eeprom_guard import EepromGuard
 from servobus.link.late_replies import DEFAULT_LATE_REPLY_S, LateReplies
 from servobus.link.stats import TransactionStats
-from servobus.link.transaction import (
-    DEFAULT_RETRIES,
-    TransactionManager,
-    check_call,
-)
+from servobus.link.transaction import DEFAULT_RETRIES, TransactionManager, check_call
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232 import commands as cmds
 from servobus.protocols.dyn232.commands import Command

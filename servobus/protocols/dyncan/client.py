@@ -62,11 +62,7 @@ from servobus.link.can import CanClient
 from servobus.link.eeprom_guard import EepromGuard
 from servobus.link.late_replies import DEFAULT_LATE_REPLY_S
 from servobus.link.stats import StreamStats, TransactionStats
-from servobus.link.transaction import (
-    DEFAULT_RETRIES,
-    TransactionManager,
-    check_call,
-)
+from servobus.link.transaction import DEFAULT_RETRIES, TransactionManager, check_call
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan import commands as cmds
 from servobus.protocols.dyncan.commands import CanCommand

@@ -43,11 +43,7 @@ from servobus.link.can import CanClient
 from servobus.link.eeprom_guard import EepromGuard
 from servobus.link.late_replies import DEFAULT_LATE_REPLY_S
 from servobus.link.stats import TransactionStats
-from servobus.link.transaction import (
-    DEFAULT_RETRIES,
-    TransactionManager,
-    check_call,
-)
+from servobus.link.transaction import DEFAULT_RETRIES, TransactionManager, check_call
 from servobus.protocols.easycan import codec
 from servobus.protocols.easycan.commands import EasyCanCommand
 from servobus.protocols.easycan.describe import register_name

@@ -49,11 +49,7 @@ from servobus.errors import (
 from servobus.link.eeprom_guard import EepromGuard
 from servobus.link.late_replies import DEFAULT_LATE_REPLY_S, LateReplies
 from servobus.link.stats import TransactionStats
-from servobus.link.transaction import (
-    DEFAULT_RETRIES,
-    TransactionManager,
-    check_call,
-)
+from servobus.link.transaction import DEFAULT_RETRIES, TransactionManager, check_call
 from servobus.protocols.modbus import codec as C
 from servobus.protocols.modbus.framer import GapFramer, ReplyFramer
 from servobus.protocols.modbus.policy import DEFAULT_TURNAROUND_S, RtuPolicy
