@@ -3,7 +3,7 @@
 A protocol supplies a commands module (the :class:`CommandSet` vocabulary, whose builders
 return :class:`Request` objects typed by their result) and a client with ``execute``
 (:class:`CommandClient`: a ``Request[T]`` in, its ``T`` out, by the rules of
-:mod:`servobus.axis.transaction`); this class maps the Axis API onto them once, in the Axis
+:mod:`servobus.link.transaction`); this class maps the Axis API onto them once, in the Axis
 units: counts are
 converted to the drive's command units through GEAR_NUM (read from the drive once, then
 tracked through this axis's own writes; see :mod:`servobus.families.dmm.family`), the
@@ -21,12 +21,12 @@ from typing import ClassVar, Never, Protocol, TypeVar, cast
 from servobus.axis import checks
 from servobus.axis.base import DEFAULT_WAIT_TIMEOUT_S, AxisTraceHook, check_int
 from servobus.axis.client_axis import ClientAxis
-from servobus.axis.eeprom_guard import EepromGuard
 from servobus.errors import DriveTimeout, ProtocolError
 from servobus.families.base import AxisStatus, Family, ParamInfo
 from servobus.families.dmm import units as U
 from servobus.families.dmm.family import DYN2, axis_status, counts_to_command
 from servobus.families.dmm.registers import DriveConfig, DriveStatus
+from servobus.link.eeprom_guard import EepromGuard
 
 T = TypeVar("T")
 T_co = TypeVar("T_co", covariant=True)

@@ -1,15 +1,20 @@
 """URL scheme registry (like python-can's interface table): scheme -> lazily imported opener.
 
-Providers declare their schemes; nothing here names a protocol. A provider is a module with
+Providers declare what they offer; nothing here names a protocol. A protocol declares one
+frozen :class:`~servobus.protocols.ProtocolSpec` as ``SPEC`` in its package ``__init__``
+(its schemes and opener, its ``sim://`` virtual drive, CLI commands, sniff decoder,
+parameters, family), each target a ``"module:attribute"`` string imported when used::
 
-    SCHEMES: Mapping[str, str]   # scheme -> "module:function" of an opener
     async def opener(url: DriveUrl, *, drive_id: int | None, **options) -> AsyncAxis
 
 Providers are every subpackage of :mod:`servobus.protocols` (its ``__init__`` stays light:
-it declares ``SCHEMES`` and imports nothing heavy), the simulator's ``servobus.sim.schemes``
+it declares ``SPEC`` and imports nothing heavy), the simulator's ``servobus.sim.schemes``
 (``sim://``; a host client never imports the simulator unless a ``sim://`` URL is opened),
 and third-party packages through the ``servobus.schemes`` entry-point group (each entry
-point names a provider module). The empty scheme ``""`` is the bare serial port
+point names a provider module). A provider without ``SPEC`` may declare the tables
+directly (``SCHEMES: Mapping[str, str]`` scheme -> opener, ``SIM``, ``DECODERS``,
+``PARAMS``, ``FAMILIES``, ``SHORTCUTS``, ``CLI = "module:register"``): ``sim://`` does,
+and so may older third-party providers. The empty scheme ``""`` is the bare serial port
 (``/dev/ttyUSB0``, ``COM3``); pyserial URL schemes (``socket``, ``loop`` ...) are claimed by
 the protocol that serves bare serial ports.
 """
@@ -23,6 +28,7 @@ from importlib.metadata import entry_points
 from typing import TYPE_CHECKING, Any, cast
 
 from servobus.errors import ArgumentRangeError
+from servobus.protocols import ProtocolSpec
 
 if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis
@@ -51,17 +57,51 @@ def _provider_modules() -> list[str]:
     return names
 
 
+#: The tables a ProtocolSpec fills, by the name a provider without SPEC declares them.
+_FROM_SPEC: dict[str, Callable[[ProtocolSpec], dict[str, str]]] = {
+    "SCHEMES": lambda spec: dict.fromkeys(spec.schemes, spec.opener),
+    "SIM": lambda spec: dict.fromkeys(spec.sim_names, spec.sim) if spec.sim else {},
+    "DECODERS": lambda spec: {spec.name: spec.decoder} if spec.decoder else {},
+    "PARAMS": lambda spec: {spec.name: spec.params} if spec.params else {},
+    "FAMILIES": lambda spec: {spec.name: spec.family},
+    "SHORTCUTS": lambda spec: dict(spec.shortcuts),
+}
+
+_specs: dict[str, ProtocolSpec] | None = None
 _tables: dict[str, dict[str, str]] = {}
 
 
+def _spec_of(module: object) -> ProtocolSpec | None:
+    spec = getattr(module, "SPEC", None)
+    return spec if isinstance(spec, ProtocolSpec) else None
+
+
+def specs() -> dict[str, ProtocolSpec]:
+    """Every protocol's spec by name, in provider order (first wins)."""
+    global _specs
+    if _specs is None:
+        found: dict[str, ProtocolSpec] = {}
+        for name in _provider_modules():
+            spec = _spec_of(importlib.import_module(name))
+            if spec is not None:
+                found.setdefault(spec.name, spec)
+        _specs = found
+    return _specs
+
+
 def provided(attribute: str) -> dict[str, str]:
-    """Merge one declared table (``SCHEMES``, ``SIM``) over every provider, first wins."""
+    """One table (``SCHEMES``, ``SIM``, ``DECODERS`` ...) merged over every provider, first
+    wins: from each protocol's spec, or as a provider without one declares it."""
     table = _tables.get(attribute)
     if table is None:
         table = {}
         for name in _provider_modules():
             module = importlib.import_module(name)
-            declared = cast(Mapping[str, str], getattr(module, attribute, {}))
+            spec = _spec_of(module)
+            if spec is not None and attribute in _FROM_SPEC:
+                declared: Mapping[str, str] = _FROM_SPEC[attribute](spec)
+            else:
+                declared = cast(Mapping[str, str], getattr(module, attribute, {}))
             for key, target in declared.items():
                 table.setdefault(key.lower(), target)
         _tables[attribute] = table
@@ -69,10 +109,13 @@ def provided(attribute: str) -> dict[str, str]:
 
 
 def provided_list(attribute: str) -> list[str]:
-    """Single values a provider declares (``CLI = "module:register"``), in provider order."""
+    """Single values a provider declares (``CLI``: ``"module:register"``), in provider order."""
     found: list[str] = []
     for name in _provider_modules():
-        value = getattr(importlib.import_module(name), attribute, None)
+        module = importlib.import_module(name)
+        spec = _spec_of(module)
+        value = getattr(spec, attribute.lower(), None) if spec is not None else getattr(
+            module, attribute, None)
         if isinstance(value, str):
             found.append(value)
     return found

@@ -2,6 +2,15 @@
 
 The sync ``Axis`` submits each coroutine to this loop and blocks on the result, so the one
 async core does all the work. Hooks registered through the facade run on the loop thread.
+
+Decision (issue 19): the facade is an explicit typed class, one method per method of
+:class:`~servobus.axis.base.AsyncAxis` with the same parameters and the coroutine's result
+as a plain return type, so a checker sees ``connect(...).position()`` as ``int`` and flags
+``axis.move_too(5)``. tests/axis/test_axis_sync_facade.py fails when the two drift. Every
+call goes through :meth:`Axis._call`, the one place where a blocking fast path for
+synchronous callers (issue 22) would plug in: one facade, not two. What a protocol has
+beyond the Axis API is reached through ``axis.extra`` (typed ``Any`` on purpose: it
+depends on the protocol) or, asynchronously on the loop thread, ``axis.core``.
 """
 
 from __future__ import annotations
@@ -11,14 +20,21 @@ import concurrent.futures
 import functools
 import inspect
 import threading
-from collections.abc import Coroutine
+import warnings
+from collections.abc import Callable, Coroutine, Iterable, Mapping
 from types import TracebackType
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
+
+from servobus.axis.base import DEFAULT_POLL_S, DEFAULT_WAIT_TIMEOUT_S
 
 if TYPE_CHECKING:
-    from servobus.axis.base import AsyncAxis
+    from servobus.axis.base import AsyncAxis, AxisTraceHook
+    from servobus.axis.capture import Capture
+    from servobus.axis.virtual_io import VirtualIo
+    from servobus.families.base import AxisStatus, Family, ParamInfo
 
 T = TypeVar("T")
+P = ParamSpec("P")
 
 
 class LoopThread:
@@ -68,12 +84,11 @@ class LoopThread:
 
 
 class Axis:
-    """Synchronous facade over any AsyncAxis, derived from it rather than copied.
+    """Synchronous facade over any AsyncAxis: the same methods, run on the facade's loop thread.
 
-    Every coroutine method of the core (the Axis API and a protocol's extras such as
-    synchronised moves) is available under the same name and runs on the facade's loop
-    thread; plain attributes and properties are read through. ``sibling`` returns an Axis
-    sharing the connection. Hooks registered through the facade run on the loop thread.
+    Each method has the AsyncAxis method's parameters and returns what its coroutine returns
+    (module docstring). ``sibling`` returns an Axis sharing the connection. Hooks registered
+    through the facade run on the loop thread. A protocol's own methods: ``axis.extra``.
     """
 
     def __init__(self, core: AsyncAxis, runner: LoopThread, *, owns_runner: bool = True,
@@ -82,31 +97,187 @@ class Axis:
         self._runner = runner
         self._owns_runner = owns_runner
         self._call_timeout = call_timeout  # safety net only; the core enforces deadlines
+        self._extra = Extras(self)
 
+    def _call(self, method: Callable[P, Coroutine[Any, Any, T]], *args: P.args,
+              **kwargs: P.kwargs) -> T:
+        """Run one coroutine method of the core and wait for it: every call passes here."""
+        return self._runner.run(method(*args, **kwargs), self._call_timeout)
+
+    # ------------------------------------------------------------- beyond the Axis API
     @property
     def core(self) -> AsyncAxis:
         """The async core (for use on the facade's loop thread only)."""
         return self._core
 
-    def __getattr__(self, name: str) -> Any:
-        if name.startswith("_"):
-            raise AttributeError(name)
-        attr = getattr(self._core, name)
-        if not inspect.iscoroutinefunction(attr):
+    @property
+    def extra(self) -> Any:
+        """The protocol's own methods beyond the Axis API, run synchronously like the rest
+        (``axis.extra.config()`` on a DMM drive over DYN232M); untyped: they depend on the
+        protocol. AttributeError for a method this protocol does not have."""
+        return self._extra
+
+    if not TYPE_CHECKING:
+        def __getattr__(self, name: str) -> Any:
+            """Deprecated (one release): ``axis.config()`` for ``axis.extra.config()``.
+
+            Hidden from type checkers, so a misspelt Axis method stays a checker error."""
+            if name.startswith("_"):
+                raise AttributeError(name)
+            attr = getattr(self._extra, name)
+            warnings.warn(f"Axis.{name}: a protocol's own method; use axis.extra.{name} "
+                          "(the attribute fallback goes in the next release)",
+                          DeprecationWarning, stacklevel=2)
             return attr
 
-        @functools.wraps(attr)
-        def call(*args: Any, **kwargs: Any) -> Any:
-            return self._runner.run(attr(*args, **kwargs), self._call_timeout)
+    # ------------------------------------------------------------- identity
+    @property
+    def drive_id(self) -> int:
+        return self._core.drive_id
 
-        return call
+    @property
+    def protocol(self) -> str:
+        return self._core.protocol
 
-    def __dir__(self) -> list[str]:
-        return sorted(set(super().__dir__()) | {n for n in dir(self._core)
-                                                if not n.startswith("_")})
+    @property
+    def family(self) -> Family:
+        return self._core.family
+
+    @property
+    def drive_ids(self) -> range:
+        """Every id a drive can have on this protocol (what ``scan`` tries)."""
+        return self._core.drive_ids
+
+    @property
+    def counts_per_rev(self) -> int:
+        return self._core.counts_per_rev
+
+    # ------------------------------------------------------------- motion
+    def move_to(self, position: int, *, wait: bool = False, timeout: float | None = None,
+                confirm: bool = False, confirm_timeout: float | None = None) -> None:
+        """Absolute move to ``position`` counts (:meth:`AsyncAxis.move_to`)."""
+        return self._call(self._core.move_to, position, wait=wait, timeout=timeout,
+                          confirm=confirm, confirm_timeout=confirm_timeout)
+
+    def move_by(self, distance: int, *, wait: bool = False, timeout: float | None = None,
+                confirm: bool = False, confirm_timeout: float | None = None) -> None:
+        """Relative move by ``distance`` counts (:meth:`AsyncAxis.move_by`; never re-sent)."""
+        return self._call(self._core.move_by, distance, wait=wait, timeout=timeout,
+                          confirm=confirm, confirm_timeout=confirm_timeout)
+
+    def turn(self, rpm: int) -> None:
+        """Constant speed in rpm (0 ramps down and holds)."""
+        return self._call(self._core.turn, rpm)
+
+    def stop(self) -> None:
+        """Constant speed 0: the drive ramps down at its deceleration and holds position."""
+        return self._call(self._core.stop)
+
+    def wait_idle(self, timeout: float = DEFAULT_WAIT_TIMEOUT_S,
+                  poll: float = DEFAULT_POLL_S) -> AxisStatus:
+        """Poll status until motion is done (:meth:`AsyncAxis.wait_idle`)."""
+        return self._call(self._core.wait_idle, timeout, poll)
+
+    def set_origin(self) -> None:
+        return self._call(self._core.set_origin)
+
+    def enable(self) -> None:
+        return self._call(self._core.enable)
+
+    def disable(self) -> None:
+        return self._call(self._core.disable)
+
+    def reset(self) -> None:
+        """Power cycle: clears a latched alarm."""
+        return self._call(self._core.reset)
+
+    def square_wave(self, amplitude: int) -> None:
+        return self._call(self._core.square_wave, amplitude)
+
+    def sine_wave(self, amplitude: int) -> None:
+        return self._call(self._core.sine_wave, amplitude)
+
+    def wave_frequency(self, hz: int) -> None:
+        return self._call(self._core.wave_frequency, hz)
+
+    # ------------------------------------------------------------- reading
+    def status(self) -> AxisStatus:
+        return self._call(self._core.status)
+
+    def position(self) -> int:
+        """Encoder counts of the family (``counts_per_rev`` per revolution)."""
+        return self._call(self._core.position)
+
+    def speed(self) -> float:
+        """Motor speed, rpm."""
+        return self._call(self._core.speed)
+
+    def current(self) -> float:
+        """Torque-producing motor current, A (positive = towards increasing position)."""
+        return self._call(self._core.current)
+
+    def position_window(self) -> int:
+        """Counts within which the drive reports "in position"."""
+        return self._call(self._core.position_window)
+
+    def ping(self, timeout: float = 0.05) -> bool:
+        """One status read, no retry; False on timeout."""
+        return self._call(self._core.ping, timeout)
+
+    def trace_buffer(self) -> Capture:
+        """The drive's own samples since the previous call (:meth:`AsyncAxis.trace_buffer`)."""
+        return self._call(self._core.trace_buffer)
+
+    def virtual_io(self) -> VirtualIo:
+        """A virtual drive's connector I/O; NotSupported on a real drive."""
+        return self._core.virtual_io()
+
+    # ------------------------------------------------------------- parameters and id
+    def parameters(self) -> tuple[ParamInfo, ...]:
+        """The family's parameters this protocol reaches."""
+        return self._core.parameters()
+
+    def param_info(self, name: str) -> ParamInfo:
+        return self._core.param_info(name)
+
+    def read_param(self, name: str) -> int:
+        return self._call(self._core.read_param, name)
+
+    def write_param(self, name: str, value: int) -> None:
+        return self._call(self._core.write_param, name, value)
+
+    def read_params(self, names: Iterable[str] | None = None) -> dict[str, int]:
+        """Read parameters (default: every one this protocol reaches)."""
+        return self._call(self._core.read_params, names)
+
+    def write_params(self, values: Mapping[str, int]) -> None:
+        """Write several parameters; every value is checked before the first byte is sent."""
+        return self._call(self._core.write_params, values)
+
+    def read_id(self) -> int:
+        return self._call(self._core.read_id)
+
+    def assign_id(self, new_id: int) -> None:
+        """After this the axis talks to ``new_id``."""
+        return self._call(self._core.assign_id, new_id)
+
+    # ------------------------------------------------------------- units
+    def revs(self, revolutions: float) -> int:
+        """Revolutions -> counts of this axis (rounded half away from zero)."""
+        return self._core.revs(revolutions)
+
+    def degrees(self, degrees: float) -> int:
+        """Degrees -> counts of this axis (rounded half away from zero)."""
+        return self._core.degrees(degrees)
+
+    # ------------------------------------------------------------- connection
+    def add_trace(self, hook: AxisTraceHook) -> None:
+        """``hook(direction, item, t)``; it runs on the facade's loop thread."""
+        return self._call(self._core.add_trace, hook)
 
     def sibling(self, drive_id: int) -> Axis:
-        core = self._runner.run(self._core.sibling(drive_id), self._call_timeout)
+        """Another drive on the same connection; closing it keeps the connection."""
+        core = self._call(self._core.sibling, drive_id)
         return Axis(core, self._runner, owns_runner=False, call_timeout=self._call_timeout)
 
     def close(self) -> None:
@@ -114,7 +285,7 @@ class Axis:
         if self._runner.stopped:
             return
         try:
-            self._runner.run(self._core.close(), self._call_timeout)
+            self._call(self._core.close)
         finally:
             if self._owns_runner:
                 self._runner.stop()
@@ -128,3 +299,30 @@ class Axis:
 
     def __repr__(self) -> str:
         return f"<Axis {self._core.protocol} id {self._core.drive_id}>"
+
+
+class Extras:
+    """``axis.extra``: any public attribute of the core; its coroutine methods run
+    synchronously through the facade, its plain attributes are read through."""
+
+    def __init__(self, axis: Axis) -> None:
+        self._axis = axis
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("_"):
+            raise AttributeError(name)
+        attr = getattr(self._axis.core, name)
+        if not inspect.iscoroutinefunction(attr):
+            return attr
+
+        @functools.wraps(attr)
+        def call(*args: Any, **kwargs: Any) -> Any:
+            return self._axis._call(attr, *args, **kwargs)
+
+        return call
+
+    def __dir__(self) -> list[str]:
+        return sorted(n for n in dir(self._axis.core) if not n.startswith("_"))
+
+    def __repr__(self) -> str:
+        return f"<extras of {self._axis!r}>"

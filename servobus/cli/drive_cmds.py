@@ -72,7 +72,7 @@ def status_record(axis: Axis, status: AxisStatus) -> dict[str, object]:
     if vendor is not None and hasattr(vendor, "as_dict"):
         record["vendor_status"] = vendor.as_dict()
     if "config" in axis.family.features and hasattr(axis.core, "config"):
-        record["config"] = axis.config().as_dict()
+        record["config"] = axis.extra.config().as_dict()
     return record
 
 
@@ -134,7 +134,7 @@ def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float, c
             if not hasattr(axis.core, "move_to_command"):
                 raise NotSupported(f"{axis.family.title} over {axis.protocol} has no raw "
                                    "command units; give counts, rev or deg", axis.family.name)
-            (axis.move_by_command if relative else axis.move_to_command)(int(number))
+            (axis.extra.move_by_command if relative else axis.extra.move_to_command)(int(number))
             record: dict[str, object] = {"command_units": int(number)}
         else:
             counts = to_counts(axis, number, unit)

@@ -1,7 +1,46 @@
 """One package per wire protocol: codec, commands, client, virtual-drive front end, server.
 
-Each package's ``__init__`` is light: it declares the URL schemes it serves (``SCHEMES``,
-scheme -> ``"module:opener"``, read by :mod:`servobus.axis.registry`), its in-process virtual
-drive for ``sim://<name>`` (``SIM``), and its CLI additions (``CLI``, ``"module:register"``).
-No package here imports another one.
+Each package's ``__init__`` is light: it declares one frozen :class:`ProtocolSpec` as
+``SPEC`` (its URL schemes and opener, its in-process virtual drive for ``sim://<name>``, its
+CLI additions, sniff decoder, parameters, family), read by :mod:`servobus.axis.registry`;
+every target is a ``"module:attribute"`` string, imported only when used. No package here
+imports another one.
 """
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class ProtocolSpec:
+    """What the shared layers (connect, sim://, CLI, sniff, GUI) may ask of one protocol.
+
+    Targets are ``"module:attribute"`` (tests/axis/test_registry.py resolves every one).
+    """
+
+    #: The protocol's one name: its package, its sniff decoder's and its ``sim://`` name.
+    name: str
+    #: The family key of its drives (servobus.families): ``"dmm-dyn2"``, ``"yzaim"``.
+    family: str
+    #: ``async opener(url, *, drive_id, **options) -> AsyncAxis`` for its URL schemes.
+    opener: str
+    #: URL schemes the opener serves; ``""`` is a bare serial port (``/dev/ttyUSB0``).
+    schemes: tuple[str, ...]
+    #: The same opener for ``sim://<name>``: in-process virtual drives (None: none).
+    sim: str | None = None
+    #: Further names of the virtual drive (``sim://dyn2`` for ``sim://dyn232``).
+    sim_aliases: tuple[str, ...] = ()
+    #: ``register(cli)``: the protocol's CLI commands (``servobus sim <name>`` ...).
+    cli: str | None = None
+    #: The sniff/decode decoder (servobus.sniff.Decoder).
+    decoder: str | None = None
+    #: The names of the family parameters this protocol reaches.
+    params: str | None = None
+    #: CLI shortcuts: option name -> URL template (``("can", "dyncan+{interface}://{channel}")``).
+    shortcuts: tuple[tuple[str, str], ...] = ()
+
+    @property
+    def sim_names(self) -> tuple[str, ...]:
+        """Every ``sim://<name>`` this protocol's virtual drive answers to."""
+        return (self.name, *self.sim_aliases) if self.sim else ()

@@ -1,7 +1,7 @@
 """One Axis contract, run against every protocol's virtual drive (like python-can's
 back-to-back tests): the same calls, the same units, the same errors on every protocol.
 
-Add a protocol by adding its ``sim://`` URL to CONTRACT_URLS.
+A protocol joins through its ProtocolSpec in the registry (CONTRACT_URLS).
 """
 
 from __future__ import annotations
@@ -12,18 +12,14 @@ from collections.abc import Iterator
 import pytest
 from conftest import wait_until
 
-from servobus.axis import Axis, connect
+from servobus.axis import Axis, connect, registry
 from servobus.errors import ArgumentRangeError, DriveTimeout, NotSupported
 from servobus.families.base import AxisStatus
 
-#: Every protocol's in-process virtual drive, one drive with id DRIVE.
-CONTRACT_URLS = [
-    "sim://dyn232?fast=1",
-    "sim://dyncan?fast=1",
-    "sim://easycan?fast=1",
-    "sim://enip",
-    "sim://modbus?fast=1",
-]
+#: Every protocol's in-process virtual drive, one drive with id DRIVE: from the registry,
+#: so a protocol whose ProtocolSpec names a ``sim`` is in the contract (``fast=1`` drops the
+#: wire pacing; every sim:// accepts it, EtherNet/IP has none to drop).
+CONTRACT_URLS = [f"sim://{spec.name}?fast=1" for spec in registry.specs().values() if spec.sim]
 DRIVE = 1
 ABSENT = 9
 

@@ -17,8 +17,6 @@ from dataclasses import dataclass
 
 import pytest
 
-from servobus.axis.eeprom_guard import EepromGuard
-from servobus.axis.transaction import TransactionManager, TransactionStats, check_call
 from servobus.errors import (
     ArgumentRangeError,
     ChecksumError,
@@ -28,6 +26,8 @@ from servobus.errors import (
     EepromGuardError,
     FramingError,
 )
+from servobus.link.eeprom_guard import EepromGuard
+from servobus.link.transaction import TransactionManager, TransactionStats, check_call
 from servobus.transport.base import Direction
 
 pytestmark = pytest.mark.timeout(20)

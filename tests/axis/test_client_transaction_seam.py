@@ -14,8 +14,8 @@ import asyncio
 import pytest
 from dyn232_rig import arun, rig
 
-from servobus.axis.transaction import TransactionStats
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveError
+from servobus.link.transaction import TransactionStats
 from servobus.protocols.dyn232 import commands as c232
 from servobus.protocols.dyncan import codec as cc
 from servobus.protocols.dyncan import commands as ccan

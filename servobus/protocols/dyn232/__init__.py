@@ -5,14 +5,19 @@ URL after the ``+``); a bare port or pyserial URL (``/dev/ttyUSB0``, ``socket://
 is DYN232M too. ``sim://dyn232`` (aliases ``dyn2``, ``dc2``, ``dyn4``) is the in-process line.
 """
 
-_OPEN = "servobus.protocols.dyn232.opener:open_axis"
+from servobus.protocols import ProtocolSpec
+
 #: pyserial's URL handlers (serial.serial_for_url) are bare serial ports: DYN232M.
 PYSERIAL_SCHEMES = ("socket", "tcp", "loop", "rfc2217", "spy", "alt", "hwgrep", "cp2110")
 
-SCHEMES: dict[str, str] = {"dyn232": _OPEN, "": _OPEN, **{s: _OPEN for s in PYSERIAL_SCHEMES}}
-SIM: dict[str, str] = {name: "servobus.protocols.dyn232.inprocess:open_sim_axis"
-                       for name in ("dyn232", "dyn2", "dc2", "dyn4")}
-CLI = "servobus.protocols.dyn232.sim_cmd:register"
-DECODERS: dict[str, str] = {"dyn232": "servobus.protocols.dyn232.sniff:DECODER"}
-PARAMS: dict[str, str] = {"dyn232": "servobus.protocols.dyn232.commands:REACHABLE_PARAMS"}
-FAMILIES: dict[str, str] = {"dyn232": "dmm-dyn2"}
+SPEC = ProtocolSpec(
+    name="dyn232",
+    family="dmm-dyn2",
+    opener="servobus.protocols.dyn232.opener:open_axis",
+    schemes=("dyn232", "", *PYSERIAL_SCHEMES),
+    sim="servobus.protocols.dyn232.inprocess:open_sim_axis",
+    sim_aliases=("dyn2", "dc2", "dyn4"),
+    cli="servobus.protocols.dyn232.sim_cmd:register",
+    decoder="servobus.protocols.dyn232.sniff:DECODER",
+    params="servobus.protocols.dyn232.commands:REACHABLE_PARAMS",
+)

@@ -3,7 +3,7 @@
 Transaction rules (the manual gives none; these are servobus decisions):
 
 * The rules every protocol shares (deadline, retries, pacing, stats, trace, EEPROM guard,
-  late replies, dead links) are :mod:`servobus.axis.transaction`'s; ``client.transactions``
+  late replies, dead links) are :mod:`servobus.link.transaction`'s; ``client.transactions``
   is the line's manager (``stats``, ``late_replies`` and ``guard`` are its). What follows
   is how DYN232M applies them.
 * One transaction at a time per line (one lane): RS485 has one master and replies carry
@@ -33,7 +33,7 @@ Transaction rules (the manual gives none; these are servobus decisions):
   read of the same kind (id and function are all a reply carries). Each timed-out attempt
   owes a reply; an owed reply that arrives outside its own call is dropped, and a read of
   an owed kind first waits until the owed replies came or ``late_reply_s`` passed without
-  one (see :mod:`servobus.axis.late_replies`). So a value is never older than its call,
+  one (see :mod:`servobus.link.late_replies`). So a value is never older than its call,
   up to that bound; the cost is paid only after a timeout.
 * A dead link (closed, reset, unplugged) raises ConnectionLost, also in a call that waits
   for a reply when it happens (at once, not at its deadline), and in every call after.
@@ -60,17 +60,13 @@ from typing import ClassVar, Generic, TypeVar, cast
 from servobus.axis import checks
 from servobus.axis.base import AxisTraceHook
 from servobus.axis.command_axis import CommandAxis, CommandSet, Request
-from servobus.axis.eeprom_guard import EepromGuard
-from servobus.axis.late_replies import DEFAULT_LATE_REPLY_S, LateReplies
-from servobus.axis.transaction import (
-    DEFAULT_RETRIES,
-    TransactionManager,
-    TransactionStats,
-    check_call,
-)
 from servobus.errors import ArgumentRangeError, ChecksumError, ConnectionLost
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import DriveConfig, DriveStatus
+from servobus.link.eeprom_guard import EepromGuard
+from servobus.link.late_replies import DEFAULT_LATE_REPLY_S, LateReplies
+from servobus.link.stats import TransactionStats
+from servobus.link.transaction import DEFAULT_RETRIES, TransactionManager, check_call
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232 import commands as cmds
 from servobus.protocols.dyn232.commands import Command

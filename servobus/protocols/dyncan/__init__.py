@@ -5,10 +5,16 @@ URLs: ``dyncan+<python-can interface>://<channel>``, e.g. ``dyncan+pcan://PCAN_U
 ``sim://dyncan`` runs virtual nodes on an in-process python-can virtual bus.
 """
 
-SCHEMES: dict[str, str] = {"dyncan": "servobus.protocols.dyncan.opener:open_axis"}
-SIM: dict[str, str] = {"dyncan": "servobus.protocols.dyncan.inprocess:open_sim_axis"}
-CLI = "servobus.protocols.dyncan.sim_cmd:register"
-DECODERS: dict[str, str] = {"dyncan": "servobus.protocols.dyncan.sniff:DECODER"}
-SHORTCUTS: dict[str, str] = {"can": "dyncan+{interface}://{channel}"}
-PARAMS: dict[str, str] = {"dyncan": "servobus.protocols.dyncan.commands:REACHABLE_PARAMS"}
-FAMILIES: dict[str, str] = {"dyncan": "dmm-dyn2"}
+from servobus.protocols import ProtocolSpec
+
+SPEC = ProtocolSpec(
+    name="dyncan",
+    family="dmm-dyn2",
+    opener="servobus.protocols.dyncan.opener:open_axis",
+    schemes=("dyncan",),
+    sim="servobus.protocols.dyncan.inprocess:open_sim_axis",
+    cli="servobus.protocols.dyncan.sim_cmd:register",
+    decoder="servobus.protocols.dyncan.sniff:DECODER",
+    params="servobus.protocols.dyncan.commands:REACHABLE_PARAMS",
+    shortcuts=(("can", "dyncan+{interface}://{channel}"),),
+)

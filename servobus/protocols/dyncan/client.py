@@ -7,7 +7,7 @@ drives (``axis.sibling(id)``, :meth:`AsyncDynCanClient.sync_move`, streaming).
 
 Transaction rules (servobus decisions; the manual gives none). The rules every protocol
 shares (deadline, retries, stats, trace, EEPROM guard, late replies, dead links) are
-:mod:`servobus.axis.transaction`'s; ``client.transactions`` is the bus's manager
+:mod:`servobus.link.transaction`'s; ``client.transactions`` is the bus's manager
 (``stats``, ``late_replies`` and ``guard`` are its). How DYN CAN applies them:
 
 * A reply matches a pending read when its identifier (drive id, function) and its data
@@ -31,7 +31,7 @@ shares (deadline, retries, stats, trace, EEPROM guard, late replies, dead links)
   to nobody else: each timed-out attempt owes one reply per (drive id, function); an owed
   frame that arrives while no read of its identifier waits is dropped, and a read of an
   owed identifier first waits until the owed frames came or ``late_reply_s`` passed
-  without one (:mod:`servobus.axis.late_replies`). A value is never older than its call,
+  without one (:mod:`servobus.link.late_replies`). A value is never older than its call,
   up to that bound.
 * A dead bus (closed, socketcand gone, adapter error) raises ConnectionLost, at once in the
   reads that wait when it happens, and in every call after.
@@ -45,34 +45,29 @@ import asyncio
 import contextlib
 import logging
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
 from typing import Any, ClassVar, TypeVar, cast
 
 from servobus.axis import checks
-from servobus.axis.base import AsyncAxis, AxisTraceHook
+from servobus.axis.base import AsyncAxis
 from servobus.axis.command_axis import CommandAxis, CommandSet, Request
-from servobus.axis.eeprom_guard import EepromGuard
-from servobus.axis.late_replies import DEFAULT_LATE_REPLY_S, LateReplies
-from servobus.axis.transaction import (
-    DEFAULT_RETRIES,
-    TransactionManager,
-    TransactionStats,
-    check_call,
-)
 from servobus.errors import (
     ArgumentRangeError,
-    ConnectionLost,
     DriveAlarm,
     DriveError,
     DriveTimeout,
     ServobusError,
 )
 from servobus.families.dmm import units as U
+from servobus.link.can import CanClient
+from servobus.link.eeprom_guard import EepromGuard
+from servobus.link.late_replies import DEFAULT_LATE_REPLY_S
+from servobus.link.stats import StreamStats, TransactionStats
+from servobus.link.transaction import DEFAULT_RETRIES, TransactionManager, check_call
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan import commands as cmds
 from servobus.protocols.dyncan.commands import CanCommand
 from servobus.transport.base import Direction
-from servobus.transport.can_bus import AsyncCanBus, CanFrame, FramePort, set_receiver
+from servobus.transport.can_bus import AsyncCanBus, CanFrame, FramePort
 
 log = logging.getLogger(__name__)
 
@@ -87,14 +82,6 @@ _GUARD_EXEMPT = frozenset({"max_speed", "max_accel"})
 AlarmCallback = Callable[[int], None]  # called with the alarming drive's id
 #: The counters of a bus (the one stats class of every protocol).
 BusStats = TransactionStats
-
-
-@dataclass
-class StreamStats:
-    ticks: int = 0
-    frames: int = 0
-    late_ticks: int = 0  # ticks sent more than one period after their slot
-    max_lateness_s: float = 0.0
 
 
 def _describe_key(key: ReplyKey) -> str:
@@ -113,7 +100,7 @@ def _own(command: Request[T]) -> CanCommand[T]:
     return command
 
 
-class AsyncDynCanClient:
+class AsyncDynCanClient(CanClient[ReplyKey, c.Frame, c.Frame]):
     """Executes CanCommands on one CAN bus (any FramePort)."""
 
     def __init__(self, port: FramePort, *, timeout: float | None = None,
@@ -124,55 +111,22 @@ class AsyncDynCanClient:
         self.timeout = DEFAULT_TIMEOUT_S if checked is None else checked
         if on_alarm is not None and not callable(on_alarm):
             raise ArgumentRangeError(f"on_alarm must be callable, got {on_alarm!r}")
-        self.port = port
-        #: The bus's transaction manager: one lane per drive id.
-        self.transactions: TransactionManager[ReplyKey, c.Frame, c.Frame] = TransactionManager(
-            self._write, link="CAN bus", describe_key=_describe_key,
-            describe_request=_describe_request, retries=retries, late_reply_s=late_reply_s,
-            eeprom_guard=eeprom_guard, owed_keys=self._owed_keys)
-        tm = self.transactions
-        self.stats: TransactionStats = tm.stats
-        #: Replies owed by timed-out reads (``late_replies.late``, ``.given_up``).
-        self.late_replies: LateReplies[ReplyKey] = tm.late_replies
-        self.guard: EepromGuard = tm.guard
         self._alarm_callbacks: list[AlarmCallback] = [on_alarm] if on_alarm else []
         self._pending: dict[int, ServobusError] = {}
-        self._rx_task: asyncio.Task[None] | None = None
-        if not set_receiver(port, self._on_frame):  # push: one task switch less per reply
-            self._rx_task = asyncio.get_running_loop().create_task(self._receive_loop(),
-                                                                   name="dyncan-rx")
-
-    @property
-    def retries(self) -> int:
-        """Default re-sends of a read (per call: ``execute(..., retries=)``)."""
-        return self.transactions.retries
+        # the bus's transaction manager: one lane per drive id
+        super().__init__(port, TransactionManager(
+            self._write, link="CAN bus", describe_key=_describe_key,
+            describe_request=_describe_request, retries=retries, late_reply_s=late_reply_s,
+            eeprom_guard=eeprom_guard, owed_keys=self._owed_keys), name="dyncan-rx")
 
     # ------------------------------------------------------------- hooks
-    def add_trace(self, hook: AxisTraceHook) -> None:
-        """``hook(direction, item, t)``: every Frame sent/received and every error met."""
-        self.transactions.add_trace(hook)
-
     def on_alarm(self, callback: AlarmCallback) -> None:
         """``callback(drive_id)`` runs on the loop when a drive pushes Drive Error 0xEE."""
         self._alarm_callbacks.append(callback)
 
     # ------------------------------------------------------------- receiving
-    async def _receive_loop(self) -> None:
-        while True:
-            try:
-                raw = await self.port.recv(None)
-            except OSError as exc:  # ConnectionLost, or a foreign port's own error
-                self.transactions.lost(exc)
-                self._on_frame(None)
-                return
-            if raw is not None:
-                self._on_frame(raw)
-
-    def _on_frame(self, raw: CanFrame | None) -> None:
+    def _on_can_frame(self, raw: CanFrame) -> None:
         tm = self.transactions
-        if raw is None:  # the port closed or failed: every waiting read fails now
-            tm.lost(ConnectionLost("CAN bus closed"))
-            return
         if raw.is_extended_id or raw.arbitration_id > c.MAX_ARBITRATION_ID:
             tm.stray(raw)
             return
@@ -307,19 +261,20 @@ class AsyncDynCanClient:
                     del iters[drive_id]
             if not tick:
                 break
-            due = t0 + stats.ticks * period
+            due = t0 + stats.cycles * period
             delay = due - loop.time()
             if delay > 0:
                 await asyncio.sleep(delay)
             elif -delay > period:
-                stats.late_ticks += 1
+                stats.late_cycles += 1
             stats.max_lateness_s = max(stats.max_lateness_s, -delay)
             for command in tick:
                 self.raise_pending(command.drive_id)
             for command in tick:
                 await self.transactions.send(command.frame)
             stats.frames += len(tick)
-            stats.ticks += 1
+            stats.cycles += 1
+        stats.elapsed_s = loop.time() - t0
         return stats
 
     async def heartbeat(self, drive_id: int) -> int:
@@ -333,19 +288,6 @@ class AsyncDynCanClient:
         hb = Heartbeat(self, drive_id, period, on_lost)
         hb.start()
         return hb
-
-    async def close(self) -> None:
-        if not self.transactions.close():
-            return
-        await self.port.close()
-        if self._rx_task is not None:
-            self._rx_task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._rx_task
-
-    @property
-    def closed(self) -> bool:
-        return self.transactions.closed
 
 
 class Heartbeat:

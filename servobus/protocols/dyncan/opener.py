@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 from servobus.axis.url import DriveUrl, merge_options
-from servobus.errors import ArgumentRangeError
+from servobus.link.can import can_spec
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan.client import DynCanAxis, open_can_client
 from servobus.protocols.dyncan.commands import check_drive_id
@@ -19,19 +19,6 @@ OPTIONS: dict[str, type] = {
     "bitrate": int, "timeout": float, "retries": int, "eeprom_guard": object, "late_reply_s": float,
     "on_alarm": object,
 }
-
-
-def can_spec(url: DriveUrl) -> tuple[str, dict[str, str]]:
-    """``INTERFACE:CHANNEL`` for python-can, and the socketcand bus name if the URL gives one."""
-    if not url.transport:
-        raise ArgumentRangeError(
-            f"{url.raw!r} names no CAN interface: use dyncan+<interface>://<channel>, "
-            "e.g. dyncan+pcan://PCAN_USBBUS1 or dyncan+socketcand://127.0.0.1:29536/can0")
-    channel = url.target
-    if url.transport == "socketcand" and "/" in channel:
-        address, _, bus = channel.partition("/")
-        return f"socketcand:{address}", ({"channel": bus} if bus else {})
-    return f"{url.transport}:{channel}", {}
 
 
 async def open_axis(url: DriveUrl, *, drive_id: int | None = None, **keywords: Any) -> DynCanAxis:

@@ -13,10 +13,15 @@ URLs: ``easycan+<python-can interface>://<channel>``, e.g. ``easycan+pcan://PCAN
 runs virtual YZ-AIM motors on an in-process python-can virtual bus (docs/easycan.md).
 """
 
-SCHEMES: dict[str, str] = {"easycan": "servobus.protocols.easycan.opener:open_axis"}
-SIM: dict[str, str] = {"easycan": "servobus.protocols.easycan.inprocess:open_sim_axis"}
-CLI = "servobus.protocols.easycan.sim_cmd:register"
-DECODERS: dict[str, str] = {"easycan": "servobus.protocols.easycan.sniff:DECODER"}
-PARAMS: dict[str, str] = {"easycan": "servobus.protocols.easycan.commands:REACHABLE_PARAMS"}
-FAMILIES: dict[str, str] = {"easycan": "yzaim"}
+from servobus.protocols import ProtocolSpec
 
+SPEC = ProtocolSpec(
+    name="easycan",
+    family="yzaim",
+    opener="servobus.protocols.easycan.opener:open_axis",
+    schemes=("easycan",),
+    sim="servobus.protocols.easycan.inprocess:open_sim_axis",
+    cli="servobus.protocols.easycan.sim_cmd:register",
+    decoder="servobus.protocols.easycan.sniff:DECODER",
+    params="servobus.protocols.easycan.commands:REACHABLE_PARAMS",
+)

@@ -4,7 +4,7 @@ One :class:`AsyncEasyCanClient` per bus serves any number of motors (EasyCanAxis
 motor, :class:`servobus.protocols.easycan.sync.SyncGroup` for several at once). The rules
 every protocol shares (deadline from when the frame left, bounded read retries, writes
 sent once, stats, trace, EEPROM guard, late replies, dead links) are the shared
-:class:`~servobus.axis.transaction.TransactionManager`'s: ``client.transactions`` is the
+:class:`~servobus.link.transaction.TransactionManager`'s: ``client.transactions`` is the
 bus's manager (``stats``, ``late_replies`` and ``guard`` are its). What EasyCan adds
 (servobus decisions, docs/easycan.md):
 
@@ -28,29 +28,22 @@ bus's manager (``stats``, ``late_replies`` and ``guard`` are its). What EasyCan 
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
 import logging
 from typing import Any
 
 from servobus.axis import checks
-from servobus.axis.base import AxisTraceHook
-from servobus.axis.eeprom_guard import EepromGuard
-from servobus.axis.late_replies import DEFAULT_LATE_REPLY_S, LateReplies
-from servobus.axis.transaction import (
-    DEFAULT_RETRIES,
-    TransactionManager,
-    TransactionStats,
-    check_call,
-)
 from servobus.errors import (
     ArgumentRangeError,
-    ConnectionLost,
     DriveError,
     DriveTimeout,
     FramingError,
 )
 from servobus.families import yzaim
+from servobus.link.can import CanClient
+from servobus.link.eeprom_guard import EepromGuard
+from servobus.link.late_replies import DEFAULT_LATE_REPLY_S
+from servobus.link.stats import TransactionStats
+from servobus.link.transaction import DEFAULT_RETRIES, TransactionManager, check_call
 from servobus.protocols.easycan import codec
 from servobus.protocols.easycan.commands import EasyCanCommand
 from servobus.protocols.easycan.describe import register_name
@@ -69,7 +62,7 @@ from servobus.protocols.easycan.messages import (
     WriteRequest,
 )
 from servobus.transport.base import Direction
-from servobus.transport.can_bus import AsyncCanBus, CanFrame, FramePort, set_receiver
+from servobus.transport.can_bus import AsyncCanBus, CanFrame, FramePort
 
 log = logging.getLogger(__name__)
 
@@ -125,7 +118,7 @@ def _what_register(command: EasyCanCommand) -> str:
     return Function(request.function).name
 
 
-class AsyncEasyCanClient:
+class AsyncEasyCanClient(CanClient[Key, EasyCanCommand, Reply]):
     """Executes EasyCanCommands on one CAN bus."""
 
     def __init__(self, port: FramePort, *, timeout: float | None = None,
@@ -133,56 +126,22 @@ class AsyncEasyCanClient:
                  eeprom_guard: EepromGuard | None = None, host: int = HOST_ADDRESS) -> None:
         check_options(timeout, retries, late_reply_s, eeprom_guard)
         self.timeout = DEFAULT_TIMEOUT_S if timeout is None else timeout
-        self.port = port
         self.host = host
-        #: The bus's transaction manager: one lane per motor, one for replied cache writes.
-        self.transactions: TransactionManager[Key, EasyCanCommand, Reply] = TransactionManager(
-            self._write, link="CAN bus", describe_key=describe_key,
-            describe_request=_describe_request, trace_request=_trace_request,
-            retries=DEFAULT_RETRIES if retries is None else retries,
-            late_reply_s=DEFAULT_LATE_REPLY_S if late_reply_s is None else late_reply_s,
-            eeprom_guard=eeprom_guard)
-        tm = self.transactions
-        self.stats: TransactionStats = tm.stats
-        #: Replies owed by timed-out attempts (``late_replies.late``, ``.given_up``).
-        self.late_replies: LateReplies[Key] = tm.late_replies
-        self.guard: EepromGuard = tm.guard
         #: The request last sent per key: while one waits it is the one of its key (lanes).
         self._sent: dict[Key, Request] = {}
         #: Decoded replies by data bytes (frozen, so shared): polling repeats the same frames.
         self._decoded: dict[bytes, Reply] = {}
-        self._rx_task: asyncio.Task[None] | None = None
-        if not set_receiver(port, self._on_frame):
-            self._rx_task = asyncio.get_running_loop().create_task(self._receive_loop(),
-                                                                   name="easycan-rx")
-
-    @property
-    def retries(self) -> int:
-        """Default re-sends of a read or setting (per call: ``execute(..., retries=)``)."""
-        return self.transactions.retries
-
-    # ------------------------------------------------------------- tracing
-    def add_trace(self, hook: AxisTraceHook) -> None:
-        """``hook(direction, item, t)``: every message sent/received and every error met."""
-        self.transactions.add_trace(hook)
+        # the bus's transaction manager: one lane per motor, one for replied cache writes
+        super().__init__(port, TransactionManager(
+            self._write, link="CAN bus", describe_key=describe_key,
+            describe_request=_describe_request, trace_request=_trace_request,
+            retries=DEFAULT_RETRIES if retries is None else retries,
+            late_reply_s=DEFAULT_LATE_REPLY_S if late_reply_s is None else late_reply_s,
+            eeprom_guard=eeprom_guard), name="easycan-rx")
 
     # ------------------------------------------------------------- receiving
-    async def _receive_loop(self) -> None:
-        while True:
-            try:
-                raw = await self.port.recv(None)
-            except OSError as exc:  # ConnectionLost, or a foreign port's own error
-                self.transactions.lost(exc)
-                self._on_frame(None)
-                return
-            if raw is not None:
-                self._on_frame(raw)
-
-    def _on_frame(self, raw: CanFrame | None) -> None:
+    def _on_can_frame(self, raw: CanFrame) -> None:
         tm = self.transactions
-        if raw is None:  # the port closed or failed: every waiting request fails now
-            tm.lost(ConnectionLost("CAN bus closed"))
-            return
         if raw.is_extended_id or raw.arbitration_id != self.host:
             return  # requests (ours echoed by some adapters, another host's): not replies
         data = bytes(raw.data)
@@ -292,20 +251,6 @@ class AsyncEasyCanClient:
         if isinstance(reply, WriteReply):
             return reply.position
         return None
-
-    # ------------------------------------------------------------- closing
-    async def close(self) -> None:
-        if not self.transactions.close():
-            return
-        await self.port.close()
-        if self._rx_task is not None:
-            self._rx_task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._rx_task
-
-    @property
-    def closed(self) -> bool:
-        return self.transactions.closed
 
 
 async def open_easycan_client(can: str, *, timeout: float | None = None,

@@ -1,7 +1,7 @@
 """What an EasyCan reply answers, and which requests wait one at a time (docs/easycan.md).
 
 The EasyCan rules the client hands to the shared
-:class:`~servobus.axis.transaction.TransactionManager`; pure, no I/O. Decisions (servobus;
+:class:`~servobus.link.transaction.TransactionManager`; pure, no I/O. Decisions (servobus;
 the manual gives none):
 
 * **Keys.** A reply carries no sequence number, only the answering motor and the function

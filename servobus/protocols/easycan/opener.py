@@ -15,7 +15,7 @@ from __future__ import annotations
 from typing import Any
 
 from servobus.axis.url import DriveUrl, merge_options
-from servobus.errors import ArgumentRangeError
+from servobus.link.can import can_spec
 from servobus.protocols.easycan import commands as cmds
 from servobus.protocols.easycan.axis import EasyCanAxis
 from servobus.protocols.easycan.client import open_easycan_client
@@ -25,19 +25,6 @@ OPTIONS: dict[str, type] = {
     "bitrate": int, "timeout": float, "retries": int, "late_reply_s": float, "tcp_tune": bool,
     "eeprom_guard": object,
 }
-
-
-def can_spec(url: DriveUrl) -> tuple[str, dict[str, str]]:
-    """``INTERFACE:CHANNEL`` for python-can, and the socketcand bus name if the URL gives one."""
-    if not url.transport:
-        raise ArgumentRangeError(
-            f"{url.raw!r} names no CAN interface: use easycan+<interface>://<channel>, "
-            "e.g. easycan+pcan://PCAN_USBBUS1 or easycan+socketcand://127.0.0.1:29536/can0")
-    channel = url.target
-    if url.transport == "socketcand" and "/" in channel:
-        address, _, bus = channel.partition("/")
-        return f"socketcand:{address}", ({"channel": bus} if bus else {})
-    return f"{url.transport}:{channel}", {}
 
 
 async def open_axis(url: DriveUrl, *, drive_id: int | None = None,

@@ -31,10 +31,10 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
 
 from servobus.errors import ArgumentRangeError
 from servobus.families import yzaim
+from servobus.link.stats import StreamStats
 from servobus.protocols.easycan import commands as cmds
 from servobus.protocols.easycan.client import AsyncEasyCanClient
 
@@ -42,15 +42,6 @@ CYCLE_S = yzaim.SYNC_CYCLE_S
 PHASE = 0.25  # slots sit this fraction of a cycle after the synchronisation signal was sent
 SYNC_ON = 1
 SPIN_S = 0.0012  # wake this early and yield until the slot (asyncio timers wake ~1 ms late)
-
-
-@dataclass
-class StreamStats:
-    cycles: int = 0  # cycles sent
-    frames: int = 0
-    skipped: int = 0  # cycles dropped because the host was more than a cycle behind
-    max_lateness_s: float = 0.0
-    elapsed_s: float = 0.0
 
 
 class SyncGroup:

@@ -7,9 +7,15 @@ Spec: DMM "DYN5 EtherNet/IP Specification" 1.1A; the device model (Parameter ins
 Identity values, quirks) is ``servobus.families.dyn5``.
 """
 
-SCHEMES: dict[str, str] = {"enip": "servobus.protocols.enip.opener:open_axis"}
-SIM: dict[str, str] = {"enip": "servobus.protocols.enip.inprocess:open_sim_axis"}
-CLI = "servobus.protocols.enip.cli:register"
-DECODERS: dict[str, str] = {"enip": "servobus.protocols.enip.sniff:DECODER"}
-PARAMS: dict[str, str] = {"enip": "servobus.families.dyn5_family:PARAM_NAMES"}
-FAMILIES: dict[str, str] = {"enip": "dmm-dyn5"}
+from servobus.protocols import ProtocolSpec
+
+SPEC = ProtocolSpec(
+    name="enip",
+    family="dmm-dyn5",
+    opener="servobus.protocols.enip.opener:open_axis",
+    schemes=("enip",),
+    sim="servobus.protocols.enip.inprocess:open_sim_axis",
+    cli="servobus.protocols.enip.cli:register",
+    decoder="servobus.protocols.enip.sniff:DECODER",
+    params="servobus.families.dyn5_family:PARAM_NAMES",
+)

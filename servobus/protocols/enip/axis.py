@@ -38,7 +38,6 @@ from typing import TYPE_CHECKING
 
 from servobus.axis import checks
 from servobus.axis.base import DEFAULT_WAIT_TIMEOUT_S, AsyncAxis, AxisTraceHook, check_int
-from servobus.axis.transaction import DEFAULT_RETRIES
 from servobus.errors import (
     ArgumentRangeError,
     ConnectionLost,
@@ -53,6 +52,7 @@ from servobus.families.dmm import units as U
 from servobus.families.dmm.family import counts_to_command
 from servobus.families.dyn5 import Instance
 from servobus.families.dyn5_family import DYN5, PARAM_INSTANCES, axis_status
+from servobus.link.transaction import DEFAULT_RETRIES
 from servobus.protocols.enip.cip import ClassCode
 from servobus.protocols.enip.client import CONNECT_TIMEOUT_S, DEFAULT_TIMEOUT_S, AsyncEnipClient
 from servobus.protocols.enip.encap import TCP_PORT

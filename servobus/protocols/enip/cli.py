@@ -185,7 +185,7 @@ def io_cmd(ctx: CliContext, rpi: float, frames: int | None, duration: float | No
 
         stopped = ""
         try:
-            stats = axis.monitor_io(on_frame, rpi_ms=rpi, frames=frames, duration=duration)
+            stats = axis.extra.monitor_io(on_frame, rpi_ms=rpi, frames=frames, duration=duration)
         except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM: the normal end of watching
             stats, stopped = None, getattr(exc, "signal_name", "Ctrl-C")
         if show is not None:

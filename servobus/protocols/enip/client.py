@@ -7,7 +7,7 @@ unconnected data item with one Message Router request. The client registers a se
 Get_Attributes_All, and the Connection Manager's Forward_Open / Forward_Close for cyclic I/O
 (:mod:`servobus.protocols.enip.scanner`). UnregisterSession on close.
 
-Transactions follow the shared policy, :class:`servobus.axis.transaction.TransactionManager`:
+Transactions follow the shared policy, :class:`servobus.link.transaction.TransactionManager`:
 every call carries its own sender context (a 64-bit counter), which the adapter echoes
 (CIP Vol. 2 2-3) and which is the key its reply is matched on; each attempt waits
 ``timeout`` (default 0.5 s: a DYN5 answers within milliseconds on a LAN, manual 7) from
@@ -38,7 +38,6 @@ import struct
 from collections.abc import Callable
 
 from servobus.axis import checks
-from servobus.axis.transaction import DEFAULT_RETRIES, TransactionManager, TransactionStats
 from servobus.errors import (
     ConnectionLost,
     DriveError,
@@ -47,6 +46,8 @@ from servobus.errors import (
     ProtocolError,
     ServobusError,
 )
+from servobus.link.stats import TransactionStats
+from servobus.link.transaction import DEFAULT_RETRIES, TransactionManager
 from servobus.protocols.enip import discovery, epath
 from servobus.protocols.enip.cip import (
     GeneralStatus,

@@ -10,9 +10,15 @@ URLs: ``modbus:///dev/ttyUSB0?baud=19200``, ``modbus:COM3``, ``modbus+socket://H
 (any pyserial URL after the ``+``); ``sim://modbus`` is the in-process virtual line.
 """
 
-SCHEMES: dict[str, str] = {"modbus": "servobus.protocols.modbus.opener:open_axis"}
-SIM: dict[str, str] = {"modbus": "servobus.protocols.modbus.inprocess:open_sim_axis"}
-CLI = "servobus.protocols.modbus.sim_cmd:register"
-DECODERS: dict[str, str] = {"modbus": "servobus.protocols.modbus.sniff:DECODER"}
-PARAMS: dict[str, str] = {"modbus": "servobus.protocols.modbus.params:REACHABLE_PARAMS"}
-FAMILIES: dict[str, str] = {"modbus": "yzaim"}
+from servobus.protocols import ProtocolSpec
+
+SPEC = ProtocolSpec(
+    name="modbus",
+    family="yzaim",
+    opener="servobus.protocols.modbus.opener:open_axis",
+    schemes=("modbus",),
+    sim="servobus.protocols.modbus.inprocess:open_sim_axis",
+    cli="servobus.protocols.modbus.sim_cmd:register",
+    decoder="servobus.protocols.modbus.sniff:DECODER",
+    params="servobus.protocols.modbus.params:REACHABLE_PARAMS",
+)

@@ -2,7 +2,7 @@
 
 One :class:`ModbusClient` per line (any number of devices on it). It moves register words;
 what the registers mean is the device family's (:mod:`servobus.protocols.modbus.axis`).
-The transaction rules are the shared :class:`~servobus.axis.transaction.TransactionManager`'s
+The transaction rules are the shared :class:`~servobus.link.transaction.TransactionManager`'s
 (one lane: RS-485 has one master; deadlines measured from when the request left; reads
 retried, writes sent exactly once; late replies; dead links; stats; trace); the timing is
 the :class:`~servobus.protocols.modbus.policy.RtuPolicy`'s. What is RTU's own:
@@ -39,14 +39,6 @@ from dataclasses import dataclass
 
 from servobus.axis import checks
 from servobus.axis.base import AxisTraceHook
-from servobus.axis.eeprom_guard import EepromGuard
-from servobus.axis.late_replies import DEFAULT_LATE_REPLY_S, LateReplies
-from servobus.axis.transaction import (
-    DEFAULT_RETRIES,
-    TransactionManager,
-    TransactionStats,
-    check_call,
-)
 from servobus.errors import (
     ArgumentRangeError,
     ChecksumError,
@@ -54,6 +46,10 @@ from servobus.errors import (
     DriveError,
     DriveTimeout,
 )
+from servobus.link.eeprom_guard import EepromGuard
+from servobus.link.late_replies import DEFAULT_LATE_REPLY_S, LateReplies
+from servobus.link.stats import TransactionStats
+from servobus.link.transaction import DEFAULT_RETRIES, TransactionManager, check_call
 from servobus.protocols.modbus import codec as C
 from servobus.protocols.modbus.framer import GapFramer, ReplyFramer
 from servobus.protocols.modbus.policy import DEFAULT_TURNAROUND_S, RtuPolicy

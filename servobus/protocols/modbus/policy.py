@@ -1,7 +1,7 @@
 """The timing of the Modbus RTU client in one place: per-attempt deadline and frame gap.
 
 Retries, late replies, stats and trace are the shared
-:class:`~servobus.axis.transaction.TransactionManager`'s; this class only knows what RTU
+:class:`~servobus.link.transaction.TransactionManager`'s; this class only knows what RTU
 timing adds. Decisions (servobus's; docs/modbus.md):
 
 * Per-attempt deadline = request wire time + t3.5 (the device recognises the end of the

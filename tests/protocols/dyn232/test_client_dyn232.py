@@ -17,7 +17,6 @@ from typing import Any
 import pytest
 from dyn232_rig import Rig, arun, rig
 
-from servobus.axis.eeprom_guard import EepromGuard, EepromWearWarning
 from servobus.errors import (
     ArgumentRangeError,
     ChecksumError,
@@ -28,6 +27,7 @@ from servobus.errors import (
 from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, DriveConfig, ServoMode
+from servobus.link.eeprom_guard import EepromGuard, EepromWearWarning
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232.client import AsyncDyn232Client, Dyn232Axis
 from servobus.transport.base import ByteReceiver, Direction, TraceHook

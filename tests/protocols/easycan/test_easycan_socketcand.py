@@ -111,7 +111,7 @@ def test_state_file_keeps_saved_registers_across_restarts(tmp_path: Path) -> Non
     try:
         with connect(url, drive_id=4) as axis:
             axis.write_param("acceleration", 4321)
-            axis.save_parameters()
+            axis.extra.save_parameters()
             axis.write_param("target_speed", 222)  # not saved
     finally:
         proc.terminate()

@@ -16,8 +16,6 @@ from collections.abc import Callable
 import pytest
 
 from servobus.axis import connect
-from servobus.axis.eeprom_guard import EepromGuard
-from servobus.axis.transaction import TransactionStats
 from servobus.errors import (
     ArgumentRangeError,
     ConnectionLost,
@@ -26,6 +24,8 @@ from servobus.errors import (
     EepromGuardError,
 )
 from servobus.families import yzaim as Y
+from servobus.link.eeprom_guard import EepromGuard
+from servobus.link.transaction import TransactionStats
 from servobus.protocols.dyncan import commands as dyncan_cmds
 from servobus.protocols.easycan import codec
 from servobus.protocols.easycan import commands as cmds

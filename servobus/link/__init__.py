@@ -1,0 +1,8 @@
+"""What every protocol client shares, below the Axis (docs/architecture.md).
+
+``transaction`` the one transaction policy (deadlines, retries, lanes, pacing, dead links),
+``late_replies`` the replies owed by timed-out attempts, ``eeprom_guard`` the EEPROM wear
+guard, ``stats`` the counters, ``can`` what the CAN clients share (the python-can channel
+of a URL, the receive loop). A link knows no protocol and no simulator; it moves nothing
+itself (``servobus.transport`` does).
+"""
