@@ -321,6 +321,11 @@ def check_record(key: str, rec: object) -> dict[str, Any]:
     """One record, normalised (every field present); ValueError names the first problem."""
     if not (key.isdigit() and key == str(int(key)) and int(key) <= MAX_DRIVE_ID):
         raise ValueError(f"the key must be a power-on drive id 0..{MAX_DRIVE_ID}")
+    return check_drive_record(rec)
+
+
+def check_drive_record(rec: object) -> dict[str, Any]:
+    """One record's fields (whatever its key), normalised; ValueError names the problem."""
     if not isinstance(rec, dict):
         raise ValueError(f"must be an object, got {describe(rec)}")
     unknown = sorted(set(rec) - _FIELDS)
@@ -359,7 +364,8 @@ DMM_STATE = StateKind("drive records", check_record)
 
 # ---------------------------------------------------------------- the store
 class EepromStore:
-    def __init__(self, path: str | Path | None = None, key: str = "0") -> None:
+    def __init__(self, path: str | Path | None = None, key: str = "0",
+                 kind: StateKind | None = None) -> None:
         self.path = Path(path) if path is not None else None
         self.key = key
         self.params: dict[str, int] = P.defaults()
@@ -368,7 +374,7 @@ class EepromStore:
         self.origin = 0  # stored absolute zero: encoder angle within one revolution (counts)
         self.writes: dict[str, int] = {}
         self._initialised = False
-        self._file = StateFile.shared(self.path) if self.path is not None else None
+        self._file = StateFile.shared(self.path, kind) if self.path is not None else None
         if self._file is not None:
             self._load(self._file)
 

@@ -72,7 +72,7 @@ from servobus.protocols.enip.encap import (
 )
 from servobus.protocols.enip.production import Producer, ProductionWheel
 from servobus.sim.drive import VirtualDrive
-from servobus.sim.eeprom import EepromStore
+from servobus.sim.eeprom import EepromStore, StateKind, check_drive_record
 from servobus.sim.realtime import RealtimeClock
 from servobus.sim.server_limits import MAX_OUTPUT_BYTES, WRITE_HIGH_WATER
 
@@ -593,12 +593,25 @@ def parse_hosts(text: str) -> list[str]:
     return hosts
 
 
+def _check_dyn5_record(key: str, rec: object) -> dict[str, Any]:
+    try:
+        ipaddress.IPv4Address(key)
+    except ValueError:
+        raise ValueError("the key must be the drive's IPv4 address") from None
+    return check_drive_record(rec)
+
+
+#: ``sim enip --state``: DMM drive records keyed by the drive's IPv4 address (decision; the
+#: DYN2/DYN4 files key by power-on drive id, which a DYN5 on EtherNet/IP does not have).
+DYN5_STATE = StateKind("drive records keyed by IPv4 address", _check_dyn5_record)
+
+
 def make_drive(host: str, *, state: str | None = None, model: str | None = None
                ) -> VirtualDrive:
     """One drive per address; with ``state`` its EEPROM is kept under the address."""
     drive_id = int(host.rsplit(".", 1)[1]) % 64
     kwargs: dict[str, Any] = {} if model is None else {"model": model}
-    eeprom = EepromStore(state, key=host) if state else None
+    eeprom = EepromStore(state, key=host, kind=DYN5_STATE) if state else None
     return VirtualDrive(drive_id, eeprom=eeprom, **kwargs)
 
 
