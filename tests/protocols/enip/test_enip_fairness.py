@@ -83,8 +83,10 @@ async def test_a_polite_request_is_answered_before_the_flooders_next_few() -> No
         assert (status, context) == (0, POLITE)
         at_polite = order.index(POLITE)
         flooded_meanwhile = at_polite - flooded_before
-        assert flooded_before < FLOOD - 4 * PACKETS_PER_TURN, "flood handled all at once"
-        assert flooded_meanwhile <= 2 * PACKETS_PER_TURN, order[flooded_before:at_polite + 1]
+        assert at_polite < FLOOD // 2, "the flood was handled before the polite request"
+        # The polite bytes are readable at the next poll (loopback): a turn or two of the
+        # flooder's; the margin covers a late wake-up, never its backlog.
+        assert flooded_meanwhile <= 4 * PACKETS_PER_TURN, order[flooded_before:at_polite + 1]
         await until(lambda: order.count(FLOODER) == FLOOD)  # the flooder is served too
         assert f_reader.at_eof() is False
         for w in (f_writer, p_writer):
