@@ -10,6 +10,11 @@ before, at the peak of and after the attack, and runs a well-behaved client (one
 every 20 ms, each with a deadline) beside the attacker. A scenario passes when the server
 is alive, its memory stays within ``RSS_BOUND_MIB`` of the start, and the well-behaved
 client met every deadline. Exit status 1 when any scenario fails.
+
+The ``enip`` scenarios (issue 17.5) measure a polite EtherNet/IP originator (one parameter
+read at a time) beside two flooders of valid requests that read their replies ("greedy") or
+never do; its deadline is the target, ``ENIP_TARGET_S`` (100 ms), and its worst reply time
+is printed.
 """
 
 from __future__ import annotations
@@ -25,6 +30,9 @@ from benchmarks import soak_clients as sc
 
 RSS_BOUND_MIB = 64.0  # growth allowed under any attack
 DEADLINE_S = {"fast": 0.25, "paced": 0.5}  # the well-behaved client's deadline per reply
+ENIP_TARGET_S = 0.1  # issue 17.5: the polite originator's worst reply beside a flooder
+PROBERS: dict[str, Callable[..., sc.Latency]] = {
+    "dyn2": sc.dyn2_prober, "can": sc.can_prober, "enip": sc.enip_prober}
 CONNECTIONS = 2000
 STATE_MUTATIONS = 20_000  # random corruptions of a valid state file, checked in-process
 STATE_FILES = 200  # ... of which this many also go through a real file (open, lock, refuse)
@@ -84,18 +92,19 @@ def attack(name: str, server_args: list[str], attacks: list[str], seconds: float
            ) -> Result:
     """Run ``attacks`` (soak_clients.ATTACKS names, own processes) beside a prober."""
     mode = "fast" if "--fast" in server_args else "paced"
+    deadline_s = ENIP_TARGET_S if prober == "enip" else DEADLINE_S[mode]
     server = sc.start_server(*server_args)
     extra = setup(server) if setup is not None else None
     try:
         time.sleep(0.5)
         before = server.rss_mib()
         procs = [sc.attack_process(a, server.port, seconds) for a in attacks]
-        probe_fn = sc.dyn2_prober if prober == "dyn2" else sc.can_prober
+        probe_fn = PROBERS[prober]
         with RssWatch(server) as watch:
             time.sleep(min(1.0, seconds / 4))  # the attack is under way
             try:
                 probe: sc.Latency | None = probe_fn(server.port, drive_id, seconds - 1.5,
-                                                    DEADLINE_S[mode])
+                                                    deadline_s)
             except OSError as exc:
                 probe = None
                 note = f"prober failed: {exc}"
@@ -112,7 +121,7 @@ def attack(name: str, server_args: list[str], attacks: list[str], seconds: float
                 s.close()
         _, err = server.stop()
     logged = [line for line in err.splitlines()
-              if not line.startswith(("stopped:", "servobus sim"))]  # banner, summary
+              if not line.startswith(("stopped", "servobus sim"))]  # banner, summary
     if "Traceback" in err:
         note += " TRACEBACK in server stderr"
         alive = False
@@ -240,6 +249,7 @@ def scenarios(seconds: float) -> dict[str, Callable[[], Result]]:
     can = ["dyncan", "--socketcand", "127.0.0.1:0", "--ids", "1,2"]
     fast = ["--fast"]
     tap = ["--tap", "tcp://127.0.0.1:0"]
+    enip = ["enip", "--tcp-port", "0", "--udp-port", "0"]
     s = seconds
     return {
         "dyn2 paced flood": lambda: attack("dyn2 paced flood", dyn2, ["dyn2-flood"], s,
@@ -274,6 +284,11 @@ def scenarios(seconds: float) -> dict[str, Callable[[], Result]]:
         "can connections": lambda: connections("can", ["--max-clients", "4096"],
                                                CONNECTIONS, False),
         "can connections cap": lambda: connections("can", [], CONNECTIONS, True),
+        "enip never-reading": lambda: attack("enip never-reading", enip,
+                                             ["enip-flood-noread", "enip-flood-noread"], s,
+                                             prober="enip"),
+        "enip greedy": lambda: attack("enip greedy", enip, ["enip-flood", "enip-flood"], s,
+                                      prober="enip"),
         "state file fuzz": state_fuzz,
     }
 

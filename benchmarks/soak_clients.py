@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import contextlib
 import random
+import re
 import select
 import socket
+import struct
 import subprocess
 import sys
 import threading
@@ -64,7 +66,9 @@ def start_server(*args: str) -> Server:
         proc.kill()
         _, err = proc.communicate()
         raise RuntimeError(f"server did not start: {line!r} {err[-500:]!r}")
-    return Server(proc, int(line.rsplit(":", 1)[1]))
+    found = re.search(r":(\d+)", line.removeprefix("listening on "))
+    assert found is not None, line
+    return Server(proc, int(found.group(1)))
 
 
 def rss_mib(pid: int) -> float:
@@ -383,7 +387,87 @@ ATTACKS: dict[str, Callable[[int, float], int]] = {
     "can-flood": lambda port, s: can_flood(port, s, read=True),
     "can-flood-noread": lambda port, s: can_flood(port, s, read=False),
     "can-garbage": can_garbage,
+    "enip-flood": lambda port, s: enip_flood(port, s, read=True),
+    "enip-flood-noread": lambda port, s: enip_flood(port, s, read=False),
 }
+
+
+# ---------------------------------------------------------------- EtherNet/IP (sim enip)
+ENCAP = struct.Struct("<HHII8sI")  # command, length, session, status, context, options
+REGISTER_SESSION, SEND_RR_DATA = 0x65, 0x6F
+PARAM_1 = bytes((0x0E, 3, 0x20, 0x0F, 0x24, 1, 0x30, 0x01))  # Get_Attribute_Single param 1
+
+
+def enip_read(session: int, context: bytes = b"soaktest") -> bytes:
+    """SendRRData: an unconnected Get_Attribute_Single of parameter 1 (CIP Vol. 2 ch. 2)."""
+    cpf = (struct.pack("<IHH", 0, 5, 2) + struct.pack("<HH", 0, 0)
+           + struct.pack("<HH", 0xB2, len(PARAM_1)) + PARAM_1)
+    return ENCAP.pack(SEND_RR_DATA, len(cpf), session, 0, context, 0) + cpf
+
+
+def _recv_exact(sock: socket.socket, n: int, deadline: float) -> bytes | None:
+    got = b""
+    while len(got) < n:
+        left = deadline - time.monotonic()
+        if left <= 0 or not readable(sock, left):
+            return None
+        chunk = sock.recv(n - len(got))
+        if not chunk:
+            raise ConnectionError("server closed the connection")
+        got += chunk
+    return got
+
+
+def enip_session(port: int) -> tuple[socket.socket, int]:
+    sock = socket.create_connection(("127.0.0.1", port), timeout=5)
+    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    sock.sendall(ENCAP.pack(REGISTER_SESSION, 4, 0, 0, b"register", 0) + struct.pack("<HH", 1, 0))
+    head = _recv_exact(sock, ENCAP.size + 4, time.monotonic() + 5)
+    if head is None:
+        raise ConnectionError("no RegisterSession reply")
+    return sock, ENCAP.unpack_from(head)[2]
+
+
+def enip_prober(port: int, drive_id: int, seconds: float, deadline_s: float,
+                period_s: float = 0.02) -> Latency:
+    """A polite originator: one parameter read at a time, ``deadline_s`` per reply."""
+    out = Latency()
+    sock, session = enip_session(port)
+    end = time.monotonic() + seconds
+    with sock:
+        while time.monotonic() < end:
+            t0 = time.monotonic()
+            sock.sendall(enip_read(session))
+            head = _recv_exact(sock, ENCAP.size, t0 + deadline_s)
+            body = (_recv_exact(sock, ENCAP.unpack(head)[1], t0 + deadline_s)
+                    if head is not None else None)
+            if body is not None:
+                out.samples.append(time.monotonic() - t0)
+            else:
+                out.misses += 1
+                _drain(sock, 0.3)  # a late reply must not be taken for the next one
+            time.sleep(period_s)
+    return out
+
+
+def enip_flood(port: int, seconds: float, *, read: bool = True) -> int:
+    """Valid parameter reads as fast as TCP takes them; replies drained only if ``read``."""
+    sock, session = enip_session(port)
+    burst = enip_read(session, b"flooder!") * 1024
+    if read:
+        return _send_for(sock, seconds, lambda: burst)
+    end = time.monotonic() + seconds
+    sent = 0
+    with sock:
+        sock.settimeout(0.2)
+        while time.monotonic() < end:
+            try:
+                sent += sock.send(burst)
+            except TimeoutError:
+                continue
+            except OSError:
+                break
+    return sent
 
 
 def main(argv: list[str]) -> int:

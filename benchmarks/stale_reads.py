@@ -1,4 +1,5 @@
-"""Stale reads under late replies: the DYN232M and DYN CAN clients through a delaying link.
+"""Stale reads under late replies: the DYN232M, DYN CAN, Modbus RTU and EasyCan clients
+through a delaying link.
 
 Profile (issue #8): 30 % of the drive's replies are delayed by a uniform 0..150 ms, order
 kept (a delayed reply holds back the ones behind it, as on a wire). The drive answers each
@@ -7,13 +8,17 @@ than its call exactly when it is below that number at the start of the call.
 
 ``python -m benchmarks.stale_reads [READS]`` (default 885, the issue's run) prints, per
 client and reception path, the stale count with the late-reply drain on (the default) and
-off (``late_reply_s=0``, the behaviour before it). The tests reuse :func:`dyn232_stale`
-and :func:`dyncan_stale` with fewer reads. In-process, seeded, nothing listens anywhere.
+off (``late_reply_s=0``, the behaviour before it). The tests reuse :func:`dyn232_stale`,
+:func:`dyncan_stale`, :func:`modbus_stale` and :func:`easycan_stale` with fewer reads.
+In-process, seeded, nothing listens anywhere. Modbus RTU (issue 17.7) runs at the YZ-AIM's
+19200 baud with the client's own deadline (wire time + 50 ms turnaround), below the
+profile's 150 ms delays, so timeouts and retries are in play as in the issue.
 """
 
 from __future__ import annotations
 
 import asyncio
+import functools
 import random
 import sys
 import time
@@ -21,10 +26,18 @@ from dataclasses import dataclass
 from typing import Any
 
 from servobus.errors import ServobusError
+from servobus.families import yzaim as Y
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232.client import AsyncDyn232Client, Dyn232Axis
 from servobus.protocols.dyncan import codec as cc
 from servobus.protocols.dyncan.client import AsyncDynCanClient, DynCanAxis
+from servobus.protocols.easycan import codec as ec
+from servobus.protocols.easycan import messages as em
+from servobus.protocols.easycan.axis import EasyCanAxis
+from servobus.protocols.easycan.client import AsyncEasyCanClient
+from servobus.protocols.modbus import codec as mc
+from servobus.protocols.modbus.axis import ModbusAxis
+from servobus.protocols.modbus.client import ModbusClient
 from servobus.transport.base import Direction
 from servobus.transport.can_bus import CanFrame, FrameReceiver, FrameTraceHook
 from servobus.transport.pair import Fault, Manipulator, PairStream, open_pair
@@ -113,13 +126,34 @@ async def dyn232_stale(reads: int, *, push: bool = True, seed: int = SEED,
 
 
 # ------------------------------------------------------------------ DYN CAN, delaying port
+def _dyncan_answer(arbitration_id: int, data: bytes, counter: _Counter
+                   ) -> tuple[int, bytes] | None:
+    request = cc.decode(arbitration_id, data)
+    if not cc.expects_reply(request):
+        return None
+    answer = cc.reply(request.drive_id, cc.Function(request.function), counter.next())
+    return answer.arbitration_id, answer.data
+
+
+def _easycan_answer(arbitration_id: int, data: bytes, counter: _Counter
+                    ) -> tuple[int, bytes] | None:
+    """Every register read answered with the counter (a 32-bit pair: low word first)."""
+    request = ec.decode_request(arbitration_id, data)
+    if not isinstance(request, em.ReadRequest):
+        return None
+    words = Y.split32(counter.next()) if request.count == 2 else (counter.next() & 0xFFFF,)
+    return ec.encode(em.ReadReply(request.slave, request.address, words, request.host))
+
+
 class DelayingCanPort:
     """A FramePort whose one drive answers every read with the counter, some late.
 
     Order is kept per bus: a delayed reply holds back the replies behind it.
     """
 
-    def __init__(self, counter: _Counter, seed: int) -> None:
+    def __init__(self, counter: _Counter, seed: int,
+                 answer: Any = _dyncan_answer) -> None:
+        self._answer = answer
         self._counter = counter
         self._rng = random.Random(seed)
         self._receiver: FrameReceiver | None = None
@@ -133,11 +167,9 @@ class DelayingCanPort:
         pass
 
     async def send(self, arbitration_id: int, data: bytes) -> None:
-        request = cc.decode(arbitration_id, data)
-        if not cc.expects_reply(request):
+        answer = self._answer(arbitration_id, bytes(data), self._counter)
+        if answer is None:
             return
-        answer = cc.reply(request.drive_id, cc.Function(request.function),
-                          self._counter.next())
         delay = (self._rng.uniform(0.0, MAX_DELAY_S) if self._rng.random() < DELAY_RATE
                  else 0.0)
         loop = asyncio.get_running_loop()
@@ -148,9 +180,9 @@ class DelayingCanPort:
         self._release_at = max(self._release_at, now) + delay
         loop.call_at(self._release_at, self._deliver, answer)
 
-    def _deliver(self, frame: cc.Frame) -> None:
+    def _deliver(self, frame: tuple[int, bytes]) -> None:
         if self._receiver is not None and not self._closed:
-            self._receiver(CanFrame(frame.arbitration_id, frame.data))
+            self._receiver(CanFrame(frame[0], frame[1]))
 
     async def recv(self, timeout: float | None = None) -> CanFrame | None:
         raise NotImplementedError("push only")
@@ -175,20 +207,76 @@ async def dyncan_stale(reads: int, *, seed: int = SEED, **client_kw: Any) -> Sta
                       time.monotonic() - t0)
 
 
+# ------------------------------------------------------------------ EasyCan, delaying port
+async def easycan_stale(reads: int, *, seed: int = SEED, **client_kw: Any) -> StaleCount:
+    counter = _Counter()
+    client = AsyncEasyCanClient(DelayingCanPort(counter, seed, _easycan_answer), **client_kw)
+    axis = EasyCanAxis(client, DRIVE_ID)
+    t0 = time.monotonic()
+    try:
+        ok, failed, stale = await _count_stale(axis.position, counter, reads)
+    finally:
+        await client.close()
+    late = client.late_replies
+    return StaleCount(reads, ok, failed, stale, late.late, late.given_up,
+                      time.monotonic() - t0)
+
+
+# ------------------------------------------------------------------ Modbus RTU over the pair
+async def _serve_modbus(device: PairStream, counter: _Counter) -> None:
+    """A device answering every read with the counter (32-bit pair, low word first)."""
+    buf = bytearray()
+    try:
+        while True:
+            buf += await device.read()
+            while len(buf) >= mc.FIXED_FRAME_LENGTH:  # the client sends reads only
+                request = mc.decode_request(bytes(buf[:mc.FIXED_FRAME_LENGTH]))
+                del buf[:mc.FIXED_FRAME_LENGTH]
+                assert isinstance(request, mc.ReadHoldingRequest)
+                value = counter.next()
+                words = (Y.split32(value) if request.count == 2
+                         else tuple(value & 0xFFFF for _ in range(request.count)))
+                await device.write(mc.encode_reply(mc.ReadHoldingReply(request.address,
+                                                                       words)))
+    except ConnectionError:
+        pass
+
+
+async def modbus_stale(reads: int, *, push: bool = True, seed: int = SEED,
+                       **client_kw: Any) -> StaleCount:
+    faults = Manipulator(seed=seed, delay_s=0.0, delay_max_s=MAX_DELAY_S)
+    faults.set_rate(Direction.RX, Fault.DELAY, DELAY_RATE)
+    host, device = open_pair(faults, push=push)
+    counter = _Counter()
+    server = asyncio.create_task(_serve_modbus(device, counter))
+    client = ModbusClient(host, **client_kw)
+    axis = ModbusAxis(client, DRIVE_ID)
+    t0 = time.monotonic()
+    try:
+        ok, failed, stale = await _count_stale(axis.position, counter, reads)
+    finally:
+        await client.close()
+        await server
+    late = client.late_replies
+    return StaleCount(reads, ok, failed, stale, late.late, late.given_up,
+                      time.monotonic() - t0)
+
+
 async def _main(reads: int) -> None:
     print(f"== stale reads: {DELAY_RATE:.0%} of replies delayed 0..{MAX_DELAY_S * 1000:.0f} ms "
           f"(seed {SEED}), {reads} position reads each")
-    runs: list[tuple[str, dict[str, Any], bool | None]] = [
-        ("DYN232M push (TCP, sim://)", {}, True),
-        ("DYN232M pull (pyserial)", {}, False),
-        ("DYN CAN", {}, None),
+    runs: list[tuple[str, Any]] = [
+        ("DYN232M push (TCP, sim://)", functools.partial(dyn232_stale, push=True)),
+        ("DYN232M pull (pyserial)", functools.partial(dyn232_stale, push=False)),
+        ("DYN CAN", dyncan_stale),
+        ("Modbus RTU push (TCP, sim://)", functools.partial(modbus_stale, push=True)),
+        ("Modbus RTU pull (pyserial)", functools.partial(modbus_stale, push=False)),
+        ("EasyCan", easycan_stale),
     ]
-    for label, kw, push in runs:
+    for label, run in runs:
         for drain, extra in (("off", {"late_reply_s": 0.0}), ("on", {})):
-            options = {**kw, **extra}
-            count = (await dyncan_stale(reads, **options) if push is None
-                     else await dyn232_stale(reads, push=push, **options))
-            print(count.line(f"{label}, drain {drain}"))
+            count = await run(reads, **extra)
+            print(count.line(f"{label}, drain {drain}"), flush=True)
 
 
 def main(argv: list[str] | None = None) -> None:

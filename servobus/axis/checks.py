@@ -9,7 +9,10 @@ argument and the value, and nothing has been sent when it is raised.
 from __future__ import annotations
 
 import math
+import os
+from collections.abc import Callable, Mapping
 
+from servobus.axis.eeprom_guard import EepromGuard
 from servobus.errors import ArgumentRangeError, ConnectionLost, ServobusError
 
 
@@ -99,3 +102,63 @@ def lost(exc: BaseException, what: str) -> BaseException:
     if isinstance(exc, ServobusError | TimeoutError) or not isinstance(exc, OSError):
         return exc
     return ConnectionLost(f"{what}: {exc}")
+
+
+# ---------------------------------------------------------------- connect options
+def _guard(name: str, value: object) -> object:
+    if value is not None and not isinstance(value, EepromGuard):
+        raise ArgumentRangeError(f"{name} must be an EepromGuard, got {value!r}")
+    return value
+
+
+def _callback(name: str, value: object) -> object:
+    if value is not None and not callable(value):
+        raise ArgumentRangeError(f"{name} must be callable, got {value!r}")
+    return value
+
+
+def _transport(name: str, value: object) -> object:
+    if value not in ("auto", "tcp", "pyserial"):
+        raise ArgumentRangeError(f"{name}={value!r}: use 'auto', 'tcp' or 'pyserial'")
+    return value
+
+
+def _amperes(name: str, value: object) -> float:
+    return positive(name, value, "A")
+
+
+#: The connect options every protocol shares, by name, checked the same way everywhere.
+#: Decision: ``timeout=None`` means the protocol's default; no other option takes None
+#: except the optional objects (``eeprom_guard``, ``on_alarm``).
+OPTION_CHECKS: dict[str, Callable[[str, object], object]] = {
+    "timeout": optional_seconds, "connect_timeout": seconds, "reset_timeout": seconds,
+    "retries": count, "turnaround_s": non_negative_seconds,
+    "query_interval_s": non_negative_seconds, "late_reply_s": non_negative_seconds,
+    "frame_gap_s": non_negative_seconds, "reset_downtime_s": non_negative_seconds,
+    "baud": positive_int, "bitrate": positive_int, "max_in_flight": positive_int,
+    "peak_current_a": _amperes, "eeprom_guard": _guard, "on_alarm": _callback,
+    "transport": _transport,
+}
+
+
+def connect_options(options: Mapping[str, object], types: Mapping[str, type]) -> None:
+    """Check every connect option (URL query and keywords, merged) before anything is opened.
+
+    Shared options are checked by name (:data:`OPTION_CHECKS`); a protocol's own options by
+    their declared type: ``str`` takes a string (a path-like too), ``bool`` a bool or 0/1,
+    ``int`` an integer, ``float`` a finite number. ArgumentRangeError names the option.
+    """
+    for name, value in options.items():
+        check = OPTION_CHECKS.get(name)
+        if check is not None:
+            check(name, value)
+            continue
+        kind = types.get(name, object)
+        if kind is str and not isinstance(value, str | os.PathLike):
+            raise ArgumentRangeError(f"{name} must be a string, got {value!r}")
+        if kind is bool and (not isinstance(value, int) or value not in (0, 1)):
+            raise ArgumentRangeError(f"{name} must be true or false, got {value!r}")
+        if kind is int and (isinstance(value, bool) or not isinstance(value, int)):
+            raise ArgumentRangeError(f"{name} must be an integer, got {value!r}")
+        if kind is float:
+            _real(name, value)

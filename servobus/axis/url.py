@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from urllib.parse import parse_qsl
 
+from servobus.axis import checks
 from servobus.errors import ArgumentRangeError
 
 #: RFC 3986 scheme syntax; one letter is a Windows drive (``C:``), not a scheme.
@@ -119,7 +120,8 @@ def merge_options(url: DriveUrl, keywords: dict[str, object],
                   types: OptionTypes) -> dict[str, object]:
     """Keyword options override URL query options; both are checked against ``types``.
 
-    Unknown names raise ArgumentRangeError listing the known ones, before anything is opened.
+    Unknown names raise ArgumentRangeError listing the known ones, and every value is checked
+    (:func:`servobus.axis.checks.connect_options`), before anything is opened.
     """
     known = ", ".join(sorted(types)) or "none"
     merged: dict[str, object] = {}
@@ -139,4 +141,5 @@ def merge_options(url: DriveUrl, keywords: dict[str, object],
         if name not in types:
             raise ArgumentRangeError(f"unknown connect option {name!r}; known: {known}")
         merged[name] = value
+    checks.connect_options(merged, types)
     return merged

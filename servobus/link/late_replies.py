@@ -9,7 +9,12 @@ kind and hand it a value older than its own call.
 Rules (servobus decisions; docs/dyn232.md and docs/dyncan.md, "late replies"):
 
 * Each attempt that times out owes one reply, under the key a reply is matched on
-  (drive id, reply function). Replies arrive in request order on one line or identifier.
+  (drive id, reply function), and so does an attempt its caller cancelled after the
+  request left (``asyncio.timeout``, ``wait_for``, a sync call's timeout, Ctrl-C: before
+  issue 17.7 it owed nothing, and its late reply answered the next read of its kind - the
+  stale position after a move). A cancel just before the bytes left still owes: the debt
+  is then given up after ``late_reply_s`` (a wait, never a wrong value). Replies arrive in
+  request order on one line or identifier.
 * A reply that arrives while a request of its key waits is that request's answer (within
   one call every request is younger than the call). Any other reply of an owed key pays
   one debt and is dropped (``late``, logged at debug level).

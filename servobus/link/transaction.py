@@ -254,11 +254,13 @@ class TransactionManager(Generic[K, P, V]):
         loop = asyncio.get_running_loop()
         fut: asyncio.Future[V] = loop.create_future()
         self._waiting[key] = fut
+        sent = False  # the request may have left (a cancelled write may have, too)
         try:
             if self._hooks:
                 self.trace(Direction.TX, payload if self._trace_request is None
                            else self._trace_request(payload))
             self.stats.sent += 1
+            sent = True
             try:
                 await self._write(payload)
             except OSError as exc:
@@ -275,6 +277,11 @@ class TransactionManager(Generic[K, P, V]):
         except BaseException:
             if fut.done() and not fut.cancelled():
                 fut.exception()  # retrieved: asyncio logs no "never retrieved"
+            elif sent and self._dead is None:
+                # Cancelled by the caller (asyncio.timeout, wait_for, a sync call's
+                # timeout, Ctrl-C) after the request left: its reply may still come and
+                # must never answer a later call (issue 17.7).
+                self.late_replies.owe(key)
             raise
         finally:
             del self._waiting[key]

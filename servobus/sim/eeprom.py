@@ -30,6 +30,11 @@ The state file (:class:`StateFile`), decisions:
   survives the simulator being killed, not a power cut of the host.
 * A write that fails later (disk full, directory removed) logs one line; the drive keeps
   running on the values in RAM and the next write tries again.
+* The same machinery keeps the YZ-AIM motors' EEPROM (:mod:`servobus.sim.yzaim_store`): a
+  :class:`StateKind` names what a file holds and checks one record; a file is opened as one
+  kind per process (a DMM and a YZ-AIM simulator cannot share one file).
+* A file nested too deeply to be a state file (JSON parsing would exhaust the recursion limit)
+  is refused with one line like any other invalid file.
 """
 
 from __future__ import annotations
@@ -39,6 +44,8 @@ import json
 import logging
 import os
 import weakref
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -66,21 +73,38 @@ class StateFileError(ServobusError):
     """The ``--state`` file cannot be used; nothing was written to it."""
 
 
+RecordCheck = Callable[[str, object], dict[str, Any]]
+
+
+@dataclass(frozen=True)
+class StateKind:
+    """What a state file holds: ``holds`` names its records in messages, ``check`` checks one
+    record (key, value) and returns it normalised, or raises ValueError naming the problem."""
+
+    holds: str
+    check: RecordCheck
+
+
 class StateFile:
     """One validated, locked state file shared by the stores of one process."""
 
     @classmethod
-    def shared(cls, path: str | Path) -> StateFile:
+    def shared(cls, path: str | Path, kind: StateKind | None = None) -> StateFile:
         """The process's one StateFile for ``path`` (opened, checked and locked on first use)."""
+        kind = kind or DMM_STATE
         key = os.path.realpath(path)
         found = _OPEN.get(key)
         if found is None:
-            found = cls(Path(path))
+            found = cls(Path(path), kind)
             _OPEN[key] = found
+        elif found.kind is not kind:
+            found._fail(f"is in use by this process for {found.kind.holds}",
+                        f"use another file for {kind.holds}")
         return found
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, kind: StateKind | None = None) -> None:
         self.path = path
+        self.kind = kind or DMM_STATE
         self.tmp = path.with_name(path.name + ".tmp")
         self.records: dict[str, dict[str, Any]] = {}
         self._fd = [-1]  # the locked descriptor, in a box the finalizer can see
@@ -89,7 +113,7 @@ class StateFile:
         self._fd[0], raw = self._lock()
         weakref.finalize(self, _close_box, self._fd)
         try:
-            self.records = parse_state(raw, str(path))
+            self.records = parse_state(raw, str(path), self.kind)
             self._check_writable()
         except StateFileError:
             _close_box(self._fd)
@@ -234,8 +258,10 @@ def _read_all(fd: int) -> bytes:
 
 
 # ---------------------------------------------------------------- validation
-def parse_state(raw: bytes, name: str) -> dict[str, dict[str, Any]]:
+def parse_state(raw: bytes, name: str, kind: StateKind | None = None
+                ) -> dict[str, dict[str, Any]]:
     """The records of a state file's bytes; StateFileError (one line) if anything is off."""
+    kind = kind or DMM_STATE
 
     def fail(problem: str) -> StateFileError:
         return StateFileError(f"state file {name}: {problem} - fix or remove it; it was not "
@@ -256,14 +282,18 @@ def parse_state(raw: bytes, name: str) -> dict[str, dict[str, Any]]:
         where = (f" at line {exc.lineno} column {exc.colno}"
                  if isinstance(exc, json.JSONDecodeError) else "")
         raise fail(f"is not valid JSON ({msg}{where}; truncated?)") from None
+    except RecursionError:
+        raise fail("nests too deeply to be a state file") from None
     if not isinstance(doc, dict):
-        raise fail(f"holds {_kind(doc)}, expected an object of drive records")
+        raise fail(f"holds {describe(doc)}, expected an object of {kind.holds}")
     records: dict[str, dict[str, Any]] = {}
     for key, rec in doc.items():
         try:
-            records[key] = check_record(key, rec)
+            records[key] = kind.check(key, rec)
         except ValueError as exc:
             raise fail(f"record {key!r}: {exc}") from None
+        except RecursionError:
+            raise fail(f"record {key!r} nests too deeply to be a state file") from None
     return records
 
 
@@ -271,7 +301,7 @@ def _reject_constant(name: str) -> Any:
     raise ValueError(f"{name} is not a number JSON allows")
 
 
-def _kind(value: object) -> str:
+def describe(value: object) -> str:
     if value is None:
         return "null"
     if isinstance(value, list):
@@ -279,7 +309,7 @@ def _kind(value: object) -> str:
     return f"a {type(value).__name__}"
 
 
-def _int(value: object, what: str, low: int, high: int) -> int:
+def checked_int(value: object, what: str, low: int, high: int) -> int:
     if isinstance(value, bool) or not isinstance(value, int):
         raise ValueError(f"{what} must be an integer, got {json.dumps(value)[:40]}")
     if not low <= value <= high:
@@ -291,42 +321,51 @@ def check_record(key: str, rec: object) -> dict[str, Any]:
     """One record, normalised (every field present); ValueError names the first problem."""
     if not (key.isdigit() and key == str(int(key)) and int(key) <= MAX_DRIVE_ID):
         raise ValueError(f"the key must be a power-on drive id 0..{MAX_DRIVE_ID}")
+    return check_drive_record(rec)
+
+
+def check_drive_record(rec: object) -> dict[str, Any]:
+    """One record's fields (whatever its key), normalised; ValueError names the problem."""
     if not isinstance(rec, dict):
-        raise ValueError(f"must be an object, got {_kind(rec)}")
+        raise ValueError(f"must be an object, got {describe(rec)}")
     unknown = sorted(set(rec) - _FIELDS)
     if unknown:
         raise ValueError(f"unknown field {unknown[0]!r}")
     if "drive_id" not in rec:
         raise ValueError("has no drive_id")
     out: dict[str, Any] = {
-        "drive_id": _int(rec["drive_id"], "drive_id", 0, MAX_DRIVE_ID),
-        "config": _int(rec.get("config", 0), "config", 0, CONFIG_DEFINED_MASK),
-        "origin": _int(rec.get("origin", 0), "origin", 0, COUNTS_PER_REV - 1),
+        "drive_id": checked_int(rec["drive_id"], "drive_id", 0, MAX_DRIVE_ID),
+        "config": checked_int(rec.get("config", 0), "config", 0, CONFIG_DEFINED_MASK),
+        "origin": checked_int(rec.get("origin", 0), "origin", 0, COUNTS_PER_REV - 1),
     }
     params = rec.get("params", {})
     if not isinstance(params, dict):
-        raise ValueError(f"params must be an object, got {_kind(params)}")
+        raise ValueError(f"params must be an object, got {describe(params)}")
     checked = P.defaults()
     for name, value in params.items():
         spec = P.BY_NAME.get(name)
         if spec is None or spec.storage is not P.Storage.EEPROM:
             raise ValueError(f"{name!r} is not an EEPROM parameter")
-        checked[name] = _int(value, name, spec.minimum, spec.maximum)
+        checked[name] = checked_int(value, name, spec.minimum, spec.maximum)
     out["params"] = checked
     writes = rec.get("writes", {})
     if not isinstance(writes, dict):
-        raise ValueError(f"writes must be an object, got {_kind(writes)}")
+        raise ValueError(f"writes must be an object, got {describe(writes)}")
     for item, count in writes.items():
         if item not in _ITEMS:
             raise ValueError(f"writes counts an unknown item {item!r}")
-        _int(count, f"writes[{item!r}]", 0, 1 << 62)
+        checked_int(count, f"writes[{item!r}]", 0, 1 << 62)
     out["writes"] = dict(writes)
     return out
 
 
+DMM_STATE = StateKind("drive records", check_record)
+
+
 # ---------------------------------------------------------------- the store
 class EepromStore:
-    def __init__(self, path: str | Path | None = None, key: str = "0") -> None:
+    def __init__(self, path: str | Path | None = None, key: str = "0",
+                 kind: StateKind | None = None) -> None:
         self.path = Path(path) if path is not None else None
         self.key = key
         self.params: dict[str, int] = P.defaults()
@@ -335,7 +374,7 @@ class EepromStore:
         self.origin = 0  # stored absolute zero: encoder angle within one revolution (counts)
         self.writes: dict[str, int] = {}
         self._initialised = False
-        self._file = StateFile.shared(self.path) if self.path is not None else None
+        self._file = StateFile.shared(self.path, kind) if self.path is not None else None
         if self._file is not None:
             self._load(self._file)
 

@@ -3,23 +3,65 @@
 The motor writes it only when the host sets the save flag 0x14 (manual 5.2) - every saved
 register at once - and records its position at power-off (1: "communication mode: power-off
 record position"). With a path it is kept as JSON so it survives a restart of the simulator
-(``servobus sim easycan --state FILE``). Several motors may share one file: each keeps its own
-record under the address it had when the record was made (its serial number), like
-:class:`servobus.sim.eeprom.EepromStore` for DMM drives.
+(``servobus sim easycan --state FILE``, ``sim modbus --state FILE``, ``sim://easycan?state=``).
+Several motors may share one file: each keeps its own record under the address it had when
+the record was made (its serial number).
 
-File format (decision): ``{"<key>": {"registers": {name: raw value}, "position": counts,
-"saves": n}}``. A record that cannot be read, or a register that is not a saved register of
-the family table or is out of its range, is ignored (the table default is used) rather than
-served: the motor never runs on a value it could not have stored.
+The file is the DMM drives' state file (:class:`servobus.sim.eeprom.StateFile`, one machinery
+for both families): checked whole at start-up, locked against a second simulator, written
+atomically, every other motor's record kept when one motor rewrites its own.
+
+File format (decision): ``{"<address 1..254>": {"registers": {name: raw value}, "position":
+counts or null, "saves": n}}``; every field optional. Decision (issue 17, replacing "a record
+that cannot be read is ignored"): anything the motor could not have stored - a file that is not
+JSON, a record that is not an object, an unknown field, a register that is not a saved register
+of the family table or is out of its range, a position outside int32, a negative save count -
+refuses the start with one line naming the file and the problem, and the file is left as it
+was: running on defaults would silently drop that motor's record at the next save.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 from servobus.families import yzaim
+from servobus.sim.eeprom import StateFile, StateKind, checked_int, describe
+
+_FIELDS = frozenset({"registers", "position", "saves"})
+_ADDRESS = yzaim.BY_NAME["device_address"]
+
+
+def check_yzaim_record(key: str, rec: object) -> dict[str, Any]:
+    """One motor's record, normalised; ValueError names the first problem."""
+    if not (key.isdigit() and key == str(int(key))
+            and _ADDRESS.minimum <= int(key) <= _ADDRESS.maximum):
+        raise ValueError(f"the key must be a device address {_ADDRESS.minimum}.."
+                         f"{_ADDRESS.maximum}")
+    if not isinstance(rec, dict):
+        raise ValueError(f"must be an object, got {describe(rec)}")
+    unknown = sorted(set(rec) - _FIELDS)
+    if unknown:
+        raise ValueError(f"unknown field {unknown[0]!r}")
+    registers = rec.get("registers", {})
+    if not isinstance(registers, dict):
+        raise ValueError(f"registers must be an object, got {describe(registers)}")
+    checked: dict[str, int] = {}
+    for name, value in registers.items():
+        reg = yzaim.BY_NAME.get(name)
+        if reg is None or not reg.saved:
+            raise ValueError(f"{name!r} is not a saved register")
+        checked[name] = checked_int(value, name, reg.minimum, reg.maximum)
+        if value in reg.invalid:
+            raise ValueError(f"{name} {value} is not a value the motor defines")
+    position = rec.get("position")
+    if position is not None:
+        checked_int(position, "position", yzaim.INT32_MIN, yzaim.INT32_MAX)
+    saves = checked_int(rec.get("saves", 0), "saves", 0, 1 << 62)
+    return {"registers": checked, "position": position, "saves": saves}
+
+
+YZAIM_STATE = StateKind("motor records", check_yzaim_record)
 
 
 class YzaimStore:
@@ -31,8 +73,10 @@ class YzaimStore:
         self.position: int | None = None  # counts recorded at the last power-off
         self.saves = 0
         self.loaded = False
-        if self.path is not None and self.path.exists():
-            self._load()
+        self._file = (StateFile.shared(self.path, YZAIM_STATE)
+                      if self.path is not None else None)
+        if self._file is not None:
+            self._load(self._file)
 
     def save_registers(self, values: dict[str, int]) -> None:
         """The save flag: every saved register of ``values`` goes to EEPROM at once."""
@@ -51,40 +95,14 @@ class YzaimStore:
                 "saves": self.saves}
 
     def save(self) -> None:
-        if self.path is None:
-            return
-        data: dict[str, Any] = {}
-        if self.path.exists():
-            try:
-                loaded = json.loads(self.path.read_text())
-                data = loaded if isinstance(loaded, dict) else {}
-            except (OSError, ValueError):
-                data = {}
-        data[self.key] = self._record()
-        tmp = self.path.with_name(self.path.name + ".tmp")
-        tmp.write_text(json.dumps(data, indent=1, sort_keys=True))
-        tmp.replace(self.path)
+        if self._file is not None:
+            self._file.save(self.key, self._record())
 
-    def _load(self) -> None:
-        assert self.path is not None
-        try:
-            data = json.loads(self.path.read_text())
-        except (OSError, ValueError):
+    def _load(self, state: StateFile) -> None:
+        rec = state.records.get(self.key)
+        if rec is None:
             return
-        rec = data.get(self.key) if isinstance(data, dict) else None
-        if not isinstance(rec, dict):
-            return
-        regs = rec.get("registers", {})
-        if isinstance(regs, dict):
-            for name, value in regs.items():
-                reg = yzaim.BY_NAME.get(name)
-                if (reg is not None and reg.saved and isinstance(value, int)
-                        and not isinstance(value, bool) and reg.valid(value)):
-                    self.registers[name] = value
-        position = rec.get("position")
-        if isinstance(position, int) and not isinstance(position, bool) \
-                and yzaim.INT32_MIN <= position <= yzaim.INT32_MAX:
-            self.position = position
-        saves = rec.get("saves", 0)
-        self.saves = saves if isinstance(saves, int) and saves >= 0 else 0
+        self.registers.update(rec["registers"])
+        self.position = rec["position"]
+        self.saves = rec["saves"]
         self.loaded = True

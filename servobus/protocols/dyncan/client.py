@@ -381,7 +381,7 @@ class DynCanAxis(CommandAxis):
             self._gear_num = values["gear_num"]
 
 
-_CLIENT_OPTIONS = ("retries", "eeprom_guard", "on_alarm")
+_CLIENT_OPTIONS = ("retries", "eeprom_guard", "on_alarm", "late_reply_s")
 
 
 async def open_can_client(can: str, *, timeout: float | None = None,

@@ -21,8 +21,14 @@ the originator's Sockaddr Info 0x8001 when it sent one, else to port 2222 of its
 Forward_Open reply carries a 0x8000 item naming the O->T port when it is not 2222.
 Reset (0x21 = 0xABCD): the reply is sent, then every connection and session is dropped,
 the drive power-cycles and the adapter ignores traffic for ``reset_downtime_s``
-(3 s like the drive; tests shorten it). Every TCP client has a bounded input buffer (one
-packet) and output buffer (``MAX_OUTPUT`` bytes; a client that does not read is cut off).
+(3 s like the drive; tests shorten it).
+
+Fair service (issue 17.5): every TCP client is served at most ``PACKETS_PER_TURN`` packets
+per event-loop turn, so a client that floods requests delays another by a few packets, not
+by its whole backlog; a client that does not read its replies is not read either (asyncio
+flow control past ``WRITE_HIGH_WATER``, as on the serial and CAN servers). Memory per client
+is bounded: one received chunk of packets and the replies of one turn (``MAX_OUTPUT`` is the
+last bound: a client past it is cut off).
 """
 
 from __future__ import annotations
@@ -35,6 +41,7 @@ import itertools
 import logging
 import random
 import threading
+from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, cast
@@ -65,12 +72,15 @@ from servobus.protocols.enip.encap import (
 )
 from servobus.protocols.enip.production import Producer, ProductionWheel
 from servobus.sim.drive import VirtualDrive
-from servobus.sim.eeprom import EepromStore
+from servobus.sim.eeprom import EepromStore, StateKind, check_drive_record
 from servobus.sim.realtime import RealtimeClock
+from servobus.sim.server_limits import MAX_OUTPUT_BYTES, WRITE_HIGH_WATER
 
 log = logging.getLogger("servobus.enip")
 
-MAX_OUTPUT = 64 * 1024
+MAX_OUTPUT = MAX_OUTPUT_BYTES  # past asyncio's flow control: the last bound, then cut off
+PACKETS_PER_TURN = 8  # packets of one client handled per loop turn (fair service)
+QUANTUM = 1024  # bytes of one client framed at a time (a 256 KiB read is not parsed at once)
 MAX_SESSIONS = 32
 MAX_CLIENTS = 64
 STOP_POLL_S = 0.005
@@ -402,12 +412,27 @@ class EnipServer:
 
 
 class _TcpClient(asyncio.Protocol):
+    """One TCP client: served fairly, a bounded number of packets per loop turn.
+
+    A received chunk is kept as bytes and framed ``QUANTUM`` bytes at a time; at most
+    ``PACKETS_PER_TURN`` packets are handled per turn and the rest wait behind every other
+    ready callback (the other clients' requests). While a client has input queued, or its
+    replies are not being drained (asyncio's write flow control, ``WRITE_HIGH_WATER``), its
+    input is not read: the back-pressure reaches the client through TCP. Memory per client:
+    one received chunk, the packets of one quantum and the replies of one turn.
+    """
+
     def __init__(self, server: EnipServer) -> None:
         self.server = server
         self.framer = EncapFramer(server.max_data)
         self.session = 0
         self.peer_ip = ""
         self.transport: asyncio.Transport | None = None
+        self._pending: deque[EncapPacket | EncapReject] = deque()
+        self._backlog = bytearray()  # received, not yet framed (QUANTUM bytes per turn)
+        self._scheduled = False
+        self._reading_paused = False
+        self._writing_paused = False
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self.transport = cast(asyncio.Transport, transport)
@@ -416,13 +441,51 @@ class _TcpClient(asyncio.Protocol):
         if not self.server.client_opened(self):
             self.transport = None
             cast(asyncio.Transport, transport).abort()
+            return
+        self.transport.set_write_buffer_limits(high=WRITE_HIGH_WATER)
 
     def data_received(self, data: bytes) -> None:
+        if self.transport is None:
+            return
+        self._backlog += data
+        if not self._scheduled and not self._writing_paused:
+            self._serve()  # nothing of this client waits: its turn is now
+        else:
+            self._pause_reading()
+
+    def pause_writing(self) -> None:
+        self._writing_paused = True
+        self._pause_reading()  # no more requests until the client reads its replies
+
+    def resume_writing(self) -> None:
+        self._writing_paused = False
+        if self._pending or self._backlog:
+            self._schedule()
+        else:
+            self._resume_reading()
+
+    def _schedule(self) -> None:
+        if not self._scheduled and self.server._loop is not None:
+            self._scheduled = True
+            self.server._loop.call_soon(self._serve)  # behind every other ready callback
+
+    def _serve(self) -> None:
+        """One turn: up to PACKETS_PER_TURN packets; their SendRRData replies in one write."""
+        self._scheduled = False
         transport = self.transport
         if transport is None:
+            self._drop_queued()
             return
-        out: list[bytes] = []  # the replies to one chunk's SendRRData go out in one write
-        for item in self.framer.feed(data):
+        if self._writing_paused:
+            return  # resume_writing() continues
+        while len(self._pending) < PACKETS_PER_TURN and self._backlog:
+            self._pending.extend(self.framer.feed(bytes(self._backlog[:QUANTUM])))
+            del self._backlog[:QUANTUM]
+        out: list[bytes] = []
+        for _ in range(PACKETS_PER_TURN):
+            if not self._pending:
+                break
+            item = self._pending.popleft()
             if out and (isinstance(item, EncapReject) or item.command != Command.SEND_RR_DATA):
                 transport.write(b"".join(out))  # before a packet that may end the session
                 out.clear()
@@ -433,22 +496,49 @@ class _TcpClient(asyncio.Protocol):
                 self.close(abort=True)
                 return
             if self.transport is None:
+                self._drop_queued()
                 return
             if reply is not None:
                 out.append(reply.encode())
         if out:
             transport.write(b"".join(out))
-        if transport.get_write_buffer_size() > MAX_OUTPUT:
+        if transport.get_write_buffer_size() > MAX_OUTPUT:  # flow control failed: a bound
             log.info("client %s does not read its replies: disconnected", self.peer_ip)
             self.close(abort=True)
+            return
+        if self._pending or self._backlog:
+            self._pause_reading()
+            if not self._writing_paused:
+                self._schedule()
+        else:
+            self._resume_reading()
+
+    def _drop_queued(self) -> None:
+        self._pending.clear()
+        self._backlog.clear()
+
+    def _pause_reading(self) -> None:
+        if not self._reading_paused and self.transport is not None \
+                and not self.transport.is_closing():
+            self._reading_paused = True
+            self.transport.pause_reading()
+
+    def _resume_reading(self) -> None:
+        if self._reading_paused and not self._writing_paused and not self._pending \
+                and not self._backlog:
+            self._reading_paused = False
+            if self.transport is not None and not self.transport.is_closing():
+                self.transport.resume_reading()
 
     def connection_lost(self, exc: Exception | None) -> None:
         if self.transport is not None:
             self.server.client_closed(self)
         self.transport = None
+        self._drop_queued()
 
     def close(self, *, abort: bool = False) -> None:
         transport, self.transport = self.transport, None
+        self._drop_queued()
         self.server.client_closed(self)
         if transport is None:
             return
@@ -503,12 +593,25 @@ def parse_hosts(text: str) -> list[str]:
     return hosts
 
 
+def _check_dyn5_record(key: str, rec: object) -> dict[str, Any]:
+    try:
+        ipaddress.IPv4Address(key)
+    except ValueError:
+        raise ValueError("the key must be the drive's IPv4 address") from None
+    return check_drive_record(rec)
+
+
+#: ``sim enip --state``: DMM drive records keyed by the drive's IPv4 address (decision; the
+#: DYN2/DYN4 files key by power-on drive id, which a DYN5 on EtherNet/IP does not have).
+DYN5_STATE = StateKind("drive records keyed by IPv4 address", _check_dyn5_record)
+
+
 def make_drive(host: str, *, state: str | None = None, model: str | None = None
                ) -> VirtualDrive:
     """One drive per address; with ``state`` its EEPROM is kept under the address."""
     drive_id = int(host.rsplit(".", 1)[1]) % 64
     kwargs: dict[str, Any] = {} if model is None else {"model": model}
-    eeprom = EepromStore(state, key=host) if state else None
+    eeprom = EepromStore(state, key=host, kind=DYN5_STATE) if state else None
     return VirtualDrive(drive_id, eeprom=eeprom, **kwargs)
 
 
