@@ -81,6 +81,11 @@ class ServoEngine:
         self.steps = 0
         self.bl_n = self.bl_k = 0  # path handover: total and elapsed control periods
         self.bl_amp = 0.0  # handover amplitude, counts (speed x duration)
+        #: Torque servo speed limit, counts/s (inf: none). The speed loop runs against it and
+        #: clamps the torque command, as a drive's torque mode with a speed limit does: the
+        #: motor reaches the limit and holds it (DYN5 instance 0x27, "will not exceed").
+        self.torque_speed_limit = math.inf
+        self.lim_fwd = True  # direction the limit was last held in (its integrator's sign)
         self.set_protections(True)
         self.power_on()
         self.set_gains(40, 40, 20, 127, 127)
@@ -641,6 +646,9 @@ class ServoEngine:
             self.heat_trip
         ss, target, sref = self.ss_alpha, self.speed_target, self.speed_ref
         speed_mode = self.servo == Servo.SPEED
+        wlim = self.torque_speed_limit
+        limited = not speed_mode and wlim < math.inf
+        lim_fwd = self.lim_fwd
         kt = self.model.torque_constant_nm_a
         oc_t, oc_stall, oc_trip_s = self.oc_t, K.OVER_CURRENT_STALL_CPS, self.oc_trip_s
         trip = AlarmCode.NONE
@@ -670,6 +678,26 @@ class ServoEngine:
                     integ += kv * ki_h * ev
             else:
                 tc = sref * kt
+                if limited:  # the speed loop holds |w| <= wlim by clamping the torque
+                    forward = sref >= 0.0
+                    if forward != lim_fwd:
+                        lim_fwd = forward
+                        integ = 0.0
+                    ev = (wlim if forward else -wlim) - w
+                    u = kv * ev + integ
+                    if forward:
+                        if u < tc:
+                            if u > lo:
+                                tc = u
+                                integ += kv * ki_h * ev
+                            else:
+                                tc = lo
+                    elif u > tc:
+                        if u < hi:
+                            tc = u
+                            integ += kv * ki_h * ev
+                        else:
+                            tc = hi
                 if tc > hi:
                     tc = hi
                 elif tc < lo:
@@ -698,7 +726,7 @@ class ServoEngine:
             else:
                 oc_t = 0.0
         self.p, self.w, self.integ, self.tq, self.tq_cmd, self.heat = p, w, integ, tq, tc, heat
-        self.speed_ref, self.oc_t = sref, oc_t
+        self.speed_ref, self.oc_t, self.lim_fwd = sref, oc_t, lim_fwd
         self.ref = self.ref_prev = p
         if trip:
             self._trip(trip)
