@@ -319,6 +319,12 @@ class VirtualDrive:
         self._engine.set_soft_start(U.soft_start_rise_s(r["max_accel"]))
         self._apply_profile()
 
+    def _max_speed_counts(self) -> float:
+        """The axis' configured top speed, counts/s (Max Speed, or the raw profile's)."""
+        if self._raw_profile is not None:
+            return U.rpm_to_counts_per_s(self._raw_profile[0])
+        return PR.speed_counts_per_s(self._ram["max_speed"], self._ram["gear_num"])
+
     def _apply_profile(self) -> None:
         if self._raw_profile is not None:
             speed, accel = self._raw_profile
@@ -693,7 +699,8 @@ class VirtualDrive:
             return start + at(s)
 
         eng.go_path(path.length, to_counts, self._smoothing(path.length),
-                    start_speed=start_speed, handover=axis_speed - start_speed * path.slope)
+                    start_speed=start_speed, handover=axis_speed - start_speed * path.slope,
+                    speed_limit=self._max_speed_counts())
         return True
 
     # ---------------------------------------------------------------- inputs (JP3)
