@@ -54,8 +54,10 @@ Behaviour, with the manual's sections (docs/yzaim.md) and servobus decisions whe
   pending is refused (TOO_FAST), not stored; a write handled after the tick of its cycle
   is taken at once.
 * **Save** (0x14): 1 stores every saved register at once (reads 2 afterwards), 3 also the
-  single-turn origin (reads 2); 0 and 2 are only stored. A new device address 0x15 takes
-  effect at the next power cycle.
+  single-turn origin (reads 2); 0 and 2 are only stored. The write's reply carries the value
+  written (5.4a: ``FF 06 14 01 01 00`` is answered ``01 06 14 01 01 00``; 1 = "saving
+  parameters", the register's state while the write executes); reads give 2 afterwards. A
+  new device address 0x15 takes effect at the next power cycle.
 * **Power cycle**: RAM from EEPROM; multi-turn models (57AIM) keep their position (battery),
   single-turn models read the angle within one turn; special functions 6/8 then go to 0 and
   10..32768 to that angle within the turn; 1, 2, 4, 7 and 9 are stored, not simulated.
@@ -151,6 +153,7 @@ class YzaimMotor:
         self._cache_pending = False
         self._next_tick = self.drive.time + TICK_S
         self._at = self.drive.time  # arrival time of the frame being executed
+        self._save_reply: int | None = None  # the save-flag word of the write in progress
         drive = self.drive
         drive.disable()
         drive.enable()
@@ -273,6 +276,7 @@ class YzaimMotor:
         it later than that (the 2 ms cycle it belongs to; default: now)."""
         self._check_span(address, len(words))
         self._at = self.time if at is None else min(at, self.time)
+        self._save_reply = None
         for w in words:
             if not 0 <= w <= yzaim.WORD_MAX:
                 raise ValueError(f"register word {w} is outside 0..{yzaim.WORD_MAX}")
@@ -296,7 +300,11 @@ class YzaimMotor:
             else:
                 self._write_register(yzaim.BY_ADDRESS[addr], words[i])
             i += 1
-        return self.read_words(address, len(words))
+        held = self.read_words(address, len(words))
+        if self._save_reply is not None:  # an accepted save: its reply shows what was written
+            at_flag = _R["save_flag"].address - address
+            held = (*held[:at_flag], self._save_reply, *held[at_flag + 1:])
+        return held
 
     def _write_pair(self, pair: yzaim.Pair, low: int, high: int) -> None:
         self._latched_high.pop(pair.low, None)
@@ -329,6 +337,7 @@ class YzaimMotor:
         name = reg.name
         if name == "save_flag":
             self._save(value)
+            self._save_reply = word
             return
         self._ram[name] = value
         if name == "output_enable":

@@ -327,13 +327,27 @@ def test_sync_on_the_dir_signal() -> None:
 
 
 # ------------------------------------------------------------------ EEPROM, power cycle
+@pytest.mark.parametrize("value", [Y.SaveFlag.SAVE, Y.SaveFlag.SAVE_SINGLE_TURN_ORIGIN])
+def test_a_save_write_answers_the_value_written_then_reads_saved(value: int) -> None:
+    """5.4a: `FF 06 14 01 01 00` is answered `01 06 14 01 01 00` (before: `... 02 00`, the
+    register after the save); 4.10: "the parameter will be displayed 2 after saving"."""
+    m = YzaimMotor()
+    flag = Y.BY_NAME["save_flag"].address
+    assert m.write_words(flag, (value,)) == (value,)
+    assert read(m, "save_flag") == Y.SaveFlag.SAVED
+    assert m.write_words(flag, (value, 1)) == (value, 1)  # in a two-word write (0x14, 0x15)
+    write(m, "modbus_enable", 0)
+    assert m.write_words(flag, (value,)) == (Y.SaveFlag.SAVED,)  # not applied: what it holds
+
+
+
 def test_save_flag_keeps_the_saved_registers_in_the_state_file(tmp_path: Path) -> None:
     state = tmp_path / "yzaim.json"
     m = YzaimMotor(2, store=YzaimStore(state, key="2"))
     write(m, "target_speed", 700)
     write(m, "device_address", 9)
     assert read(m, "save_flag") == 0
-    write(m, "save_flag", Y.SaveFlag.SAVE)
+    assert write(m, "save_flag", Y.SaveFlag.SAVE) == (Y.SaveFlag.SAVE,)  # 5.4a's reply
     assert read(m, "save_flag") == Y.SaveFlag.SAVED
     write(m, "acceleration", 2000)  # not saved
     assert m.address == 2  # the new address needs a power cycle

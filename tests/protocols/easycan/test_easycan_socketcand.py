@@ -124,3 +124,39 @@ def test_state_file_keeps_saved_registers_across_restarts(tmp_path: Path) -> Non
     finally:
         proc.terminate()
         proc.wait(10)
+
+
+# ---------------------------------------------------------------- the manual's reply bytes
+def exchange(bus: can.BusABC, request: str, ident: int = 0x001) -> bytes:
+    """Send the manual's request bytes on ``ident``; the reply's data bytes on 0xFF."""
+    bus.send(can.Message(arbitration_id=ident, data=bytes.fromhex(request),
+                         is_extended_id=False))
+    return bytes(recv_reply(bus).data)
+
+
+def test_save_flag_write_is_answered_as_in_5_4a(server: int) -> None:
+    """5.4a "Parameter save and send 1": FF 06 14 01 01 00 -> 01 06 14 01 01 00 (before:
+    ... 02 00, the register after the save); a read afterwards gives 2 (saved)."""
+    bus = can.Bus(interface="socketcand", host="127.0.0.1", port=server, channel="can0")
+    try:
+        assert exchange(bus, "FF 06 14 01 01 00").hex(" ") == "01 06 14 01 01 00"
+        assert exchange(bus, "FF 03 14 01").hex(" ") == "01 03 14 01 02 00"
+    finally:
+        bus.shutdown()
+
+
+def test_one_word_incremental_write_answers_the_current_position(server: int) -> None:
+    """5.3b note: "When the written register address is 0xC (incremental position), the
+    returned data is the current absolute position" - also for a one-word write, which
+    answers the position's low word (before: the written word echoed)."""
+    bus = can.Bus(interface="socketcand", host="127.0.0.1", port=server, channel="can0")
+    try:
+        for _ in range(100):  # at rest: two reads of the position agree
+            first = exchange(bus, "FF 03 16 02")[4:]
+            if exchange(bus, "FF 03 16 02")[4:] == first:
+                break
+        step = "10 00" if first[:2] != bytes.fromhex("10 00") else "20 00"  # not an echo
+        reply = exchange(bus, "FF 06 0C 01 " + step)  # 16 (or 32) counts forward
+        assert reply.hex(" ") == "01 06 0c 01 " + first[:2].hex(" ")
+    finally:
+        bus.shutdown()
