@@ -52,7 +52,9 @@ Behaviour, with the manual's sections (docs/yzaim.md) and servobus decisions whe
   than the speed limit 0x02 (5.4d, "no lag"). 0x1C = 255 takes the cache on each
   ``dir_edge()``. While 0x1C is not 0, a cache write while the previous one is still
   pending is refused (TOO_FAST), not stored; a write handled after the tick of its cycle
-  is taken at once.
+  is taken at once. Frames are judged by when they reached the bus (``at=``): a second
+  frame that arrived before the tick that takes the first is refused, also when the motor
+  handles both after that tick.
 * **Save** (0x14): 1 stores every saved register at once (reads 2 afterwards), 3 also the
   single-turn origin (reads 2); 0 and 2 are only stored. The write's reply carries the value
   written (5.4a: ``FF 06 14 01 01 00`` is answered ``01 06 14 01 01 00``; 1 = "saving
@@ -151,6 +153,7 @@ class YzaimMotor:
         self._torque_param = 0
         self._speed_mode = False
         self._cache_pending = False
+        self._cache_due = -math.inf  # when the last cache value is (was) taken, by arrival
         self._next_tick = self.drive.time + TICK_S
         self._at = self.drive.time  # arrival time of the frame being executed
         self._save_reply: int | None = None  # the save-flag word of the write in progress
@@ -539,7 +542,12 @@ class YzaimMotor:
         return sync != 0 and sync != yzaim.SYNC_BY_DIR_SIGNAL
 
     def _cache_is_pending(self) -> bool:
-        return self._cache_pending and self._ram["sync_control"] != 0
+        """Is a cache value waiting, as of the arrival of the frame being executed? A value
+        already taken at the tick after it arrived still counts for a frame that arrived
+        before that tick (handled late): frames are judged by when they reached the bus."""
+        if self._ram["sync_control"] == 0:
+            return False
+        return self._cache_pending or self._at < self._cache_due
 
     def _refuse_cache(self) -> None:
         self.refused_cache += 1
@@ -550,7 +558,12 @@ class YzaimMotor:
         low, high = yzaim.split32(position)
         self._ram["position_cache_low"], self._ram["position_cache_high"] = low, high
         self._cache_pending = True
-        if self._sync_internal() and self._at < self._next_tick - TICK_S:
+        if not self._sync_internal():
+            self._cache_due = -math.inf  # waits for a signal or a DIR edge (pending flag)
+            return
+        due = self._next_tick - math.floor((self._next_tick - self._at) / TICK_S) * TICK_S
+        self._cache_due = due if due > self._at else due + TICK_S  # the first tick after
+        if self._at < self._next_tick - TICK_S:
             self._take_cache()  # handled late: the tick that takes it has already run
 
     def _cache(self) -> int:
@@ -573,6 +586,7 @@ class YzaimMotor:
         if self._sync_internal():
             if self._cache_pending:
                 self._take_cache()
+            self._cache_due = self._at
             self._next_tick = self._at + TICK_S
 
 

@@ -286,6 +286,25 @@ def test_two_cache_writes_in_one_cycle_are_too_fast() -> None:
     m.write_position_cache(200)  # taken: the next cycle accepts one
 
 
+def test_cache_frames_are_judged_by_their_arrival_when_handled_late() -> None:
+    """Issue 18.3: two cache frames that reached the bus within one 2 ms cycle are too fast
+    even when the motor handles them after that cycle's tick has run (a loaded simulator):
+    before, the first was taken at once and the second then accepted too."""
+    m = YzaimMotor()
+    write(m, "sync_control", 1)  # the 2 ms time base starts here: ticks at 2, 4, ... ms
+    m.advance(0.0105)  # the ticks up to 10 ms have run
+    m.write_position_cache(100, at=0.0095)  # arrived in the cycle the 10 ms tick closed
+    with pytest.raises(MotorRefused) as info:
+        m.write_position_cache(200, at=0.0095)
+    assert info.value.reason is Refusal.TOO_FAST
+    with pytest.raises(MotorRefused):
+        m.write_words(CACHE, Y.split32(300), at=0.0099)
+    m.write_position_cache(400, at=0.0101)  # the next cycle: accepted
+    with pytest.raises(MotorRefused):
+        m.write_position_cache(500, at=0.0104)
+    assert m.refused_cache == 3 and read(m, "position_cache") == 400
+
+
 def test_cache_waits_without_sync_and_the_sync_signal_triggers_it() -> None:
     m = YzaimMotor()
     write(m, "sync_control", 1)  # the signal alone: the power-on cache 0 is not pending

@@ -171,8 +171,11 @@ def _execute(motor: YzaimMotor, request: Request, at: float | None) -> Reply | N
 
 
 def arrival(frame: CanFrame) -> float:
-    """The monotonic instant a frame reached the bus, from its wall-clock timestamp (python-can
-    and the socketcand hub stamp frames on arrival; the node may handle them later)."""
+    """The monotonic instant a frame reached the bus: the medium's own stamp (the socketcand
+    hub's, one per TCP read), else from its wall-clock timestamp (python-can stamps frames
+    on arrival; the node may handle them later)."""
+    if frame.arrived is not None:
+        return frame.arrived
     now = time.monotonic()
     if frame.timestamp <= 0:
         return now
