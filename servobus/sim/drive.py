@@ -34,6 +34,7 @@ Public additions beyond the DYN232M set (contract for the other front ends and t
   first 10 such writes after power-on go to EEPROM, later ones to RAM only.
 * ``set_torque_mode(bool)`` / ``torque_command(amps) -> bool``: DYN5 network torque mode
   (RAM only); the current reference is clipped by the torque limit.
+  ``set_torque_speed_limit(rpm)``: the torque mode's speed limit (DYN5 0x27; None = none).
 * Inputs: ``input_pulses(count, seconds=0.0)`` (pulses spread over ``seconds``; 4 x GEAR_NUM
   per rev; needs CW/CCW or Pulse/Dir command mode), ``input_pulse_levels(samples,
   seconds=0.0)`` (signal-level (pin6, pin4) samples decoded per ``pulse_format``),
@@ -73,9 +74,11 @@ import math
 from collections.abc import Callable, Iterable
 from dataclasses import replace
 
+from servobus.families.base import Family
 from servobus.families.dmm import params as P
 from servobus.families.dmm import profile as PR
 from servobus.families.dmm import units as U
+from servobus.families.dmm.family import DYN2
 from servobus.families.dmm.registers import (
     AlarmCode,
     CommandMode,
@@ -110,8 +113,10 @@ class VirtualDrive:
         model: str | U.MotorModel = U.DEFAULT_MODEL,
         eeprom: EepromStore | None = None,
         axis_ids: tuple[int, int, int] = DEFAULT_AXIS_IDS,
+        family: Family = DYN2,
     ) -> None:
         self.model = model if isinstance(model, U.MotorModel) else U.MODELS[model]
+        self.set_family(family)
         self._raw_profile: tuple[float, float] | None = None
         self._protections = True
         self.eeprom = eeprom if eeprom is not None else EepromStore()
@@ -255,6 +260,23 @@ class VirtualDrive:
             return None
 
     # ---------------------------------------------------------------- parameters
+    def set_family(self, family: Family) -> None:
+        """Whose parameter ranges the drive accepts (``set_param``): the family's own table,
+        read here once (DYN2: GEAR_NUM 500..16384; DYN5: 1..16384, LINE_NUM 1..4095). The
+        drive parameters are the DMM ones; units, storage and defaults stay the DMM table's."""
+        self.family = family
+        self._ranges = {p.name: (p.minimum, p.maximum) for p in family.params
+                        if p.name in P.BY_NAME}
+
+    def param_range(self, name: str) -> tuple[int, int]:
+        """(minimum, maximum) this drive accepts for parameter ``name``."""
+        spec = P.spec(name)
+        return self._ranges.get(spec.name, (spec.minimum, spec.maximum))
+
+    def _valid(self, name: str, value: int) -> bool:
+        low, high = self.param_range(name)
+        return low <= value <= high
+
     def get_param(self, name: str) -> int:
         return self._ram[P.spec(name).name]
 
@@ -264,7 +286,7 @@ class VirtualDrive:
         EEPROM wear: past 1,000,000 writes the value still takes effect (RAM) but no longer
         survives a power cycle (see :mod:`servobus.sim.eeprom`)."""
         spec = P.spec(name)
-        if isinstance(value, bool) or not isinstance(value, int) or not spec.valid(value):
+        if isinstance(value, bool) or not isinstance(value, int) or not self._valid(name, value):
             return False
         if not self.accepts_commands:
             return False
@@ -277,7 +299,7 @@ class VirtualDrive:
     def set_speed_accel_group(self, max_speed: int, max_accel: int) -> bool:
         """DYN CAN Set_Param_Group2 (see class docstring for the EEPROM quirk)."""
         values = {"max_speed": max_speed, "max_accel": max_accel}
-        if any(v != 0 and not P.spec(n).valid(v) for n, v in values.items()):
+        if any(v != 0 and not self._valid(n, v) for n, v in values.items()):
             return False
         if not self.accepts_commands:
             return False
@@ -296,6 +318,12 @@ class VirtualDrive:
         self._engine.set_gains(*(r[n] for n in _GAIN_PARAMS))
         self._engine.set_soft_start(U.soft_start_rise_s(r["max_accel"]))
         self._apply_profile()
+
+    def _max_speed_counts(self) -> float:
+        """The axis' configured top speed, counts/s (Max Speed, or the raw profile's)."""
+        if self._raw_profile is not None:
+            return U.rpm_to_counts_per_s(self._raw_profile[0])
+        return PR.speed_counts_per_s(self._ram["max_speed"], self._ram["gear_num"])
 
     def _apply_profile(self) -> None:
         if self._raw_profile is not None:
@@ -551,6 +579,26 @@ class VirtualDrive:
         self._engine.wake()
         return True
 
+    def set_torque_speed_limit(self, rpm: float | None) -> None:
+        """Torque servo speed limit (DYN5 instance 0x27: "The servo drive will not exceed the
+        speed set by this parameter when in torque mode"); None removes it.
+
+        The speed loop runs against +-limit in the direction of the torque command and clamps
+        the torque: an unloaded motor accelerates with the commanded torque up to the limit
+        and holds it there, its current falling to what friction and load take; a load that
+        pushes it faster is braked. RAM only; no limit at power-on (the DYN2's analog torque
+        mode has none)."""
+        if rpm is None:
+            self._engine.torque_speed_limit = math.inf
+        else:
+            self._engine.torque_speed_limit = U.rpm_to_counts_per_s(abs(float(rpm)))
+        self._engine.wake()
+
+    @property
+    def torque_speed_limit_rpm(self) -> float | None:
+        limit = self._engine.torque_speed_limit
+        return None if limit == math.inf else U.counts_per_s_to_rpm(limit)
+
     def square_wave(self, amplitude: int) -> bool:
         return self._wave(amplitude, square=True)
 
@@ -651,7 +699,8 @@ class VirtualDrive:
             return start + at(s)
 
         eng.go_path(path.length, to_counts, self._smoothing(path.length),
-                    start_speed=start_speed, handover=axis_speed - start_speed * path.slope)
+                    start_speed=start_speed, handover=axis_speed - start_speed * path.slope,
+                    speed_limit=self._max_speed_counts())
         return True
 
     # ---------------------------------------------------------------- inputs (JP3)

@@ -52,10 +52,14 @@ Behaviour, with the manual's sections (docs/yzaim.md) and servobus decisions whe
   than the speed limit 0x02 (5.4d, "no lag"). 0x1C = 255 takes the cache on each
   ``dir_edge()``. While 0x1C is not 0, a cache write while the previous one is still
   pending is refused (TOO_FAST), not stored; a write handled after the tick of its cycle
-  is taken at once.
+  is taken at once. Frames are judged by when they reached the bus (``at=``): a second
+  frame that arrived before the tick that takes the first is refused, also when the motor
+  handles both after that tick.
 * **Save** (0x14): 1 stores every saved register at once (reads 2 afterwards), 3 also the
-  single-turn origin (reads 2); 0 and 2 are only stored. A new device address 0x15 takes
-  effect at the next power cycle.
+  single-turn origin (reads 2); 0 and 2 are only stored. The write's reply carries the value
+  written (5.4a: ``FF 06 14 01 01 00`` is answered ``01 06 14 01 01 00``; 1 = "saving
+  parameters", the register's state while the write executes); reads give 2 afterwards. A
+  new device address 0x15 takes effect at the next power cycle.
 * **Power cycle**: RAM from EEPROM; multi-turn models (57AIM) keep their position (battery),
   single-turn models read the angle within one turn; special functions 6/8 then go to 0 and
   10..32768 to that angle within the turn; 1, 2, 4, 7 and 9 are stored, not simulated.
@@ -149,8 +153,10 @@ class YzaimMotor:
         self._torque_param = 0
         self._speed_mode = False
         self._cache_pending = False
+        self._cache_due = -math.inf  # when the last cache value is (was) taken, by arrival
         self._next_tick = self.drive.time + TICK_S
         self._at = self.drive.time  # arrival time of the frame being executed
+        self._save_reply: int | None = None  # the save-flag word of the write in progress
         drive = self.drive
         drive.disable()
         drive.enable()
@@ -273,6 +279,7 @@ class YzaimMotor:
         it later than that (the 2 ms cycle it belongs to; default: now)."""
         self._check_span(address, len(words))
         self._at = self.time if at is None else min(at, self.time)
+        self._save_reply = None
         for w in words:
             if not 0 <= w <= yzaim.WORD_MAX:
                 raise ValueError(f"register word {w} is outside 0..{yzaim.WORD_MAX}")
@@ -296,7 +303,11 @@ class YzaimMotor:
             else:
                 self._write_register(yzaim.BY_ADDRESS[addr], words[i])
             i += 1
-        return self.read_words(address, len(words))
+        held = self.read_words(address, len(words))
+        if self._save_reply is not None:  # an accepted save: its reply shows what was written
+            at_flag = _R["save_flag"].address - address
+            held = (*held[:at_flag], self._save_reply, *held[at_flag + 1:])
+        return held
 
     def _write_pair(self, pair: yzaim.Pair, low: int, high: int) -> None:
         self._latched_high.pop(pair.low, None)
@@ -329,6 +340,7 @@ class YzaimMotor:
         name = reg.name
         if name == "save_flag":
             self._save(value)
+            self._save_reply = word
             return
         self._ram[name] = value
         if name == "output_enable":
@@ -530,7 +542,12 @@ class YzaimMotor:
         return sync != 0 and sync != yzaim.SYNC_BY_DIR_SIGNAL
 
     def _cache_is_pending(self) -> bool:
-        return self._cache_pending and self._ram["sync_control"] != 0
+        """Is a cache value waiting, as of the arrival of the frame being executed? A value
+        already taken at the tick after it arrived still counts for a frame that arrived
+        before that tick (handled late): frames are judged by when they reached the bus."""
+        if self._ram["sync_control"] == 0:
+            return False
+        return self._cache_pending or self._at < self._cache_due
 
     def _refuse_cache(self) -> None:
         self.refused_cache += 1
@@ -541,7 +558,12 @@ class YzaimMotor:
         low, high = yzaim.split32(position)
         self._ram["position_cache_low"], self._ram["position_cache_high"] = low, high
         self._cache_pending = True
-        if self._sync_internal() and self._at < self._next_tick - TICK_S:
+        if not self._sync_internal():
+            self._cache_due = -math.inf  # waits for a signal or a DIR edge (pending flag)
+            return
+        due = self._next_tick - math.floor((self._next_tick - self._at) / TICK_S) * TICK_S
+        self._cache_due = due if due > self._at else due + TICK_S  # the first tick after
+        if self._at < self._next_tick - TICK_S:
             self._take_cache()  # handled late: the tick that takes it has already run
 
     def _cache(self) -> int:
@@ -564,6 +586,7 @@ class YzaimMotor:
         if self._sync_internal():
             if self._cache_pending:
                 self._take_cache()
+            self._cache_due = self._at
             self._next_tick = self._at + TICK_S
 
 

@@ -36,6 +36,9 @@ class CanFrame:
     data: bytes
     timestamp: float = 0.0
     is_extended_id: bool = False
+    #: The time.monotonic() instant the frame reached the bus, where the medium knows it
+    #: (the socketcand hub stamps frames as their TCP data arrives); None: unknown.
+    arrived: float | None = None
 
 
 #: Called with every frame moved (TX or RX) and the monotonic time it moved.

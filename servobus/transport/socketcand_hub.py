@@ -12,7 +12,15 @@ python-can's ``interface="socketcand"`` connects from another process
                                                    seconds.microseconds, data hex
 
 Decisions: a frame goes to every other endpoint (TCP clients in rawmode, in-process ports),
-never back to its sender, like a CAN controller that does not receive its own frames. A
+never back to its sender, like a CAN controller that does not receive its own frames.
+A client's frame is stamped when its TCP data reaches the hub (``timestamp`` wall clock,
+``arrived`` monotonic), every frame of one TCP read with the same instant: frames a client
+writes at once reach the bus together, whenever the hub's event loop gets round to parsing
+them, so a node judges them by that instant (EasyCan's 2 ms cache cycle) and not by the
+simulator's load. A remote (RTR) frame - python-can sends ``< send ID DLC >`` with DLC > 0
+and no data bytes - is dropped with one log line and no reply, as socketcand does (its
+rawmode has no remote frames; it logs "Syntax error in send command" and answers nothing):
+an ``< error ... >`` line would break python-can's session, which parses it as a frame. A
 client starts receiving 20 ms after its rawmode ``< ok >``: python-can's handshake reads
 with a single recv() and would fail if a frame were glued to that ``< ok >``. ``< echo >``
 is answered; other commands get ``< error unsupported >``. Binds 127.0.0.1 by default.
@@ -69,8 +77,10 @@ def format_frame(frame: CanFrame) -> str:
     return f"< frame {ident} {sec}.{usec:06d} {frame.data.hex().upper()} >"
 
 
-def parse_send(tokens: list[str]) -> CanFrame:
-    """``send ID DLC B0 B1 ...`` (tokens without the angle brackets).
+def parse_send(tokens: list[str], timestamp: float | None = None,
+               arrived: float | None = None) -> CanFrame:
+    """``send ID DLC B0 B1 ...`` (tokens without the angle brackets), stamped ``timestamp``
+    (wall clock, default now) and ``arrived`` (monotonic, when the hub knows it).
 
     Raises ValueError with a fixed ASCII reason: ID is 1-8 hex digits (more than 3 = 29-bit),
     DLC one hex digit 0..8, then exactly DLC data bytes of 1-2 hex digits each.
@@ -91,7 +101,22 @@ def parse_send(tokens: list[str]) -> CanFrame:
         raise ValueError("number of data bytes does not match the length")
     if not all(_HEX.fullmatch(b) and len(b) <= 2 for b in data_texts):
         raise ValueError("data bytes must be 1 or 2 hex digits")
-    return CanFrame(ident, bytes(int(b, 16) for b in data_texts), time.time(), extended)
+    return CanFrame(ident, bytes(int(b, 16) for b in data_texts),
+                    time.time() if timestamp is None else timestamp, extended, arrived)
+
+
+def is_remote_request(tokens: list[str]) -> bool:
+    """``send ID DLC`` with a valid identifier, DLC 1..8 and no data bytes: how python-can's
+    socketcand client writes a remote (RTR) frame."""
+    if len(tokens) != 3 or not _HEX.fullmatch(tokens[2]) or len(tokens[2]) > 1:
+        return False
+    if not 1 <= int(tokens[2], 16) <= 8:
+        return False
+    try:
+        parse_send([tokens[0], tokens[1], "0"])
+    except ValueError:
+        return False
+    return True
 
 
 class HubPort:
@@ -213,6 +238,8 @@ class _Session:
         self.dropped = False
         self._out = bytearray()  # written once per event-loop turn (one send for many frames)
         self._flush_scheduled = False
+        self._wall = self._mono = 0.0  # when the TCP data being parsed reached the hub
+        self.remote_frames = 0  # RTR frames dropped (socketcand rawmode has none)
 
     def deliver(self, frame: CanFrame, sender: object = None) -> None:
         if self.receiving:
@@ -249,6 +276,7 @@ class _Session:
         while not self.dropped:
             await asyncio.sleep(0)  # one chunk per loop turn: buffered input must not starve
             chunk = await reader.read(4096)  # the other sessions
+            self._wall, self._mono = time.time(), time.monotonic()  # its frames' arrival
             if not chunk:
                 if not self.dropped:
                     await self.hub.linger(self)  # half-closed: its replies are still owed
@@ -285,8 +313,13 @@ class _Session:
             self.receiving = True
         elif word == "send":
             try:
-                frame = parse_send(tokens)
+                frame = parse_send(tokens, self._wall, self._mono)
             except ValueError as exc:
+                if is_remote_request(tokens):
+                    self.remote_frames += 1
+                    lim.logger.info("socketcand client sent a remote (RTR) frame %s: dropped, "
+                             "socketcand rawmode has no remote frames", tokens[1])
+                    return
                 self.reply(f"< error {exc} >")  # fixed ASCII texts (parse_send)
                 return
             await self.hub.publish_from_client(frame, self)

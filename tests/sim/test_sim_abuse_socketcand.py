@@ -71,6 +71,25 @@ def test_malformed_and_non_ascii_commands_get_an_error_and_keep_the_session() ->
     assert "Traceback" not in p.stderr, p.stderr[-2000:]
 
 
+def test_a_remote_frame_is_dropped_without_a_reply_as_socketcand_does() -> None:
+    """python-can writes a remote (RTR) frame as ``< send ID DLC >`` without data bytes;
+    socketcand's rawmode has no remote frames and answers nothing (issue 18.5: the hub's
+    ``< error ... >`` reply broke python-can's session). Not relayed; the session stays."""
+    with sim(*BUS, "--fast") as p:
+        port = p.port()
+        listener = can_session(port)
+        sender = can_session(port)
+        try:
+            sender.sendall(b"< send 123 2  >< send 03A 8 >< echo >")
+            got = expect(sender, b"< echo >")
+            assert b"error" not in got
+            assert not readable(listener, 0.3)  # nothing was relayed to the bus
+        finally:
+            listener.close()
+            sender.close()
+    assert "remote (RTR) frame" in p.stderr and "Traceback" not in p.stderr
+
+
 @pytest.mark.parametrize("text", [m for m in MALFORMED if m.isascii()])
 def test_parse_send_rejects_with_a_plain_ascii_reason(text: bytes) -> None:
     tokens = text.decode().strip("<> ").split()

@@ -109,6 +109,26 @@ def test_7_5_dtpu_a_line_during_a_point_to_point_move_is_handed_over() -> None:
     assert run.x.position == round(start + U.command_to_counts(100_000))
 
 
+@pytest.mark.parametrize("feed", [127, 64])
+@pytest.mark.parametrize("length", [100_000, 1_000_000])
+def test_7_5_dtpu_a_line_during_a_point_to_point_move_holds_max_speed(feed: int,
+                                                                     length: int) -> None:
+    """Issue 18.5: a point-to-point move cruising at Max Speed 48 (1,985 rpm) interrupted by a
+    line: the line speeds up while the handed-over speed decays, and the sum reached 2,549 rpm
+    (+28 %). The configured Max Speed holds through the handover; the end point stays exact."""
+    run = Run()
+    assert run.x.move_relative(100_000)
+    run.step(0.15)
+    start = run.reference
+    run.line(length, 0, 0, feed)
+    cruise_cps = U.rpm_to_counts_per_s(CRUISE_RPM) * feed / 127
+    run.step(1.0 + U.command_to_counts(length) / cruise_cps, record=True)
+    assert max(abs(v) for v in run.ref_speeds) <= CRUISE_RPM * 1.001
+    assert min(run.ref_speeds[:400]) > 0.0  # never restarts from standstill
+    assert run.x.position == round(start + U.command_to_counts(length))
+    assert not run.x.peek_status().motion_busy
+
+
 # ---------------------------------------------------------------- 1.1 voltage limit
 def test_1_1_max_speed_127_saturates_at_the_voltage_limit_and_lost_phase_trips() -> None:
     """MaxSpd 127 asks for (130^2/16) x 12.21 = 12,897 rpm (7.4.1); the motor runs out of

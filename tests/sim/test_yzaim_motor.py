@@ -286,6 +286,25 @@ def test_two_cache_writes_in_one_cycle_are_too_fast() -> None:
     m.write_position_cache(200)  # taken: the next cycle accepts one
 
 
+def test_cache_frames_are_judged_by_their_arrival_when_handled_late() -> None:
+    """Issue 18.3: two cache frames that reached the bus within one 2 ms cycle are too fast
+    even when the motor handles them after that cycle's tick has run (a loaded simulator):
+    before, the first was taken at once and the second then accepted too."""
+    m = YzaimMotor()
+    write(m, "sync_control", 1)  # the 2 ms time base starts here: ticks at 2, 4, ... ms
+    m.advance(0.0105)  # the ticks up to 10 ms have run
+    m.write_position_cache(100, at=0.0095)  # arrived in the cycle the 10 ms tick closed
+    with pytest.raises(MotorRefused) as info:
+        m.write_position_cache(200, at=0.0095)
+    assert info.value.reason is Refusal.TOO_FAST
+    with pytest.raises(MotorRefused):
+        m.write_words(CACHE, Y.split32(300), at=0.0099)
+    m.write_position_cache(400, at=0.0101)  # the next cycle: accepted
+    with pytest.raises(MotorRefused):
+        m.write_position_cache(500, at=0.0104)
+    assert m.refused_cache == 3 and read(m, "position_cache") == 400
+
+
 def test_cache_waits_without_sync_and_the_sync_signal_triggers_it() -> None:
     m = YzaimMotor()
     write(m, "sync_control", 1)  # the signal alone: the power-on cache 0 is not pending
@@ -327,13 +346,27 @@ def test_sync_on_the_dir_signal() -> None:
 
 
 # ------------------------------------------------------------------ EEPROM, power cycle
+@pytest.mark.parametrize("value", [Y.SaveFlag.SAVE, Y.SaveFlag.SAVE_SINGLE_TURN_ORIGIN])
+def test_a_save_write_answers_the_value_written_then_reads_saved(value: int) -> None:
+    """5.4a: `FF 06 14 01 01 00` is answered `01 06 14 01 01 00` (before: `... 02 00`, the
+    register after the save); 4.10: "the parameter will be displayed 2 after saving"."""
+    m = YzaimMotor()
+    flag = Y.BY_NAME["save_flag"].address
+    assert m.write_words(flag, (value,)) == (value,)
+    assert read(m, "save_flag") == Y.SaveFlag.SAVED
+    assert m.write_words(flag, (value, 1)) == (value, 1)  # in a two-word write (0x14, 0x15)
+    write(m, "modbus_enable", 0)
+    assert m.write_words(flag, (value,)) == (Y.SaveFlag.SAVED,)  # not applied: what it holds
+
+
+
 def test_save_flag_keeps_the_saved_registers_in_the_state_file(tmp_path: Path) -> None:
     state = tmp_path / "yzaim.json"
     m = YzaimMotor(2, store=YzaimStore(state, key="2"))
     write(m, "target_speed", 700)
     write(m, "device_address", 9)
     assert read(m, "save_flag") == 0
-    write(m, "save_flag", Y.SaveFlag.SAVE)
+    assert write(m, "save_flag", Y.SaveFlag.SAVE) == (Y.SaveFlag.SAVE,)  # 5.4a's reply
     assert read(m, "save_flag") == Y.SaveFlag.SAVED
     write(m, "acceleration", 2000)  # not saved
     assert m.address == 2  # the new address needs a power cycle

@@ -11,8 +11,12 @@ maps frames. Decisions where the manual is silent:
   request naming a function or length the table does not have is answered with error 0x03
   or 0x04 by the motor it addresses (the codec's MalformedRequest).
 * Reads of 0 or more than 2 registers (0x03) answer 0x04; addresses past 0x1D answer 0x02.
-* A write reply carries what the registers hold after the write (the motor's rule), except
-  writes of both words of 0x0C or 0x16, which answer the current absolute position (5.3b).
+* A write reply carries what the registers hold after the write (the motor's rule; an
+  accepted save-flag write shows the value written, as 5.4a does), except writes to 0x0C or
+  0x16, which answer the current absolute position (5.3b note: "When the written register
+  address is 0xC (incremental position), the returned data is the current absolute
+  position", the same for 0x16). A one-word write answers its low word: the reply keeps
+  the request's length, as every 5.3b reply does.
 * A cache write that comes too fast (the motor's TOO_FAST) answers 0x86 code 0x05 when the
   frame asked for a reply (0x3xx) and is dropped silently otherwise (0x1xx), counted.
 * Motors answer on their power-on address (register 0x15 takes effect after a power cycle).
@@ -146,8 +150,8 @@ def _execute(motor: YzaimMotor, request: Request, at: float | None) -> Reply | N
             return ReadReply(request.slave, request.address, words, request.host)
         case WriteRequest():
             words = motor.write_words(request.address, request.values, at=at)
-            if request.address in POSITION_ECHO_ADDRESSES and len(words) == 2:
-                words = motor.read_words(_ABS_LOW, 2)  # 5.3b: the current absolute position
+            if request.address in POSITION_ECHO_ADDRESSES:  # 5.3b: the current position
+                words = motor.read_words(_ABS_LOW, 2)[:len(words)]
             return WriteReply(request.slave, request.address, words, request.host)
         case EmergencyStop():
             motor.emergency_stop()
@@ -167,8 +171,11 @@ def _execute(motor: YzaimMotor, request: Request, at: float | None) -> Reply | N
 
 
 def arrival(frame: CanFrame) -> float:
-    """The monotonic instant a frame reached the bus, from its wall-clock timestamp (python-can
-    and the socketcand hub stamp frames on arrival; the node may handle them later)."""
+    """The monotonic instant a frame reached the bus: the medium's own stamp (the socketcand
+    hub's, one per TCP read), else from its wall-clock timestamp (python-can stamps frames
+    on arrival; the node may handle them later)."""
+    if frame.arrived is not None:
+        return frame.arrived
     now = time.monotonic()
     if frame.timestamp <= 0:
         return now

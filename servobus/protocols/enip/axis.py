@@ -313,7 +313,11 @@ class EnipAxis(AsyncAxis):
 
     async def torque(self, amps: float) -> None:
         """Torque-mode current command in amperes, positive towards increasing position
-        (0x26: 2000 = peak current, positive = CW); clamped to +-peak."""
+        (0x26: 2000 = peak current, positive = CW); clamped to +-peak.
+
+        The drive delivers it only below the torque-mode speed limit (parameter
+        ``torque_speed_limit``, 0x27): there its speed loop clamps the torque and holds the
+        limit, so the current read back falls to what the load takes (docs/enip.md)."""
         if isinstance(amps, bool) or not isinstance(amps, int | float) or amps != amps:
             raise ArgumentRangeError(f"amps must be a number, got {amps!r}")
         await self._write(_I["torque_command"],

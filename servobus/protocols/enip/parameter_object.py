@@ -11,10 +11,10 @@ and the general rules of manual 4.1:
 
 Decisions: a range-valid command the drive cannot carry out now (servo free, alarm, torque
 mode for a position command) is still a successful write: the DYN5 reports execution in
-the status word, not in the reply. A drive parameter the core's table refuses although the
-DYN5 range allows it (GEAR_NUM / LINE_NUM below 500: the core models DYN2-class limits)
-answers 05 like an out-of-range write. The torque-mode speed limit (0x27) is stored and
-read back but not enforced: the drive core's torque servo has no speed limit.
+the status word, not in the reply. The drive core takes the DYN5's own ranges (its family
+table: GEAR_NUM 1..16384, LINE_NUM 1..4095), not the DYN2's. The torque-mode speed limit
+(0x27) goes to the core's torque servo, whose speed loop clamps the torque at the limit
+(VirtualDrive.set_torque_speed_limit); like every value here it is lost at Reset.
 """
 
 from __future__ import annotations
@@ -25,7 +25,10 @@ from enum import Enum
 from servobus.families import dyn5
 from servobus.families.dmm.registers import ServoMode
 from servobus.families.dyn5 import Instance, Kind
+from servobus.families.dyn5_family import DYN5
 from servobus.sim.drive import VirtualDrive
+
+_SPEED_LIMIT = dyn5.BY_NAME["torque_speed_limit"].number
 
 
 class Effect(Enum):
@@ -50,6 +53,7 @@ class ParameterObject:
 
     def __init__(self, drive: VirtualDrive) -> None:
         self.drive = drive
+        drive.set_family(DYN5)  # the DYN5's parameter ranges, not the DYN2's
         self.power_on()
 
     def power_on(self) -> None:
@@ -57,6 +61,7 @@ class ParameterObject:
         self._stored = {i.number: i.default for i in dyn5.INSTANCES if i.kind is Kind.STORED}
         self._torque_command = 0
         self._diagnostic = 0
+        self.drive.set_torque_speed_limit(self._stored[_SPEED_LIMIT])
 
     # ---------------------------------------------------------------- reads
     def read(self, number: int) -> int:
@@ -119,6 +124,8 @@ class ParameterObject:
             return _REFUSED
         if inst.kind is Kind.STORED:
             self._stored[number] = value
+            if number == _SPEED_LIMIT:
+                self.drive.set_torque_speed_limit(value)
             return _DONE
         if inst.kind is Kind.PARAMETER:
             assert inst.param is not None

@@ -79,8 +79,16 @@ class ServoEngine:
         self.bus_voltage = K.DEFAULT_BUS_VOLTAGE
         self.heat = 0.0  # filtered I^2, A^2 (thermal state persists like a warm motor)
         self.steps = 0
-        self.bl_n = self.bl_k = 0  # path handover: total and elapsed control periods
+        self.bl_n = 0  # path handover: its duration in control periods at full pace
+        self.bl_x = 1.0  # ... how far it has run (0 -> 1; 1 = none running)
         self.bl_amp = 0.0  # handover amplitude, counts (speed x duration)
+        self.bl_base = 0.0  # the path's own reference of the last period, counts
+        self.bl_vlim = math.inf  # the axis speed limit the handover keeps to, counts/s
+        #: Torque servo speed limit, counts/s (inf: none). The speed loop runs against it and
+        #: clamps the torque command, as a drive's torque mode with a speed limit does: the
+        #: motor reaches the limit and holds it (DYN5 instance 0x27, "will not exceed").
+        self.torque_speed_limit = math.inf
+        self.lim_fwd = True  # direction the limit was last held in (its integrator's sign)
         self.set_protections(True)
         self.power_on()
         self.set_gains(40, 40, 20, 127, 127)
@@ -233,7 +241,8 @@ class ServoEngine:
         self.dsum = d * n
         self.idle_steps = 0
         self.path = None
-        self.bl_n = self.bl_k = 0
+        self.bl_n = 0
+        self.bl_x = 1.0
 
     def _gen_speed_now(self) -> float:
         """Reference speed (counts/s) the next generator motion continues from."""
@@ -282,7 +291,8 @@ class ServoEngine:
         return self.dsum / (self.n_smooth * self.h)
 
     def go_path(self, length: float, path: PathMap, smoothing_s: float, *,
-                start_speed: float = 0.0, handover: float = 0.0) -> None:
+                start_speed: float = 0.0, handover: float = 0.0,
+                speed_limit: float = math.inf) -> None:
         """Run the generator 0 -> ``length`` along ``path`` (maps coordinate -> counts),
         starting at ``start_speed`` (path counts/s).
 
@@ -291,7 +301,14 @@ class ServoEngine:
         speed v0 and no acceleration at the start, none of position, speed or acceleration
         at the end, so the reference keeps its speed, the path's end point is exact and the
         acceleration stays continuous. max |q''| = 3.94, hence T = 3.94 v0 / Max Accel keeps
-        the handover's own acceleration within Max Accel (constants.HANDOVER_Q2_PEAK)."""
+        the handover's own acceleration within Max Accel (constants.HANDOVER_Q2_PEAK).
+
+        ``speed_limit`` (counts/s, the axis' Max Speed): the path speeds up while the handed
+        over speed decays, and their sum would exceed Max Speed (a line at feed 127 taking
+        over a point-to-point move at Max Speed: +27 %). The handover's clock is slowed
+        whenever path speed + handover speed would pass +-speed_limit, so the sum holds the
+        limit instead; h(t) keeps its shape (it only runs slower), so it still ends at 0 and
+        the path's end point stays exact. The path waits for the handover to finish."""
         n = max(1, round(smoothing_s / self.h))
         if n != self.n_smooth:
             self.n_smooth = n
@@ -300,7 +317,9 @@ class ServoEngine:
         self._reset_gen(0.0, start_speed)
         if handover:
             steps = max(1, math.ceil(K.HANDOVER_Q2_PEAK * abs(handover) / self.amax / self.h))
-            self.bl_n, self.bl_k, self.bl_amp = steps, 0, handover * steps * self.h
+            self.bl_n, self.bl_x, self.bl_amp = steps, 0.0, handover * steps * self.h
+            self.bl_base = path(0.0)
+            self.bl_vlim = speed_limit
         self.path = path
         self.gT = length
         self.gen = Gen.POS
@@ -434,8 +453,8 @@ class ServoEngine:
         inv_n = 1.0 / nsm
         idle = self.idle_steps
         path = self.path
-        bl_n, bl_k, bl_amp = self.bl_n, self.bl_k, self.bl_amp
-        inv_bl_n = 1.0 / bl_n if bl_n else 0.0
+        bl_x, bl_amp, bl_base, bl_vlim = self.bl_x, self.bl_amp, self.bl_base, self.bl_vlim
+        inv_bl_n = 1.0 / self.bl_n if self.bl_n else 0.0
         vmax, ah, inv_ah2x2 = self.vmax, self.ah, self.inv_ah2x2
         arrive = ah * h
         w_amp, w_phase, w_step, w_center = (self.wave_amp, self.wave_phase, self.wave_step,
@@ -493,7 +512,7 @@ class ServoEngine:
                 sref += dsum * inv_n
                 if gen == 0:
                     idle += 1
-                    if idle >= nsm and bl_k >= bl_n:  # filter flushed: land exactly
+                    if idle >= nsm and bl_x >= 1.0:  # filter flushed: land exactly
                         sref = gp
                         dsum = 0.0
                         mode = 0
@@ -502,9 +521,22 @@ class ServoEngine:
                 else:
                     idle = 0
                 ref = sref if path is None else path(sref)
-                if bl_k < bl_n:  # path handover (go_path)
-                    bl_k += 1
-                    x = bl_k * inv_bl_n
+                if bl_x < 1.0:  # path handover (go_path), paced to keep the speed limit
+                    vp = (ref - bl_base) * inv_h
+                    bl_base = ref
+                    x = bl_x
+                    q0 = x * (1.0 - x * x * (6.0 - x * (8.0 - 3.0 * x)))
+                    x += inv_bl_n
+                    if x > 1.0:
+                        x = 1.0
+                    vh = bl_amp * (x * (1.0 - x * x * (6.0 - x * (8.0 - 3.0 * x))) - q0) * inv_h
+                    if vp + vh > bl_vlim and vh > 0.0:
+                        r = (bl_vlim - vp) / vh
+                        x = bl_x + (r if r > 0.0 else 0.0) * inv_bl_n
+                    elif vp + vh < -bl_vlim and vh < 0.0:
+                        r = (-bl_vlim - vp) / vh
+                        x = bl_x + (r if r > 0.0 else 0.0) * inv_bl_n
+                    bl_x = x
                     ref += bl_amp * x * (1.0 - x * x * (6.0 - x * (8.0 - 3.0 * x)))
             elif mode == 2:  # SINE
                 w_phase += w_step
@@ -591,7 +623,7 @@ class ServoEngine:
         self.ref_mode = Ref(mode)
         self.gen, self.gp, self.gv, self.gT = Gen(gen), gp, gv, g_t
         self.sref, self.dsum, self.bidx, self.idle_steps = sref, dsum, bidx, idle
-        self.bl_k = bl_k
+        self.bl_x, self.bl_base = bl_x, bl_base
         self.wave_phase = w_phase
         self.ext_left = ext_left
         self.busy = busy
@@ -641,6 +673,9 @@ class ServoEngine:
             self.heat_trip
         ss, target, sref = self.ss_alpha, self.speed_target, self.speed_ref
         speed_mode = self.servo == Servo.SPEED
+        wlim = self.torque_speed_limit
+        limited = not speed_mode and wlim < math.inf
+        lim_fwd = self.lim_fwd
         kt = self.model.torque_constant_nm_a
         oc_t, oc_stall, oc_trip_s = self.oc_t, K.OVER_CURRENT_STALL_CPS, self.oc_trip_s
         trip = AlarmCode.NONE
@@ -670,6 +705,26 @@ class ServoEngine:
                     integ += kv * ki_h * ev
             else:
                 tc = sref * kt
+                if limited:  # the speed loop holds |w| <= wlim by clamping the torque
+                    forward = sref >= 0.0
+                    if forward != lim_fwd:
+                        lim_fwd = forward
+                        integ = 0.0
+                    ev = (wlim if forward else -wlim) - w
+                    u = kv * ev + integ
+                    if forward:
+                        if u < tc:
+                            if u > lo:
+                                tc = u
+                                integ += kv * ki_h * ev
+                            else:
+                                tc = lo
+                    elif u > tc:
+                        if u < hi:
+                            tc = u
+                            integ += kv * ki_h * ev
+                        else:
+                            tc = hi
                 if tc > hi:
                     tc = hi
                 elif tc < lo:
@@ -698,7 +753,7 @@ class ServoEngine:
             else:
                 oc_t = 0.0
         self.p, self.w, self.integ, self.tq, self.tq_cmd, self.heat = p, w, integ, tq, tc, heat
-        self.speed_ref, self.oc_t = sref, oc_t
+        self.speed_ref, self.oc_t, self.lim_fwd = sref, oc_t, lim_fwd
         self.ref = self.ref_prev = p
         if trip:
             self._trip(trip)

@@ -127,6 +127,29 @@ def test_out_of_range_writes_answer_05(adapter: Dyn5Adapter, inst: int, bad: int
     assert status(put(adapter, inst, bad)) == 0x05
 
 
+@pytest.mark.parametrize("inst,low,high", [(0x0B, 1, 16384), (0x0C, 1, 4095)])
+def test_gear_num_and_line_num_take_the_dyn5_ranges(adapter: Dyn5Adapter, inst: int, low: int,
+                                                     high: int) -> None:
+    """4.3: GEAR_NUM 1~16384, LINE_NUM 1~4095 - not the DYN2's 500 lower limit (issue 18.2;
+    before: 1..499 answered 05)."""
+    for good in (low, 2, 499, high):
+        assert status(put(adapter, inst, good)) == 0 and value(adapter, inst) == good
+    assert status(put(adapter, inst, low - 1)) == 0x05 and value(adapter, inst) == high
+    assert status(put(adapter, inst, high + 1)) == 0x05
+
+
+def test_gear_num_below_500_moves_by_the_appendix_b_formula(adapter: Dyn5Adapter) -> None:
+    """Appendix B: movement = command x 4096 / GEAR_NUM x 4 counts, also below 500: at
+    GEAR_NUM 100 a command of 400 is one revolution. (High Speed and High Accel count in
+    command units too, so the slowest codes keep the motor within its speed.)"""
+    for inst, val in ((0x0B, 100), (0x08, 1), (0x09, 1)):
+        assert status(put(adapter, inst, val)) == 0
+    start = value(adapter, 0x1D)
+    assert status(put(adapter, 0x17, 400)) == 0
+    run(adapter, 3.0)
+    assert value(adapter, 0x1D) - start == 65_536 and value(adapter, 0x02) == 0
+
+
 @pytest.mark.parametrize("service,cls,inst,attr", [
     (0x0E, 0x0F, 0, 1), (0x0E, 0x0F, 1, 2), (0x0E, 0x0F, 1, None), (0x0E, 0x0F, 0x100, 1),
     (0x01, 0x0F, 1, None), (0x01, 0x0F, 0, None), (0x4C, 0x0F, 1, 1), (0x0E, 0x04, 100, 3),
@@ -276,6 +299,39 @@ def test_torque_mode(adapter: Dyn5Adapter) -> None:
     put(adapter, 0x17, 1000)  # position command in torque mode: ignored, no error
     put(adapter, 0x25, 0x0000)
     assert value(adapter, 0x26) == 0 and value(adapter, 0x25) == 0
+
+
+@pytest.mark.parametrize("torque", [150, 2000, -150, -2000])
+def test_torque_mode_obeys_its_speed_limit(adapter: Dyn5Adapter, torque: int) -> None:
+    """0x27: "The servo drive will not exceed the speed set by this parameter when in torque
+    mode". Unloaded, 100 rpm and a torque command of 150 (1.5 A) up to the full 2000: the
+    speed loop clamps the torque, the motor holds ~100 rpm (before: 5,477 rpm, the back-EMF
+    limit). Stepped on simulated time."""
+    assert status(put(adapter, 0x27, 100)) == 0 and value(adapter, 0x27) == 100
+    put(adapter, 0x25, 0xFFFF)
+    assert status(put(adapter, 0x26, torque)) == 0
+    fastest = 0.0
+    for _ in range(2000):  # 1 s
+        run(adapter, 0.0005)
+        fastest = max(fastest, abs(adapter.drive.speed_rpm))
+    assert fastest <= 110.0  # the speed loop's own overshoot at full torque: < 10 %
+    sign = 1 if torque > 0 else -1
+    assert value(adapter, 0x14) == 100 * sign  # held at the limit, in the command's direction
+    assert abs(adapter.drive.current_a) < 0.1 * abs(torque) / 2000 * 20  # only friction left
+
+
+def test_torque_mode_speed_limit_brakes_a_pushing_load_and_resets(adapter: Dyn5Adapter) -> None:
+    """A load pushing the way the torque turns the motor is braked at the limit; a Reset
+    restores the default 20,000 rpm (the value is RAM, 4.1)."""
+    put(adapter, 0x27, 300)
+    put(adapter, 0x25, 0xFFFF)
+    put(adapter, 0x26, 100)
+    adapter.drive.set_disturbance(0.3)  # N m towards CW, with the command
+    run(adapter, 1.0)
+    assert value(adapter, 0x14) == pytest.approx(300, abs=3)
+    assert adapter.drive.current_a < 0  # braking against the load
+    adapter.params.reset_drive()
+    assert value(adapter, 0x27) == 20_000 and adapter.drive.torque_speed_limit_rpm == 20_000
 
 
 def test_input_image_equals_the_instances(adapter: Dyn5Adapter) -> None:

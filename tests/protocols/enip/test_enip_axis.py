@@ -12,7 +12,7 @@ from enip_rig import DOWNTIME_S, adapters, rig, url_of
 
 from servobus.axis import connect, connect_async
 from servobus.axis.base import AsyncAxis
-from servobus.errors import ArgumentRangeError, DriveAlarm, DriveError, DriveTimeout, NotSupported
+from servobus.errors import ArgumentRangeError, DriveAlarm, DriveTimeout, NotSupported
 from servobus.families import dyn5
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode
@@ -120,9 +120,9 @@ async def test_parameters_are_ram_values_of_the_drive() -> None:
             "max_speed": 60, "memory_test": 33, "torque_speed_limit": 900}
         assert fleet.servers[0].drive.get_param("max_speed") == 60
         assert fleet.servers[0].drive.eeprom.params["max_speed"] == 48  # RAM only (4.1)
-        with pytest.raises(DriveError) as info:  # the core refuses GEAR_NUM < 500 (docs)
-            await axis.write_param("gear_num", 100)
-        assert info.value.code == 0x05
+        assert fleet.servers[0].drive.torque_speed_limit_rpm == 900  # the drive obeys it
+        await axis.write_param("gear_num", 100)  # 4.3: 1~16384 (the DYN2 starts at 500)
+        assert await axis.read_param("gear_num") == 100
 
 
 async def test_enable_disable_and_the_status_word() -> None:

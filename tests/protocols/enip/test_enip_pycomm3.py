@@ -66,6 +66,17 @@ def test_parameter_read_write(plc: CIPDriver) -> None:
     assert message(plc, get, 0x0F, 0x0D, 1, data_type=UDINT).value == 0xAAAA
 
 
+def test_gear_num_below_500_is_accepted_over_the_wire(plc: CIPDriver) -> None:
+    """4.3: GEAR_NUM 1~16384 (issue 18.2: 1..499 answered 05 before)."""
+    get, put = Services.get_attribute_single, Services.set_attribute_single
+    try:
+        assert message(plc, put, 0x0F, 0x0B, 1, request_data=UDINT.encode(1)).error is None
+        assert message(plc, get, 0x0F, 0x0B, 1, data_type=UDINT).value == 1
+        assert message(plc, put, 0x0F, 0x0B, 1, request_data=UDINT.encode(0)).error is not None
+    finally:
+        message(plc, put, 0x0F, 0x0B, 1, request_data=UDINT.encode(4096))
+
+
 def test_dyn5_error_05_reaches_pycomm3(plc: CIPDriver) -> None:
     bad = message(plc, Services.set_attribute_single, 0x0F, 0x01, 1,
                   request_data=UDINT.encode(64))
