@@ -23,6 +23,7 @@ import uvicorn
 from servobus.errors import ArgumentRangeError
 from servobus.gui.app import create_app
 from servobus.gui.fleet import DEFAULT_URL, Fleet
+from servobus.gui.state import GuiState
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8080
@@ -68,8 +69,20 @@ def bind(host: str, port: int) -> socket.socket:
     return sock
 
 
-def serve(options: ServeOptions, say: Callable[[str], None]) -> None:
-    """Serve until interrupted (KeyboardInterrupt propagates after the shutdown)."""
+@dataclass
+class ServeOutcome:
+    """How the server ended: the signal that stopped it and the stop of every axis."""
+
+    signal: str | None = None  # "Ctrl-C", "SIGTERM"; None: the server ended by itself
+    halted: dict[int, BaseException | None] | None = None  # GuiState.halted
+
+
+def serve(options: ServeOptions, say: Callable[[str], None]) -> ServeOutcome:
+    """Serve until interrupted (Ctrl-C, SIGTERM); every axis is stopped before it returns.
+
+    Decision: an interrupt is how a server is meant to end, so it is an outcome here (the
+    command exits 0 on it), not an error; a stop that failed is in ``halted``.
+    """
     token = options.token
     loopback = is_loopback(options.host)
     if token is not None and not token.strip():
@@ -77,14 +90,18 @@ def serve(options: ServeOptions, say: Callable[[str], None]) -> None:
     if not loopback and token is None:
         token = secrets.token_urlsafe(18)
     sock = bind(options.host, options.port)
+    outcome = ServeOutcome()
     try:
-        asyncio.run(_serve(options, token, loopback, sock, say))
+        asyncio.run(_serve(options, token, loopback, sock, say, outcome))
+    except KeyboardInterrupt as exc:  # uvicorn re-raises the signal after its shutdown
+        outcome.signal = getattr(exc, "signal_name", "Ctrl-C")
     finally:
         sock.close()
+    return outcome
 
 
 async def _serve(options: ServeOptions, token: str | None, loopback: bool,
-                 sock: socket.socket, say: Callable[[str], None]) -> None:
+                 sock: socket.socket, say: Callable[[str], None], outcome: ServeOutcome) -> None:
     fleet = await Fleet.open(options.url, options.ids)
     app = create_app(fleet=fleet, token=token)
     config = uvicorn.Config(app, log_level="warning", lifespan="on", access_log=False,
@@ -113,3 +130,11 @@ async def _serve(options: ServeOptions, token: str | None, loopback: bool,
         await server.serve(sockets=[sock])
     finally:
         task.cancel()
+        # uvicorn skips the app's shutdown on a second Ctrl-C (force exit): stop every axis
+        # and close the link here then (GuiState.shut_down runs once).
+        gui: GuiState | None = getattr(app.state, "gui", None)
+        if gui is not None:
+            await gui.shut_down()
+            outcome.halted = gui.halted
+        else:
+            await fleet.close()
