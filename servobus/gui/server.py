@@ -19,10 +19,12 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import uvicorn
+from starlette.applications import Starlette as ASGIApplication
 
 from servobus.errors import ArgumentRangeError
 from servobus.gui.app import create_app
 from servobus.gui.fleet import DEFAULT_URL, Fleet
+from servobus.gui.limits import UVICORN_LIMITS
 from servobus.gui.state import GuiState
 
 DEFAULT_HOST = "127.0.0.1"
@@ -77,6 +79,13 @@ class ServeOutcome:
     halted: dict[int, BaseException | None] | None = None  # GuiState.halted
 
 
+def uvicorn_config(app: ASGIApplication) -> uvicorn.Config:
+    """How the GUI app is served (also by tests and benchmarks): quiet, bounded inputs."""
+    return uvicorn.Config(app, log_level="warning", lifespan="on", access_log=False,
+                          ws_per_message_deflate=False,  # scope frames do not compress
+                          **UVICORN_LIMITS)  # type: ignore[arg-type]
+
+
 def serve(options: ServeOptions, say: Callable[[str], None]) -> ServeOutcome:
     """Serve until interrupted (Ctrl-C, SIGTERM); every axis is stopped before it returns.
 
@@ -104,9 +113,7 @@ async def _serve(options: ServeOptions, token: str | None, loopback: bool,
                  sock: socket.socket, say: Callable[[str], None], outcome: ServeOutcome) -> None:
     fleet = await Fleet.open(options.url, options.ids)
     app = create_app(fleet=fleet, token=token)
-    config = uvicorn.Config(app, log_level="warning", lifespan="on", access_log=False,
-                            ws_per_message_deflate=False)  # scope frames do not compress
-    server = uvicorn.Server(config)
+    server = uvicorn.Server(uvicorn_config(app))
     port = sock.getsockname()[1]
     url = page_url(options.host, port, token)
 
