@@ -151,16 +151,20 @@ def post(url: str, doc: object) -> int:
         return int(r.status)
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("sig,times", [(signal.SIGINT, 1), (signal.SIGTERM, 1),
+                                       (signal.SIGINT, 2)],
+                         ids=["SIGINT", "SIGTERM", "SIGINT-twice"])
 def test_a_signal_stops_the_turning_axis_and_ends_the_gui_normally(
-        line_url: str, sig: signal.Signals) -> None:
+        line_url: str, sig: signal.Signals, times: int) -> None:
+    """A second Ctrl-C makes uvicorn skip the app's shutdown: every axis still stops."""
     with gui("--url", "dyn232+" + line_url, "--id", "1") as (proc, lines), \
             connect("dyn232+" + line_url, drive_id=1) as watcher:
         base = re.search(r"http://127\.0\.0\.1:\d+/", lines[0])
         assert base is not None
         assert post(base.group(0) + "api/axes/1/turn", {"rpm": 300}) == 200
         wait_until(lambda: abs(watcher.speed() - 300) < 5, timeout=10, what="300 rpm")
-        proc.send_signal(sig)
+        for _ in range(times):
+            proc.send_signal(sig)
         err = ended(proc)
         # the stop ramps down at Max Accel: at standstill well within a second
         wait_until(lambda: watcher.speed() == 0, timeout=3, what="axis 1 at standstill")
