@@ -362,3 +362,59 @@ def test_scope_and_step_test_on_every_protocol(any_server: str, browser: WebDriv
                what=f"a step result ({msg.text!r})")
     assert "drive trace 4,000 Hz" in msg.text, msg.text
     assert float(msg.get_attribute("data-overshoot") or "nan") >= 0.0
+
+
+@pytest.fixture
+def broken_sampler_server() -> Iterator[str]:
+    """The GUI in this process (uvicorn on a thread) whose axis 3 can give no samples at
+    all: its trace and its polling both fail with a bug."""
+    import asyncio
+
+    import uvicorn
+
+    from servobus.gui.app import create_app
+    from servobus.gui.server import bind, uvicorn_config
+
+    app = create_app()
+    sock = bind("127.0.0.1", 0)
+    srv = uvicorn.Server(uvicorn_config(app))
+    thread = threading.Thread(target=lambda: asyncio.run(srv.serve(sockets=[sock])),
+                              daemon=True)
+    thread.start()
+    wait_until(lambda: srv.started, timeout=20, what="the GUI server started")
+
+    async def trace_bug() -> None:
+        raise RuntimeError("trace bug")
+
+    async def poll_bug() -> None:
+        raise RuntimeError("poll bug")
+
+    sampler = app.state.gui.samplers[3]  # not started until a page subscribes
+    sampler.handle.axis.trace_buffer = trace_bug
+    sampler._run_poll = poll_bug
+    try:
+        yield f"http://127.0.0.1:{sock.getsockname()[1]}/"
+    finally:
+        srv.should_exit = True
+        thread.join(timeout=15)
+        sock.close()
+
+
+def test_a_sampler_that_stops_shows_why_on_the_page(broken_sampler_server: str,
+                                                    browser: WebDriver) -> None:
+    """Issue 17.2: never "no data yet" forever without a word."""
+    browser.get(broken_sampler_server)
+    wait_until(lambda: js(browser, "return window.servobus && window.servobus.link.open"),
+               timeout=10, what="page ready")
+    tab(browser, "scope")
+    js(browser, """const s = window.servobus.scope;
+        s.channels = [{axis: 3, signal: "position"}];
+        s.renderChannels(); s.build(); s.configure();""")
+    shown = wait_until(lambda: js(browser, "const e = document.querySelector("
+                                           "'#scope-status .sampler-error');"
+                                           "return e && e.textContent"),
+                       timeout=10, what="the sampler's error on the page")
+    assert "A3 sampling stopped: RuntimeError: poll bug" in shown
+    color = browser.find_element(By.CSS_SELECTOR, "#scope-status .sampler-error"
+                                 ).value_of_css_property("color")
+    assert color != browser.find_element(By.ID, "scope-status").value_of_css_property("color")
