@@ -11,12 +11,16 @@ connection closes (servobus.gui.state.GuiState.shut_down).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import ipaddress
 import secrets
+import signal
 import socket
+import threading
 import webbrowser
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
+from types import FrameType
 
 import uvicorn
 from starlette.applications import Starlette as ASGIApplication
@@ -102,18 +106,45 @@ def serve(options: ServeOptions, say: Callable[[str], None]) -> ServeOutcome:
     outcome = ServeOutcome()
     try:
         asyncio.run(_serve(options, token, loopback, sock, say, outcome))
-    except KeyboardInterrupt as exc:  # uvicorn re-raises the signal after its shutdown
+    except KeyboardInterrupt as exc:  # before the server listened (opening the drives)
         outcome.signal = getattr(exc, "signal_name", "Ctrl-C")
     finally:
         sock.close()
     return outcome
 
 
+class _Server(uvicorn.Server):
+    """uvicorn's server, except that Ctrl-C and SIGTERM are not raised again once it has
+    shut down: the GUI reports them as its outcome. (uvicorn re-raises them; under
+    asyncio.run a second Ctrl-C then cancels the shutdown half-way and logs tracebacks.)"""
+
+    def __init__(self, config: uvicorn.Config) -> None:
+        super().__init__(config)
+        self.signals: list[int] = []
+
+    @contextlib.contextmanager
+    def capture_signals(self) -> Iterator[None]:
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+        handled = (signal.SIGINT, signal.SIGTERM)
+        original = {sig: signal.signal(sig, self._on_signal) for sig in handled}
+        try:
+            yield
+        finally:
+            for sig, handler in original.items():
+                signal.signal(sig, handler)
+
+    def _on_signal(self, sig: int, frame: FrameType | None) -> None:
+        self.signals.append(sig)
+        self.handle_exit(sig, frame)
+
+
 async def _serve(options: ServeOptions, token: str | None, loopback: bool,
                  sock: socket.socket, say: Callable[[str], None], outcome: ServeOutcome) -> None:
     fleet = await Fleet.open(options.url, options.ids)
     app = create_app(fleet=fleet, token=token)
-    server = uvicorn.Server(uvicorn_config(app))
+    server = _Server(uvicorn_config(app))
     port = sock.getsockname()[1]
     url = page_url(options.host, port, token)
 
@@ -137,11 +168,13 @@ async def _serve(options: ServeOptions, token: str | None, loopback: bool,
         await server.serve(sockets=[sock])
     finally:
         task.cancel()
-        # uvicorn skips the app's shutdown on a second Ctrl-C (force exit): stop every axis
-        # and close the link here then (GuiState.shut_down runs once).
+        if server.signals:
+            outcome.signal = "Ctrl-C" if server.signals[0] == signal.SIGINT else "SIGTERM"
         gui: GuiState | None = getattr(app.state, "gui", None)
         if gui is not None:
-            await gui.shut_down()
+            if not gui.closed:  # a second Ctrl-C: uvicorn skipped the app's shutdown
+                await server.lifespan.shutdown()
+            await gui.shut_down()  # done by the app's shutdown; here if even that failed
             outcome.halted = gui.halted
         else:
             await fleet.close()

@@ -41,6 +41,11 @@ class GuiState:
                    samplers={i: AxisSampler(h) for i, h in fleet.handles.items()},
                    tuning={i: TuningState() for i in fleet.handles})
 
+    @property
+    def closed(self) -> bool:
+        """The shutdown has begun (servobus.gui.server checks it after a forced exit)."""
+        return self._closed
+
     def start(self) -> None:
         self.monitor.start()
         self.jog.start()
