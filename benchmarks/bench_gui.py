@@ -14,19 +14,33 @@ drive-generated 2 Hz sine. Figures:
   holding that sample, which the page sends after drawing it (target <= 100 ms; the worst
   of the 10 is marked, the ack's way back included).
 
+Bounded inputs (issue 17.3; :func:`input_stall`, no browser): the longest stall of the
+server's event loop (its lateness on a 1 ms sleep) and the slowest small request
+(``GET /api/axes``) while :data:`ABUSERS` clients each stream a 50 MB body, send bodies
+nested to the size limit and flood the WebSocket with deeply nested messages, beside the
+same figures idle. The stall is also split into the loop's own work in it (the thread's
+CPU time: parsing, refusing), the part the server controls (target <= 50 ms, a tenth of the
+0.6 s jog lease); the rest is the OS running the abusing processes.
+
 Needs Chromium and chromedriver (Debian: apt-get install chromium chromium-driver).
 """
 
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
+import contextlib
 import functools
 import json
+import multiprocessing
+import os
 import shutil
+import socket
 import statistics
 import tempfile
 import threading
 import time
+import urllib.error
 import urllib.request
 from collections.abc import Callable, Coroutine
 from typing import Any, TypeVar
@@ -35,7 +49,8 @@ import uvicorn
 
 from benchmarks.verdict import mark, percent
 from servobus.gui.app import create_app
-from servobus.gui.server import bind
+from servobus.gui.limits import MAX_BODY_BYTES, MAX_MESSAGE_BYTES
+from servobus.gui.server import bind, uvicorn_config
 from servobus.gui.state import GuiState
 
 T = TypeVar("T")
@@ -56,8 +71,7 @@ class Server:
         self.app = create_app()
         self.sock = bind("127.0.0.1", 0)
         self.url = f"http://127.0.0.1:{self.sock.getsockname()[1]}/"
-        self.server = uvicorn.Server(uvicorn.Config(self.app, log_level="warning",
-                                                    ws_per_message_deflate=False))
+        self.server = uvicorn.Server(uvicorn_config(self.app))
         self.loop = asyncio.new_event_loop()
         self.thread = threading.Thread(target=self._run, daemon=True)
 
@@ -160,7 +174,109 @@ async def _delay_after(gui: GuiState, t_before: float) -> float:
     return next(ack - t_change for _, newest, ack in session.drawn if newest >= t_change)
 
 
+ABUSERS = 4
+BIG_BODY = 50_000_000
+
+
+async def _loop_lag(stop: threading.Event) -> tuple[float, float]:
+    """The longest lateness of a 1 ms sleep on this loop until ``stop`` is set, seconds:
+    wall clock (with the time the OS gave other processes) and the loop thread's own CPU
+    time in that gap (the work that held the loop)."""
+    wall = work = 0.0
+    while not stop.is_set():
+        t0, c0 = time.monotonic(), time.thread_time()
+        await asyncio.sleep(0.001)
+        wall = max(wall, time.monotonic() - t0 - 0.001)
+        work = max(work, time.thread_time() - c0)
+    return wall, work
+
+
+def _big_body(port: int) -> None:
+    """50 MB streamed (chunked) at a command: refused at the limit, the connection closed."""
+    chunk = b" " * 65536
+    frame = b"%x\r\n%s\r\n" % (len(chunk), chunk)
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+        s.sendall(b"POST /api/axes/1/move HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+                  b"Content-Type: application/json\r\nTransfer-Encoding: chunked\r\n\r\n")
+        with contextlib.suppress(OSError):
+            for _ in range(BIG_BODY // len(chunk)):
+                s.sendall(frame)
+
+
+def _deep_bodies(url: str, n: int = 20) -> None:
+    deep = b"[" * (MAX_BODY_BYTES - 1)
+    for _ in range(n):
+        request = urllib.request.Request(url + "api/axes/1/move", data=deep,
+                                         headers={"Content-Type": "application/json"})
+        with contextlib.suppress(urllib.error.HTTPError):
+            urllib.request.urlopen(request, timeout=10).close()
+
+
+def _deep_messages(url: str, n: int = 200) -> None:
+    from websockets.sync.client import connect as ws_connect
+
+    with ws_connect(url.replace("http://", "ws://") + "ws") as ws:
+        for _ in range(n):
+            ws.send("[" * (MAX_MESSAGE_BYTES - 1))
+
+
+def _probe(url: str, stop: threading.Event, worst: list[float]) -> None:
+    while not stop.is_set():
+        t0 = time.monotonic()
+        urllib.request.urlopen(url + "api/axes", timeout=10).close()
+        worst[0] = max(worst[0], time.monotonic() - t0)
+        time.sleep(0.01)
+
+
+def _stall(srv: Server, abuse: list[Callable[[], None]], idle_s: float = 2.0
+           ) -> tuple[float, float, float]:
+    """(loop stall, of it the loop's own work, slowest small request), seconds, while
+    ``abuse`` runs (else for ``idle_s``)."""
+    stop = threading.Event()
+    lag = asyncio.run_coroutine_threadsafe(_loop_lag(stop), srv.loop)
+    worst = [0.0]
+    probe = threading.Thread(target=_probe, args=(srv.url, stop, worst))
+    probe.start()
+    if abuse:  # in other processes: their Python work must not hold this one's GIL
+        spawn = multiprocessing.get_context("spawn")
+        with concurrent.futures.ProcessPoolExecutor(len(abuse), mp_context=spawn) as pool:
+            for done in [pool.submit(fn) for fn in abuse]:
+                done.result()
+    else:
+        time.sleep(idle_s)
+    stop.set()
+    probe.join()
+    wall, work = lag.result(timeout=10)
+    return wall, work, worst[0]
+
+
+def input_stall() -> None:
+    print(f"GUI bounded inputs: {ABUSERS} clients each streaming a {BIG_BODY // 10**6} MB "
+          f"body, sending bodies and WebSocket messages nested to the size limit "
+          f"(load {os.getloadavg()[0]:.1f})")
+    with Server() as srv:
+        idle = _stall(srv, [])
+        port = int(srv.url.rsplit(":", 1)[1].strip("/"))
+        abuse: list[Callable[[], None]] = []
+        for _ in range(ABUSERS):
+            abuse += [functools.partial(_big_body, port), functools.partial(_deep_bodies, srv.url),
+                      functools.partial(_deep_messages, srv.url)]
+        t0 = time.monotonic()
+        busy = _stall(srv, abuse)
+        took = time.monotonic() - t0
+    print(f"  idle: loop stall {idle[0] * 1000:.1f} ms (its own work {idle[1] * 1000:.1f} ms), "
+          f"slowest GET /api/axes {idle[2] * 1000:.1f} ms")
+    figure = mark("gui: loop held by big/deep inputs", busy[1] * 1000, at_most=50,
+                  show="{:g} ms".format)
+    print(f"  under abuse ({took:.1f} s): loop stall {busy[0] * 1000:.1f} ms, longest own work "
+          f"of the loop in one stall {busy[1] * 1000:.1f} ms {figure}; slowest GET /api/axes "
+          f"{busy[2] * 1000:.1f} ms")
+    print("  (the stall beyond the loop's own work is the OS running the "
+          f"{len(abuse)} abusing processes on this machine's {os.cpu_count()} cores)")
+
+
 def main() -> None:
+    input_stall()
     print(f"GUI scope pipeline: virtual drive trace 4000 Hz x {len(CHANNELS)} channels, "
           f"{WINDOW_S:g} s window, headless Chromium")
     with Server() as srv:
@@ -206,7 +322,9 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    import sys
+
     from benchmarks.verdict import summary
 
-    main()
+    input_stall() if sys.argv[1:] == ["inputs"] else main()
     print(summary())

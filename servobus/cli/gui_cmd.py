@@ -3,6 +3,11 @@
 The drive comes from ``gui --url`` or the global ``--url``/``--port``/``--can``/
 SERVOBUS_URL; with none, three built-in virtual drives (ids 1, 2, 3). ``--ids`` names the
 drives on the line or bus, ``--id`` one of them.
+
+Decision: Ctrl-C and SIGTERM are how a server is meant to end, so they end ``servobus gui``
+normally (exit 0, one line on stdout saying every axis was stopped), not with an ``error:``
+line and 130 like a command cut short; an axis that did not confirm its stop is an error
+(exit 2) naming it.
 """
 
 from __future__ import annotations
@@ -11,7 +16,7 @@ import click
 
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
-from servobus.cli.failures import Interrupted
+from servobus.cli.failures import CliError
 
 SHUTDOWN_NOTE = "every axis was stopped and the GUI server closed"
 
@@ -49,7 +54,8 @@ def gui(ctx: CliContext, gui_url: str | None, one_id: int | None, ids_text: str 
         host: str, port: int, no_browser: bool, token: str | None) -> None:
     """Tune, command and watch drives in a browser (live scope, step tests, parameters).
 
-    Binds 127.0.0.1 by default. Ctrl-C stops every axis, then the server.
+    Binds 127.0.0.1 by default. Ctrl-C or SIGTERM stops every axis, then the server
+    (exit 0; exit 2 with an error line if an axis did not confirm its stop).
     """
     from servobus.gui.server import ServeOptions, serve
 
@@ -64,11 +70,14 @@ def gui(ctx: CliContext, gui_url: str | None, one_id: int | None, ids_text: str 
     url = gui_url or ctx.named_url
     options = ServeOptions(url=url, ids=ids, host=host, port=port, token=token,
                            open_browser=not no_browser)
-    try:
-        serve(options, lambda line: click.echo(line))
-    except KeyboardInterrupt as exc:
-        name = exc.signal_name if isinstance(exc, Interrupted) else "Ctrl-C"
-        raise Interrupted(name, SHUTDOWN_NOTE) from None
+    outcome = serve(options, lambda line: click.echo(line))
+    failed = {i: e for i, e in (outcome.halted or {}).items() if e is not None}
+    if failed:
+        what = "; ".join(f"axis {i}: {type(e).__name__}: {e}" for i, e in failed.items())
+        raise CliError(f"the GUI server closed but not every axis confirmed its stop ({what})",
+                       "check those drives now: they may still be moving")
+    if outcome.signal is not None:
+        click.echo(f"servobus gui: {outcome.signal}: {SHUTDOWN_NOTE}")
 
 
 def register(group: click.Group) -> None:

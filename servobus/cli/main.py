@@ -1,19 +1,23 @@
 """Entry point of the ``servobus`` command (also ``python -m servobus``).
 
 :func:`main` turns every failure into one stderr line and a documented exit code
-(servobus.cli.failures); ``--debug`` or ``SERVOBUS_DEBUG=1`` adds the Python traceback and
-lets third-party libraries log to stderr.
+(servobus.cli.failures), and ends quietly (exit 0) when standard output is a pipe its
+reader closed (``servobus profile ... | head -3``); ``--debug`` or ``SERVOBUS_DEBUG=1`` adds
+the Python traceback and lets third-party libraries log to stderr.
 """
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import logging
 import os
+import select
 import signal
 import sys
 import traceback
 from types import FrameType
+from typing import NoReturn
 
 import click
 
@@ -131,12 +135,42 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(0)
     except SystemExit:
         raise
+    except BrokenPipeError as exc:
+        if not stdout_closed():  # a pipe to something else (a drive's link): a failure
+            _fail(exc, debug)
+        _quiet_stdout()  # `servobus ... | head`: the reader has all it wanted
+        sys.exit(0)
     except BaseException as exc:  # the one place every failure is reported
-        code, line = describe(exc)
-        if debug:
-            traceback.print_exception(exc)
-        click.echo(line, err=True)
-        sys.exit(code)
+        _fail(exc, debug)
     finally:
         signal.signal(signal.SIGTERM, previous)
     sys.exit(0)
+
+
+def _fail(exc: BaseException, debug: bool) -> NoReturn:
+    code, line = describe(exc)
+    if debug:
+        traceback.print_exception(exc)
+    click.echo(line, err=True)
+    sys.exit(code)
+
+
+def stdout_closed() -> bool:
+    """True when standard output is a pipe whose reader has gone (``| head``): poll reports
+    an error on it. Decision: that ends the command quietly with exit 0, like a reader that
+    read to the end; a broken pipe anywhere else is a failure like any other."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, ValueError, OSError):
+        return False
+    poller = select.poll()
+    poller.register(fd, select.POLLOUT)
+    return any(events & select.POLLERR for _, events in poller.poll(0))
+
+
+def _quiet_stdout() -> None:
+    """Point stdout at /dev/null: the interpreter's last flush must not fail loudly."""
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)

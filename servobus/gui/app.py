@@ -1,7 +1,8 @@
 """The GUI's ASGI application: static page, REST API, WebSocket, behind the Guard.
 
 ``create_app(url, ids, token=...)`` opens the drives when the server starts (lifespan) and,
-when it stops, stops every axis and closes the connection.
+when it stops, stops every axis and closes the connection. Every request passes the Guard
+(servobus.gui.auth), then the body limit (servobus.gui.limits).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from servobus.gui import api_axes, api_io, api_params, ws
 from servobus.gui.auth import Guard
 from servobus.gui.fleet import Fleet
 from servobus.gui.jog import LEASE_S
+from servobus.gui.limits import BodyLimit
 from servobus.gui.state import GuiState
 
 STATIC = Path(__file__).parent / "static"
@@ -53,5 +55,5 @@ def create_app(url: str | None = None, ids: Sequence[int] | None = None, *,
         *api_io.ROUTES,
         WebSocketRoute("/ws", ws.endpoint),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
-    ], lifespan=lifespan, middleware=[Middleware(Guard, token=token)])
+    ], lifespan=lifespan, middleware=[Middleware(Guard, token=token), Middleware(BodyLimit)])
     return app

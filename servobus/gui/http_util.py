@@ -10,6 +10,7 @@ from starlette.requests import Request
 from starlette.responses import JSONResponse, Response
 
 from servobus.errors import ArgumentRangeError
+from servobus.gui import limits
 from servobus.gui.errors import error_response
 from servobus.gui.fleet import AxisHandle
 from servobus.gui.state import GuiState
@@ -32,10 +33,11 @@ def handle(request: Request) -> AxisHandle:
 
 
 async def body(request: Request) -> dict[str, object]:
+    """The JSON object of the body (bounded in size and nesting: servobus.gui.limits)."""
     try:
-        doc = await request.json()
-    except ValueError:
-        raise ArgumentRangeError("the request body is not JSON") from None
+        doc = limits.loads(await request.body())
+    except limits.JsonRefused as exc:
+        raise ArgumentRangeError(f"the request body is {exc}") from None
     if not isinstance(doc, dict):
         raise ArgumentRangeError("the request body must be a JSON object")
     return doc

@@ -15,7 +15,7 @@ import logging
 import time
 from dataclasses import dataclass
 
-from servobus.errors import ServobusError
+from servobus.errors import ConnectionLost, ServobusError
 from servobus.gui.fleet import Fleet
 
 log = logging.getLogger(__name__)
@@ -38,6 +38,7 @@ class JogControl:
         self.lease_s = lease_s
         self.leases: dict[int, Lease] = {}
         self.stops = 0  # jogs ended by this class (release, drop, lease)
+        self.closed = False  # the GUI is shutting down: no new jog
         self._task: asyncio.Task[None] | None = None
 
     def start(self) -> None:
@@ -50,9 +51,16 @@ class JogControl:
                 await self._task
         await self.stop_all_jogs()
 
+    def close(self) -> None:
+        """The GUI shuts down (its stop of every axis follows): refuse jogs, drop leases."""
+        self.closed = True
+        self.leases.clear()
+
     async def jog(self, owner: int, axis_id: int, rpm: int) -> None:
         """Start, change or keep jogging ``axis_id`` at ``rpm`` (0 = release)."""
         handle = self.fleet.get(axis_id)
+        if self.closed:
+            raise ConnectionLost("the GUI is shutting down: every axis is being stopped")
         if isinstance(rpm, bool) or not isinstance(rpm, int) or abs(rpm) > MAX_JOG_RPM:
             raise ValueError(f"jog speed must be an integer rpm within +-{MAX_JOG_RPM}")
         if rpm == 0:

@@ -15,6 +15,7 @@ import asyncio
 import contextlib
 import functools
 import itertools
+import logging
 import operator
 import time
 from array import array
@@ -25,6 +26,8 @@ from servobus.errors import ConnectionLost, NotSupported, ServobusError
 from servobus.gui.fleet import AxisHandle
 from servobus.gui.ring import SampleRing
 from servobus.gui.signals import BIT_SIGNALS, POLLED_READS, SIGNALS
+
+log = logging.getLogger(__name__)
 
 TRACE_READ_S = 0.008
 POLL_MAX_HZ = 1000.0
@@ -61,6 +64,8 @@ class AxisSampler:
         self._wanted[token] = frozenset(s for s in signals if s in SIGNALS)
         self._idle_since = None
         if self._task is None or self._task.done():
+            if self.error.startswith("sampling stopped"):
+                self.error = ""  # a new try
             self._task = asyncio.create_task(self._run(), name=f"gui-sampler-{self.handle.id}")
         return token
 
@@ -95,6 +100,8 @@ class AxisSampler:
                 and time.monotonic() - self._idle_since > LINGER_S)
 
     async def _run(self) -> None:
+        """Trace where the drive keeps one, else poll; any failure of the trace falls back
+        to polling, and whatever ends the sampling is in :attr:`error` (the page shows it)."""
         try:
             if self.source != "poll":
                 try:
@@ -102,18 +109,29 @@ class AxisSampler:
                     self.source = "trace"
                 except NotSupported:
                     self.source = "poll"
+                except ConnectionLost:
+                    raise
+                except Exception as exc:  # a trace that cannot start: poll instead
+                    self._fall_back(exc)
             if self.source == "trace":
                 try:
                     await self._run_trace()
                     return
                 except ConnectionLost:
                     raise
-                except ServobusError as exc:  # a trace that fails: poll from now on
-                    self.error = f"trace: {type(exc).__name__}: {exc}; polling instead"
-                    self.source = "poll"
+                except Exception as exc:  # a trace that fails: poll from now on
+                    self._fall_back(exc)
             await self._run_poll()
         except ConnectionLost as exc:
-            self.error = f"link lost: {exc}"
+            self.error = f"sampling stopped: link lost: {exc}"
+        except Exception as exc:  # never silent: the scope's status line shows it
+            self.error = f"sampling stopped: {type(exc).__name__}: {exc}"
+            log.error("GUI sampler of axis %s: %s", self.handle.id, self.error)
+
+    def _fall_back(self, exc: Exception) -> None:
+        self.error = f"trace: {type(exc).__name__}: {exc}; polling instead"
+        self.source = "poll"
+        log.warning("GUI sampler of axis %s: %s", self.handle.id, self.error)
 
     async def _run_trace(self) -> None:
         axis = self.handle.axis
@@ -155,7 +173,8 @@ class AxisSampler:
                     values.update({"enabled": float(st.enabled), "moving": float(st.moving),
                                    "in_position": float(st.in_position),
                                    "alarm": float(st.alarm)})
-                self.error = ""
+                if not self.error.startswith("trace:"):  # keep saying why it polls
+                    self.error = ""
             except ConnectionLost:
                 raise
             except ServobusError as exc:

@@ -11,18 +11,25 @@ connection closes (servobus.gui.state.GuiState.shut_down).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import ipaddress
 import secrets
+import signal
 import socket
+import threading
 import webbrowser
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
+from types import FrameType
 
 import uvicorn
+from starlette.applications import Starlette as ASGIApplication
 
 from servobus.errors import ArgumentRangeError
 from servobus.gui.app import create_app
 from servobus.gui.fleet import DEFAULT_URL, Fleet
+from servobus.gui.limits import UVICORN_LIMITS
+from servobus.gui.state import GuiState
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8080
@@ -68,8 +75,27 @@ def bind(host: str, port: int) -> socket.socket:
     return sock
 
 
-def serve(options: ServeOptions, say: Callable[[str], None]) -> None:
-    """Serve until interrupted (KeyboardInterrupt propagates after the shutdown)."""
+@dataclass
+class ServeOutcome:
+    """How the server ended: the signal that stopped it and the stop of every axis."""
+
+    signal: str | None = None  # "Ctrl-C", "SIGTERM"; None: the server ended by itself
+    halted: dict[int, BaseException | None] | None = None  # GuiState.halted
+
+
+def uvicorn_config(app: ASGIApplication) -> uvicorn.Config:
+    """How the GUI app is served (also by tests and benchmarks): quiet, bounded inputs."""
+    return uvicorn.Config(app, log_level="warning", lifespan="on", access_log=False,
+                          ws_per_message_deflate=False,  # scope frames do not compress
+                          **UVICORN_LIMITS)  # type: ignore[arg-type]
+
+
+def serve(options: ServeOptions, say: Callable[[str], None]) -> ServeOutcome:
+    """Serve until interrupted (Ctrl-C, SIGTERM); every axis is stopped before it returns.
+
+    Decision: an interrupt is how a server is meant to end, so it is an outcome here (the
+    command exits 0 on it), not an error; a stop that failed is in ``halted``.
+    """
     token = options.token
     loopback = is_loopback(options.host)
     if token is not None and not token.strip():
@@ -77,19 +103,48 @@ def serve(options: ServeOptions, say: Callable[[str], None]) -> None:
     if not loopback and token is None:
         token = secrets.token_urlsafe(18)
     sock = bind(options.host, options.port)
+    outcome = ServeOutcome()
     try:
-        asyncio.run(_serve(options, token, loopback, sock, say))
+        asyncio.run(_serve(options, token, loopback, sock, say, outcome))
+    except KeyboardInterrupt as exc:  # before the server listened (opening the drives)
+        outcome.signal = getattr(exc, "signal_name", "Ctrl-C")
     finally:
         sock.close()
+    return outcome
+
+
+class _Server(uvicorn.Server):
+    """uvicorn's server, except that Ctrl-C and SIGTERM are not raised again once it has
+    shut down: the GUI reports them as its outcome. (uvicorn re-raises them; under
+    asyncio.run a second Ctrl-C then cancels the shutdown half-way and logs tracebacks.)"""
+
+    def __init__(self, config: uvicorn.Config) -> None:
+        super().__init__(config)
+        self.signals: list[int] = []
+
+    @contextlib.contextmanager
+    def capture_signals(self) -> Iterator[None]:
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+        handled = (signal.SIGINT, signal.SIGTERM)
+        original = {sig: signal.signal(sig, self._on_signal) for sig in handled}
+        try:
+            yield
+        finally:
+            for sig, handler in original.items():
+                signal.signal(sig, handler)
+
+    def _on_signal(self, sig: int, frame: FrameType | None) -> None:
+        self.signals.append(sig)
+        self.handle_exit(sig, frame)
 
 
 async def _serve(options: ServeOptions, token: str | None, loopback: bool,
-                 sock: socket.socket, say: Callable[[str], None]) -> None:
+                 sock: socket.socket, say: Callable[[str], None], outcome: ServeOutcome) -> None:
     fleet = await Fleet.open(options.url, options.ids)
     app = create_app(fleet=fleet, token=token)
-    config = uvicorn.Config(app, log_level="warning", lifespan="on", access_log=False,
-                            ws_per_message_deflate=False)  # scope frames do not compress
-    server = uvicorn.Server(config)
+    server = _Server(uvicorn_config(app))
     port = sock.getsockname()[1]
     url = page_url(options.host, port, token)
 
@@ -113,3 +168,13 @@ async def _serve(options: ServeOptions, token: str | None, loopback: bool,
         await server.serve(sockets=[sock])
     finally:
         task.cancel()
+        if server.signals:
+            outcome.signal = "Ctrl-C" if server.signals[0] == signal.SIGINT else "SIGTERM"
+        gui: GuiState | None = getattr(app.state, "gui", None)
+        if gui is not None:
+            if not gui.closed:  # a second Ctrl-C: uvicorn skipped the app's shutdown
+                await server.lifespan.shutdown()
+            await gui.shut_down()  # done by the app's shutdown; here if even that failed
+            outcome.halted = gui.halted
+        else:
+            await fleet.close()

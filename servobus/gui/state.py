@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import asyncio
+import logging
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from servobus.errors import ServobusError
+from servobus.axis.base import AsyncAxis
+from servobus.axis.halt import halt
 from servobus.gui.fleet import Fleet
 from servobus.gui.jog import JogControl
 from servobus.gui.monitor import StatusMonitor
@@ -15,6 +18,8 @@ from servobus.gui.tuning import TuningState
 
 if TYPE_CHECKING:
     from servobus.gui.scope_session import ScopeSession
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -25,6 +30,9 @@ class GuiState:
     samplers: dict[int, AxisSampler]
     tuning: dict[int, TuningState]
     sessions: set[ScopeSession] = field(default_factory=set)
+    #: What the shutdown's stop gave per axis (None: stopped); None before the shutdown.
+    halted: dict[int, BaseException | None] | None = None
+    _closed: bool = False
 
     @classmethod
     def build(cls, fleet: Fleet, jog_lease_s: float) -> GuiState:
@@ -33,30 +41,60 @@ class GuiState:
                    samplers={i: AxisSampler(h) for i, h in fleet.handles.items()},
                    tuning={i: TuningState() for i in fleet.handles})
 
+    @property
+    def closed(self) -> bool:
+        """The shutdown has begun (servobus.gui.server checks it after a forced exit)."""
+        return self._closed
+
     def start(self) -> None:
         self.monitor.start()
         self.jog.start()
 
+    async def _stop(self, axis: AsyncAxis, timeout_s: float) -> None:
+        """One axis's stop, counted on its handle like every other call of the GUI."""
+        handle = self.fleet.get(axis.drive_id)
+        await handle.call(asyncio.wait_for(axis.stop(), timeout_s))
+
     async def stop_all(self) -> dict[int, str]:
         """STOP: every axis ramps down and holds (all at once); '' or the error per axis."""
         self.jog.forget()
-        handles = list(self.fleet.handles.values())
-        results = await asyncio.gather(*(h.call(h.axis.stop()) for h in handles),
-                                       return_exceptions=True)
-        out: dict[int, str] = {}
-        for h, r in zip(handles, results, strict=True):
-            if isinstance(r, BaseException) and not isinstance(r, ServobusError):
-                raise r
-            out[h.id] = "" if not isinstance(r, BaseException) else f"{type(r).__name__}: {r}"
-        return out
+        axes = {i: h.axis for i, h in self.fleet.handles.items()}
+        results = await halt(axes, stop=self._stop)
+        return {i: "" if r is None else f"{type(r).__name__}: {r}" for i, r in results.items()}
 
     async def shut_down(self) -> None:
-        """Stop the services, stop every axis (the GUI is going away), close the link."""
-        await self.jog.stop()
-        await self.monitor.stop()
-        for sampler in self.samplers.values():
-            await sampler.stop()
+        """The GUI is going away: stop every axis first, then the services, the link last.
+
+        The stop (servobus.axis.halt) comes before anything else and nothing can skip it:
+        it never raises for an axis and finishes under cancellation; jogs are refused from
+        the moment it starts. Then each service stops in its own try (a sampler that died
+        with an exception is logged, the others still stop) and the fleet closes last,
+        whatever happened before. A second call does nothing.
+        """
+        if self._closed:
+            return
+        self._closed = True
+        self.jog.close()  # no page can start a jog from here on
+        axes = {i: h.axis for i, h in self.fleet.handles.items()}
         try:
-            await self.stop_all()
+            self.halted = await halt(axes, stop=self._stop)
         finally:
-            await self.fleet.close()
+            steps: list[tuple[str, Callable[[], Awaitable[None]]]] = [
+                ("jog watchdog", self.jog.stop), ("status monitor", self.monitor.stop),
+                *((f"sampler of axis {i}", s.stop) for i, s in self.samplers.items()),
+                ("connection", self.fleet.close)]
+            await _each(steps)
+
+
+async def _each(steps: list[tuple[str, Callable[[], Awaitable[None]]]]) -> None:
+    """Run every step, each in its own try; a cancellation is passed on after the last."""
+    cancelled: asyncio.CancelledError | None = None
+    for name, step in steps:
+        try:
+            await step()
+        except asyncio.CancelledError as exc:
+            cancelled = exc
+        except Exception as exc:  # logged, and the next step still runs
+            log.error("GUI shutdown: %s failed: %s: %s", name, type(exc).__name__, exc)
+    if cancelled is not None:
+        raise cancelled

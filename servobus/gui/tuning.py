@@ -21,7 +21,6 @@ from datetime import UTC, datetime
 
 from servobus.errors import ArgumentRangeError, DriveTimeout, ServobusError
 from servobus.gui.fleet import AxisHandle
-from servobus.gui.ring import SampleRing
 from servobus.gui.sampler import AxisSampler
 from servobus.gui.step_metrics import step_metrics
 
@@ -49,12 +48,16 @@ class TuningState:
     runs: int = 0
 
 
-async def _wait_for(ring: SampleRing, t: float, timeout: float) -> None:
+async def _wait_for(sampler: AxisSampler, t: float, timeout: float) -> None:
+    """Until the sampler has samples up to ``t``; a sampler that stopped says why at once."""
+    ring = sampler.ring
     deadline = time.monotonic() + timeout
     while (ring.last_time or -math.inf) < t:
+        if not sampler.running:
+            raise ServobusError(f"no samples: {sampler.error or 'the sampling stopped'}")
         if time.monotonic() > deadline:
-            raise DriveTimeout(f"no samples up to the end of the step after {timeout:g} s "
-                               "(the link gives none)")
+            why = f": {sampler.error}" if sampler.error else " (the link gives none)"
+            raise DriveTimeout(f"no samples up to the end of the step after {timeout:g} s{why}")
         await asyncio.sleep(0.01)
 
 
@@ -75,7 +78,7 @@ async def run_step(handle: AxisHandle, sampler: AxisSampler, state: TuningState,
     token = sampler.subscribe(STEP_SIGNALS)
     try:
         pre_s = PRE_FRACTION * duration_s
-        await _wait_for(ring, time.monotonic() - 0.02, FRESH_TIMEOUT_S + pre_s)
+        await _wait_for(sampler, time.monotonic() - 0.02, FRESH_TIMEOUT_S + pre_s)
         await asyncio.sleep(pre_s)
         try:
             band = float(await handle.call(axis.position_window()))
@@ -88,7 +91,7 @@ async def run_step(handle: AxisHandle, sampler: AxisSampler, state: TuningState,
         if math.isnan(start):
             start = float(await handle.call(axis.position()))
         await handle.call(axis.move_by(distance))
-        await _wait_for(ring, t_cmd + duration_s, duration_s + FRESH_TIMEOUT_S)
+        await _wait_for(sampler, t_cmd + duration_s, duration_s + FRESH_TIMEOUT_S)
     finally:
         sampler.unsubscribe(token)
     i0, i1 = ring.index_at(t_cmd - pre_s), ring.index_at(t_cmd + duration_s)

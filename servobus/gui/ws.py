@@ -4,8 +4,10 @@ Messages from the page (JSON): ``jog`` {axis, rpm} (repeated while the button is
 ``jog_stop`` {axis}, ``stop_all``, ``scope`` {settings}, ``scope_run`` {running},
 ``scope_arm``, ``scope_csv``, ``ack`` {seq}, ``io_watch`` {axis or null}. To the page:
 ``hello``, ``status`` (every :data:`STATUS_PERIOD_S`), ``io`` (the watched axis's virtual
-outputs and state, as often), ``scope_state``, ``csv``, ``error``, ``stopped`` (JSON) and
-scope frames (binary, servobus.gui.frames).
+outputs and state, as often), ``scope_state``, ``csv``, ``error`` (``message``; ``request``:
+the type of the message it answers, ``received``: that message's start), ``stopped`` (JSON)
+and scope frames (binary, servobus.gui.frames). Message sizes and JSON nesting are bounded
+(servobus.gui.limits).
 
 When the WebSocket closes, for whatever reason, every jog of this page stops first.
 """
@@ -18,11 +20,13 @@ import itertools
 import json
 import logging
 import math
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Mapping
+from typing import Any
 
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from servobus.errors import ServobusError
+from servobus.gui import limits
 from servobus.gui.api_io import snapshot
 from servobus.gui.scope_session import ScopeSession, ScopeSettings
 from servobus.gui.state import GuiState
@@ -107,6 +111,38 @@ class PageLink:
         else:
             raise ValueError(f"unknown message type {kind!r}")
 
+    async def receive(self, message: Mapping[str, Any]) -> bool:
+        """Answer one message from the page; False when the socket was closed for it.
+
+        Every bad message gets an ``error`` naming that message (its type, and its start
+        in ``received``) and the session goes on; only one over the size limit closes the
+        socket (1009, servobus.gui.limits).
+        """
+        text = message.get("text")
+        data = message.get("bytes")
+        size = len(data) if isinstance(data, bytes) else len(str(text or "").encode())
+        if size > limits.MAX_MESSAGE_BYTES:
+            await self.ws.close(limits.CLOSE_TOO_BIG,
+                                f"message of {size} bytes: at most {limits.MAX_MESSAGE_BYTES}")
+            return False
+        if not isinstance(text, str):
+            await self.refuse("a binary message: the page sends JSON text", "", "(binary)")
+            return True
+        kind = ""
+        try:
+            doc = limits.loads(text)
+            if not isinstance(doc, dict):
+                raise ValueError("a message is a JSON object")
+            kind = str(doc.get("type", ""))
+            await self.handle(doc)
+        except (ValueError, ServobusError) as exc:
+            await self.refuse(str(exc), kind, limits.excerpt(text))
+        return True
+
+    async def refuse(self, text: str, kind: str, received: str) -> None:
+        await self.send_json({"type": "error", "message": text, "request": kind,
+                              "received": received})
+
     async def serve(self) -> None:
         gui = self.gui
         await self.ws.accept()
@@ -121,18 +157,10 @@ class PageLink:
                 message = await self.ws.receive()
                 if message["type"] == "websocket.disconnect":
                     break
-                text = message.get("text")
-                if text is None:
-                    continue  # the page sends no binary messages: ignored
-                try:
-                    doc = json.loads(text)
-                    if not isinstance(doc, dict):
-                        raise ValueError("a message is a JSON object")
-                    await self.handle(doc)
-                except (ValueError, ServobusError) as exc:
-                    await self.send_json({"type": "error", "message": str(exc),
-                                          "request": str(doc.get("type")
-                                                         if isinstance(doc, dict) else "")})
+                if not await self.receive(message):
+                    break
+                # a page that floods: its queued messages wait for the others' turn
+                await asyncio.sleep(0)
         except (WebSocketDisconnect, RuntimeError):
             pass  # the page went away (closed, reloaded, network dropped)
         finally:

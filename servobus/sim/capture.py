@@ -11,6 +11,12 @@ every VirtualDrive created while it is active (``VirtualDrive.__init__`` calls
 :func:`note_created`), so ``servobus.sim.schemes`` gives each opened axis a
 :class:`SimCapture` without knowing the protocol.
 
+What is recorded is a :class:`Traced`: a DMM VirtualDrive as it is (:class:`DriveTrace`: its
+id, its counts), or a motor of another family built on one (a YZ-AIM motor: its own address,
+its own counts and offset, its own alarm), which replaces its core with :func:`note_front`.
+The host asks by the id it talks to, so several YZ-AIM motors on one bus (whose cores all
+have id 0) each give their own trace.
+
 Time: a drive's simulated time runs at wall-clock rate from a fixed offset
 (servobus.sim.realtime); the offset is ``monotonic() - drive.time`` at the first read of the
 drive and stays fixed, so sample times only ever grow (the drive lags the wall clock by at
@@ -24,7 +30,7 @@ from array import array
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from contextvars import ContextVar
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from servobus.axis.capture import SIGNALS, Capture, status_bits
 from servobus.errors import ArgumentRangeError
@@ -40,14 +46,52 @@ CAPACITY = 2 * CONTROL_HZ
 #: recorded until then is still handed out by the next read.
 IDLE_STOP_S = 2.0
 
-_created: ContextVar[list[VirtualDrive] | None] = ContextVar("servobus_sim_created",
-                                                             default=None)
+
+
+class Traced(Protocol):
+    """What a trace records every control period of its core :attr:`drive`."""
+
+    @property
+    def drive(self) -> VirtualDrive: ...
+
+    @property
+    def trace_id(self) -> int:
+        """The id the host addresses it by."""
+
+    @property
+    def counts_per_rev(self) -> int: ...
+
+    def trace_sample(self) -> tuple[float, float, float, float, int]:
+        """Position, position error (counts), speed (rpm), current (A), status bits."""
+
+
+class DriveTrace:
+    """A DMM VirtualDrive as the host sees it: its own id and counts."""
+
+    __slots__ = ("drive",)
+    counts_per_rev = U.COUNTS_PER_REV
+
+    def __init__(self, drive: VirtualDrive) -> None:
+        self.drive = drive
+
+    @property
+    def trace_id(self) -> int:
+        return self.drive.drive_id
+
+    def trace_sample(self) -> tuple[float, float, float, float, int]:
+        d = self.drive
+        return (d.position, d.position_error, d.speed_rpm, d.current_a,
+                status_bits(*d.trace_flags()))
+
+
+_created: ContextVar[list[Traced] | None] = ContextVar("servobus_sim_created", default=None)
 
 
 @contextmanager
-def collecting() -> Iterator[list[VirtualDrive]]:
-    """Every VirtualDrive created inside the block (same task context) lands in the list."""
-    made: list[VirtualDrive] = []
+def collecting() -> Iterator[list[Traced]]:
+    """Every VirtualDrive (or front, :func:`note_front`) created inside the block (same task
+    context) lands in the list."""
+    made: list[Traced] = []
     token = _created.set(made)
     try:
         yield made
@@ -58,14 +102,24 @@ def collecting() -> Iterator[list[VirtualDrive]]:
 def note_created(drive: VirtualDrive) -> None:
     made = _created.get()
     if made is not None:
-        made.append(drive)
+        made.append(DriveTrace(drive))
+
+
+def note_front(front: Traced) -> None:
+    """``front`` (a motor built on ``front.drive``) is what the host sees of that drive."""
+    made = _created.get()
+    if made is not None:
+        made[:] = [t for t in made if t.drive is not front.drive]
+        made.append(front)
 
 
 class Recorder:
     """One drive's trace while it is read: a per-period observer with bounded buffers."""
 
-    def __init__(self, drive: VirtualDrive) -> None:
+    def __init__(self, traced: Traced) -> None:
+        drive = traced.drive
         self.drive = drive
+        self._sample = traced.trace_sample
         self.first_period = drive.periods + 1  # period whose end the first sample shows
         self.lost = 0
         self.last_read = drive.periods
@@ -84,11 +138,12 @@ class Recorder:
         if drive.periods - self.last_read > IDLE_STOP_S * CONTROL_HZ:
             drive.period_observer = None  # nobody reads: stop costing CPU
             return
-        self._pos.append(drive.position)
-        self._err.append(drive.position_error)
-        self._speed.append(drive.speed_rpm)
-        self._current.append(drive.current_a)
-        self._status.append(status_bits(*drive.trace_flags()))
+        position, error, speed, current, status = self._sample()
+        self._pos.append(position)
+        self._err.append(error)
+        self._speed.append(speed)
+        self._current.append(current)
+        self._status.append(status)
         if len(self._pos) >= 2 * CAPACITY:  # amortised: trim in blocks
             self._drop(len(self._pos) - CAPACITY)
 
@@ -114,31 +169,43 @@ class Recorder:
         return first, signals, lost
 
 
+def _traced(item: VirtualDrive | Traced) -> Traced:
+    from servobus.sim.drive import VirtualDrive  # drive imports this module
+
+    return DriveTrace(item) if isinstance(item, VirtualDrive) else item
+
+
 class SimCapture:
     """The CaptureSource of an in-process virtual line or bus (servobus.axis.capture)."""
 
-    def __init__(self, drives: Sequence[VirtualDrive]) -> None:
-        self.drives = list(drives)
+    def __init__(self, drives: Sequence[VirtualDrive | Traced]) -> None:
+        self.traced: list[Traced] = [_traced(d) for d in drives]
         self._recorders: dict[int, Recorder] = {}  # id(drive) -> recorder
         self._offset: dict[int, float] = {}  # id(drive) -> monotonic - simulated time
 
-    def _drive(self, drive_id: int) -> VirtualDrive:
-        for drive in self.drives:
-            if drive.drive_id == drive_id:
-                return drive
-        if len(self.drives) == 1:  # a front end that keeps its own id (YZ-AIM)
-            return self.drives[0]
+    @property
+    def drives(self) -> list[VirtualDrive]:
+        """The virtual drives recorded (a YZ-AIM motor's core drive)."""
+        return [t.drive for t in self.traced]
+
+    def _find(self, drive_id: int) -> Traced:
+        for traced in self.traced:
+            if traced.trace_id == drive_id:
+                return traced
+        if len(self.traced) == 1:  # one drive on the line: whatever id it is asked by
+            return self.traced[0]
         raise ArgumentRangeError(f"no virtual drive {drive_id} on this line")
 
     def read(self, drive_id: int) -> Capture:
-        drive = self._drive(drive_id)
+        traced = self._find(drive_id)
+        drive = traced.drive
         key = id(drive)
         offset = self._offset.setdefault(key, time.monotonic() - drive.time)
         rec = self._recorders.get(key)
         if rec is None:
-            rec = self._recorders[key] = Recorder(drive)
+            rec = self._recorders[key] = Recorder(traced)
         elif not rec.active:  # stopped unread: hand out what it kept, then record afresh
-            self._recorders[key] = Recorder(drive)
+            self._recorders[key] = Recorder(traced)
         first, signals, lost = rec.take()
         return Capture(t0=offset + first / CONTROL_HZ, rate_hz=float(CONTROL_HZ),
-                       counts_per_rev=U.COUNTS_PER_REV, signals=signals, lost=lost)
+                       counts_per_rev=traced.counts_per_rev, signals=signals, lost=lost)

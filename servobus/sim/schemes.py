@@ -42,10 +42,10 @@ async def open_axis(url: DriveUrl, *, drive_id: int | None = None, **keywords: A
             f"no virtual drive {name!r} in {url.raw!r}; known: sim://"
             + ", sim://".join(sorted(sim_protocols())))
     opener = registry.load(target)
-    with capture.collecting() as drives:  # the virtual drives this axis talks to
+    with capture.collecting() as traced:  # the virtual drives (or motors) this axis talks to
         axis: AsyncAxis = await opener(url, drive_id=drive_id, **keywords)
-    if drives and axis.capture_source is None:
-        axis.capture_source = capture.SimCapture(drives)  # trace_buffer(): their 4 kHz trace
-    if drives and axis.io_source is None and virtual_io.has_jp3(axis.family.name):
-        axis.io_source = virtual_io.SimIoSource(drives)  # virtual_io(): their JP3 I/O
+    if traced and axis.capture_source is None:
+        axis.capture_source = capture.SimCapture(traced)  # trace_buffer(): their 4 kHz trace
+    if traced and axis.io_source is None and virtual_io.has_jp3(axis.family.name):
+        axis.io_source = virtual_io.SimIoSource([t.drive for t in traced])  # their JP3 I/O
     return axis

@@ -74,8 +74,11 @@ import math
 from collections.abc import Sequence
 from enum import IntEnum
 
+from servobus.axis.capture import status_bits
 from servobus.errors import ServobusError
 from servobus.families import yzaim
+from servobus.families.yzaim_family import MOVING_RPM
+from servobus.sim import capture
 from servobus.sim import yzaim_physics as phys
 from servobus.sim.drive import VirtualDrive
 from servobus.sim.yzaim_store import YzaimStore
@@ -127,6 +130,7 @@ class YzaimMotor:
                 self.store.registers["gear_numerator"] = 0
         core = phys.core_model(self.model)
         self.drive = VirtualDrive(0, model=core)
+        capture.note_front(self)  # sim:// traces this motor, not its core (id 0, DMM counts)
         self.drive.set_protections(False)
         self.peak_a = core.peak_current_a
         self.refused_writes = 0  # writes not applied (range, access, modbus_enable 0)
@@ -588,6 +592,28 @@ class YzaimMotor:
                 self._take_cache()
             self._cache_due = self._at
             self._next_tick = self._at + TICK_S
+
+    # ---------------------------------------------------------------- 4 kHz trace
+    # What servobus.sim.capture records of this motor (trace_buffer() on sim://easycan and
+    # sim://modbus): its address, its counts and offset, its alarm - not its core drive's.
+    counts_per_rev = yzaim.COUNTS_PER_REV
+
+    @property
+    def trace_id(self) -> int:
+        return self.address
+
+    def trace_sample(self) -> tuple[float, float, float, float, int]:
+        """Position, following error (counts), speed, current, status bits; the status bits
+        as the Axis reads them (servobus.families.yzaim_family.axis_status)."""
+        drive = self.drive
+        position = drive.position / phys.CORE_PER_COUNT + self._offset
+        speed = drive.speed_rpm
+        near = abs(self.target - position) <= yzaim.POSITION_TOLERANCE_COUNTS
+        moving = abs(speed) >= MOVING_RPM or not near
+        stops = self._alarm != 0 and self.alarm.stops_motor
+        return (position, drive.position_error / phys.CORE_PER_COUNT, speed, drive.current_a,
+                status_bits(self._ram["output_enable"] == 1 and not stops, moving, near,
+                            self._alarm != 0))
 
 
 _ALARM = yzaim.ALARM_BY_NAME

@@ -16,7 +16,9 @@ from servobus.sim.drive import VirtualDrive
 pytestmark = pytest.mark.timeout(60)
 
 
-@pytest.mark.parametrize("url", ["sim://dyn232?ids=1,2&fast=1", "sim://dyncan?ids=1,2&fast=1"])
+@pytest.mark.parametrize("url", ["sim://dyn232?ids=1,2&fast=1", "sim://dyncan?ids=1,2&fast=1",
+                                 # YZ-AIM: several motors whose cores all have id 0 (issue 17.2)
+                                 "sim://easycan?ids=1,2&fast=1", "sim://modbus?ids=1,2&fast=1"])
 async def test_trace_of_a_move_in_axis_units_with_continuous_times(url: str) -> None:
     axis = await connect_async(url, drive_id=1)
     other = await axis.sibling(2)

@@ -53,11 +53,11 @@ CHROME_ARGS = ("--headless=new", "--no-sandbox", "--disable-gpu",
 
 
 # ------------------------------------------------------------------ fixtures
-@pytest.fixture(scope="module")
-def server() -> Iterator[str]:
+def serve(*args: str) -> Iterator[str]:
+    """``servobus gui --port 0 --no-browser ARGS``: its URL, then a Ctrl-C at the end."""
     proc = subprocess.Popen([sys.executable, "-m", "servobus", "gui", "--port", "0",
-                             "--no-browser"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+                             "--no-browser", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
     lines: queue.Queue[str] = queue.Queue()
     threading.Thread(target=lambda: [lines.put(x) for x in proc.stdout or ()],
                      daemon=True).start()
@@ -72,6 +72,11 @@ def server() -> Iterator[str]:
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+
+
+@pytest.fixture(scope="module")
+def server() -> Iterator[str]:
+    yield from serve()
 
 
 @pytest.fixture(scope="module")
@@ -321,3 +326,95 @@ def test_io_panel_drives_the_analog_input_in_analog_speed_mode(page: WebDriver,
     wait_until(lambda: abs(status(server, 2)["speed"]) < 1, timeout=5, what="0 V stops")
     api(server, "/api/axes/2/config", {"command_mode": "rs232", "servo_mode": "position"})
     page.find_element(By.CSS_SELECTOR, '.axis-card[data-axis="1"]').click()
+
+
+# ------------------------------------------------------------------ every protocol
+PROTOCOLS = ("dyn232", "dyncan", "enip", "easycan", "modbus")
+
+
+@pytest.fixture(scope="module", params=PROTOCOLS)
+def any_server(request: pytest.FixtureRequest) -> Iterator[str]:
+    """A GUI on two virtual drives of each sim:// protocol (dyn232: the module's server)."""
+    if request.param == "dyn232":
+        yield request.getfixturevalue("server")
+        return
+    yield from serve("--url", f"sim://{request.param}?fast=1", "--ids", "1,2")
+
+
+def test_scope_and_step_test_on_every_protocol(any_server: str, browser: WebDriver) -> None:
+    """Issue 17.2: the scope reads the drive trace and the step test measures, whatever the
+    protocol (YZ-AIM once gave "polled 0 Hz - no data yet" and a 504)."""
+    browser.get(any_server)
+    wait_until(lambda: js(browser, "return window.servobus && window.servobus.link.open"),
+               timeout=10, what="page ready")
+    tab(browser, "scope")
+    scope_status = browser.find_element(By.ID, "scope-status")
+    wait_until(lambda: "drive trace 4,000 Hz" in scope_status.text, timeout=10,
+               what=f"the drive trace in the scope's status ({scope_status.text!r})")
+    wait_until(lambda: js(browser, "return window.servobus.scope.stats.frames") > 3,
+               what="scope frames")
+    assert not browser.find_elements(By.CSS_SELECTOR, "#scope-status .sampler-error")
+    tab(browser, "tuning")
+    msg = browser.find_element(By.ID, "tuning-msg")
+    wait_until(lambda: browser.find_element(By.ID, "step-plus").is_enabled(), what="step button")
+    browser.find_element(By.ID, "step-plus").click()
+    wait_until(lambda: msg.get_attribute("data-overshoot"), timeout=10,
+               what=f"a step result ({msg.text!r})")
+    assert "drive trace 4,000 Hz" in msg.text, msg.text
+    assert float(msg.get_attribute("data-overshoot") or "nan") >= 0.0
+
+
+@pytest.fixture
+def broken_sampler_server() -> Iterator[str]:
+    """The GUI in this process (uvicorn on a thread) whose axis 3 can give no samples at
+    all: its trace and its polling both fail with a bug."""
+    import asyncio
+
+    import uvicorn
+
+    from servobus.gui.app import create_app
+    from servobus.gui.server import bind, uvicorn_config
+
+    app = create_app()
+    sock = bind("127.0.0.1", 0)
+    srv = uvicorn.Server(uvicorn_config(app))
+    thread = threading.Thread(target=lambda: asyncio.run(srv.serve(sockets=[sock])),
+                              daemon=True)
+    thread.start()
+    wait_until(lambda: srv.started, timeout=20, what="the GUI server started")
+
+    async def trace_bug() -> None:
+        raise RuntimeError("trace bug")
+
+    async def poll_bug() -> None:
+        raise RuntimeError("poll bug")
+
+    sampler = app.state.gui.samplers[3]  # not started until a page subscribes
+    sampler.handle.axis.trace_buffer = trace_bug
+    sampler._run_poll = poll_bug
+    try:
+        yield f"http://127.0.0.1:{sock.getsockname()[1]}/"
+    finally:
+        srv.should_exit = True
+        thread.join(timeout=15)
+        sock.close()
+
+
+def test_a_sampler_that_stops_shows_why_on_the_page(broken_sampler_server: str,
+                                                    browser: WebDriver) -> None:
+    """Issue 17.2: never "no data yet" forever without a word."""
+    browser.get(broken_sampler_server)
+    wait_until(lambda: js(browser, "return window.servobus && window.servobus.link.open"),
+               timeout=10, what="page ready")
+    tab(browser, "scope")
+    js(browser, """const s = window.servobus.scope;
+        s.channels = [{axis: 3, signal: "position"}];
+        s.renderChannels(); s.build(); s.configure();""")
+    shown = wait_until(lambda: js(browser, "const e = document.querySelector("
+                                           "'#scope-status .sampler-error');"
+                                           "return e && e.textContent"),
+                       timeout=10, what="the sampler's error on the page")
+    assert "A3 sampling stopped: RuntimeError: poll bug" in shown
+    color = browser.find_element(By.CSS_SELECTOR, "#scope-status .sampler-error"
+                                 ).value_of_css_property("color")
+    assert color != browser.find_element(By.ID, "scope-status").value_of_css_property("color")

@@ -333,10 +333,17 @@ export class ScopePanel {
     else if (f && (f.flags & FLAG_FREE_RUN)) state = "auto: no trigger, free-running";
     else if (f && (f.flags & FLAG_TRIGGERED)) state = `${s.mode}: triggered`;
     else state = `${s.mode}: waiting for trigger`;
-    const src = (s.sources || []).map((x) => `A${x.axis} ${x.source === "trace" ? "drive trace" : "polled"} ${fmt(x.rate_hz)} Hz${x.error ? ` (${x.error})` : ""}`).join(", ");
+    const sources = s.sources || [];
+    const src = sources.filter((x) => x.running || !x.error).map((x) => {
+      const kind = x.source === "trace" ? "drive trace" : x.source === "poll" ? "polled" : "starting";
+      return `A${x.axis} ${kind} ${fmt(x.rate_hz)} Hz${x.error ? ` (${x.error})` : ""}`;
+    }).join(", ");
+    // a sampler that stopped says why, in the status line, in the error colour (never silent)
+    const stopped = sources.filter((x) => !x.running && x.error)
+      .map((x) => el("span", { class: "sampler-error", text: ` · A${x.axis} ${x.error}` }));
     const lat = s.latency_ms ? `delay ${s.latency_ms.median.toFixed(0)} ms (p95 ${s.latency_ms.p95.toFixed(0)})` : "";
-    $("#scope-status").replaceChildren(el("span", { class: "state", text: state }),
-      ` · ${src} · ${f ? `${f.raw.toLocaleString("en-US")} samples in view` : "no data yet"} · ${this.stats.fps} frames/s drawn ${lat ? "· " + lat : ""}`);
+    $("#scope-status").replaceChildren(el("span", { class: "state", text: state }), ...stopped,
+      `${src ? " · " + src : ""} · ${f ? `${f.raw.toLocaleString("en-US")} samples in view` : "no data yet"} · ${this.stats.fps} frames/s drawn ${lat ? "· " + lat : ""}`);
     if (this.cursorA !== null || this.cursorB !== null) this.renderCursors();
   }
 
