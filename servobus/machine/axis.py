@@ -94,6 +94,11 @@ class AsyncMachineAxis:
         """``speed`` of the file, user units per second (turn's and the GUI jog's default)."""
         return self.spec.speed
 
+    @property
+    def watching(self) -> bool:
+        """A limit watcher of a ``turn`` runs (it ends when it stopped the axis)."""
+        return self._watcher is not None and not self._watcher.done()
+
     def core(self) -> AsyncAxis:
         """The underlying Axis, or MachineLinkError naming the axis and its URL."""
         if self.axis is None:
