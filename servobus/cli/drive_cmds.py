@@ -88,6 +88,8 @@ def status_record(axis: Axis, status: AxisStatus) -> dict[str, object]:
 def render_status(con: Console, record: dict[str, object], title: str) -> None:
     nested = ("config", "vendor_status")
     top = {k: v for k, v in record.items() if k not in (*nested, "drive_id", "protocol")}
+    if top.get("alarm") == "":  # people read an empty field as "not read"
+        top["alarm"] = "none"
     con.print(kv_text(title, top), markup=False)
     for key in nested:
         block = record.get(key)

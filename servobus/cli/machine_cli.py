@@ -142,7 +142,8 @@ def status(ctx: CliContext) -> None:
         machine.close(stop=False)
     if ctx.machine_path is None:
         note_builtin_machine_once()
-    emit(ctx, {"machine": name, "axes": records}, lambda con: _table(con, name, records))
+    emit(ctx, {"machine": name, "axes": records},
+         lambda con: render_machine_table(con, name, records))
     offline = [str(r["axis"]) for r in records if not r["online"]]
     if offline:
         raise CliError(f"axes offline: {', '.join(offline)} "
@@ -150,7 +151,7 @@ def status(ctx: CliContext) -> None:
                        "check those links (power, cable, URL in the machine file)")
 
 
-def _table(con: Console, name: str, records: list[dict[str, object]]) -> None:
+def render_machine_table(con: Console, name: str, records: list[dict[str, object]]) -> None:
     """Plain columns (no wrapping or ellipsis whatever the terminal width)."""
     head = ("axis", "position", "counts", "enabled", "moving", "in_pos", "alarm", "link")
     rows: list[tuple[str, ...]] = []
