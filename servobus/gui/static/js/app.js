@@ -41,7 +41,7 @@ async function main() {
   const link = new Link();
   const ctx = new Context(info, link);
   window.servobus = ctx;  // for people poking around, and for the browser tests
-  $("#conn-url").textContent = info.url;
+  $("#conn-url").textContent = info.machine ? `machine ${info.machine} · ${info.url}` : info.url;
   link.onState((state) => {
     const node = $("#conn");
     node.dataset.state = state;

@@ -112,7 +112,7 @@ export class MotionPanel {
       item(`${axisLabel(this.ctx.identity(this.ctx.selected))} position`,
         s.unit !== undefined ? `${fmt(s.user_position)} ${s.unit}` : `${fmt(s.position)} counts`),
       item("revolutions", s.revolutions === undefined ? "–" : s.revolutions.toFixed(4)),
-      item("speed", `${fmt(s.speed)} rpm`),
+      item("speed", s.unit !== undefined ? `${fmt(s.user_speed)} ${s.speed_unit}` : `${fmt(s.speed)} rpm`),
       item("current", `${fmt(s.current)} A`),
       item("state", s.link ? "link error" : s.alarm_code ? `ALARM ${s.alarm_code}` :
         `${s.enabled ? "enabled" : "disabled"}${s.moving ? ", moving" : ""}${s.in_position ? ", in position" : ""}`, false));
