@@ -26,7 +26,7 @@ import logging
 import math
 from typing import TYPE_CHECKING
 
-from servobus.errors import LimitError, MachineLinkError, NotSupported
+from servobus.errors import ArgumentRangeError, LimitError, MachineLinkError, NotSupported
 from servobus.machine.config import AxisSpec
 from servobus.machine.units import Scale
 
@@ -123,8 +123,8 @@ class AsyncMachineAxis:
         """``target`` (user units) inside the limits, else LimitError; nothing is sent."""
         if isinstance(target, bool) or not isinstance(target, int | float) \
                 or not math.isfinite(target):
-            raise LimitError(f"axis {self.name}: a target must be a finite number of "
-                             f"{self.unit}, got {target!r}")
+            raise ArgumentRangeError(f"axis {self.name}: a target must be a finite number "
+                                     f"of {self.unit}, got {target!r}")
         if self.limits is not None:
             low, high = self.limits
             if not low <= target <= high:
@@ -161,8 +161,8 @@ class AsyncMachineAxis:
         """Relative move by ``distance`` user units; the end point is checked first."""
         if isinstance(distance, bool) or not isinstance(distance, int | float) \
                 or not math.isfinite(distance):
-            raise LimitError(f"axis {self.name}: a distance must be a finite number of "
-                             f"{self.unit}, got {distance!r}")
+            raise ArgumentRangeError(f"axis {self.name}: a distance must be a finite "
+                                     f"number of {self.unit}, got {distance!r}")
         if self.limits is not None:
             low, high = self.limits
             if abs(distance) > high - low:
@@ -180,12 +180,13 @@ class AsyncMachineAxis:
         if speed is None:
             speed = self.spec.speed
             if speed is None:
-                raise LimitError(f"axis {self.name}: give a speed in {self.speed_unit} (the "
-                                 "machine file sets no default speed)")
+                raise ArgumentRangeError(f"axis {self.name}: give a speed in "
+                                         f"{self.speed_unit} (the machine file sets no "
+                                         "default speed)")
         if isinstance(speed, bool) or not isinstance(speed, int | float) \
                 or not math.isfinite(speed):
-            raise LimitError(f"axis {self.name}: a speed must be a finite number of "
-                             f"{self.speed_unit}, got {speed!r}")
+            raise ArgumentRangeError(f"axis {self.name}: a speed must be a finite number "
+                                     f"of {self.speed_unit}, got {speed!r}")
         rpm = round(self.scale.to_rpm(speed))
         if rpm == 0:
             await self.stop()

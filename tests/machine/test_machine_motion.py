@@ -86,7 +86,7 @@ async def test_limits_are_refused_before_the_wire(tmp_path: Path) -> None:
             await x.move_by(400.0)  # longer than the travel: no read either
         with pytest.raises(LimitError):
             await m.move_together({"x": 10.0, "c": 721.0})
-        with pytest.raises(LimitError):
+        with pytest.raises(ArgumentRangeError, match="finite number"):
             await x.move_to(float("nan"))
         assert sent == []
         assert isinstance(LimitError("x"), ArgumentRangeError)
@@ -251,3 +251,15 @@ def test_builtin_machine_mixes_vendors() -> None:
         assert m.path is None
         assert {(a.name, a.unit, a.protocol) for a in m.axes.values()} == {
             ("x", "mm", "dyn232"), ("y", "mm", "dyn232"), ("c", "deg", "easycan")}
+
+
+async def test_the_guard_stops_motion_started_around_the_machine(tmp_path: Path) -> None:
+    text = ('[axes.c]\nurl = "sim://easycan?fast=1"\nid = 1\nunit = "deg"\n'
+            "limits = [-10.0, 90.0]\n")
+    async with await open_machine_async(write_machine(tmp_path, text)) as m:
+        c = m["c"]
+        m.guard_limits(period=0.01)
+        await c.core().turn(60)  # the Axis itself, as a GUI jog does: the machine not asked
+        await wait_until_async(lambda: _stopped_past(c, 90.0), timeout=10,
+                               what="the guard stops c past its limit")
+        assert await c.position() < 150.0
