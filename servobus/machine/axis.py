@@ -287,9 +287,9 @@ class AsyncMachineAxis:
             home = getattr(self.core(), "home", None)
             if home is None:
                 core = self.core()
-                raise NotSupported(f"axis {self.name}: {core.family.title} over "
-                                   f"{core.protocol} has no homing; use origin = \"set\"",
-                                   family=core.family.name)
+                raise NotSupported(f"{self.source}: axis {self.name}: origin: "
+                                   f"{core.family.title} over {core.protocol} has no "
+                                   "homing; use origin = \"set\"", family=core.family.name)
             await home()
 
     async def _closed(self) -> None:

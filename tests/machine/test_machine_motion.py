@@ -13,7 +13,7 @@ from machine_rig import write_machine
 
 import servobus
 from servobus.axis import registry
-from servobus.errors import ArgumentRangeError, LimitError, MachineLinkError
+from servobus.errors import ArgumentRangeError, LimitError, MachineLinkError, NotSupported
 from servobus.machine import AsyncMachine, open_machine_async, parse_quantity
 from servobus.transport.base import Direction
 
@@ -263,3 +263,26 @@ async def test_the_guard_stops_motion_started_around_the_machine(tmp_path: Path)
         await wait_until_async(lambda: _stopped_past(c, 90.0), timeout=10,
                                what="the guard stops c past its limit")
         assert await c.position() < 150.0
+
+
+async def test_origin_rules_at_start_up(tmp_path: Path,
+                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    from servobus.machine import AsyncMachineAxis
+
+    calls: list[str] = []
+    real = AsyncMachineAxis.set_origin
+
+    async def counted(self: AsyncMachineAxis) -> None:
+        calls.append(self.name)
+        await real(self)
+
+    monkeypatch.setattr(AsyncMachineAxis, "set_origin", counted)
+    text = ('[axes.c]\nurl = "sim://easycan?fast=1"\nid = 1\nunit = "deg"\n'
+            'origin = "set"\n[axes.x]\nurl = "sim://dyn232?fast=1"\nunit = "rev"\n')
+    async with await open_machine_async(write_machine(tmp_path, text)) as m:
+        assert calls == ["c"]  # x has no origin rule
+        assert await m["c"].position() == 0.0
+    path = write_machine(tmp_path, text.replace('"set"', '"home"'))
+    with pytest.raises(NotSupported, match=r"m\.toml: axis c: origin: .* has no homing") as info:
+        await open_machine_async(path)
+    assert "\n" not in str(info.value)
