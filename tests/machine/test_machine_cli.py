@@ -135,3 +135,21 @@ def test_params_reach_the_axis_of_the_machine(run: Run, tmp_path: Path) -> None:
     doc = json.loads(out)
     assert (doc["family"], doc["drive_id"]) == ("yzaim", 1)  # the c axis answered
     assert "target_speed" in doc["params"]
+
+
+def test_status_marks_an_unreachable_link_offline_and_exits_2(run: Run, tmp_path: Path) -> None:
+    import machine_rig
+
+    from servobus.axis import registry
+
+    registry.register("flaky", "machine_rig:flaky_open")
+    machine_rig.FLAKY.update(down=True, attempts=0)
+    text = machine_rig.MIXED + '\n[axes.z]\nurl = "flaky://line"\nid = 3\nunit = "rev"\n'
+    m = str(write_machine(tmp_path, text))
+    code, out, err = run("--machine", m, "status")
+    assert code == 2 and err.count("\n") == 1 and "axes offline: z" in err
+    row = next(line for line in out.splitlines() if line.startswith("z "))
+    assert "flaky://line id 3 OFFLINE" in row
+    assert [line.split()[0] for line in out.splitlines()[2:]] == ["x", "y", "c", "z"]
+    code, _, err = run("--machine", m, "--axis", "z", "position")
+    assert code == 2 and "axis z: cannot open flaky://line" in err

@@ -118,3 +118,24 @@ def test_servobus_gui_machine_serves_both_links(tmp_path: Path) -> None:
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=10)
     assert proc.returncode == 130 and "every axis was stopped" in err
+
+
+def test_an_offline_axis_shows_its_link_error_and_stop_all_goes_on(tmp_path: Path) -> None:
+    import machine_rig
+
+    from servobus.axis import registry
+
+    registry.register("flaky", "machine_rig:flaky_open")
+    machine_rig.FLAKY.update(down=True, attempts=0)
+    text = machine_rig.MIXED + '\n[axes.z]\nurl = "flaky://line"\nid = 3\nunit = "rev"\n'
+    with TestClient(create_app(machine=write_machine(tmp_path, text)), base_url=BASE) as c:
+        info = c.get("/api/info").json()
+        z = info["axes"][3]
+        assert (z["name"], z["online"], z["family_title"]) == ("z", False, "offline")
+        wait_until(lambda: "offline" in status(c, 4).get("link", ""), what="z's link error")
+        answer = c.post("/api/stop_all", json={}).json()
+        assert answer["failed"] == [4] and "offline" in answer["axes"]["4"]
+        machine_rig.FLAKY["down"] = False
+        wait_until(lambda: "position" in status(c, 4) and not status(c, 4)["link"],
+                   timeout=10, what="z back online")
+        assert status(c, 4)["unit"] == "rev"
