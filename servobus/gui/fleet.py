@@ -15,6 +15,7 @@ page for its identity). The machine's guard stops a jog or wave at a soft limit.
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,13 +36,17 @@ DEFAULT_IDS = (1, 2, 3)
 
 
 class _OfflineAxis:
-    """Stands in for the Axis of an offline machine axis: every call raises its
-    MachineLinkError when awaited (so STOP ALL and the monitor go on with the others)."""
+    """Stands in for the Axis of an offline machine axis: a coroutine method raises its
+    MachineLinkError when awaited (so STOP ALL and the monitor go on with the others);
+    anything else (family, parameters(), ...) raises it at once."""
 
     def __init__(self, machine_axis: AsyncMachineAxis) -> None:
         self._machine_axis = machine_axis
 
     def __getattr__(self, name: str) -> Callable[..., Awaitable[object]]:
+        if not inspect.iscoroutinefunction(getattr(AsyncAxis, name, None)):
+            self._machine_axis.core()  # raises MachineLinkError
+
         async def offline(*args: object, **kwargs: object) -> object:
             return self._machine_axis.core()  # raises MachineLinkError
 

@@ -135,6 +135,8 @@ def test_an_offline_axis_shows_its_link_error_and_stop_all_goes_on(tmp_path: Pat
         wait_until(lambda: "offline" in status(c, 4).get("link", ""), what="z's link error")
         answer = c.post("/api/stop_all", json={}).json()
         assert answer["failed"] == [4] and "offline" in answer["axes"]["4"]
+        r = c.get("/api/axes/4/params")  # a page asking the offline axis: a typed answer
+        assert r.status_code == 503 and "axis z is offline (flaky://line)" in r.json()["error"]
         machine_rig.FLAKY["down"] = False
         wait_until(lambda: "position" in status(c, 4) and not status(c, 4)["link"],
                    timeout=10, what="z back online")
