@@ -9,6 +9,9 @@ from servobus.errors import (
     DriveTimeout,
     EepromGuardError,
     FramingError,
+    LimitError,
+    MachineFileError,
+    MachineLinkError,
     NotSupported,
     ProtocolError,
     ServobusError,
@@ -24,6 +27,7 @@ __version__ = "0.1.0"
 TYPE_CHECKING = False
 if TYPE_CHECKING:
     from servobus.axis.connect import connect, connect_async
+    from servobus.machine import open_machine, open_machine_async
 else:
     def __getattr__(name: str) -> object:
         """``servobus.connect`` / ``connect_async``, imported on first use."""
@@ -31,6 +35,10 @@ else:
             import importlib
 
             return getattr(importlib.import_module("servobus.axis.connect"), name)
+        if name in ("open_machine", "open_machine_async"):  # servobus.machine, on first use
+            import importlib
+
+            return getattr(importlib.import_module("servobus.machine"), name)
         raise AttributeError(f"module 'servobus' has no attribute {name!r}")
 
 __all__ = [
@@ -42,10 +50,15 @@ __all__ = [
     "DriveTimeout",
     "EepromGuardError",
     "FramingError",
+    "LimitError",
+    "MachineFileError",
+    "MachineLinkError",
     "NotSupported",
     "ProtocolError",
     "ServobusError",
     "__version__",
     "connect",
     "connect_async",
+    "open_machine",
+    "open_machine_async",
 ]

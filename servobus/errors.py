@@ -40,6 +40,14 @@ class ArgumentRangeError(ServobusError, ValueError):
     """An argument is outside the range the manual allows; nothing was sent."""
 
 
+class LimitError(ArgumentRangeError):
+    """A motion would cross a machine axis's soft limit; nothing was sent."""
+
+
+class MachineFileError(ArgumentRangeError):
+    """A mistake in a machine file (servobus.machine): one line naming file, axis and key."""
+
+
 class EepromGuardError(ServobusError):
     """Parameter writes exceed the configured EEPROM write rate; nothing was sent."""
 
@@ -55,6 +63,10 @@ class DriveError(ServobusError):
 
 class ConnectionLost(ServobusError, ConnectionError):
     """The transport went away (closed, reset, broken pipe); also a ``ConnectionError``."""
+
+
+class MachineLinkError(ConnectionLost):
+    """A machine axis's link cannot be opened (or is offline): names the axis and its URL."""
 
 
 class NotSupported(ServobusError):

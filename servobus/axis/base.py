@@ -33,7 +33,7 @@ import asyncio
 import logging
 import time
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from types import TracebackType
 
 from servobus.axis import checks
@@ -176,6 +176,27 @@ class AsyncAxis(ABC):
 
     async def wave_frequency(self, hz: int) -> None:
         raise self.unsupported("waves")
+
+    def sync_group(self) -> object | None:
+        """A synchronised start: axes whose ``sync_group()`` is the same (non-None) object can
+        start absolute moves with one trigger (:meth:`sync_move_to`), e.g. drives on one bus
+        with a broadcast start. None (the default): this axis has no synchronised start.
+        The machine (servobus.machine) asks this instead of naming a protocol."""
+        return None
+
+    async def sync_move_to(self, moves: Sequence[tuple[AsyncAxis, int]]) -> None:
+        """Absolute moves (counts) of axes of this axis's :meth:`sync_group`, loaded first
+        and started by one trigger; every target is checked before anything is sent."""
+        raise NotSupported(f"{self.family.title} over {self.protocol} has no synchronised "
+                           "start", family=self.family.name)
+
+    def _check_sync_moves(self, moves: Sequence[tuple[AsyncAxis, int]]) -> None:
+        """Every axis in this axis's sync group, every target in range (nothing sent)."""
+        group = self.sync_group()
+        for axis, counts in moves:
+            if group is None or axis.sync_group() is not group:
+                raise ArgumentRangeError(f"{axis!r} does not start together with {self!r}")
+            axis._check_move(counts, relative=False)
 
     #: Where :meth:`trace_buffer` reads; set by the in-process virtual drives
     #: (servobus.sim.capture), None on a link to a drive that keeps no trace.

@@ -44,7 +44,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any, ClassVar, TypeVar, cast
 
 from servobus.axis import checks
@@ -355,6 +355,19 @@ class DynCanAxis(CommandAxis):
     async def load_sync(self, value: int, *, relative: bool = False) -> None:
         """Load a synchronized move; start it with ``client.sync_trigger`` / sync_move."""
         await self._run(cmds.make_sync_load(self._id, value, relative=relative))
+
+    def sync_group(self) -> object | None:
+        """Drives on one client (one bus) start together: Sync_Trigger is a broadcast."""
+        return self.client
+
+    async def sync_move_to(self, moves: Sequence[tuple[AsyncAxis, int]]) -> None:
+        """Load each drive's synchronized absolute move, then one Sync_Trigger (section 6)."""
+        self._check_sync_moves(moves)
+        targets: dict[int, int] = {}
+        for axis, counts in moves:
+            assert isinstance(axis, DynCanAxis)
+            targets[axis.drive_id] = await axis.to_command(counts)
+        await self.client.sync_move(targets)
 
     async def echo(self, data: bytes) -> bytes:
         return await self._run(cmds.make_echo(self._id, data))

@@ -16,12 +16,14 @@ mapping of the Axis calls onto the YZ-AIM registers is :mod:`servobus.axis.regis
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
+from servobus.axis.base import AsyncAxis
 from servobus.axis.register_axis import RegisterAxis
 from servobus.protocols.easycan import commands as cmds
 from servobus.protocols.easycan.client import AsyncEasyCanClient
+from servobus.protocols.easycan.sync import SyncGroup
 
 
 class EasyCanAxis(RegisterAxis[AsyncEasyCanClient]):
@@ -63,6 +65,29 @@ class EasyCanAxis(RegisterAxis[AsyncEasyCanClient]):
 
     async def _write_increment(self, distance: int, *, need_start: bool) -> int | None:
         return await self.client.position_write(cmds.make_move_relative(self._id, distance))
+
+    # ------------------------------------------------------------- synchronised start
+    def sync_group(self) -> object | None:
+        """Motors on one client (one bus) start together through their position caches."""
+        return self.client
+
+    async def sync_move_to(self, moves: Sequence[tuple[AsyncAxis, int]]) -> None:
+        """Position mode for each, load every cache with sync off, one synchronisation
+        signal to all (servobus.protocols.easycan.sync.SyncGroup.move), then sync off again
+        so the motors take ordinary moves afterwards (a motor keeps the cache it took)."""
+        self._check_sync_moves(moves)
+        motors: list[tuple[EasyCanAxis, int]] = []
+        for axis, counts in moves:
+            assert isinstance(axis, EasyCanAxis)
+            motors.append((axis, counts))
+        for axis, _ in motors:
+            await axis._position_mode()
+            axis._target = None
+        group = SyncGroup(self.client, [a.drive_id for a, _ in motors])
+        await group.move({a.drive_id: counts for a, counts in motors})
+        for axis, counts in motors:
+            axis._target = counts
+        await group.stop()
 
     # ------------------------------------------------------------- EasyCan's own frames
     async def emergency_stop(self) -> None:

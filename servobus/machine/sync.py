@@ -1,0 +1,198 @@
+"""The synchronous Machine: the async core on a private loop thread (as servobus.axis.sync).
+
+Every method mirrors the async one explicitly, with its types; each call runs on the
+machine's loop thread and blocks on the result.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Mapping
+from pathlib import Path
+from types import MappingProxyType, TracebackType
+from typing import TYPE_CHECKING
+
+from servobus.axis.sync import Axis, LoopThread
+from servobus.machine.machine import AsyncMachine, TogetherReport, open_machine_async
+
+if TYPE_CHECKING:
+    from servobus.families.base import AxisStatus, Family
+    from servobus.machine.axis import AsyncMachineAxis
+
+
+class MachineAxis:
+    """One axis of a :class:`Machine`, in user units (AsyncMachineAxis, synchronously)."""
+
+    def __init__(self, core: AsyncMachineAxis, runner: LoopThread) -> None:
+        self._core = core
+        self._runner = runner
+
+    @property
+    def core(self) -> AsyncMachineAxis:
+        """The async axis (for use on the machine's loop thread only)."""
+        return self._core
+
+    @property
+    def name(self) -> str:
+        return self._core.name
+
+    @property
+    def unit(self) -> str:
+        return self._core.unit
+
+    @property
+    def speed_unit(self) -> str:
+        return self._core.speed_unit
+
+    @property
+    def limits(self) -> tuple[float, float] | None:
+        return self._core.limits
+
+    @property
+    def url(self) -> str:
+        return self._core.url
+
+    @property
+    def drive_id(self) -> int | None:
+        return self._core.drive_id
+
+    @property
+    def online(self) -> bool:
+        return self._core.online
+
+    @property
+    def last_error(self) -> BaseException | None:
+        return self._core.last_error
+
+    @property
+    def family(self) -> Family | None:
+        return self._core.family
+
+    @property
+    def protocol(self) -> str | None:
+        return self._core.protocol
+
+    @property
+    def axis(self) -> Axis | None:
+        """The underlying Axis (sync, sharing the machine's loop), None while offline."""
+        core = self._core.axis
+        return None if core is None else Axis(core, self._runner, owns_runner=False)
+
+    def to_counts(self, user: float) -> int:
+        return self._core.to_counts(user)
+
+    def to_user(self, counts: float) -> float:
+        return self._core.to_user(counts)
+
+    def check_target(self, target: float) -> float:
+        return self._core.check_target(target)
+
+    def counts(self) -> int:
+        return self._runner.run(self._core.counts())
+
+    def position(self) -> float:
+        return self._runner.run(self._core.position())
+
+    def speed(self) -> float:
+        return self._runner.run(self._core.speed())
+
+    def status(self) -> AxisStatus:
+        return self._runner.run(self._core.status())
+
+    def move_to(self, target: float, *, wait: bool = False, timeout: float | None = None) -> None:
+        self._runner.run(self._core.move_to(target, wait=wait, timeout=timeout))
+
+    def move_by(self, distance: float, *, wait: bool = False,
+                timeout: float | None = None) -> None:
+        self._runner.run(self._core.move_by(distance, wait=wait, timeout=timeout))
+
+    def turn(self, speed: float | None = None) -> None:
+        self._runner.run(self._core.turn(speed))
+
+    def stop(self) -> None:
+        self._runner.run(self._core.stop())
+
+    def enable(self) -> None:
+        self._runner.run(self._core.enable())
+
+    def disable(self) -> None:
+        self._runner.run(self._core.disable())
+
+    def reset(self) -> None:
+        self._runner.run(self._core.reset())
+
+    def set_origin(self) -> None:
+        self._runner.run(self._core.set_origin())
+
+    def wait_idle(self, timeout: float | None = None) -> AxisStatus:
+        return self._runner.run(self._core.wait_idle(timeout))
+
+    def __repr__(self) -> str:
+        return repr(self._core).replace("AsyncMachineAxis", "MachineAxis", 1)
+
+
+class Machine:
+    """A machine file's axes by name, synchronously (see AsyncMachine)."""
+
+    def __init__(self, core: AsyncMachine, runner: LoopThread) -> None:
+        self._core = core
+        self._runner = runner
+        self._axes = {name: MachineAxis(a, runner) for name, a in core.axes.items()}
+
+    @property
+    def core(self) -> AsyncMachine:
+        return self._core
+
+    @property
+    def name(self) -> str:
+        return self._core.name
+
+    @property
+    def path(self) -> Path | None:
+        return self._core.path
+
+    @property
+    def axes(self) -> Mapping[str, MachineAxis]:
+        return MappingProxyType(self._axes)
+
+    def __getitem__(self, name: str) -> MachineAxis:
+        self._core[name]  # the one error naming the axes
+        return self._axes[name]
+
+    def stop_all(self) -> dict[str, BaseException | None]:
+        return self._runner.run(self._core.stop_all())
+
+    def move_together(self, targets: Mapping[str, float], *, wait: bool = False,
+                      timeout: float | None = None) -> TogetherReport:
+        return self._runner.run(self._core.move_together(targets, wait=wait, timeout=timeout))
+
+    def close(self, *, stop: bool = True) -> None:
+        """Stop every axis (unless ``stop=False``), close the links and the loop thread;
+        idempotent."""
+        if self._runner.stopped:
+            return
+        try:
+            self._runner.run(self._core.close(stop=stop))
+        finally:
+            self._runner.stop()
+
+    def __enter__(self) -> Machine:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return repr(self._core).replace("AsyncMachine", "Machine", 1)
+
+
+def open_machine(path: str | Path | None = None, *, retry: bool = False,
+                 only: Collection[str] | None = None) -> Machine:
+    """Synchronous :func:`open_machine_async` on a private loop thread."""
+    runner = LoopThread("servobus-machine")
+    try:
+        core = runner.run(open_machine_async(path, retry=retry, only=only))
+    except BaseException:
+        runner.stop()
+        raise
+    return Machine(core, runner)
