@@ -21,7 +21,7 @@ import functools
 import inspect
 import threading
 import warnings
-from collections.abc import Callable, Coroutine, Iterable, Mapping
+from collections.abc import Callable, Coroutine, Iterable, Mapping, Sequence
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
 
@@ -274,6 +274,14 @@ class Axis:
     def add_trace(self, hook: AxisTraceHook) -> None:
         """``hook(direction, item, t)``; it runs on the facade's loop thread."""
         return self._call(self._core.add_trace, hook)
+
+    def sync_group(self) -> object | None:
+        """Axes with the same (non-None) group start absolute moves with one trigger."""
+        return self._core.sync_group()
+
+    def sync_move_to(self, moves: Sequence[tuple[Axis, int]]) -> None:
+        """Absolute moves (counts) of axes of this axis's sync group, started together."""
+        self._call(self._core.sync_move_to, [(axis.core, counts) for axis, counts in moves])
 
     def sibling(self, drive_id: int) -> Axis:
         """Another drive on the same connection; closing it keeps the connection."""
