@@ -196,7 +196,10 @@ class CommandAxis(ClientAxis[CommandClient]):
         return await self._run(self._read(self.commands.make_read_status))
 
     async def status(self) -> AxisStatus:
-        return axis_status(await self.drive_status())
+        """The status byte, and the speed when no profile runs (moving = the motor turns,
+        family.axis_status): a constant speed leaves the busy bit clear."""
+        status = await self.drive_status()
+        return axis_status(status, speed_rpm=None if status.motion_busy else await self.speed())
 
     async def config(self) -> DriveConfig:
         return await self._run(self._read(self.commands.make_read_config))

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 
 from servobus.axis.capture import SIGNALS, Capture, status_bits
 from servobus.errors import ArgumentRangeError
+from servobus.families.base import motion_state
 from servobus.families.dmm import units as U
 from servobus.sim.core.constants import CONTROL_HZ
 
@@ -86,9 +87,12 @@ class Recorder:
             return
         self._pos.append(drive.position)
         self._err.append(drive.position_error)
-        self._speed.append(drive.speed_rpm)
+        speed = drive.speed_rpm
+        self._speed.append(speed)
         self._current.append(drive.current_a)
-        self._status.append(status_bits(*drive.trace_flags()))
+        enabled, busy, on_position, alarm = drive.trace_flags()
+        moving, in_position = motion_state(busy, on_position, speed)  # as AxisStatus has them
+        self._status.append(status_bits(enabled, moving, in_position, alarm))
         if len(self._pos) >= 2 * CAPACITY:  # amortised: trim in blocks
             self._drop(len(self._pos) - CAPACITY)
 

@@ -52,7 +52,7 @@ from servobus.families.base import AxisStatus, Family, ParamInfo
 from servobus.families.dmm import units as U
 from servobus.families.dmm.family import counts_to_command
 from servobus.families.dyn5 import Instance
-from servobus.families.dyn5_family import DYN5, PARAM_INSTANCES, axis_status
+from servobus.families.dyn5_family import DYN5, PARAM_INSTANCES, Dyn5Status, axis_status
 from servobus.protocols.enip.cip import ClassCode
 from servobus.protocols.enip.client import CONNECT_TIMEOUT_S, DEFAULT_TIMEOUT_S, AsyncEnipClient
 from servobus.protocols.enip.encap import TCP_PORT
@@ -324,7 +324,11 @@ class EnipAxis(AsyncAxis):
         return await self.read_instance(_I["drive_status"].number)
 
     async def status(self) -> AxisStatus:
-        return axis_status(await self.status_word())
+        """The status word, and the speed when no profile runs (moving = the motor turns,
+        dyn5_family.axis_status): a constant speed leaves the busy bit clear."""
+        word = await self.status_word()
+        busy = Dyn5Status.from_word(word).motion_busy
+        return axis_status(word, None if busy else await self.speed())
 
     async def position(self) -> int:
         return await self.read_instance(_I["motor_position"].number)
