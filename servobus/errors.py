@@ -40,6 +40,14 @@ class ArgumentRangeError(ServobusError, ValueError):
     """An argument is outside the range the manual allows; nothing was sent."""
 
 
+class UnknownScheme(ArgumentRangeError):
+    """A drive URL names no scheme servobus serves; ``suggestion`` is the resembling URL."""
+
+    def __init__(self, message: str, suggestion: str | None = None) -> None:
+        super().__init__(message)
+        self.suggestion = suggestion
+
+
 class EepromGuardError(ServobusError):
     """Parameter writes exceed the configured EEPROM write rate; nothing was sent."""
 

@@ -309,8 +309,8 @@ class AsyncAxis(ABC):
     def _raise_alarm(self, st: AxisStatus) -> None:
         if st.alarm_latched:
             raise DriveAlarm(
-                f"drive {self.drive_id} alarm {st.alarm_code}: {st.alarm_text}; "
-                "reset() clears it", code=st.alarm_code, drive_id=self.drive_id)
+                f"drive {self.drive_id} alarm {st.alarm_code}: {st.alarm_text} (latched: "
+                "a reset or power cycle clears it)", code=st.alarm_code, drive_id=self.drive_id)
 
     async def stop(self) -> None:
         """Constant speed 0: the drive ramps down at its deceleration and holds position."""

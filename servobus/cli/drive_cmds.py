@@ -1,10 +1,16 @@
-"""Drive commands: ``status``, ``position``, ``speed RPM``, ``move [--relative] TARGET``, ``stop``.
+"""Drive commands: ``status``, ``position``, ``speed RPM``, ``move [--relative] TARGET``, ``stop``,
+``reset``.
 
 Units are the Axis's, the same on every drive: ``move`` takes encoder counts of the drive
 family (``move 16384``), revolutions (``2.5rev``), degrees (``90deg``) or the drive's raw
 command units (``120cmd``, where the protocol has them); ``position`` prints counts and
 revolutions. Negative numbers are arguments: ``servobus move --relative -120``.
 Ctrl-C or SIGTERM during ``move --wait`` stops the motor first (servobus.cli.motion_guard).
+
+``status`` exits 1 when the drive reports an alarm (README "Errors and exit codes"), after
+printing the status; ``reset`` clears a latched alarm the family's own way (Axis.reset():
+the DMM reset selector, which the drive takes as a power cycle; DYN5 Reset 0x21; YZ-AIM
+output_enable 0 then 1) and exits 1 when the alarm is still there afterwards.
 
 Note: without a drive URL each invocation starts its own built-in virtual drive, so state
 (position, motion) does not carry over from one command to the next.
@@ -13,6 +19,7 @@ Note: without a drive URL each invocation starts its own built-in virtual drive,
 from __future__ import annotations
 
 import re
+import time
 from typing import TYPE_CHECKING, Any, TypeAlias
 
 import click
@@ -23,7 +30,7 @@ from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.motion_guard import stop_on_interrupt
 from servobus.cli.open_axis import connection_label, emit, kv_text, open_axis
 from servobus.cli.param_types import Seconds
-from servobus.errors import NotSupported
+from servobus.errors import DriveAlarm, DriveTimeout, NotSupported
 
 if TYPE_CHECKING:
     from servobus.axis.sync import Axis
@@ -76,24 +83,106 @@ def status_record(axis: Axis, status: AxisStatus) -> dict[str, object]:
     return record
 
 
+#: Titles of the nested blocks of ``status``.
+BLOCKS = {"config": "config", "vendor_status": "drive's own status bits"}
+
+
+def alarm_words(code: object, text: object, latched: object) -> str:
+    """``none``, or ``2 over current (latched)``: the alarm the same way on every family."""
+    if not code:
+        return "none"
+    return f"{code} {text}" + (" (latched)" if latched else " (notice, not latched)")
+
+
 def render_status(con: Console, record: dict[str, object], title: str) -> None:
-    nested = ("config", "vendor_status")
-    top = {k: v for k, v in record.items() if k not in (*nested, "drive_id", "protocol")}
+    top: dict[str, object] = {}
+    for key, value in record.items():
+        if key in (*BLOCKS, "drive_id", "protocol", "alarm_code", "alarm_latched"):
+            continue
+        top[key] = (alarm_words(record["alarm_code"], value, record["alarm_latched"])
+                    if key == "alarm" else value)
     con.print(kv_text(title, top), markup=False)
-    for key in nested:
+    for key, block_title in BLOCKS.items():
         block = record.get(key)
         if isinstance(block, dict):
-            con.print(kv_text(key.replace("_", " "), block), markup=False)
+            con.print(kv_text(block_title, block), markup=False)
+
+
+def alarm_error(axis: Axis, status: AxisStatus) -> DriveAlarm:
+    """The exit-1 error of a drive in alarm (servobus.cli.failures names `servobus reset`)."""
+    kind = "latched" if status.alarm_latched else "a notice, not latched"
+    return DriveAlarm(f"drive {axis.drive_id} reports alarm {status.alarm_code}: "
+                      f"{status.alarm_text} ({kind})", code=status.alarm_code,
+                      drive_id=axis.drive_id)
+
+
+def read_status(axis: Axis) -> AxisStatus:
+    """The status, also of a drive that pushed its alarm: such an alarm is raised once, by
+    the next call (DriveAlarm without the code); the status read after it names the code."""
+    try:
+        status: AxisStatus = axis.status()
+    except DriveAlarm:
+        status = axis.status()
+    return status
 
 
 @click.command("status", cls=ServobusCommand)
 @pass_cli
 def status_cmd(ctx: CliContext) -> None:
-    """Decoded drive status (and the drive's configuration where it has one)."""
+    """Decoded drive status (and the drive's configuration where it has one).
+
+    Exits 1 when the drive reports an alarm (`servobus reset` clears a latched one)."""
     with open_axis(ctx) as axis:
-        record = status_record(axis, axis.status())
+        status = read_status(axis)
+        record = status_record(axis, status)
         label = connection_label(ctx, axis)
     emit(ctx, record, lambda con: render_status(con, record, f"status of {label}"))
+    if status.alarm:
+        raise alarm_error(axis, status)
+
+
+@click.command("reset", cls=ServobusCommand)
+@click.option("--wait-timeout", type=Seconds(), default=15.0, show_default=True,
+              help="seconds to wait for the drive to answer again after the reset")
+@pass_cli
+def reset_cmd(ctx: CliContext, wait_timeout: float) -> None:
+    """Clear a latched alarm the drive family's own way, then show the status.
+
+    DMM DYN2/DYN4: the reset selector (the drive takes it as a power cycle); DMM DYN5: Reset
+    (0x21 = 0xABCD, the adapter restarts); YZ-AIM: output enable 0 then 1 (5.2). Remove the
+    cause first: an alarm whose cause remains trips again. Exits 1 if the alarm is still
+    there."""
+    with open_axis(ctx) as axis:
+        axis.family.require("reset")
+        before = read_status(axis)
+        axis.reset()
+        after = _status_after_reset(axis, wait_timeout)
+        record = {"alarm_before": before.alarm_code, **status_record(axis, after)}
+        label = connection_label(ctx, axis)
+
+    def render(con: Console) -> None:
+        con.print(f"reset sent; alarm before: "
+                  f"{alarm_words(before.alarm_code, before.alarm_text, before.alarm_latched)}",
+                  markup=False)
+        render_status(con, record, f"status of {label}")
+
+    emit(ctx, record, render)
+    if after.alarm:
+        raise alarm_error(axis, after)
+
+
+def _status_after_reset(axis: Axis, wait_timeout: float) -> AxisStatus:
+    """The first status the drive answers after its reset (it may be restarting)."""
+    deadline = time.monotonic() + wait_timeout
+    while True:
+        try:
+            status: AxisStatus = axis.status()
+        except DriveTimeout:
+            if time.monotonic() >= deadline:
+                raise DriveTimeout(f"drive {axis.drive_id} did not answer within "
+                                   f"{wait_timeout:g} s after the reset") from None
+        else:
+            return status
 
 
 @click.command("position", cls=ServobusCommand)
@@ -163,5 +252,5 @@ def stop_cmd(ctx: CliContext) -> None:
 
 
 def register(group: click.Group) -> None:
-    for command in (status_cmd, position_cmd, speed_cmd, move_cmd, stop_cmd):
+    for command in (status_cmd, position_cmd, speed_cmd, move_cmd, stop_cmd, reset_cmd):
         group.add_command(command)

@@ -99,8 +99,11 @@ def kv_text(title: str, rows: Mapping[str, Any]) -> str:
 
 
 def _fmt(value: object) -> str:
+    """yes/no for a flag, ``none`` for a value the drive does not have (never ``None``)."""
     if isinstance(value, bool):
         return "yes" if value else "no"
+    if value is None:
+        return "none"
     return str(value)
 
 

@@ -199,8 +199,8 @@ class AsyncDynCanClient:
         if code == c.DriveErrorCode.ALARM:
             tm.stats.alarms += 1
             self._pending[drive_id] = DriveAlarm(
-                f"drive {drive_id} pushed an alarm (Drive Error 0xEE); read status() for the "
-                "code, reset() clears it", code=code, drive_id=drive_id)
+                f"drive {drive_id} pushed an alarm (Drive Error 0xEE); read the status for "
+                "its code; a reset clears it", code=code, drive_id=drive_id)
             for cb in list(self._alarm_callbacks):
                 cb(drive_id)
             return
