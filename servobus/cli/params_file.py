@@ -13,7 +13,9 @@ Format (JSON, UTF-8), version 1::
     }
 
 Decisions: parameter names are the snake_case names of the family's table (the same on every
-protocol, so a DYN232M backup restores onto a DYN CAN drive); a file without ``family`` is a
+protocol, so a DYN232M backup restores onto a DYN CAN drive: ``--load``/``--diff`` name both
+protocols in a note, and refuse a file whose parameters the protocol cannot reach or whose
+family differs from the drive's, naming both); a file without ``family`` is a
 DMM DYN2 backup (what servobus wrote before families existed); a file may hold a
 subset of the parameters (only those are restored); unknown top-level keys are ignored so a
 later minor addition stays readable; a higher ``version`` is refused. Every value is checked
@@ -89,8 +91,11 @@ def load(path: str | Path) -> ParamsBackup:
 def parse(doc: object, where: str = "backup") -> ParamsBackup:
     if not isinstance(doc, dict):
         raise ParamsFileError(f"{where}: expected a JSON object")
-    if doc.get("format") != FORMAT:
-        raise ParamsFileError(f"{where}: format is {doc.get('format')!r}, expected {FORMAT!r}")
+    if "format" not in doc:
+        raise ParamsFileError(f"{where}: not a servobus parameter backup (it has no "
+                              f"\"format\": \"{FORMAT}\" field)")
+    if doc["format"] != FORMAT:
+        raise ParamsFileError(f"{where}: format is {doc['format']!r}, expected {FORMAT!r}")
     version = doc.get("version")
     if not _is_int(version) or version < 1:
         raise ParamsFileError(f"{where}: version {version!r} is not a positive integer")

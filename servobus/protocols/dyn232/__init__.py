@@ -9,7 +9,9 @@ _OPEN = "servobus.protocols.dyn232.opener:open_axis"
 #: pyserial's URL handlers (serial.serial_for_url) are bare serial ports: DYN232M.
 PYSERIAL_SCHEMES = ("socket", "tcp", "loop", "rfc2217", "spy", "alt", "hwgrep", "cp2110")
 
-SCHEMES: dict[str, str] = {"dyn232": _OPEN, "": _OPEN, **{s: _OPEN for s in PYSERIAL_SCHEMES}}
+SCHEMES: dict[str, str] = {"dyn232": _OPEN}
+#: Bare serial ports and pyserial URLs: served, but not servobus's own schemes (registry).
+SERIAL_SCHEMES: dict[str, str] = {"": _OPEN, **{s: _OPEN for s in PYSERIAL_SCHEMES}}
 SIM: dict[str, str] = {name: "servobus.protocols.dyn232.inprocess:open_sim_axis"
                        for name in ("dyn232", "dyn2", "dc2", "dyn4")}
 CLI = "servobus.protocols.dyn232.sim_cmd:register"

@@ -1,0 +1,110 @@
+"""What a newcomer tripped on (issue 18, items 9-14), in-process: one line each, and right.
+
+URLs (unknown and near-miss schemes and transports), ``move`` out of range, backups of another
+family or protocol, ``--id`` against an ``enip://`` address, ``scan --ids`` and its progress,
+and no Python ``None`` in what a person reads.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from servobus.cli import failures as F
+from servobus.cli.main import main
+
+
+def run(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
+    """``servobus ARGS`` in this process: exit code, stdout, stderr."""
+    with pytest.raises(SystemExit) as info:
+        main(list(args))
+    out, err = capsys.readouterr()
+    code = info.value.code
+    return code if isinstance(code, int) else 0, out, err
+
+
+def one_error_line(err: str) -> str:
+    assert err.count("\n") == 1 and err.startswith("error: "), err
+    return err
+
+
+# ------------------------------------------------------------------ 9: URLs
+def test_an_unknown_scheme_lists_servobus_schemes_only(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run(capsys, "--url", "foo://x", "status")
+    line = one_error_line(err)
+    assert code == F.EXIT_USAGE
+    for own in ("dyn232", "dyncan", "easycan", "enip", "modbus", "sim"):
+        assert own in line
+    for pyserial in ("alt", "hwgrep", "spy", "cp2110"):
+        assert f" {pyserial}," not in line and f" {pyserial} " not in line
+    assert "inside the range" not in line and "did you mean" not in line
+
+
+@pytest.mark.parametrize(("url", "meant"), [
+    ("enp://127.0.0.1", "enip://127.0.0.1"),
+    ("dyncann+pcan://PCAN_USBBUS1", "dyncan+pcan://PCAN_USBBUS1"),
+    ("dyn232+sockte://127.0.0.1:5", "dyn232+socket://127.0.0.1:5"),
+    ("modbus+sockte://127.0.0.1:5", "modbus+socket://127.0.0.1:5"),
+])
+def test_a_near_miss_suggests_what_it_resembles(capsys: pytest.CaptureFixture[str], url: str,
+                                                meant: str) -> None:
+    code, _, err = run(capsys, "--url", url, "status")
+    line = one_error_line(err)
+    assert code == F.EXIT_USAGE
+    assert f"did you mean {meant}?" in line
+    assert "CAN bus" not in line and "inside the range" not in line
+
+
+def test_socketcan_with_host_and_port_points_to_socketcand(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run(capsys, "--url", "dyncan+socketcan://127.0.0.1:29536", "status")
+    line = one_error_line(err)
+    assert code == F.EXIT_USAGE
+    assert "dyncan+socketcand://127.0.0.1:29536" in line and "ip link" not in line
+
+
+# ------------------------------------------------------------------ 11: backups
+def test_a_backup_of_another_family_is_refused_naming_both(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    backup = tmp_path / "yzaim.json"
+    code, _, err = run(capsys, "--url", "sim://modbus?fast=1", "params", "--save", str(backup))
+    assert code == 0, err
+    for action in ("--load", "--diff"):
+        code, out, err = run(capsys, "--url", "sim://dyn232?fast=1", "params", action,
+                             str(backup))
+        line = one_error_line(err)
+        assert code == F.EXIT_USAGE and out == ""
+        assert "YZ-AIM" in line and "modbus" in line
+        assert "DMM DYN2" in line and "dyn232" in line
+
+
+def test_a_backup_of_another_protocol_of_the_family_is_restored_with_a_note(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    backup = tmp_path / "dyn232.json"
+    code, _, err = run(capsys, "--url", "sim://dyn232?fast=1", "params", "--save", str(backup))
+    assert code == 0, err
+    code, _, err = run(capsys, "--url", "sim://dyncan?fast=1", "params", "--load",
+                         str(backup))
+    assert code == 0, err
+    assert "saved over dyn232" in err and "over dyncan" in err
+
+
+def test_a_json_file_without_format_says_what_it_is_not(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps({"main_gain": 40}))
+    code, _, err = run(capsys, "params", "--load", str(other))
+    line = one_error_line(err)
+    assert code == F.EXIT_USAGE
+    assert "None" not in line and "not a servobus parameter backup" in line
+
+
+# ------------------------------------------------------------------ 14: None
+def test_status_of_a_yzaim_motor_has_no_python_none(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run(capsys, "--url", "sim://modbus?fast=1", "status")
+    assert code == 0, err
+    assert "None" not in out
+    assert "position_error" in out
