@@ -223,8 +223,35 @@ class AsyncAxis(ABC):
         return self.family.degrees_to_counts(degrees)
 
     def _check_move(self, value: object, *, relative: bool) -> int:
-        """Check a move argument before anything is sent (protocols add their range)."""
-        return check_int("distance" if relative else "position", value)
+        """Check a move argument before anything is sent: an int within :meth:`_move_limits`."""
+        counts = check_int("distance" if relative else "position", value)
+        self._check_limits(counts, relative)
+        return counts
+
+    def _move_limits(self, relative: bool) -> tuple[int, int] | None:
+        """Counts a move to (or by) can reach with what the axis knows now; None: no limit.
+
+        Protocols whose range depends on a drive setting (DMM GEAR_NUM) give the widest
+        range until they have read it, then the exact one (:meth:`move_range`)."""
+        return None
+
+    def _check_limits(self, counts: int, relative: bool) -> None:
+        limits = self._move_limits(relative)
+        if limits is not None and not limits[0] <= counts <= limits[1]:
+            what = "a move by" if relative else "a move to"
+            raise ArgumentRangeError(
+                f"{what} {counts} counts is outside {limits[0]}..{limits[1]} counts, "
+                f"the range of {self.family.title} over {self.protocol}"
+                f"{self._limits_note()}")
+
+    def _limits_note(self) -> str:
+        """What the range depends on, for the error message (e.g. " at GEAR_NUM 4096")."""
+        return ""
+
+    async def move_range(self, *, relative: bool = False) -> tuple[int, int] | None:
+        """The counts a move to (``relative``: by) can reach on this drive, None if
+        unbounded (reads what the range depends on, e.g. DMM GEAR_NUM, when needed)."""
+        return self._move_limits(relative)
 
     async def position_window(self) -> int:
         """Counts within which the drive reports "in position" (protocols read the drive's)."""

@@ -25,7 +25,8 @@ from servobus.axis.eeprom_guard import EepromGuard
 from servobus.errors import DriveTimeout, ProtocolError
 from servobus.families.base import AxisStatus, Family, ParamInfo
 from servobus.families.dmm import units as U
-from servobus.families.dmm.family import DYN2, axis_status, counts_to_command
+from servobus.families.dmm import vocabulary as V
+from servobus.families.dmm.family import DYN2, axis_status, command_to_counts, counts_to_command
 from servobus.families.dmm.registers import DriveConfig, DriveStatus
 
 T = TypeVar("T")
@@ -146,11 +147,26 @@ class CommandAxis(ClientAxis[CommandClient]):
     # ------------------------------------------------------------- motion
     async def _send_move_to(self, position: int) -> None:
         command = await self.to_command(position)
+        self._check_limits(position, False)  # now at the drive's GEAR_NUM
         await self._run(self.commands.make_move_absolute(self._id, command))
 
     async def _send_move_by(self, distance: int) -> None:
         command = await self.to_command(distance)
+        self._check_limits(distance, True)
         await self._run(self.commands.make_move_relative(self._id, command))
+
+    def _move_limits(self, relative: bool) -> tuple[int, int] | None:
+        """The 28-bit command range in counts at the GEAR_NUM known so far (the widest,
+        GEAR_NUM's minimum, before it is read)."""
+        gear = self._gear_num or self.family.param("gear_num").minimum
+        return command_to_counts(V.VALUE_MIN, gear), command_to_counts(V.VALUE_MAX, gear)
+
+    def _limits_note(self) -> str:
+        return f" at GEAR_NUM {self._gear_num}" if self._gear_num else ""
+
+    async def move_range(self, *, relative: bool = False) -> tuple[int, int] | None:
+        await self.gear_num()
+        return self._move_limits(relative)
 
     async def move_to_command(self, command: int, *, wait: bool = False,
                               timeout: float | None = None) -> None:

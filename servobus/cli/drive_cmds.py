@@ -18,6 +18,7 @@ Note: without a drive URL each invocation starts its own built-in virtual drive,
 
 from __future__ import annotations
 
+import math
 import re
 import time
 from typing import TYPE_CHECKING, Any, TypeAlias
@@ -30,7 +31,7 @@ from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.motion_guard import stop_on_interrupt
 from servobus.cli.open_axis import connection_label, emit, kv_text, open_axis
 from servobus.cli.param_types import Seconds
-from servobus.errors import DriveAlarm, DriveTimeout, NotSupported
+from servobus.errors import ArgumentRangeError, DriveAlarm, DriveTimeout, NotSupported
 
 if TYPE_CHECKING:
     from servobus.axis.sync import Axis
@@ -69,6 +70,34 @@ def to_counts(axis: Axis, number: float, unit: str) -> int:
     if unit == "deg":
         return int(axis.degrees(number))
     return int(number)
+
+
+def typed(number: float, unit: str) -> str:
+    """A TARGET as the user wrote it (``16384``, ``2.5rev``, ``-90deg``)."""
+    text = str(int(number)) if number.is_integer() else repr(number)
+    return text if unit == "counts" else f"{text}{unit}"
+
+
+def in_unit(axis: Axis, counts: int, unit: str) -> str:
+    """Counts in a TARGET unit, rounded towards zero (a bound stays reachable)."""
+    if unit == "counts":
+        return str(counts)
+    per_unit = axis.counts_per_rev / (360.0 if unit == "deg" else 1.0)
+    value = math.trunc(counts / per_unit * 1000) / 1000
+    return f"{value:.3f}".rstrip("0").rstrip(".")
+
+
+def check_reach(axis: Axis, counts: int, relative: bool, number: float, unit: str) -> None:
+    """ArgumentRangeError naming TARGET as typed and the drive's range in its unit."""
+    limits = axis.move_range(relative=relative)
+    if limits is None or limits[0] <= counts <= limits[1]:
+        return
+    low, high = (in_unit(axis, bound, unit) for bound in limits)
+    what = "move --relative" if relative else "move"
+    raise ArgumentRangeError(
+        f"{what} {typed(number, unit)}: outside the {low}..{high} "
+        f"{'counts' if unit == 'counts' else unit} this drive reaches "
+        f"({axis.family.title} over {axis.protocol})")
 
 
 def status_record(axis: Axis, status: AxisStatus) -> dict[str, object]:
@@ -227,6 +256,7 @@ def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float, c
             record: dict[str, object] = {"command_units": int(number)}
         else:
             counts = to_counts(axis, number, unit)
+            check_reach(axis, counts, relative, number, unit)
             (axis.move_by if relative else axis.move_to)(counts, confirm=confirm)
             record = {"counts": counts}
         record["move"] = "relative" if relative else "absolute"

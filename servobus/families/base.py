@@ -45,9 +45,9 @@ class ParamInfo:
 
 
 #: At or above this measured speed (rpm, either direction) the motor turns. Below it is the
-#: hold jitter of a servo standing on position: DMM speed reads are whole rpm and read +-1
-#: while a move settles, YZ-AIM reads +-0.8 (docs/axis.md "Moving and in position").
-MOVING_RPM = 2.0
+#: correction of a servo standing on position: the virtual DMM drives read up to 3 rpm for
+#: a moment while a move settles, YZ-AIM +-1 rpm (docs/axis.md "Moving and in position").
+MOVING_RPM = 5.0
 
 
 def motion_state(profile_running: bool, on_target: bool,

@@ -126,7 +126,8 @@ def test_moving_and_in_position_mean_the_same_everywhere(axis: Axis) -> None:
     """moving: the motor turns or a profile runs; in_position: on target and still
     (docs/axis.md "Moving and in position"): at rest, in constant speed, during a move."""
     def at_rest() -> None:
-        st = axis.status()
+        wait_until(lambda: axis.status().idle, timeout=5, what="at rest")  # settled
+        st = axis.status()  # and it stays so
         assert not st.moving and st.in_position and st.idle, st
 
     at_rest()
@@ -167,3 +168,15 @@ def test_a_drive_trace_has_the_same_moving_and_in_position(axis: Axis) -> None:
         bits >> STATUS_BITS.index("in_position") & 1
     assert (moving, in_position) == (1, 0)
     axis.stop()
+
+
+def test_a_move_out_of_reach_is_refused_in_counts(axis: Axis) -> None:
+    """The range of a move is in counts on every protocol (move_range), and so is the error."""
+    for relative in (False, True):
+        limits = axis.move_range(relative=relative)
+        assert limits is not None
+        low, high = limits
+        assert low < 0 < axis.revs(100) < high
+        with pytest.raises(ArgumentRangeError, match=f"{high + 1} counts is outside "
+                                                     f"{low}..{high} counts"):
+            (axis.move_by if relative else axis.move_to)(high + 1)

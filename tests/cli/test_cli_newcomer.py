@@ -108,3 +108,18 @@ def test_status_of_a_yzaim_motor_has_no_python_none(capsys: pytest.CaptureFixtur
     assert code == 0, err
     assert "None" not in out
     assert "position_error" in out
+
+
+# ------------------------------------------------------------------ 10: move out of reach
+@pytest.mark.parametrize("url", ["sim://dyn232?fast=1", "sim://dyncan?fast=1", "sim://enip",
+                                 "sim://easycan?fast=1", "sim://modbus?fast=1"])
+def test_move_out_of_reach_names_the_value_as_typed_and_the_range_in_its_unit(
+        capsys: pytest.CaptureFixture[str], url: str) -> None:
+    code, _, err = run(capsys, "--url", url, "move", "999999999999")
+    line = one_error_line(err)
+    assert code == F.EXIT_USAGE
+    assert "move 999999999999: outside the -" in line and " counts this drive reaches" in line
+    code, _, err = run(capsys, "--url", url, "move", "--relative", "--", "-99999999.5rev")
+    line = one_error_line(err)
+    assert "move --relative -99999999.5rev: outside the -" in line
+    assert " rev this drive reaches" in line and "counts" not in line
