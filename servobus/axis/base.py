@@ -87,6 +87,12 @@ class AsyncAxis(ABC):
     def counts_per_rev(self) -> int:
         return self.family.counts_per_rev
 
+    @property
+    def id_address(self) -> str | None:
+        """The network address the drive id selected, where a protocol derives one from it
+        (DYN5: the id is the last byte, B3.B2.B1.id); None where the id is a bus address."""
+        return None
+
     # ------------------------------------------------------------- primitives (per protocol)
     @abstractmethod
     async def _send_move_to(self, position: int) -> None:

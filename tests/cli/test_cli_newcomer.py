@@ -123,3 +123,22 @@ def test_move_out_of_reach_names_the_value_as_typed_and_the_range_in_its_unit(
     line = one_error_line(err)
     assert "move --relative -99999999.5rev: outside the -" in line
     assert " rev this drive reaches" in line and "counts" not in line
+
+
+# ------------------------------------------------------------------ 12: --id on enip://
+def test_an_id_that_changes_the_enip_address_is_shown(capsys: pytest.CaptureFixture[str]) -> None:
+    """Decision (docs/axis.md "Drive ids"): --id keeps picking the daisy-chain neighbour
+    B3.B2.B1.id, and says which address that is."""
+    code, out, err = run(capsys, "--url", "sim://enip?ids=1,9", "--id", "9", "status")
+    assert code == 0, err
+    assert "note: --id 9 addresses 127.0.0.9" in err
+    assert out.startswith("status of sim://enip?ids=1,9, id 9 at 127.0.0.9")
+    code, _, err = run(capsys, "--url", "sim://enip?ids=1,9", "--json", "--id", "9", "position")
+    assert code == 0 and "127.0.0.9" in err
+
+
+def test_an_id_on_a_bus_adds_no_address(capsys: pytest.CaptureFixture[str]) -> None:
+    url = "sim://dyncan?ids=1,9&fast=1"
+    code, out, err = run(capsys, "--url", url, "--id", "9", "status")
+    assert code == 0, err
+    assert "addresses" not in err and out.startswith(f"status of {url}, id 9\n")

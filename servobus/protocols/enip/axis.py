@@ -204,6 +204,11 @@ class EnipAxis(AsyncAxis):
         await client.set_attribute_single(ClassCode.PARAMETER, inst.number,
                                           dyn5.PARAMETER_ATTRIBUTE, data)
 
+    @property
+    def id_address(self) -> str:
+        """B3.B2.B1.id: the drive id picks the drive of the URL's daisy chain (docs/enip.md)."""
+        return self.ip
+
     # ------------------------------------------------------------- units
     async def gear_num(self) -> int:
         """GEAR_NUM as this axis knows it (read from the drive the first time)."""
