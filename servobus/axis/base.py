@@ -53,6 +53,8 @@ DEFAULT_WAIT_TIMEOUT_S = 30.0
 #: half a second covers the status reads and their retries on a slow or paced link.
 DEFAULT_CONFIRM_TIMEOUT_S = 0.5
 DEFAULT_POLL_S = 0.02
+#: ping_deadline where a protocol states none (a network drive: no wire time to add).
+DEFAULT_PING_S = 0.05
 
 
 def check_int(name: str, value: object) -> int:
@@ -154,6 +156,12 @@ class AsyncAxis(ABC):
     @abstractmethod
     async def ping(self, timeout: float = 0.05) -> bool:
         """One status read, no retry; False on timeout."""
+
+    def ping_deadline(self) -> float:
+        """Seconds a ping should wait for an absent drive (what ``scan`` waits per id): the
+        protocol's per-attempt reply deadline of a short read, i.e. the request and its reply
+        on the wire at the link's rate plus the drive's reply time (docs/axis.md, "scan")."""
+        return DEFAULT_PING_S
 
     @abstractmethod
     async def sibling(self, drive_id: int) -> AsyncAxis:

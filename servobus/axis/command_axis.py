@@ -82,6 +82,9 @@ class CommandClient(Protocol):
 
     @property
     def guard(self) -> EepromGuard: ...
+    def reply_deadline_s(self) -> float:
+        """Per-attempt deadline of a short read (wire time + the drive's reply time)."""
+        ...
     async def execute(self, command: Request[T], *, retries: int | None = None,
                       timeout: float | None = None) -> T: ...
     def add_trace(self, hook: AxisTraceHook) -> None: ...
@@ -281,6 +284,9 @@ class CommandAxis(ClientAxis[CommandClient]):
         self._id = new_id
         self._reads.clear()
         self._param_reads.clear()
+
+    def ping_deadline(self) -> float:
+        return self.client.reply_deadline_s()
 
     async def ping(self, timeout: float = 0.05) -> bool:
         """One status read without retry. A corrupt reply still proves something answered."""

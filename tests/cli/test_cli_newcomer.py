@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from servobus.axis import connect
 from servobus.cli import failures as F
 from servobus.cli.main import main
 
@@ -142,3 +143,26 @@ def test_an_id_on_a_bus_adds_no_address(capsys: pytest.CaptureFixture[str]) -> N
     code, out, err = run(capsys, "--url", url, "--id", "9", "status")
     assert code == 0, err
     assert "addresses" not in err and out.startswith(f"status of {url}, id 9\n")
+
+
+# ------------------------------------------------------------------ 13: scan
+def test_scan_ids_narrows_and_says_how_long_it_may_take(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    url = "sim://modbus?ids=3,12&fast=1"
+    with connect(url) as axis:  # the wait per id: the RTU deadline of a one-register read
+        per_id_ms = round(axis.ping_deadline() * 1000)
+    assert 50 < per_id_ms < 70  # 19200 baud: ~10 ms on the wire + t3.5 + 50 ms turnaround
+    code, out, err = run(capsys, "--url", url, "scan", "--ids", "1-8,12")
+    assert code == 0, err
+    assert out == f"found 2 drive(s) on {url}: 3 12\n"
+    assert (f"scanning 9 id(s) (1-8,12) on {url}: at most {9 * per_id_ms / 1000:.1f} s "
+            f"({per_id_ms} ms per absent id)") in err
+    code, out, err = run(capsys, "--url", url, "--json", "scan", "--ids", "12,3")
+    assert code == 0 and json.loads(out) == [3, 12]
+
+
+@pytest.mark.parametrize(("ids", "says"), [("1-x", "1-8,12"), ("8-1", "low-high"),
+                                           ("0", "not in this protocol's ids 1..")])
+def test_scan_refuses_bad_ids(capsys: pytest.CaptureFixture[str], ids: str, says: str) -> None:
+    code, _, err = run(capsys, "--url", "sim://dyncan?fast=1", "scan", "--ids", ids)
+    assert code == F.EXIT_USAGE and says in one_error_line(err)

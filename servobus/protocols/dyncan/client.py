@@ -147,6 +147,11 @@ class AsyncDynCanClient:
         """Default re-sends of a read (per call: ``execute(..., retries=)``)."""
         return self.transactions.retries
 
+    def reply_deadline_s(self) -> float:
+        """Per-attempt deadline of a read (``timeout``: a frame each way at 1 Mbit/s is
+        ~0.1 ms; the rest is the drive's reply time and the adapter's latency)."""
+        return self.timeout
+
     # ------------------------------------------------------------- hooks
     def add_trace(self, hook: AxisTraceHook) -> None:
         """``hook(direction, item, t)``: every Frame sent/received and every error met."""
