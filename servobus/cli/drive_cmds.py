@@ -248,6 +248,7 @@ def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float, c
     """Point-to-point move to/by TARGET: counts (16384), 2.5rev, 90deg or 120cmd."""
     number, unit = target
     with open_axis(ctx) as axis, stop_on_interrupt(axis):
+        start = axis.position() if wait and relative else 0  # where "by" counts from
         if unit == "cmd":
             if not hasattr(axis.core, "move_to_command"):
                 raise NotSupported(f"{axis.family.title} over {axis.protocol} has no raw "
@@ -262,14 +263,31 @@ def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float, c
         record["move"] = "relative" if relative else "absolute"
         if wait:
             status = axis.wait_idle(timeout=wait_timeout) if wait_timeout > 0 else axis.status()
-            record.update(in_position=status.in_position, position=axis.position())
+            record.update(in_position=status.in_position, position=axis.position(),
+                          window=axis.position_window())
+            if unit != "cmd":
+                record["target"] = start + counts
 
     def render(con: Console) -> None:
         verb = "moving by" if relative else "moving to"
         what = f"{int(number)} command units" if unit == "cmd" else f"{record['counts']} counts"
-        con.print(f"{verb} {what}" + (f"; done at {record['position']} counts" if wait else ""))
+        con.print(f"{verb} {what}" + (f"; {done_text(record)}" if wait else ""))
 
     emit(ctx, record, render)
+
+
+def done_text(record: dict[str, object]) -> str:
+    """Where a waited move ended, and why that need not be the target to the count: the
+    drive reports "in position" within its window (DMM OnRange, YZ-AIM +-10 counts)."""
+    position, window, target = record["position"], record["window"], record.get("target")
+    if not (isinstance(position, int) and isinstance(target, int) and isinstance(window, int)):
+        return f"done at {position} counts"
+    off = position - target
+    if off == 0:
+        return f"done at {position} counts, on the target"
+    place = "inside" if abs(off) <= window else "outside"
+    return (f"done at {position} counts, {off:+d} from the target: {place} the drive's "
+            f"in-position window of +-{window} counts")
 
 
 @click.command("stop", cls=ServobusCommand)

@@ -166,3 +166,22 @@ def test_scan_ids_narrows_and_says_how_long_it_may_take(
 def test_scan_refuses_bad_ids(capsys: pytest.CaptureFixture[str], ids: str, says: str) -> None:
     code, _, err = run(capsys, "--url", "sim://dyncan?fast=1", "scan", "--ids", ids)
     assert code == F.EXIT_USAGE and says in one_error_line(err)
+
+
+# ------------------------------------------------------------------ 14: "done at"
+@pytest.mark.parametrize("relative", [False, True])
+def test_done_at_explains_its_distance_from_the_target(capsys: pytest.CaptureFixture[str],
+                                                       relative: bool) -> None:
+    args = ["move", *(["--relative"] if relative else []), "1rev", "--wait"]
+    code, out, err = run(capsys, "--url", "sim://dyn232?fast=1", *args)
+    assert code == 0, err
+    verb = "moving by" if relative else "moving to"
+    assert out.startswith(f"{verb} 65536 counts; done at "), out
+    done = int(out.split("done at ")[1].split()[0])
+    if done == 65536:
+        assert "on the target" in out
+    else:
+        assert f"{done - 65536:+d} from the target: inside the drive's in-position window" in out
+    code, out, err = run(capsys, "--url", "sim://dyn232?fast=1", "--json", *args)
+    doc = json.loads(out)
+    assert doc["target"] == 65536 and abs(doc["position"] - 65536) <= doc["window"]
