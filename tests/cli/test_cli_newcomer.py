@@ -185,3 +185,16 @@ def test_done_at_explains_its_distance_from_the_target(capsys: pytest.CaptureFix
     code, out, err = run(capsys, "--url", "sim://dyn232?fast=1", "--json", *args)
     doc = json.loads(out)
     assert doc["target"] == 65536 and abs(doc["position"] - 65536) <= doc["window"]
+
+
+@pytest.mark.parametrize("missing", ["version", "protocol", "drive_id"])
+def test_a_backup_missing_a_field_says_missing(capsys: pytest.CaptureFixture[str],
+                                               tmp_path: Path, missing: str) -> None:
+    doc = {"format": "servobus.params", "version": 1, "protocol": "dyn232", "drive_id": 1,
+           "params": {"main_gain": 40}}
+    del doc[missing]
+    path = tmp_path / "backup.json"
+    path.write_text(json.dumps(doc))
+    code, _, err = run(capsys, "params", "--load", str(path))
+    line = one_error_line(err)
+    assert code == F.EXIT_USAGE and f"{missing} missing" in line and "None" not in line
