@@ -18,6 +18,7 @@ Note: without a drive URL each invocation starts its own built-in virtual drive,
 
 from __future__ import annotations
 
+import contextlib
 import math
 import re
 import time
@@ -112,6 +113,8 @@ def status_record(axis: Axis, status: AxisStatus) -> dict[str, object]:
     return record
 
 
+#: Seconds between the status reads that wait for a reset to take.
+RESET_POLL_S = 0.05
 #: Titles of the nested blocks of ``status``.
 BLOCKS = {"config": "config", "vendor_status": "drive's own status bits"}
 
@@ -126,7 +129,8 @@ def alarm_words(code: object, text: object, latched: object) -> str:
 def render_status(con: Console, record: dict[str, object], title: str) -> None:
     top: dict[str, object] = {}
     for key, value in record.items():
-        if key in (*BLOCKS, "drive_id", "protocol", "alarm_code", "alarm_latched"):
+        if key in (*BLOCKS, "drive_id", "protocol", "alarm_code", "alarm_latched",
+                   "alarm_before"):
             continue
         top[key] = (alarm_words(record["alarm_code"], value, record["alarm_latched"])
                     if key == "alarm" else value)
@@ -178,7 +182,8 @@ def reset_cmd(ctx: CliContext, wait_timeout: float) -> None:
     """Clear a latched alarm the drive family's own way, then show the status.
 
     DMM DYN2/DYN4: the reset selector (the drive takes it as a power cycle); DMM DYN5: Reset
-    (0x21 = 0xABCD, the adapter restarts); YZ-AIM: output enable 0 then 1 (5.2). Remove the
+    (0x21 = 0xABCD, the adapter restarts); YZ-AIM, which has no reset command: output enable
+0 then 1 (docs/axis.md). Remove the
     cause first: an alarm whose cause remains trips again. Exits 1 if the alarm is still
     there."""
     with open_axis(ctx) as axis:
@@ -201,17 +206,22 @@ def reset_cmd(ctx: CliContext, wait_timeout: float) -> None:
 
 
 def _status_after_reset(axis: Axis, wait_timeout: float) -> AxisStatus:
-    """The first status the drive answers after its reset (it may be restarting)."""
+    """The status once the reset took: the first one without a latched alarm, else the last
+    one read when ``wait_timeout`` ends (a drive restarting after its reset may not answer
+    for a while, or answer from before it; the reset command itself has no reply)."""
     deadline = time.monotonic() + wait_timeout
+    last: AxisStatus | None = None
     while True:
-        try:
-            status: AxisStatus = axis.status()
-        except DriveTimeout:
-            if time.monotonic() >= deadline:
+        with contextlib.suppress(DriveTimeout):
+            last = read_status(axis)
+        if last is not None and not last.alarm_latched:
+            return last
+        if time.monotonic() >= deadline:
+            if last is None:
                 raise DriveTimeout(f"drive {axis.drive_id} did not answer within "
-                                   f"{wait_timeout:g} s after the reset") from None
-        else:
-            return status
+                                   f"{wait_timeout:g} s after the reset")
+            return last
+        time.sleep(RESET_POLL_S)
 
 
 @click.command("position", cls=ServobusCommand)
