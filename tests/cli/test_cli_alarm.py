@@ -97,7 +97,8 @@ def trip_over_current(ax: Axis) -> None:
     DriveControl(ax.core.capture_source.drives).fault(None, "over_current")
 
 
-@pytest.mark.parametrize("url", ["sim://dyn232?fast=1", "sim://dyncan?fast=1", "sim://enip"])
+@pytest.mark.parametrize("url", ["sim://dyn232?fast=1", "sim://dyn232", "sim://dyncan?fast=1",
+                                 "sim://enip"])
 def test_reset_clears_a_latched_alarm(capsys: pytest.CaptureFixture[str],
                                       on_connect: list[Callable[[Axis], None]],
                                       url: str) -> None:
