@@ -29,6 +29,7 @@ from rich.console import Console
 
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
+from servobus.cli.failures import EXIT_FAULT, CliError
 from servobus.cli.motion_guard import stop_on_interrupt
 from servobus.cli.open_axis import connection_label, emit, kv_text, open_axis
 from servobus.cli.param_types import Seconds
@@ -141,12 +142,15 @@ def render_status(con: Console, record: dict[str, object], title: str) -> None:
             con.print(kv_text(block_title, block), markup=False)
 
 
-def alarm_error(axis: Axis, status: AxisStatus) -> DriveAlarm:
-    """The exit-1 error of a drive in alarm (servobus.cli.failures names `servobus reset`)."""
-    kind = "latched" if status.alarm_latched else "a notice, not latched"
-    return DriveAlarm(f"drive {axis.drive_id} reports alarm {status.alarm_code}: "
-                      f"{status.alarm_text} ({kind})", code=status.alarm_code,
-                      drive_id=axis.drive_id)
+def alarm_error(axis: Axis, status: AxisStatus) -> DriveAlarm | CliError:
+    """The exit-1 error of a drive in alarm: a latched one is a DriveAlarm (whose advice
+    names `servobus reset`); a notice (DMM checksum, YZ-AIM battery) needs no reset."""
+    what = f"drive {axis.drive_id} reports alarm {status.alarm_code}: {status.alarm_text}"
+    if status.alarm_latched:
+        return DriveAlarm(f"{what} (latched)", code=status.alarm_code, drive_id=axis.drive_id)
+    return CliError(f"{what} (a notice, not latched)",
+                    "the drive keeps working; the notice goes once its cause is gone",
+                    EXIT_FAULT)
 
 
 def read_status(axis: Axis) -> AxisStatus:

@@ -128,3 +128,22 @@ def test_the_alarm_advice_names_the_reset_command() -> None:
 
     code, line = F.describe(DriveAlarm("drive 1 alarm 2: over current"))
     assert code == F.EXIT_FAULT and "`servobus reset`" in line and "Axis.reset()" not in line
+
+
+def test_a_notice_exits_1_without_asking_for_a_reset(
+        capsys: pytest.CaptureFixture[str], on_connect: list[Callable[[Axis], None]]) -> None:
+    def battery_warning(ax: Axis) -> None:  # YZ-AIM 0x13: the motor keeps working
+        core = ax.core
+        real = core.status
+
+        async def status() -> AxisStatus:
+            return dataclasses.replace(await real(), alarm_code=0x13,
+                                       alarm_text=ax.family.alarm_text(0x13))
+
+        core.status = status  # type: ignore[method-assign]
+
+    on_connect.append(battery_warning)
+    code, out, err = run(capsys, "--url", "sim://modbus?fast=1", "status")
+    assert code == F.EXIT_FAULT
+    assert "(notice, not latched)" in out and "a notice, not latched" in err
+    assert "servobus reset" not in err
