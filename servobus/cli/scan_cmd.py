@@ -9,8 +9,8 @@ whole wait, a present one its reply time.
 The default range is every id the protocol addresses (``Axis.drive_ids``); ``--first`` /
 ``--last`` or ``--ids 1-8,12`` narrow it. Decision on progress: on a terminal, a live bar on
 stderr with the ids done, the drives found and the time left; otherwise (a pipe, a log,
-``--json``) one stderr line before the scan with its worst-case duration. stdout carries
-only the result.
+``--json``) one stderr line before the scan with its expected duration (ids x the wait per
+id; a loaded host adds its own time per id). stdout carries only the result.
 """
 
 from __future__ import annotations
@@ -109,7 +109,7 @@ def scan_cmd(ctx: CliContext, first: int | None, last: int | None, ids_text: str
         wait = axis.ping_deadline() if per_id is None else per_id
         where = connection_label(ctx).rsplit(", id", 1)[0]
         if not live:
-            note(f"scanning {len(ids)} id(s) ({id_text(ids)}) on {where}: at most "
+            note(f"scanning {len(ids)} id(s) ({id_text(ids)}) on {where}: about "
                  f"{len(ids) * wait:.1f} s ({wait * 1000:.0f} ms per absent id)")
         with Progress(
             TextColumn("scanning id {task.fields[current]:>3}"), BarColumn(),

@@ -155,7 +155,7 @@ def test_scan_ids_narrows_and_says_how_long_it_may_take(
     code, out, err = run(capsys, "--url", url, "scan", "--ids", "1-8,12")
     assert code == 0, err
     assert out == f"found 2 drive(s) on {url}: 3 12\n"
-    assert (f"scanning 9 id(s) (1-8,12) on {url}: at most {9 * per_id_ms / 1000:.1f} s "
+    assert (f"scanning 9 id(s) (1-8,12) on {url}: about {9 * per_id_ms / 1000:.1f} s "
             f"({per_id_ms} ms per absent id)") in err
     code, out, err = run(capsys, "--url", url, "--json", "scan", "--ids", "12,3")
     assert code == 0 and json.loads(out) == [3, 12]
