@@ -48,6 +48,14 @@ class MachineFileError(ArgumentRangeError):
     """A mistake in a machine file (servobus.machine): one line naming file, axis and key."""
 
 
+class UnknownScheme(ArgumentRangeError):
+    """A drive URL names no scheme servobus serves; ``suggestion`` is the resembling URL."""
+
+    def __init__(self, message: str, suggestion: str | None = None) -> None:
+        super().__init__(message)
+        self.suggestion = suggestion
+
+
 class EepromGuardError(ServobusError):
     """Parameter writes exceed the configured EEPROM write rate; nothing was sent."""
 

@@ -53,6 +53,8 @@ DEFAULT_WAIT_TIMEOUT_S = 30.0
 #: half a second covers the status reads and their retries on a slow or paced link.
 DEFAULT_CONFIRM_TIMEOUT_S = 0.5
 DEFAULT_POLL_S = 0.02
+#: ping_deadline where a protocol states none (a network drive: no wire time to add).
+DEFAULT_PING_S = 0.05
 
 
 def check_int(name: str, value: object) -> int:
@@ -86,6 +88,12 @@ class AsyncAxis(ABC):
     @property
     def counts_per_rev(self) -> int:
         return self.family.counts_per_rev
+
+    @property
+    def id_address(self) -> str | None:
+        """The network address the drive id selected, where a protocol derives one from it
+        (DYN5: the id is the last byte, B3.B2.B1.id); None where the id is a bus address."""
+        return None
 
     # ------------------------------------------------------------- primitives (per protocol)
     @abstractmethod
@@ -148,6 +156,12 @@ class AsyncAxis(ABC):
     @abstractmethod
     async def ping(self, timeout: float = 0.05) -> bool:
         """One status read, no retry; False on timeout."""
+
+    def ping_deadline(self) -> float:
+        """Seconds a ping should wait for an absent drive (what ``scan`` waits per id): the
+        protocol's per-attempt reply deadline of a short read, i.e. the request and its reply
+        on the wire at the link's rate plus the drive's reply time (docs/axis.md, "scan")."""
+        return DEFAULT_PING_S
 
     @abstractmethod
     async def sibling(self, drive_id: int) -> AsyncAxis:
@@ -244,8 +258,35 @@ class AsyncAxis(ABC):
         return self.family.degrees_to_counts(degrees)
 
     def _check_move(self, value: object, *, relative: bool) -> int:
-        """Check a move argument before anything is sent (protocols add their range)."""
-        return check_int("distance" if relative else "position", value)
+        """Check a move argument before anything is sent: an int within :meth:`_move_limits`."""
+        counts = check_int("distance" if relative else "position", value)
+        self._check_limits(counts, relative)
+        return counts
+
+    def _move_limits(self, relative: bool) -> tuple[int, int] | None:
+        """Counts a move to (or by) can reach with what the axis knows now; None: no limit.
+
+        Protocols whose range depends on a drive setting (DMM GEAR_NUM) give the widest
+        range until they have read it, then the exact one (:meth:`move_range`)."""
+        return None
+
+    def _check_limits(self, counts: int, relative: bool) -> None:
+        limits = self._move_limits(relative)
+        if limits is not None and not limits[0] <= counts <= limits[1]:
+            what = "a move by" if relative else "a move to"
+            raise ArgumentRangeError(
+                f"{what} {counts} counts is outside {limits[0]}..{limits[1]} counts, "
+                f"the range of {self.family.title} over {self.protocol}"
+                f"{self._limits_note()}")
+
+    def _limits_note(self) -> str:
+        """What the range depends on, for the error message (e.g. " at GEAR_NUM 4096")."""
+        return ""
+
+    async def move_range(self, *, relative: bool = False) -> tuple[int, int] | None:
+        """The counts a move to (``relative``: by) can reach on this drive, None if
+        unbounded (reads what the range depends on, e.g. DMM GEAR_NUM, when needed)."""
+        return self._move_limits(relative)
 
     async def position_window(self) -> int:
         """Counts within which the drive reports "in position" (protocols read the drive's)."""
@@ -330,8 +371,8 @@ class AsyncAxis(ABC):
     def _raise_alarm(self, st: AxisStatus) -> None:
         if st.alarm_latched:
             raise DriveAlarm(
-                f"drive {self.drive_id} alarm {st.alarm_code}: {st.alarm_text}; "
-                "reset() clears it", code=st.alarm_code, drive_id=self.drive_id)
+                f"drive {self.drive_id} alarm {st.alarm_code}: {st.alarm_text} (latched: "
+                "a reset or power cycle clears it)", code=st.alarm_code, drive_id=self.drive_id)
 
     async def stop(self) -> None:
         """Constant speed 0: the drive ramps down at its deceleration and holds position."""

@@ -24,7 +24,8 @@ from servobus.axis.client_axis import ClientAxis
 from servobus.errors import DriveTimeout, ProtocolError
 from servobus.families.base import AxisStatus, Family, ParamInfo
 from servobus.families.dmm import units as U
-from servobus.families.dmm.family import DYN2, axis_status, counts_to_command
+from servobus.families.dmm import vocabulary as V
+from servobus.families.dmm.family import DYN2, axis_status, command_to_counts, counts_to_command
 from servobus.families.dmm.registers import DriveConfig, DriveStatus
 from servobus.link.eeprom_guard import EepromGuard
 
@@ -81,6 +82,9 @@ class CommandClient(Protocol):
 
     @property
     def guard(self) -> EepromGuard: ...
+    def reply_deadline_s(self) -> float:
+        """Per-attempt deadline of a short read (wire time + the drive's reply time)."""
+        ...
     async def execute(self, command: Request[T], *, retries: int | None = None,
                       timeout: float | None = None) -> T: ...
     def add_trace(self, hook: AxisTraceHook) -> None: ...
@@ -146,11 +150,26 @@ class CommandAxis(ClientAxis[CommandClient]):
     # ------------------------------------------------------------- motion
     async def _send_move_to(self, position: int) -> None:
         command = await self.to_command(position)
+        self._check_limits(position, False)  # now at the drive's GEAR_NUM
         await self._run(self.commands.make_move_absolute(self._id, command))
 
     async def _send_move_by(self, distance: int) -> None:
         command = await self.to_command(distance)
+        self._check_limits(distance, True)
         await self._run(self.commands.make_move_relative(self._id, command))
+
+    def _move_limits(self, relative: bool) -> tuple[int, int] | None:
+        """The 28-bit command range in counts at the GEAR_NUM known so far (the widest,
+        GEAR_NUM's minimum, before it is read)."""
+        gear = self._gear_num or self.family.param("gear_num").minimum
+        return command_to_counts(V.VALUE_MIN, gear), command_to_counts(V.VALUE_MAX, gear)
+
+    def _limits_note(self) -> str:
+        return f" at GEAR_NUM {self._gear_num}" if self._gear_num else ""
+
+    async def move_range(self, *, relative: bool = False) -> tuple[int, int] | None:
+        await self.gear_num()
+        return self._move_limits(relative)
 
     async def move_to_command(self, command: int, *, wait: bool = False,
                               timeout: float | None = None) -> None:
@@ -196,7 +215,10 @@ class CommandAxis(ClientAxis[CommandClient]):
         return await self._run(self._read(self.commands.make_read_status))
 
     async def status(self) -> AxisStatus:
-        return axis_status(await self.drive_status())
+        """The status byte, and the speed when no profile runs (moving = the motor turns,
+        family.axis_status): a constant speed leaves the busy bit clear."""
+        status = await self.drive_status()
+        return axis_status(status, speed_rpm=None if status.motion_busy else await self.speed())
 
     async def config(self) -> DriveConfig:
         return await self._run(self._read(self.commands.make_read_config))
@@ -262,6 +284,9 @@ class CommandAxis(ClientAxis[CommandClient]):
         self._id = new_id
         self._reads.clear()
         self._param_reads.clear()
+
+    def ping_deadline(self) -> float:
+        return self.client.reply_deadline_s()
 
     async def ping(self, timeout: float = 0.05) -> bool:
         """One status read without retry. A corrupt reply still proves something answered."""

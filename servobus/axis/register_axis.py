@@ -126,6 +126,10 @@ class RegisterAxis(ClientAxis[C]):
         counts = super()._check_move(value, relative=relative)
         return (INC if relative else ABS).check(counts)
 
+    def _move_limits(self, relative: bool) -> tuple[int, int] | None:
+        pair = INC if relative else ABS
+        return pair.minimum, pair.maximum
+
     async def _position_mode(self) -> None:
         if self._speed_mode is False:
             return

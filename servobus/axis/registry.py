@@ -16,18 +16,21 @@ directly (``SCHEMES: Mapping[str, str]`` scheme -> opener, ``SIM``, ``DECODERS``
 ``PARAMS``, ``FAMILIES``, ``SHORTCUTS``, ``CLI = "module:register"``): ``sim://`` does,
 and so may older third-party providers. The empty scheme ``""`` is the bare serial port
 (``/dev/ttyUSB0``, ``COM3``); pyserial URL schemes (``socket``, ``loop`` ...) are claimed by
-the protocol that serves bare serial ports.
+the protocol that serves bare serial ports, in its spec's ``serial_schemes``: they open, but
+an error message lists servobus's own schemes only (``schemes``), and an unknown scheme
+suggests the one it resembles (difflib).
 """
 
 from __future__ import annotations
 
+import difflib
 import importlib
 import pkgutil
 from collections.abc import Awaitable, Callable, Mapping
 from importlib.metadata import entry_points
 from typing import TYPE_CHECKING, Any, cast
 
-from servobus.errors import ArgumentRangeError
+from servobus.errors import UnknownScheme
 from servobus.protocols import ProtocolSpec
 
 if TYPE_CHECKING:
@@ -60,6 +63,7 @@ def _provider_modules() -> list[str]:
 #: The tables a ProtocolSpec fills, by the name a provider without SPEC declares them.
 _FROM_SPEC: dict[str, Callable[[ProtocolSpec], dict[str, str]]] = {
     "SCHEMES": lambda spec: dict.fromkeys(spec.schemes, spec.opener),
+    "SERIAL_SCHEMES": lambda spec: dict.fromkeys(spec.serial_schemes, spec.opener),
     "SIM": lambda spec: dict.fromkeys(spec.sim_names, spec.sim) if spec.sim else {},
     "DECODERS": lambda spec: {spec.name: spec.decoder} if spec.decoder else {},
     "PARAMS": lambda spec: {spec.name: spec.params} if spec.params else {},
@@ -123,7 +127,12 @@ def provided_list(attribute: str) -> list[str]:
 
 def schemes() -> dict[str, str]:
     """Every known scheme -> its opener target (providers are imported once, lightly)."""
-    return {**provided("SCHEMES"), **_extra}
+    return {**provided("SERIAL_SCHEMES"), **provided("SCHEMES"), **_extra}
+
+
+def own_schemes() -> list[str]:
+    """servobus's own schemes (not the pyserial URLs a serial protocol also takes), sorted."""
+    return sorted({*provided("SCHEMES"), *_extra} - {""})
 
 
 def load(target: str) -> Any:
@@ -133,8 +142,17 @@ def load(target: str) -> Any:
 
 
 def scheme_list() -> str:
-    """The schemes for an error message: ``dyn232, dyn232+<serial>, dyncan+<interface>, ...``."""
-    return ", ".join(sorted(s if s else "<serial port>" for s in schemes()))
+    """The schemes for an error message: servobus's own, then the bare serial port."""
+    return ", ".join(own_schemes()) + ", or a bare serial port (/dev/ttyUSB0, COM3)"
+
+
+def resembling(url: DriveUrl) -> str | None:
+    """``url`` with its scheme replaced by the known one it resembles most, if any."""
+    close = difflib.get_close_matches(url.scheme, own_schemes(), n=1, cutoff=0.6)
+    if not close:
+        return None
+    head = url.raw.split(":", 1)[0]
+    return close[0] + head[len(url.scheme):] + url.raw[len(head):]
 
 
 def lookup(url: DriveUrl) -> Opener:
@@ -143,8 +161,10 @@ def lookup(url: DriveUrl) -> Opener:
     key = f"{url.scheme}+{url.transport}" if url.transport else url.scheme
     target = table.get(key) or table.get(url.scheme if url.transport else key)
     if target is None:
-        raise ArgumentRangeError(
-            f"unknown drive URL scheme in {url.raw!r}; known: {scheme_list()}")
+        suggestion = resembling(url)
+        hint = f" (did you mean {suggestion}?)" if suggestion else ""
+        raise UnknownScheme(f"unknown drive URL scheme {url.scheme!r} in {url.raw!r}{hint}; "
+                            f"known: {scheme_list()}", suggestion)
     return cast(Opener, load(target))
 
 

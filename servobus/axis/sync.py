@@ -152,6 +152,11 @@ class Axis:
     def counts_per_rev(self) -> int:
         return self._core.counts_per_rev
 
+    @property
+    def id_address(self) -> str | None:
+        """The network address the drive id selected (DYN5), None where the id is a bus address."""
+        return self._core.id_address
+
     # ------------------------------------------------------------- motion
     def move_to(self, position: int, *, wait: bool = False, timeout: float | None = None,
                 confirm: bool = False, confirm_timeout: float | None = None) -> None:
@@ -219,6 +224,14 @@ class Axis:
     def position_window(self) -> int:
         """Counts within which the drive reports "in position"."""
         return self._call(self._core.position_window)
+
+    def ping_deadline(self) -> float:
+        """Seconds a ping waits for an absent drive (what ``scan`` waits per id)."""
+        return self._core.ping_deadline()
+
+    def move_range(self, *, relative: bool = False) -> tuple[int, int] | None:
+        """The counts a move to (``relative``: by) can reach on this drive, None if unbounded."""
+        return self._call(self._core.move_range, relative=relative)
 
     def ping(self, timeout: float = 0.05) -> bool:
         """One status read, no retry; False on timeout."""

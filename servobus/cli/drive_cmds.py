@@ -1,4 +1,5 @@
-"""Drive commands: ``status``, ``position``, ``speed RPM``, ``move [--relative] TARGET``, ``stop``.
+"""Drive commands: ``status``, ``position``, ``speed RPM``, ``move [--relative] TARGET``, ``stop``,
+``reset``.
 
 Units are the Axis's, the same on every drive: ``move`` takes encoder counts of the drive
 family (``move 16384``), revolutions (``2.5rev``), degrees (``90deg``) or the drive's raw
@@ -6,13 +7,21 @@ command units (``120cmd``, where the protocol has them); ``position`` prints cou
 revolutions. Negative numbers are arguments: ``servobus move --relative -120``.
 Ctrl-C or SIGTERM during ``move --wait`` stops the motor first (servobus.cli.motion_guard).
 
+``status`` exits 1 when the drive reports an alarm (README "Errors and exit codes"), after
+printing the status; ``reset`` clears a latched alarm the family's own way (Axis.reset():
+the DMM reset selector, which the drive takes as a power cycle; DYN5 Reset 0x21; YZ-AIM
+output_enable 0 then 1) and exits 1 when the alarm is still there afterwards.
+
 Note: without a drive URL each invocation starts its own built-in virtual drive, so state
 (position, motion) does not carry over from one command to the next.
 """
 
 from __future__ import annotations
 
+import contextlib
+import math
 import re
+import time
 from typing import TYPE_CHECKING, Any, TypeAlias
 
 import click
@@ -21,10 +30,11 @@ from rich.console import Console
 from servobus.cli import machine_cli
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
+from servobus.cli.failures import EXIT_FAULT, CliError
 from servobus.cli.motion_guard import stop_on_interrupt
 from servobus.cli.open_axis import connection_label, emit, kv_text, open_axis
 from servobus.cli.param_types import Seconds
-from servobus.errors import NotSupported
+from servobus.errors import ArgumentRangeError, DriveAlarm, DriveTimeout, NotSupported
 
 if TYPE_CHECKING:
     from servobus.axis.sync import Axis
@@ -73,6 +83,34 @@ def to_counts(axis: Axis, number: float, unit: str) -> int:
     return int(number)
 
 
+def typed(number: float, unit: str) -> str:
+    """A TARGET as the user wrote it (``16384``, ``2.5rev``, ``-90deg``)."""
+    text = str(int(number)) if number.is_integer() else repr(number)
+    return text if unit == "counts" else f"{text}{unit}"
+
+
+def in_unit(axis: Axis, counts: int, unit: str) -> str:
+    """Counts in a TARGET unit, rounded towards zero (a bound stays reachable)."""
+    if unit == "counts":
+        return str(counts)
+    per_unit = axis.counts_per_rev / (360.0 if unit == "deg" else 1.0)
+    value = math.trunc(counts / per_unit * 1000) / 1000
+    return f"{value:.3f}".rstrip("0").rstrip(".")
+
+
+def check_reach(axis: Axis, counts: int, relative: bool, number: float, unit: str) -> None:
+    """ArgumentRangeError naming TARGET as typed and the drive's range in its unit."""
+    limits = axis.move_range(relative=relative)
+    if limits is None or limits[0] <= counts <= limits[1]:
+        return
+    low, high = (in_unit(axis, bound, unit) for bound in limits)
+    what = "move --relative" if relative else "move"
+    raise ArgumentRangeError(
+        f"{what} {typed(number, unit)}: outside the {low}..{high} "
+        f"{'counts' if unit == 'counts' else unit} this drive reaches "
+        f"({axis.family.title} over {axis.protocol})")
+
+
 def status_record(axis: Axis, status: AxisStatus) -> dict[str, object]:
     """--json of ``status``: the AxisStatus at top level, position, the vendor's extras."""
     record: dict[str, object] = {"drive_id": axis.drive_id, "protocol": axis.protocol,
@@ -85,29 +123,121 @@ def status_record(axis: Axis, status: AxisStatus) -> dict[str, object]:
     return record
 
 
+#: Seconds between the status reads that wait for a reset to take.
+RESET_POLL_S = 0.05
+#: Titles of the nested blocks of ``status``.
+BLOCKS = {"config": "config", "vendor_status": "drive's own status bits"}
+
+
+def alarm_words(code: object, text: object, latched: object) -> str:
+    """``none``, or ``2 over current (latched)``: the alarm the same way on every family."""
+    if not code:
+        return "none"
+    return f"{code} {text}" + (" (latched)" if latched else " (notice, not latched)")
+
+
 def render_status(con: Console, record: dict[str, object], title: str) -> None:
-    nested = ("config", "vendor_status")
-    top = {k: v for k, v in record.items() if k not in (*nested, "drive_id", "protocol")}
-    if top.get("alarm") == "":  # people read an empty field as "not read"
-        top["alarm"] = "none"
+    top: dict[str, object] = {}
+    for key, value in record.items():
+        if key in (*BLOCKS, "drive_id", "protocol", "alarm_code", "alarm_latched",
+                   "alarm_before"):
+            continue
+        top[key] = (alarm_words(record["alarm_code"], value, record["alarm_latched"])
+                    if key == "alarm" else value)
     con.print(kv_text(title, top), markup=False)
-    for key in nested:
+    for key, block_title in BLOCKS.items():
         block = record.get(key)
         if isinstance(block, dict):
-            con.print(kv_text(key.replace("_", " "), block), markup=False)
+            con.print(kv_text(block_title, block), markup=False)
+
+
+def alarm_error(axis: Axis, status: AxisStatus) -> DriveAlarm | CliError:
+    """The exit-1 error of a drive in alarm: a latched one is a DriveAlarm (whose advice
+    names `servobus reset`); a notice (DMM checksum, YZ-AIM battery) needs no reset."""
+    what = f"drive {axis.drive_id} reports alarm {status.alarm_code}: {status.alarm_text}"
+    if status.alarm_latched:
+        return DriveAlarm(f"{what} (latched)", code=status.alarm_code, drive_id=axis.drive_id)
+    return CliError(f"{what} (a notice, not latched)",
+                    "the drive keeps working; the notice goes once its cause is gone",
+                    EXIT_FAULT)
+
+
+def read_status(axis: Axis) -> AxisStatus:
+    """The status, also of a drive that pushed its alarm: such an alarm is raised once, by
+    the next call (DriveAlarm without the code); the status read after it names the code."""
+    try:
+        status: AxisStatus = axis.status()
+    except DriveAlarm:
+        status = axis.status()
+    return status
 
 
 @click.command("status", cls=ServobusCommand)
 @pass_cli
 def status_cmd(ctx: CliContext) -> None:
-    """Decoded drive status (and the drive's configuration where it has one)."""
+    """Decoded drive status (and the drive's configuration where it has one).
+
+    Exits 1 when the drive reports an alarm (`servobus reset` clears a latched one)."""
     if ctx.machine_mode:  # one table of every axis, or the one --axis names
         machine_cli.status(ctx)
         return
     with open_axis(ctx) as axis:
-        record = status_record(axis, axis.status())
+        status = read_status(axis)
+        record = status_record(axis, status)
         label = connection_label(ctx, axis)
     emit(ctx, record, lambda con: render_status(con, record, f"status of {label}"))
+    if status.alarm:
+        raise alarm_error(axis, status)
+
+
+@click.command("reset", cls=ServobusCommand)
+@click.option("--wait-timeout", type=Seconds(), default=15.0, show_default=True,
+              help="seconds to wait for the drive to answer again after the reset")
+@pass_cli
+def reset_cmd(ctx: CliContext, wait_timeout: float) -> None:
+    """Clear a latched alarm the drive family's own way, then show the status.
+
+    DMM DYN2/DYN4: the reset selector (the drive takes it as a power cycle); DMM DYN5: Reset
+    (0x21 = 0xABCD, the adapter restarts); YZ-AIM, which has no reset command: output enable
+0 then 1 (docs/axis.md). Remove the
+    cause first: an alarm whose cause remains trips again. Exits 1 if the alarm is still
+    there."""
+    with open_axis(ctx) as axis:
+        axis.family.require("reset")
+        before = read_status(axis)
+        axis.reset()
+        after = _status_after_reset(axis, wait_timeout)
+        record = {"alarm_before": before.alarm_code, **status_record(axis, after)}
+        label = connection_label(ctx, axis)
+
+    def render(con: Console) -> None:
+        con.print(f"reset sent; alarm before: "
+                  f"{alarm_words(before.alarm_code, before.alarm_text, before.alarm_latched)}",
+                  markup=False)
+        render_status(con, record, f"status of {label}")
+
+    emit(ctx, record, render)
+    if after.alarm:
+        raise alarm_error(axis, after)
+
+
+def _status_after_reset(axis: Axis, wait_timeout: float) -> AxisStatus:
+    """The status once the reset took: the first one without a latched alarm, else the last
+    one read when ``wait_timeout`` ends (a drive restarting after its reset may not answer
+    for a while, or answer from before it; the reset command itself has no reply)."""
+    deadline = time.monotonic() + wait_timeout
+    last: AxisStatus | None = None
+    while True:
+        with contextlib.suppress(DriveTimeout):
+            last = read_status(axis)
+        if last is not None and not last.alarm_latched:
+            return last
+        if time.monotonic() >= deadline:
+            if last is None:
+                raise DriveTimeout(f"drive {axis.drive_id} did not answer within "
+                                   f"{wait_timeout:g} s after the reset")
+            return last
+        time.sleep(RESET_POLL_S)
 
 
 @click.command("position", cls=ServobusCommand)
@@ -162,6 +292,7 @@ def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float, c
         return
     check_drive_target(number, unit)
     with open_axis(ctx) as axis, stop_on_interrupt(axis):
+        start = axis.position() if wait and relative else 0  # where "by" counts from
         if unit == "cmd":
             if not hasattr(axis.core, "move_to_command"):
                 raise NotSupported(f"{axis.family.title} over {axis.protocol} has no raw "
@@ -170,19 +301,37 @@ def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float, c
             record: dict[str, object] = {"command_units": int(number)}
         else:
             counts = to_counts(axis, number, unit)
+            check_reach(axis, counts, relative, number, unit)
             (axis.move_by if relative else axis.move_to)(counts, confirm=confirm)
             record = {"counts": counts}
         record["move"] = "relative" if relative else "absolute"
         if wait:
             status = axis.wait_idle(timeout=wait_timeout) if wait_timeout > 0 else axis.status()
-            record.update(in_position=status.in_position, position=axis.position())
+            record.update(in_position=status.in_position, position=axis.position(),
+                          window=axis.position_window())
+            if unit != "cmd":
+                record["target"] = start + counts
 
     def render(con: Console) -> None:
         verb = "moving by" if relative else "moving to"
         what = f"{int(number)} command units" if unit == "cmd" else f"{record['counts']} counts"
-        con.print(f"{verb} {what}" + (f"; done at {record['position']} counts" if wait else ""))
+        con.print(f"{verb} {what}" + (f"; {done_text(record)}" if wait else ""))
 
     emit(ctx, record, render)
+
+
+def done_text(record: dict[str, object]) -> str:
+    """Where a waited move ended, and why that need not be the target to the count: the
+    drive reports "in position" within its window (DMM OnRange, YZ-AIM +-10 counts)."""
+    position, window, target = record["position"], record["window"], record.get("target")
+    if not (isinstance(position, int) and isinstance(target, int) and isinstance(window, int)):
+        return f"done at {position} counts"
+    off = position - target
+    if off == 0:
+        return f"done at {position} counts, on the target"
+    place = "inside" if abs(off) <= window else "outside"
+    return (f"done at {position} counts, {off:+d} from the target: {place} the drive's "
+            f"in-position window of +-{window} counts")
 
 
 @click.command("stop", cls=ServobusCommand)
@@ -198,5 +347,5 @@ def stop_cmd(ctx: CliContext) -> None:
 
 
 def register(group: click.Group) -> None:
-    for command in (status_cmd, position_cmd, speed_cmd, move_cmd, stop_cmd):
+    for command in (status_cmd, position_cmd, speed_cmd, move_cmd, stop_cmd, reset_cmd):
         group.add_command(command)

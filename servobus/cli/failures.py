@@ -29,6 +29,7 @@ from servobus.errors import (
     NotSupported,
     ProtocolError,
     ServobusError,
+    UnknownScheme,
 )
 
 EXIT_OK = 0
@@ -69,8 +70,8 @@ class Terminated(Interrupted):
 #: (exception type, exit code, what to do); the first isinstance match wins.
 HINTS: tuple[tuple[type[BaseException], int, str], ...] = (
     (DriveAlarm, EXIT_FAULT,
-     "remove the cause (load, wiring, supply), then power-cycle the drive or call "
-     "Axis.reset()"),
+     "remove the cause (load, wiring, supply), then `servobus reset` (or power-cycle the "
+     "drive)"),
     (DriveError, EXIT_FAULT,
      "the drive refused the command: check the value against the drive's manual"),
     (DriveTimeout, EXIT_USAGE,
@@ -82,6 +83,8 @@ HINTS: tuple[tuple[type[BaseException], int, str], ...] = (
      "check that the drive (or simulator) is still running and connected, then retry"),
     (LimitError, EXIT_USAGE, "give a target inside the axis's soft limits (machine file)"),
     (MachineFileError, EXIT_USAGE, "fix the machine file (docs/machine.md lists every key)"),
+    (UnknownScheme, EXIT_USAGE,
+     "write SCHEME://TARGET with a scheme above (docs/axis.md, \"Drive URLs\")"),
     (ArgumentRangeError, EXIT_USAGE, "nothing was sent; give a value inside the range"),
     (NotSupported, EXIT_USAGE, "nothing was sent; this drive or protocol lacks the feature"),
     (EepromGuardError, EXIT_USAGE,

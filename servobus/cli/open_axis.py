@@ -54,6 +54,10 @@ def open_axis(ctx: CliContext, drive_id: int | None = None) -> Iterator[Axis]:
         raise
     except Exception as exc:  # whatever the driver raises, one line names the port
         raise open_failure(url, exc) from exc
+    address = axis.id_address if wanted is not None else None
+    if address is not None and address not in ctx.url:
+        note(f"note: --id {wanted} addresses {address} (on {axis.protocol} the drive id is the "
+             "last byte of the address; docs/axis.md, \"Drive ids\")")
     try:
         yield axis
     except BaseException:
@@ -78,7 +82,9 @@ def note_builtin_once() -> None:
 
 def connection_label(ctx: CliContext, axis: Axis | None = None) -> str:
     drive = axis.drive_id if axis is not None else ctx.drive_id
-    return f"{ctx.url}, id {drive if drive is not None else 'default'}"
+    label = f"{ctx.url}, id {drive if drive is not None else 'default'}"
+    address = axis.id_address if axis is not None else None
+    return label if address is None or address in ctx.url else f"{label} at {address}"
 
 
 def console(err: bool = False) -> Console:
@@ -105,8 +111,11 @@ def kv_text(title: str, rows: Mapping[str, Any]) -> str:
 
 
 def _fmt(value: object) -> str:
+    """yes/no for a flag, ``none`` for a value the drive does not have (never ``None``)."""
     if isinstance(value, bool):
         return "yes" if value else "no"
+    if value is None:
+        return "none"
     return str(value)
 
 

@@ -5,6 +5,9 @@ Protocol-free: what to say depends on the transport the URL names, never on the 
 * socketcand: a bounded TCP connect to HOST:PORT before python-can is asked to open it
   (python-can's socketcand client retries for 10 s and logs every attempt when nothing
   listens). The probe connection is closed at once; socketcand serves the next one.
+* a transport nobody serves (``dyn232+sockte://``) is named with the one it resembles (difflib
+  over pyserial's URL schemes and python-can's interfaces); ``socketcan`` given HOST:PORT
+  points to ``socketcand`` (socketcan takes a Linux interface such as can0);
 * any exception while opening (python-can's CanInterfaceNotImplementedError /
   CanInitializationError, a missing vendor library's OSError, pyserial's SerialException,
   a refused TCP connection) becomes one :class:`CliError` naming the port and what to do,
@@ -13,6 +16,9 @@ Protocol-free: what to say depends on the transport the URL names, never on the 
 
 from __future__ import annotations
 
+import difflib
+import pkgutil
+import re
 import socket
 
 from servobus.axis.url import DriveUrl
@@ -76,8 +82,40 @@ def check_reachable(url: DriveUrl) -> None:
                        CAN_DRIVERS["socketcand"]) from None
 
 
+_HOST_PORT = re.compile(r"[^/:]+:\d+(/.*)?")
+
+
+def known_transports() -> set[str]:
+    """What may follow ``+``: pyserial's URL schemes, python-can's interfaces, ours."""
+    import can.interfaces  # lazy: only on a failure
+    import serial.urlhandler
+
+    serial_schemes = {m.name.removeprefix("protocol_")
+                      for m in pkgutil.iter_modules(serial.urlhandler.__path__)}
+    return serial_schemes | set(can.interfaces.VALID_INTERFACES) | set(PORT_HINTS) \
+        | set(CAN_DRIVERS)
+
+
+def transport_failure(url: DriveUrl) -> CliError | None:
+    """A transport that cannot be right, with what was probably meant (module docstring)."""
+    if url.transport == "socketcan" and _HOST_PORT.fullmatch(url.target):
+        return CliError(f"cannot open CAN bus {url.raw}: socketcan takes a Linux CAN "
+                        f"interface (can0), not the network address {url.target}",
+                        f"for a socketcand server write {url.scheme}+socketcand://{url.target}")
+    if not url.transport or url.transport in known_transports():
+        return None
+    close = difflib.get_close_matches(url.transport, sorted(known_transports()), n=1)
+    if not close:  # nothing resembles it: the CAN interface list says what exists
+        return None
+    return CliError(f"unknown transport {url.transport!r} in {url.raw}",
+                    f"did you mean {url.scheme}+{close[0]}://{url.target}?")
+
+
 def open_failure(url: DriveUrl, exc: BaseException) -> CliError:
     """The one-line explanation of a port, bus or connection that could not be opened."""
+    wrong = transport_failure(url)
+    if wrong is not None:
+        return wrong
     if url.transport in CAN_DRIVERS:
         return CliError(f"cannot open CAN bus {url.raw}: {_reason(exc)}",
                         CAN_DRIVERS[url.transport])

@@ -10,6 +10,7 @@ validated before any connection is opened.
 from __future__ import annotations
 
 import sys
+from typing import TYPE_CHECKING
 
 import click
 from rich.console import Console
@@ -21,7 +22,11 @@ from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.failures import EXIT_DIFFERENT, EXIT_FAULT, CliError
 from servobus.cli.open_axis import console, emit, emit_json, note, open_axis
 from servobus.cli.param_types import ReachableParam, family_for, reachable_help
+from servobus.families import family
 from servobus.families.base import Family
+
+if TYPE_CHECKING:
+    from servobus.axis.sync import Axis
 
 
 def params_table(values: dict[str, int], title: str, width: int, fam: Family) -> Table:
@@ -62,10 +67,32 @@ def _save(ctx: CliContext, path: str) -> None:
                                f"({backup.protocol}) to {path}"))
 
 
+def check_fits(path: str, backup: PF.ParamsBackup, axis: Axis) -> None:
+    """Refuse a backup of another family, or with parameters this protocol cannot reach
+    (CliError naming both); a note when only the protocol differs (module docstring)."""
+    here = f"drive {axis.drive_id} is {axis.family.title} over {axis.protocol}"
+    if backup.family != axis.family.name:
+        theirs = family(backup.family).title
+        raise CliError(f"{path} was saved from a {theirs} drive over {backup.protocol}; {here}",
+                       "use a backup of this family (`servobus params --save FILE` makes one)")
+    if backup.protocol == axis.protocol:
+        return
+    reach = {p.name for p in axis.parameters()}
+    missing = [name for name in backup.params if name not in reach]
+    if missing:
+        raise CliError(f"{path} was saved over {backup.protocol}; {here}, which does not "
+                       f"reach {', '.join(missing)}",
+                       "remove those parameters from the file, or restore over "
+                       f"{backup.protocol}")
+    note(f"note: {path} was saved over {backup.protocol}; {here} (same family: the "
+         "parameters are the same)")
+
+
 def _load(ctx: CliContext, path: str) -> None:
     backup = PF.load(path)  # validated before anything is opened or sent
     with open_axis(ctx) as axis:
         drive = axis.drive_id
+        check_fits(path, backup, axis)
         before = axis.read_params(list(backup.params))
         if backup.drive_id != drive:  # said once the drive answers, not before a failure
             note(f"note: {path} was saved from drive {backup.drive_id}; restoring onto drive "
@@ -100,6 +127,7 @@ def _diff(ctx: CliContext, path: str) -> None:
     backup = PF.load(path)
     with open_axis(ctx) as axis:
         drive = axis.drive_id
+        check_fits(path, backup, axis)
         actual = axis.read_params(list(backup.params))
     changes = PF.diff(backup.params, actual)
     if ctx.json:

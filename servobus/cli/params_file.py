@@ -13,7 +13,9 @@ Format (JSON, UTF-8), version 1::
     }
 
 Decisions: parameter names are the snake_case names of the family's table (the same on every
-protocol, so a DYN232M backup restores onto a DYN CAN drive); a file without ``family`` is a
+protocol, so a DYN232M backup restores onto a DYN CAN drive: ``--load``/``--diff`` name both
+protocols in a note, and refuse a file whose parameters the protocol cannot reach or whose
+family differs from the drive's, naming both); a file without ``family`` is a
 DMM DYN2 backup (what servobus wrote before families existed); a file may hold a
 subset of the parameters (only those are restored); unknown top-level keys are ignored so a
 later minor addition stays readable; a higher ``version`` is refused. Every value is checked
@@ -89,17 +91,20 @@ def load(path: str | Path) -> ParamsBackup:
 def parse(doc: object, where: str = "backup") -> ParamsBackup:
     if not isinstance(doc, dict):
         raise ParamsFileError(f"{where}: expected a JSON object")
-    if doc.get("format") != FORMAT:
-        raise ParamsFileError(f"{where}: format is {doc.get('format')!r}, expected {FORMAT!r}")
+    if "format" not in doc:
+        raise ParamsFileError(f"{where}: not a servobus parameter backup (it has no "
+                              f"\"format\": \"{FORMAT}\" field)")
+    if doc["format"] != FORMAT:
+        raise ParamsFileError(f"{where}: format is {doc['format']!r}, expected {FORMAT!r}")
     version = doc.get("version")
     if not _is_int(version) or version < 1:
-        raise ParamsFileError(f"{where}: version {version!r} is not a positive integer")
+        raise ParamsFileError(f"{where}: version {_given(version)} is not a positive integer")
     if version > VERSION:
         raise ParamsFileError(f"{where}: version {version} is newer than this servobus "
                               f"understands ({VERSION})")
     protocol = doc.get("protocol")
     if not isinstance(protocol, str) or not protocol:
-        raise ParamsFileError(f"{where}: protocol {protocol!r} is not a protocol name")
+        raise ParamsFileError(f"{where}: protocol {_given(protocol)} is not a protocol name")
     family_name = doc.get("family", V1_FAMILY)
     try:
         fam = family(str(family_name))
@@ -107,7 +112,7 @@ def parse(doc: object, where: str = "backup") -> ParamsBackup:
         raise ParamsFileError(f"{where}: {exc}") from None
     drive_id = doc.get("drive_id")
     if not _is_int(drive_id) or not 0 <= drive_id <= MAX_DRIVE_ID:
-        raise ParamsFileError(f"{where}: drive_id {drive_id!r} is not 0..{MAX_DRIVE_ID}")
+        raise ParamsFileError(f"{where}: drive_id {_given(drive_id)} is not 0..{MAX_DRIVE_ID}")
     raw = doc.get("params")
     if not isinstance(raw, dict) or not raw:
         raise ParamsFileError(f"{where}: 'params' must be a non-empty object")
@@ -118,7 +123,7 @@ def parse(doc: object, where: str = "backup") -> ParamsBackup:
             raise ParamsFileError(f"{where}: unknown parameter {name!r}; "
                                   f"known: {', '.join(known)}")
         if not _is_int(value):
-            raise ParamsFileError(f"{where}: {name} must be an integer, got {value!r}")
+            raise ParamsFileError(f"{where}: {name} must be an integer, got {_given(value)}")
         try:
             params[name] = known[name].check(value)
         except ArgumentRangeError as exc:
@@ -130,6 +135,11 @@ def parse(doc: object, where: str = "backup") -> ParamsBackup:
 def diff(wanted: Mapping[str, int], actual: Mapping[str, int]) -> list[tuple[str, int, int]]:
     """(name, wanted, actual) for every parameter of ``wanted`` whose value differs."""
     return [(n, v, actual[n]) for n, v in wanted.items() if actual.get(n) != v]
+
+
+def _given(value: object) -> str:
+    """A field's value for a message: ``missing`` rather than Python's ``None``."""
+    return "missing" if value is None else repr(value)
 
 
 def _is_int(value: object) -> TypeGuard[int]:

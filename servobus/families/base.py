@@ -44,9 +44,34 @@ class ParamInfo:
         return value
 
 
+#: At or above this measured speed (rpm, either direction) the motor turns. Below it is the
+#: correction of a servo standing on position: the virtual DMM drives read up to 3 rpm for
+#: a moment while a move settles, YZ-AIM +-1 rpm (docs/axis.md "Moving and in position").
+MOVING_RPM = 5.0
+
+
+def motion_state(profile_running: bool, on_target: bool,
+                 speed_rpm: float | None) -> tuple[bool, bool]:
+    """``(moving, in_position)`` as every family defines them (docs/axis.md).
+
+    ``moving``: a profile runs (the drive's busy bit, or a commanded target not reached) or
+    the motor turns (``|speed_rpm| >= MOVING_RPM``; None: speed not read because a profile
+    already says so). ``in_position``: the drive is on its target (the drive's own
+    on-position bit or position comparison) and not moving. So turning at constant speed,
+    in a jog, a wave or analog speed mode is moving and never in position, whatever the
+    drive's bits say; the bits stay in ``AxisStatus.vendor`` under their own names.
+    """
+    moving = profile_running or (speed_rpm is not None and abs(speed_rpm) >= MOVING_RPM)
+    return moving, on_target and not moving
+
+
 @dataclass(frozen=True)
 class AxisStatus:
-    """One status for every family; ``vendor`` keeps the family's own decoded value."""
+    """One status for every family; ``vendor`` keeps the family's own decoded value.
+
+    ``moving`` and ``in_position`` mean the same on every protocol (:func:`motion_state`);
+    the drive's own bits (``on_position``, ``motion_busy``, ...) are in ``vendor``.
+    """
 
     enabled: bool
     moving: bool

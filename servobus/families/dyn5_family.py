@@ -30,7 +30,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from servobus.families import dyn5
-from servobus.families.base import AxisStatus, Family, ParamInfo, Storage
+from servobus.families.base import AxisStatus, Family, ParamInfo, Storage, motion_state
 from servobus.families.dmm import params as dmm_params
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import ALARM_SHIFT, AlarmCode, StatusBits
@@ -110,13 +110,16 @@ class Dyn5Status:
                 "alarm": self.alarm, "motion_busy": self.motion_busy}
 
 
-def axis_status(word: int) -> AxisStatus:
-    """The DYN5 status word (instance 0x02, input image word 3) as the one AxisStatus."""
+def axis_status(word: int, speed_rpm: float | None = None) -> AxisStatus:
+    """The DYN5 status word (instance 0x02, input image word 3) and the measured speed
+    (instance 0x1E, input image word 2) as the one AxisStatus (motion_state: the busy bit
+    covers the built-in profiles only, so the speed decides ``moving`` otherwise)."""
     st = Dyn5Status.from_word(word)
+    moving, in_position = motion_state(st.motion_busy, st.on_position, speed_rpm)
     return AxisStatus(
         enabled=not st.servo_free,
-        moving=st.motion_busy,
-        in_position=st.on_position,
+        moving=moving,
+        in_position=in_position,
         alarm_code=st.alarm,
         alarm_text=DYN5.alarm_text(st.alarm),
         alarm_latched=st.alarm != 0 and st.alarm not in NOTICE_CODES,

@@ -15,9 +15,10 @@ manual, 5.2). What this module adds:
   wire, no gear conversion (the gear acts on the pulse input only, 4.7).
 * **Status**: YZ-AIM has no status word. The Axis reads output_enable 0x01, alarm_code 0x0E
   and motor_speed 0x10 (one 0x12 read on EasyCan) and, when it commanded a position,
-  the position 0x16/0x17. Decisions: *moving* = |speed| >= 1 rpm, or still more than the
-  +-10 counts of 5.4a away from the last commanded target; *in position* = within those 10
-  counts of it (without a commanded target: not moving); *enabled* = output_enable is 1 and
+  the position 0x16/0x17. Decisions (servobus.families.base.motion_state, as on every
+  family): *moving* = |speed| >= MOVING_RPM, or still more than the +-10 counts of 5.4a
+  away from the last commanded target; *in position* = within those 10 counts of it (or
+  no target commanded) and not moving; *enabled* = output_enable is 1 and
   no alarm stops the motor; a stopping alarm is latched (the motor stays stopped until
   output_enable is written 0 then 1, or the power is cycled); the battery warning is not.
 """
@@ -27,10 +28,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from servobus.families import yzaim
-from servobus.families.base import AxisStatus, Family, ParamInfo, Storage
+from servobus.families.base import AxisStatus, Family, ParamInfo, Storage, motion_state
 
 NAME = yzaim.FAMILY
-MOVING_RPM = 1.0
 #: Registers that are Axis calls or motion rather than settings (module docstring).
 NOT_PARAMETERS = frozenset({"modbus_enable", "output_enable", "device_address",
                             "sync_control", "save_flag"})
@@ -94,11 +94,13 @@ def axis_status(output_enable: int, alarm_code: int, motor_speed_word: int,
     found = yzaim.alarm(alarm_code)
     stops = alarm_code != 0 and found.stops_motor
     near = position_error is None or abs(position_error) <= yzaim.POSITION_TOLERANCE_COUNTS
-    moving = abs(rpm) >= MOVING_RPM or not near
+    # The drive has no busy or on-position bit: a commanded target not yet reached is the
+    # running profile, the +-10-count comparison (5.4a) the on-target test (motion_state).
+    moving, in_position = motion_state(not near, near, rpm)
     return AxisStatus(
         enabled=output_enable == 1 and not stops,
         moving=moving,
-        in_position=near and not moving if position_error is None else near,
+        in_position=in_position,
         alarm_code=alarm_code,
         alarm_text=YZAIM.alarm_text(alarm_code),
         alarm_latched=stops,

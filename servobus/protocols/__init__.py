@@ -25,8 +25,11 @@ class ProtocolSpec:
     family: str
     #: ``async opener(url, *, drive_id, **options) -> AsyncAxis`` for its URL schemes.
     opener: str
-    #: URL schemes the opener serves; ``""`` is a bare serial port (``/dev/ttyUSB0``).
+    #: servobus's own URL schemes the opener serves.
     schemes: tuple[str, ...]
+    #: Served by the same opener but not servobus's own (error messages do not list them):
+    #: ``""`` (a bare serial port, ``/dev/ttyUSB0``) and pyserial's URL schemes.
+    serial_schemes: tuple[str, ...] = ()
     #: The same opener for ``sim://<name>``: in-process virtual drives (None: none).
     sim: str | None = None
     #: Further names of the virtual drive (``sim://dyn2`` for ``sim://dyn232``).

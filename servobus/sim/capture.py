@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Protocol
 
 from servobus.axis.capture import SIGNALS, Capture, status_bits
 from servobus.errors import ArgumentRangeError
+from servobus.families.base import motion_state
 from servobus.families.dmm import units as U
 from servobus.sim.core.constants import CONTROL_HZ
 
@@ -80,8 +81,11 @@ class DriveTrace:
 
     def trace_sample(self) -> tuple[float, float, float, float, int]:
         d = self.drive
-        return (d.position, d.position_error, d.speed_rpm, d.current_a,
-                status_bits(*d.trace_flags()))
+        speed = d.speed_rpm
+        enabled, busy, on_position, alarm = d.trace_flags()
+        moving, in_position = motion_state(busy, on_position, speed)  # as AxisStatus has them
+        return (d.position, d.position_error, speed, d.current_a,
+                status_bits(enabled, moving, in_position, alarm))
 
 
 _created: ContextVar[list[Traced] | None] = ContextVar("servobus_sim_created", default=None)

@@ -77,7 +77,7 @@ from enum import IntEnum
 from servobus.axis.capture import status_bits
 from servobus.errors import ServobusError
 from servobus.families import yzaim
-from servobus.families.yzaim_family import MOVING_RPM
+from servobus.families.base import motion_state
 from servobus.sim import capture
 from servobus.sim import yzaim_physics as phys
 from servobus.sim.drive import VirtualDrive
@@ -609,11 +609,11 @@ class YzaimMotor:
         position = drive.position / phys.CORE_PER_COUNT + self._offset
         speed = drive.speed_rpm
         near = abs(self.target - position) <= yzaim.POSITION_TOLERANCE_COUNTS
-        moving = abs(speed) >= MOVING_RPM or not near
+        moving, in_position = motion_state(not near, near, speed)  # as AxisStatus has them
         stops = self._alarm != 0 and self.alarm.stops_motor
         return (position, drive.position_error / phys.CORE_PER_COUNT, speed, drive.current_a,
-                status_bits(self._ram["output_enable"] == 1 and not stops, moving, near,
-                            self._alarm != 0))
+                status_bits(self._ram["output_enable"] == 1 and not stops, moving,
+                            in_position, self._alarm != 0))
 
 
 _ALARM = yzaim.ALARM_BY_NAME

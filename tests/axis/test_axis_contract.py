@@ -13,6 +13,7 @@ import pytest
 from conftest import wait_until
 
 from servobus.axis import Axis, connect, registry
+from servobus.axis.capture import STATUS_BITS
 from servobus.errors import ArgumentRangeError, DriveTimeout, NotSupported
 from servobus.families.base import AxisStatus
 
@@ -115,3 +116,63 @@ def test_waves_exist_or_are_not_supported(axis: Axis) -> None:
     else:
         with pytest.raises(NotSupported):
             axis.square_wave(100)
+
+
+def test_moving_and_in_position_mean_the_same_everywhere(axis: Axis) -> None:
+    """moving: the motor turns or a profile runs; in_position: on target and still
+    (docs/axis.md "Moving and in position"): at rest, in constant speed, during a move."""
+    def at_rest() -> None:
+        wait_until(lambda: axis.status().idle, timeout=5, what="at rest")  # settled
+        st = axis.status()  # and it stays so
+        assert not st.moving and st.in_position and st.idle, st
+
+    at_rest()
+    axis.turn(600)
+    wait_until(lambda: abs(axis.speed() - 600) <= 30, timeout=5, what="600 rpm")
+    st = axis.status()
+    assert st.moving and not st.in_position and not st.idle, st
+    axis.stop()
+    wait_until(lambda: axis.status().idle, timeout=5, what="at rest after the stop")
+    at_rest()
+
+    target = axis.position() + axis.revs(40)
+    axis.move_to(target)
+    wait_until(lambda: abs(axis.speed()) >= 100, timeout=5, what="the move under way")
+    st = axis.status()
+    # the position read after the status is still short of the target: the status was
+    # taken during the move
+    assert abs(axis.position() - target) > 10 * axis.position_window()
+    assert st.moving and not st.in_position and not st.idle, st
+    axis.wait_idle(timeout=30)
+    at_rest()
+
+
+def test_a_drive_trace_has_the_same_moving_and_in_position(axis: Axis) -> None:
+    """The scope's status bits (trace_buffer) follow the AxisStatus meaning too."""
+    try:
+        axis.trace_buffer()  # starts the recording
+    except NotSupported:
+        pytest.skip(f"{axis.protocol} keeps no drive trace")
+    axis.turn(600)
+    wait_until(lambda: abs(axis.speed() - 600) <= 30, timeout=5, what="600 rpm")
+    axis.trace_buffer()  # drop the samples of the ramp
+    samples: list[float] = []
+    wait_until(lambda: samples.extend(axis.trace_buffer().signals["status"]) or bool(samples),
+               timeout=5, what="trace samples at constant speed")
+    bits = int(samples[-1])
+    moving, in_position = bits >> STATUS_BITS.index("moving") & 1, \
+        bits >> STATUS_BITS.index("in_position") & 1
+    assert (moving, in_position) == (1, 0)
+    axis.stop()
+
+
+def test_a_move_out_of_reach_is_refused_in_counts(axis: Axis) -> None:
+    """The range of a move is in counts on every protocol (move_range), and so is the error."""
+    for relative in (False, True):
+        limits = axis.move_range(relative=relative)
+        assert limits is not None
+        low, high = limits
+        assert low < 0 < axis.revs(100) < high
+        with pytest.raises(ArgumentRangeError, match=f"{high + 1} counts is outside "
+                                                     f"{low}..{high} counts"):
+            (axis.move_by if relative else axis.move_to)(high + 1)

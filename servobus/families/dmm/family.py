@@ -9,7 +9,7 @@ half away from zero; the resolution is ``16384 / GEAR_NUM`` counts (4 at GEAR_NU
 
 from __future__ import annotations
 
-from servobus.families.base import AxisStatus, Family, round_counts
+from servobus.families.base import AxisStatus, Family, motion_state, round_counts
 from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, DriveStatus
@@ -35,13 +35,20 @@ DYN2 = Family(
 )
 
 
-def axis_status(status: DriveStatus, raw: int | None = None) -> AxisStatus:
-    """The DYN2 status byte (7.3) as the one AxisStatus."""
+def axis_status(status: DriveStatus, raw: int | None = None,
+                speed_rpm: float | None = None) -> AxisStatus:
+    """The DYN2 status byte (7.3) and the measured speed as the one AxisStatus.
+
+    b5 (motion busy) covers the built-in S-curve/linear/circular profiles only, and b0 (on
+    position) compares Pset with Pmotor, which a constant-speed or analog-speed reference
+    drags along: so the speed decides ``moving`` when no profile runs (motion_state).
+    """
     code = int(status.alarm)
+    moving, in_position = motion_state(status.motion_busy, status.on_position, speed_rpm)
     return AxisStatus(
         enabled=not status.servo_free,
-        moving=status.motion_busy,
-        in_position=status.on_position,
+        moving=moving,
+        in_position=in_position,
         alarm_code=code,
         alarm_text=DYN2.alarm_text(code),
         alarm_latched=status.alarm.latching,

@@ -119,6 +119,11 @@ class AsyncDynCanClient(CanClient[ReplyKey, c.Frame, c.Frame]):
             describe_request=_describe_request, retries=retries, late_reply_s=late_reply_s,
             eeprom_guard=eeprom_guard, owed_keys=self._owed_keys), name="dyncan-rx")
 
+    def reply_deadline_s(self) -> float:
+        """Per-attempt deadline of a read (``timeout``: a frame each way at 1 Mbit/s is
+        ~0.1 ms; the rest is the drive's reply time and the adapter's latency)."""
+        return self.timeout
+
     # ------------------------------------------------------------- hooks
     def on_alarm(self, callback: AlarmCallback) -> None:
         """``callback(drive_id)`` runs on the loop when a drive pushes Drive Error 0xEE."""
@@ -153,8 +158,8 @@ class AsyncDynCanClient(CanClient[ReplyKey, c.Frame, c.Frame]):
         if code == c.DriveErrorCode.ALARM:
             tm.stats.alarms += 1
             self._pending[drive_id] = DriveAlarm(
-                f"drive {drive_id} pushed an alarm (Drive Error 0xEE); read status() for the "
-                "code, reset() clears it", code=code, drive_id=drive_id)
+                f"drive {drive_id} pushed an alarm (Drive Error 0xEE); read the status for "
+                "its code; a reset clears it", code=code, drive_id=drive_id)
             for cb in list(self._alarm_callbacks):
                 cb(drive_id)
             return

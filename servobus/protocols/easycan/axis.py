@@ -59,6 +59,11 @@ class EasyCanAxis(RegisterAxis[AsyncEasyCanClient]):
     async def _write(self, name: str, value: int) -> None:
         await self.client.execute(cmds.make_write(self._id, name, int(value)))
 
+    def ping_deadline(self) -> float:
+        """The client's per-attempt deadline, ``timeout`` (a frame each way takes well under
+        a millisecond on the bus; the rest is the motor's reply time and the adapter's)."""
+        return self.client.timeout
+
     async def _probe(self, timeout: float) -> None:
         await self.client.execute(self._read_cmd(cmds.make_read, "alarm_code"), retries=0,
                                   timeout=timeout)

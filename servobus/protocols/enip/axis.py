@@ -49,9 +49,9 @@ from servobus.errors import (
 from servobus.families import dyn5
 from servobus.families.base import AxisStatus, Family, ParamInfo
 from servobus.families.dmm import units as U
-from servobus.families.dmm.family import counts_to_command
+from servobus.families.dmm.family import command_to_counts, counts_to_command
 from servobus.families.dyn5 import Instance
-from servobus.families.dyn5_family import DYN5, PARAM_INSTANCES, axis_status
+from servobus.families.dyn5_family import DYN5, PARAM_INSTANCES, Dyn5Status, axis_status
 from servobus.link.transaction import DEFAULT_RETRIES
 from servobus.protocols.enip.cip import ClassCode
 from servobus.protocols.enip.client import CONNECT_TIMEOUT_S, DEFAULT_TIMEOUT_S, AsyncEnipClient
@@ -204,6 +204,11 @@ class EnipAxis(AsyncAxis):
         await client.set_attribute_single(ClassCode.PARAMETER, inst.number,
                                           dyn5.PARAMETER_ATTRIBUTE, data)
 
+    @property
+    def id_address(self) -> str:
+        """B3.B2.B1.id: the drive id picks the drive of the URL's daisy chain (docs/enip.md)."""
+        return self.ip
+
     # ------------------------------------------------------------- units
     async def gear_num(self) -> int:
         """GEAR_NUM as this axis knows it (read from the drive the first time)."""
@@ -229,10 +234,30 @@ class EnipAxis(AsyncAxis):
 
     # ------------------------------------------------------------- motion
     async def _send_move_to(self, position: int) -> None:
-        await self._write(_I["go_absolute_pos"], await self.to_command(position))
+        command = await self.to_command(position)
+        self._check_limits(position, False)  # now at the drive's GEAR_NUM
+        await self._write(_I["go_absolute_pos"], command)
 
     async def _send_move_by(self, distance: int) -> None:
-        await self._write(_I["go_relative_pos"], await self.to_command(distance))
+        command = await self.to_command(distance)
+        self._check_limits(distance, True)
+        await self._write(_I["go_relative_pos"], command)
+
+    def _move_limits(self, relative: bool) -> tuple[int, int] | None:
+        """0x15/0x16's command range in counts at the GEAR_NUM known so far (the widest,
+        GEAR_NUM's minimum, before it is read)."""
+        inst = _I["go_relative_pos" if relative else "go_absolute_pos"]
+        if inst.minimum is None or inst.maximum is None:
+            return None
+        gear = self._gear_num or DYN5.param("gear_num").minimum
+        return command_to_counts(inst.minimum, gear), command_to_counts(inst.maximum, gear)
+
+    def _limits_note(self) -> str:
+        return f" at GEAR_NUM {self._gear_num}" if self._gear_num else ""
+
+    async def move_range(self, *, relative: bool = False) -> tuple[int, int] | None:
+        await self.gear_num()
+        return self._move_limits(relative)
 
     async def move_to_command(self, command: int, *, wait: bool = False,
                               timeout: float | None = None) -> None:
@@ -328,7 +353,11 @@ class EnipAxis(AsyncAxis):
         return await self.read_instance(_I["drive_status"].number)
 
     async def status(self) -> AxisStatus:
-        return axis_status(await self.status_word())
+        """The status word, and the speed when no profile runs (moving = the motor turns,
+        dyn5_family.axis_status): a constant speed leaves the busy bit clear."""
+        word = await self.status_word()
+        busy = Dyn5Status.from_word(word).motion_busy
+        return axis_status(word, None if busy else await self.speed())
 
     async def position(self) -> int:
         return await self.read_instance(_I["motor_position"].number)

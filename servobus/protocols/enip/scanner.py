@@ -125,7 +125,7 @@ class InputFrame:
 
     @property
     def status(self) -> AxisStatus:
-        return axis_status(self.image.status)
+        return axis_status(self.image.status, self.image.speed)
 
     def as_dict(self) -> dict[str, object]:
         return {"time": self.time, "wire_time": self.wire_time, "sequence": self.sequence,

@@ -86,6 +86,12 @@ class ModbusAxis(RegisterAxis[ModbusClient]):
         words = await self.read_words(first, max(addresses) - first + 1)
         return tuple(words[a - first] for a in addresses)
 
+    def ping_deadline(self) -> float:
+        """The RTU deadline of the one-register read a ping sends: request + t3.5 + reply on
+        the wire at the line's baud rate + ``turnaround_s`` (policy.py)."""
+        return self.client.policy.deadline_s(
+            C.ReadHoldingRequest(self._id, R["alarm_code"].address, 1))
+
     async def _probe(self, timeout: float) -> None:
         await self.read_words(R["alarm_code"].address, retries=0, timeout=timeout)
 

@@ -326,7 +326,7 @@ async def test_query_pacing_spaces_queries() -> None:
         sends: list[float] = []
         b.host.add_trace(lambda d, data, t: sends.append(t) if d is Direction.TX else None)
         for _ in range(6):
-            await ax.status()
+            await ax.position()  # one query each (status() adds a speed read at rest)
         gaps = [later - earlier for earlier, later in itertools.pairwise(sends)]
         assert len(gaps) == 5 and min(gaps) >= interval, gaps
 
@@ -373,7 +373,7 @@ async def test_query_pacing_holds_when_writes_take_time() -> None:
         client = AsyncDyn232Client(slow, query_interval_s=interval)
         ax = Dyn232Axis(client, 0, owns_client=False)
         for _ in range(6):
-            await ax.status()
+            await ax.position()  # one query each (status() adds a speed read at rest)
         gaps = [later - earlier for earlier, later in itertools.pairwise(slow.left)]
         assert min(gaps) >= interval, gaps
 

@@ -48,10 +48,10 @@ def test_status_word_of_the_6_3_example_is_all_normal() -> None:
 
 
 @pytest.mark.parametrize(("word", "enabled", "moving", "in_position"), [
-    (0x01, True, False, False), (0x02, False, False, True), (0x20, True, True, True),
+    (0x01, True, False, False), (0x02, False, False, True), (0x20, True, True, False),
     (0x23, False, True, False)])
 def test_status_bits(word: int, enabled: bool, moving: bool, in_position: bool) -> None:
-    st = axis_status(word)
+    st = axis_status(word)  # busy and on position: moving, so not in position (motion_state)
     assert (st.enabled, st.moving, st.in_position) == (enabled, moving, in_position)
     assert st.vendor == Dyn5Status.from_word(word)
 
