@@ -100,6 +100,7 @@ def in_unit(axis: Axis, counts: int, unit: str) -> str:
 
 def check_reach(axis: Axis, counts: int, relative: bool, number: float, unit: str) -> None:
     """ArgumentRangeError naming TARGET as typed and the drive's range in its unit."""
+    unit = unit or "counts"  # a bare number on a single drive is counts
     limits = axis.move_range(relative=relative)
     if limits is None or limits[0] <= counts <= limits[1]:
         return
