@@ -1,0 +1,146 @@
+"""Sample every axis of a machine: position, speed, current and status, link by link.
+
+How the rate is shared (decision, docs/gateway.md "Sampling"): axes are grouped by their
+link (the axis URL: one serial line, bus or TCP connection). Each link has one sampling
+loop that reads its axes one after the other (round robin, so every axis on a link gets the
+same share) and then waits. A round starts every ``1 / rate`` seconds, but never sooner than
+the last round's own duration times ``(1 - duty) / duty`` after it ended: with the default
+duty of 0.5, sampling takes at most half of what a link can carry and the other half stays
+free for commands. The per-axis rate is therefore ``min(rate, duty / (axes x time of one
+axis read))`` - measured, not configured, so a 38,400 baud line with four drives settles
+at what it can carry while a fast link reaches the configured rate. ``achieved_hz`` tells
+what each link reached (printed by ``servobus serve`` after start-up, and by the benchmark).
+
+A read that fails (the link dropped, the drive did not answer, the axis is offline) gives
+a Bad sample with the error's text; the sampling goes on and the next good read makes the
+axis good again. A change between good and bad is logged in one line.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from servobus.errors import NotSupported
+from servobus.families.base import AxisStatus
+from servobus.gateway.source import Machine, MachineAxis
+
+log = logging.getLogger(__name__)
+
+DEFAULT_RATE_HZ = 20.0
+DEFAULT_DUTY = 0.5
+#: A whole axis read (four transactions) that takes longer than this is a failed read.
+READ_DEADLINE_S = 2.0
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One axis at one time (wall clock, seconds); ``ok`` False carries ``error``."""
+
+    axis: str
+    time: float
+    ok: bool
+    error: str = ""
+    position: float = math.nan
+    speed: float = math.nan
+    current: float | None = None
+    status: AxisStatus | None = None
+
+
+Listener = Callable[[Sample], None]
+
+
+def check_rate(rate_hz: float) -> float:
+    if not (math.isfinite(rate_hz) and 0.1 <= rate_hz <= 1000):
+        raise ValueError(f"sampling rate {rate_hz!r} Hz: give 0.1..1000")
+    return rate_hz
+
+
+class Sampler:
+    """One loop per link; :attr:`latest` holds each axis's last sample."""
+
+    def __init__(self, machine: Machine, rate_hz: float = DEFAULT_RATE_HZ,
+                 duty: float = DEFAULT_DUTY) -> None:
+        self.machine = machine
+        self.rate_hz = check_rate(rate_hz)
+        if not 0.05 <= duty <= 1.0:
+            raise ValueError("duty must be 0.05..1")
+        self.duty = duty
+        self.links: dict[str, list[MachineAxis]] = {}
+        for axis in machine.axes.values():
+            self.links.setdefault(axis.url, []).append(axis)
+        self.latest: dict[str, Sample] = {}
+        self.listeners: list[Listener] = []
+        self.achieved_hz: dict[str, float] = dict.fromkeys(self.links, 0.0)
+        self._no_current: set[str] = set()
+        self.first_round = asyncio.Event()
+        self._first_pending = set(self.links)
+
+    async def run(self) -> None:
+        """Sample until cancelled."""
+        await asyncio.gather(*(self._link_loop(url, axes) for url, axes in self.links.items()))
+
+    async def sample_once(self, axis: MachineAxis) -> Sample:
+        try:
+            return await asyncio.wait_for(self._read(axis), READ_DEADLINE_S)
+        except asyncio.CancelledError:
+            raise
+        except TimeoutError:
+            return Sample(axis.name, time.time(), False, "no answer in time")
+        except Exception as exc:  # any failure of the link or drive is a Bad sample
+            return Sample(axis.name, time.time(), False, f"{type(exc).__name__}: {exc}")
+
+    async def _read(self, axis: MachineAxis) -> Sample:
+        if not axis.online:
+            return Sample(axis.name, time.time(), False, "axis offline")
+        position = await axis.position()
+        speed = await axis.speed()
+        status = await axis.status()
+        current = None
+        raw = axis.axis
+        if raw is not None and axis.name not in self._no_current:
+            try:
+                current = await raw.current()
+            except NotSupported:
+                self._no_current.add(axis.name)
+        return Sample(axis.name, time.time(), True, "", position, speed, current, status)
+
+    def _publish(self, sample: Sample) -> None:
+        before = self.latest.get(sample.axis)
+        if before is None or before.ok != sample.ok:
+            if sample.ok:
+                if before is not None:
+                    log.info("axis %s: readings are back", sample.axis)
+            else:
+                log.warning("axis %s: no readings: %s", sample.axis, sample.error)
+        self.latest[sample.axis] = sample
+        for listener in self.listeners:
+            try:
+                listener(sample)
+            except Exception:
+                log.exception("sample listener failed")
+
+    async def _link_loop(self, url: str, axes: list[MachineAxis]) -> None:
+        period = 1.0 / self.rate_hz
+        loop = asyncio.get_running_loop()
+        rounds, since = 0, loop.time()
+        while True:
+            start = loop.time()
+            for axis in axes:
+                self._publish(await self.sample_once(axis))
+            end = loop.time()
+            if url in self._first_pending:
+                self._first_pending.discard(url)
+                if not self._first_pending:
+                    self.first_round.set()
+            took = end - start
+            rest = max(start + period - end, took * (1 - self.duty) / self.duty)
+            rounds += 1
+            if end - since >= 2.0:
+                self.achieved_hz[url] = rounds / (end - since)
+                rounds, since = 0, end
+            await asyncio.sleep(rest)
