@@ -118,7 +118,8 @@ class Commander:
         target = command.axis or self.machine.name
         try:
             axis = self.check(user, command)
-            await asyncio.wait_for(self._call(axis, command), COMMAND_DEADLINE_S)
+            async with asyncio.timeout(COMMAND_DEADLINE_S):
+                await self._call(axis, command)
         except Refused as exc:
             log.warning("%s %s: %s %s refused (%s): %s", via, user or "anonymous", target, what,
                         exc.code, exc.message)

@@ -22,6 +22,7 @@ callback reads it.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import contextvars
 import ipaddress
 import logging
@@ -192,6 +193,13 @@ class OpcUaGateway:
             self._events[name] = await s.get_event_generator(etype, nodes.node)
 
     async def stop(self) -> None:
+        # asyncua's stop waits for its clock task's 1 s sleep; end that task first
+        clock = getattr(self.server.iserver, "time_task", None)
+        if clock is not None:
+            clock.cancel()
+            with contextlib.suppress(BaseException):
+                await clock
+            self.server.iserver.time_task = None
         await self.server.stop()
 
     # ---------------------------------------------------------------- methods
@@ -216,7 +224,10 @@ class OpcUaGateway:
             self._wake.clear()
             pending, self._pending = self._pending, {}
             for sample in pending.values():
-                await self._apply(sample)
+                try:
+                    await self._apply(sample)
+                except Exception:  # one bad update must not end the updates
+                    log.exception("OPC UA update of axis %s failed", sample.axis)
 
     async def _apply(self, sample: Sample) -> None:
         nodes = self.axes.get(sample.axis)
@@ -250,7 +261,7 @@ class OpcUaGateway:
         else:
             if before is not None and not before[1]:
                 return
-            dv = ua.DataValue(StatusCode_=ua.StatusCode(ua.StatusCodes.BadCommunicationError),
+            dv = ua.DataValue(StatusCode=ua.StatusCode(ua.StatusCodes.BadCommunicationError),
                               SourceTimestamp=_utc(sample.time))
         self.notifications += 1
         await self.server.write_attribute_value(key, dv)

@@ -54,6 +54,13 @@ class Sample:
 Listener = Callable[[Sample], None]
 
 
+def pause_after(period: float, started: float, ended: float, duty: float) -> float:
+    """Seconds to wait after a round: to the next period, and at least so long that the
+    round took no more than ``duty`` of the time (the rest is left for commands)."""
+    took = ended - started
+    return max(started + period - ended, took * (1 - duty) / duty)
+
+
 def check_rate(rate_hz: float) -> float:
     if not (math.isfinite(rate_hz) and 0.1 <= rate_hz <= 1000):
         raise ValueError(f"sampling rate {rate_hz!r} Hz: give 0.1..1000")
@@ -86,7 +93,10 @@ class Sampler:
 
     async def sample_once(self, axis: MachineAxis) -> Sample:
         try:
-            return await asyncio.wait_for(self._read(axis), READ_DEADLINE_S)
+            # asyncio.timeout, not wait_for: 3.11's wait_for can swallow a cancellation that
+            # meets a read just finishing, and the loop would never end
+            async with asyncio.timeout(READ_DEADLINE_S):
+                return await self._read(axis)
         except asyncio.CancelledError:
             raise
         except TimeoutError:
@@ -137,8 +147,7 @@ class Sampler:
                 self._first_pending.discard(url)
                 if not self._first_pending:
                     self.first_round.set()
-            took = end - start
-            rest = max(start + period - end, took * (1 - self.duty) / self.duty)
+            rest = pause_after(period, start, end, self.duty)
             rounds += 1
             if end - since >= 2.0:
                 self.achieved_hz[url] = rounds / (end - since)
