@@ -16,10 +16,10 @@ from pathlib import Path
 
 import pytest
 from asyncua import Client, Node
+from subprocess_rig import Process, read_line, stop_process
 
 from servobus.gateway.opcua_model import DI_URI, ROBOTICS_URI, SERVOBUS_URI
 from servobus.gateway.users import Users
-from subprocess_rig import Process, read_line, stop_process
 
 USER, PASSWORD = "operator", "correct horse battery"
 

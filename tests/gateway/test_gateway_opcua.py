@@ -10,7 +10,6 @@ from pathlib import Path
 import pytest
 from asyncua import Client, ua
 from asyncua.ua.uaerrors import UaStatusCodeError
-
 from conftest import wait_until_async
 from gateway_rig import (
     PASSWORD,
