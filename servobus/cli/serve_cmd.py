@@ -91,8 +91,8 @@ def serve(machine_path: Path | None, endpoint: str, users_path: Path | None,
     options = GatewayOptions(opcua=opcua, mqtt=mqtt, rate_hz=rate,
                              gui_port=gui_port if gui else None)
     _log_events()
-    name = asyncio.run(open_and_serve(machine_path, options,
-                                      lambda line: click.echo(line, nl=True)))
+    name = asyncio.run(open_and_serve(
+        machine_path, options, lambda line: click.echo(line, err=line.startswith("warning:"))))
     raise Interrupted("Ctrl-C" if name == "SIGINT" else name, SHUTDOWN_NOTE)
 
 

@@ -9,7 +9,9 @@ Topics (``<m>`` the machine's name, ``<a>`` an axis's name)::
     servobus/<m>/<a>/cmd       commands (only with --mqtt-commands; servobus.gateway.mqtt_gate)
     servobus/<m>/<a>/reply     {"id", "ok", "code", "error"} for each command
 
-Decisions: state messages QoS 0 (the next one replaces a lost one), alarms and status QoS 1
+Decisions: MQTT 5 (Mosquitto, EMQX, HiveMQ, ... all speak it): its subscription option
+"retain as published" is what lets the gateway see that a command was retained. State
+messages QoS 0 (the next one replaces a lost one), alarms and status QoS 1
 retained (a subscriber that comes later learns them), replies QoS 1. Commands are only
 taken when the gateway itself logs in to the broker with a user name and password: the
 broker's authentication and its ACL on ``.../cmd`` say who may command; the gateway
@@ -20,15 +22,18 @@ checks each command like an OPC UA call (servobus.gateway.commands), as user
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import logging
 import math
+import secrets
 import ssl
 from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import unquote, urlparse
 
 import aiomqtt
+from paho.mqtt.subscribeoptions import SubscribeOptions
 
 from servobus.errors import ArgumentRangeError
 from servobus.gateway.commands import Commander, Refused
@@ -143,9 +148,10 @@ class MqttGateway:
     def client(self) -> aiomqtt.Client:
         return aiomqtt.Client(
             self.broker.host, self.broker.port, username=self.username, password=self.password,
-            identifier=f"servobus-{self.machine.name}",
+            identifier=f"servobus-{self.machine.name}-{secrets.token_hex(4)}",
             will=aiomqtt.Will(f"{self.base}/status", b"offline", qos=1, retain=True),
-            tls_context=self._tls(), timeout=5.0, keepalive=10)
+            tls_context=self._tls(), timeout=5.0, keepalive=10,
+            protocol=aiomqtt.ProtocolVersion.V5)
 
     async def run(self) -> None:
         """Publish until cancelled; reconnects after a lost broker."""
@@ -166,7 +172,10 @@ class MqttGateway:
                  self.broker.port, " (commands on)" if self.options.commands else "")
         tasks = [asyncio.create_task(self._publish_loop(client))]
         if self.options.commands:
-            await client.subscribe(f"{self.base}/+/cmd", qos=1)
+            # MQTT 5 "retain as published": a retained command keeps its flag on the way
+            # to a live subscriber too, so it is refused now and not only on a replay
+            await client.subscribe(f"{self.base}/+/cmd", options=SubscribeOptions(
+                qos=1, retainAsPublished=True))
             tasks.append(asyncio.create_task(self._command_loop(client)))
         self.connected.set()
         try:
@@ -177,6 +186,9 @@ class MqttGateway:
             for task in tasks:
                 task.cancel()
             await asyncio.gather(*tasks, return_exceptions=True)
+            with contextlib.suppress(Exception):  # a clean stop sends no will: say it
+                async with asyncio.timeout(1.0):
+                    await self.say_offline(client)
 
     async def say_offline(self, client: aiomqtt.Client) -> None:
         await client.publish(f"{self.base}/status", b"offline", qos=1, retain=True)

@@ -123,8 +123,10 @@ def mosquitto(folder: Path) -> Iterator[int]:
     for _attempt in range(5):  # the free port may be taken between the probe and the bind
         port = free_port()
         conf = folder / "mosquitto.conf"
+        # as root, mosquitto would drop to user mosquitto, who cannot read tmp_path
+        stay = "user root\n" if os.geteuid() == 0 else ""
         conf.write_text(f"listener {port} 127.0.0.1\nallow_anonymous false\n"
-                        f"password_file {passwords}\npersistence false\n")
+                        f"password_file {passwords}\npersistence false\n{stay}")
         proc = subprocess.Popen([MOSQUITTO, "-c", str(conf)], stdout=subprocess.DEVNULL,
                                 stderr=subprocess.PIPE)
         if _wait_listening(proc, port):
