@@ -16,16 +16,33 @@ from gateway_rig import axes_of, names, parameter
 from servobus.gateway.commands import Command, Commander, Refused
 from servobus.gateway.opcua_server import OpcUaOptions
 from servobus.gateway.sampler import Sampler, pause_after
-from servobus.gateway.serve import Gateway, GatewayOptions, serve_machine
+from servobus.gateway.serve import GatewayOptions, serve_machine
 
 OPTIONS = GatewayOptions(OpcUaOptions("opc.tcp://127.0.0.1:0"), rate_hz=50)
 
 
-async def test_a_cut_link_reads_bad_until_back_and_alarms_are_events() -> None:
+async def test_a_cut_link_reads_bad_alarms_are_events_and_sigterm_stops_first() -> None:
+    """One gateway (serve_machine, as ``servobus serve`` runs it) for three checks: values
+    carry BadCommunicationError while a link is cut and are Good when it is back; an alarm
+    is an event; SIGTERM stops every axis before anything closes."""
     machine = FakeMachine()
     a0 = machine.axes["a0"]
-    gateway = Gateway(machine, OPTIONS)  # type: ignore[arg-type]
-    await gateway.start()
+    machine.axes["a1"].velocity = 3.0
+    lines: list[str] = []
+    ready = asyncio.Event()
+
+    def say(line: str) -> None:
+        lines.append(line)
+        if "ready" in line:
+            ready.set()
+
+    serving = asyncio.create_task(serve_machine(machine, OPTIONS, say))  # type: ignore[arg-type]
+    await asyncio.wait([serving, asyncio.create_task(ready.wait())],
+                       return_when=asyncio.FIRST_COMPLETED)
+    if serving.done():
+        serving.result()
+    endpoint = next(line.split()[3] for line in lines if line.startswith("servobus serve: opcua"))
+    assert endpoint.startswith("opc.tcp://127.0.0.1:")
     events: list[object] = []
 
     class Handler:
@@ -33,7 +50,7 @@ async def test_a_cut_link_reads_bad_until_back_and_alarms_are_events() -> None:
             events.append(event)
 
     try:
-        async with Client(gateway.opcua.endpoint) as client:
+        async with Client(endpoint) as client:
             n = await names(client)
             axes = await axes_of(client, "bench")
             position = await parameter(client, axes["a0"], "ActualPosition")
@@ -63,29 +80,16 @@ async def test_a_cut_link_reads_bad_until_back_and_alarms_are_events() -> None:
                                                      for e in events)),
                                    timeout=10, what="an alarm event")
             event = next(e for e in events if getattr(e, "AlarmCode", 0) == 2)
-            assert event.AxisName == "a0" and event.AlarmText == "over current"  # type: ignore[attr-defined]
+            assert (event.AxisName, event.AlarmText) == ("a0", "over current")  # type: ignore[attr-defined]
             code = await parameter(client, axes["a0"], "AlarmCode")
             await wait_until_async(lambda: _value_is(code, 2), timeout=10, what="AlarmCode 2")
+            assert machine.log == []
     finally:
-        await gateway.close()
-    assert machine.log[0] == "stop_all"
-
-
-async def test_sigterm_stops_every_axis_before_anything_closes() -> None:
-    machine = FakeMachine()
-    machine.axes["a1"].velocity = 3.0
-    lines: list[str] = []
-
-    def say(line: str) -> None:
-        lines.append(line)
-        if "ready" in line:
-            asyncio.get_running_loop().call_soon(os.kill, os.getpid(), signal.SIGTERM)
-
-    name = await serve_machine(machine, OPTIONS, say)  # type: ignore[arg-type]
-    assert name == "SIGTERM"
+        if not serving.done():  # its loop handler takes the signal while it serves
+            os.kill(os.getpid(), signal.SIGTERM)
+        assert await serving == "SIGTERM"
     assert machine.log == ["stop_all", "close"]
     assert machine.axes["a1"].velocity == 0.0
-    assert any(line.startswith("servobus serve: opcua opc.tcp://127.0.0.1:") for line in lines)
 
 
 async def test_commands_are_checked_before_the_axis_hears_of_them() -> None:
