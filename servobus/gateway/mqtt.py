@@ -198,13 +198,17 @@ class MqttGateway:
         loop = asyncio.get_running_loop()
         next_at = loop.time()
         while True:
+            sends = []
             for name, axis in self.machine.axes.items():
                 sample = self.sampler.latest.get(name)
                 if sample is None:
                     continue
-                await client.publish(f"{self.base}/{name}/state", state_json(sample, axis.unit))
-                self.published += 1
-                await self._alarm_change(client, sample)
+                # all at once: aiomqtt waits for each message to reach the socket
+                sends.append(client.publish(f"{self.base}/{name}/state",
+                                            state_json(sample, axis.unit)))
+                sends.append(self._alarm_change(client, sample))
+            await asyncio.gather(*sends)
+            self.published += len(sends) // 2
             next_at = max(next_at + period, loop.time())
             await asyncio.sleep(next_at - loop.time())
 

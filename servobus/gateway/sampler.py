@@ -2,14 +2,17 @@
 
 How the rate is shared (decision, docs/gateway.md "Sampling"): axes are grouped by their
 link (the axis URL: one serial line, bus or TCP connection). Each link has one sampling
-loop that reads its axes one after the other (round robin, so every axis on a link gets the
-same share) and then waits. A round starts every ``1 / rate`` seconds, but never sooner than
-the last round's own duration times ``(1 - duty) / duty`` after it ended: with the default
-duty of 0.5, sampling takes at most half of what a link can carry and the other half stays
-free for commands. The per-axis rate is therefore ``min(rate, duty / (axes x time of one
-axis read))`` - measured, not configured, so a 38,400 baud line with four drives settles
-at what it can carry while a fast link reaches the configured rate. ``achieved_hz`` tells
-what each link reached (printed by ``servobus serve`` after start-up, and by the benchmark).
+loop; a round asks every axis of the link for its four readings at once and lets the
+link's transaction layer queue them (a serial line carries them one after the other, a
+CAN bus overlaps the drives' answers); every axis gets one sample per round, so each has
+the same share. Then the loop waits: a round starts every ``1 / rate`` seconds, but never
+sooner than the last round's own duration times ``(1 - duty) / duty`` after it ended.
+With the default duty of 0.5, sampling takes at most half of what a link can carry and
+the other half stays free for commands. The per-axis rate is therefore
+``min(rate, duty / time of one round)`` - measured, not configured, so a 38,400 baud line
+with four drives settles at what it can carry while a fast link reaches the configured
+rate. ``achieved_hz`` holds what each link reached; it is logged once per link after the
+first seconds.
 
 A read that fails (the link dropped, the drive did not answer, the axis is offline) gives
 a Bad sample with the error's text; the sampling goes on and the next good read makes the
@@ -107,17 +110,19 @@ class Sampler:
     async def _read(self, axis: MachineAxis) -> Sample:
         if not axis.online:
             return Sample(axis.name, time.time(), False, "axis offline")
-        position = await axis.position()
-        speed = await axis.speed()
-        status = await axis.status()
-        current = None
-        raw = axis.axis
-        if raw is not None and axis.name not in self._no_current:
-            try:
-                current = await raw.current()
-            except NotSupported:
-                self._no_current.add(axis.name)
+        position, speed, status, current = await asyncio.gather(
+            axis.position(), axis.speed(), axis.status(), self._current(axis))
         return Sample(axis.name, time.time(), True, "", position, speed, current, status)
+
+    async def _current(self, axis: MachineAxis) -> float | None:
+        raw = axis.axis
+        if raw is None or axis.name in self._no_current:
+            return None
+        try:
+            return await raw.current()
+        except NotSupported:
+            self._no_current.add(axis.name)
+            return None
 
     def _publish(self, sample: Sample) -> None:
         before = self.latest.get(sample.axis)
@@ -140,8 +145,8 @@ class Sampler:
         rounds, since = 0, loop.time()
         while True:
             start = loop.time()
-            for axis in axes:
-                self._publish(await self.sample_once(axis))
+            for sample in await asyncio.gather(*(self.sample_once(a) for a in axes)):
+                self._publish(sample)
             end = loop.time()
             if url in self._first_pending:
                 self._first_pending.discard(url)
@@ -150,6 +155,9 @@ class Sampler:
             rest = pause_after(period, start, end, self.duty)
             rounds += 1
             if end - since >= 2.0:
+                if not self.achieved_hz[url]:
+                    log.info("link %s: %d axes sampled at %.1f Hz each", url, len(axes),
+                             rounds / (end - since))
                 self.achieved_hz[url] = rounds / (end - since)
                 rounds, since = 0, end
             await asyncio.sleep(rest)
