@@ -34,6 +34,7 @@ from typing import Any
 from urllib.parse import urlparse
 
 from asyncua import Server, ua
+from asyncua.common.connection import TransportLimits
 from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.user_managers import UserManager
 
@@ -47,6 +48,13 @@ from servobus.gateway.users import Users
 log = logging.getLogger(__name__)
 
 DEFAULT_ENDPOINT = "opc.tcp://127.0.0.1:4840"
+#: Bounds (decision): no request to this model needs more than a few hundred kB; a session
+#: that is not activated within 10 s is dropped; at most 200 subscriptions in all.
+MAX_MESSAGE_BYTES = 4 * 1024 * 1024
+BUFFER_BYTES = 65_535
+PENDING_ACTIVATION_S = 10.0
+MAX_SUBSCRIPTIONS = 200
+MAX_ITEM_QUEUE = 1_000
 _caller: contextvars.ContextVar[User | None] = contextvars.ContextVar("opcua_caller",
                                                                       default=None)
 ADMIN_REQUESTS = {ua.NodeId(i) for i in (
@@ -145,6 +153,12 @@ class OpcUaGateway:
     async def start(self) -> None:
         s = self.server
         await s.init()
+        s.limits = TransportLimits(max_recv_buffer=BUFFER_BYTES, max_send_buffer=BUFFER_BYTES,
+                                   max_chunk_count=MAX_MESSAGE_BYTES // BUFFER_BYTES + 1,
+                                   max_message_size=MAX_MESSAGE_BYTES)
+        s.iserver.max_pending_activation_seconds = PENDING_ACTIVATION_S
+        s.iserver.max_subscriptions = MAX_SUBSCRIPTIONS
+        s.iserver.max_monitored_item_queue_size = MAX_ITEM_QUEUE
         s.set_endpoint(f"opc.tcp://{self.host}:{self.port}")
         s.set_server_name(f"servobus gateway {self.machine.name}")
         await s.set_application_uri(f"{SERVOBUS_URI}:{self.machine.name}")

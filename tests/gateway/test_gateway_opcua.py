@@ -136,3 +136,19 @@ async def test_a_wrong_password_gets_no_session(gateway: RunningGateway) -> None
 async def _true(value: bool) -> bool:
     await asyncio.sleep(0)
     return value
+
+
+async def test_garbage_connections_do_not_stop_the_server(gateway: RunningGateway) -> None:
+    host, port = gateway.endpoint.removeprefix("opc.tcp://").rsplit(":", 1)
+    writers = []
+    for i in range(100):
+        reader, writer = await asyncio.open_connection(host, int(port))
+        writer.write(b"HELF" + bytes([i]) * 60 if i % 2 else b"\xff" * 4096)
+        writers.append((reader, writer))
+    await asyncio.gather(*(w.drain() for _, w in writers))
+    async with Client(gateway.endpoint) as client:  # served while they hang on
+        axes = await axes_of(client, MACHINE)
+        assert (await (await parameter(client, axes["x"], "ActualPosition")).read_data_value()
+                ).StatusCode.is_good()
+    for _, writer in writers:
+        writer.close()
