@@ -83,8 +83,8 @@ def serve(machine_path: Path | None, endpoint: str, users_path: Path | None,
     if mqtt_url is not None:
         password = os.environ.get(MQTT_PASSWORD_ENV)
         if mqtt_password_file is not None:
-            password = mqtt_password_file.read_text().splitlines()[0] \
-                if mqtt_password_file.read_text() else ""
+            lines = mqtt_password_file.read_text().splitlines()
+            password = lines[0] if lines else ""
         mqtt = MqttOptions(url=mqtt_url, username=mqtt_user, password=password,
                            commands=mqtt_commands, rate_hz=mqtt_rate, ca=mqtt_ca,
                            cert=mqtt_cert, key=mqtt_key)

@@ -3,7 +3,9 @@
 One process owns each link, so the GUI cannot open the machine's links again; it is handed
 the machine's Axis objects instead. Limitation (the GUI is keyed by drive id, one
 connection): axes whose drive id is already taken by an earlier axis of the machine (the
-same id on another link) are left out, and a line says so. The GUI serves 127.0.0.1 only
+same id on another link) are left out, and a line says so. The GUI moves axes in counts,
+past the machine API: the machine's limit guard (``guard_limits``) watches the limited axes
+while it runs. The GUI serves 127.0.0.1 only
 (a person at the gateway PC; no token); its STOP and shutdown stop only its axes, and
 closing it leaves the links to the machine.
 """
@@ -60,6 +62,9 @@ class RunningGui:
 
 
 async def start_gui(machine: Machine, port: int, say: Callable[[str], None]) -> RunningGui:
+    guard = getattr(machine, "guard_limits", None)
+    if guard is not None:  # the GUI jogs and waves past the machine API: watch the limits
+        guard()
     fleet, left_out = await machine_fleet(machine)
     sock = bind("127.0.0.1", port)
     app = create_app(fleet=fleet)
