@@ -11,6 +11,7 @@ import click
 EMBEDDED_SIM_URL = "sim://"
 URL_ENV = "SERVOBUS_URL"
 ID_ENV = "SERVOBUS_ID"
+MACHINE_ENV = "SERVOBUS_MACHINE"
 
 
 @dataclass
@@ -22,6 +23,34 @@ class CliContext:
     baud: int | None
     json: bool
     timeout: float | None
+    machine_option: str | None = None  # --machine FILE
+    axis_option: str | None = None  # --axis NAME
+
+    @property
+    def machine_path(self) -> str | None:
+        """The machine file named: --machine, else SERVOBUS_MACHINE unless --url/--port/--can
+        names a drive (an option beats the environment; docs/machine.md)."""
+        if self.machine_option:
+            return self.machine_option
+        if self.url_option or self.port or self.can:
+            return None
+        return os.environ.get(MACHINE_ENV) or None
+
+    @property
+    def machine_mode(self) -> bool:
+        """Commands act on a machine's axis: a file is named, or ``--axis`` without any drive
+        URL (then the built-in virtual machine)."""
+        if self.machine_option and (self.url_option or self.port or self.can):
+            raise click.UsageError("give --machine FILE or a drive (--url/--port/--can), "
+                                   "not both")
+        if self.machine_path is not None:
+            return True
+        if self.axis_option is not None:
+            if self.url_given:
+                raise click.UsageError(f"--axis {self.axis_option} names an axis of a machine "
+                                       "file; add --machine FILE (or drop --axis)")
+            return True
+        return False
 
     @property
     def named_url(self) -> str | None:

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, TypeAlias
 import click
 from rich.console import Console
 
+from servobus.cli import machine_cli
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.motion_guard import stop_on_interrupt
@@ -33,7 +34,7 @@ if TYPE_CHECKING:
 else:
     _TargetType = click.ParamType
 
-_TARGET = re.compile(r"^([-+]?\d+(?:\.\d*)?|[-+]?\.\d+)\s*(counts?|rev|revs|deg|cmd)?$")
+_TARGET = re.compile(r"^([-+]?\d+(?:\.\d*)?|[-+]?\.\d+)\s*(counts?|rev|revs|deg|cmd|mm)?$")
 
 
 class Target(_TargetType):
@@ -49,11 +50,19 @@ class Target(_TargetType):
         if match is None:
             self.fail(f"{value!r}: write counts (16384), revolutions (2.5rev), degrees (90deg) "
                       "or command units (120cmd)", param, ctx)
-        number, unit = float(match.group(1)), (match.group(2) or "counts").rstrip("s")
+        number, unit = float(match.group(1)), (match.group(2) or "").rstrip("s")
         unit = {"count": "counts", "rev": "rev"}.get(unit, unit)
-        if unit in ("counts", "cmd") and not number.is_integer():
-            self.fail(f"{value!r}: {unit} are whole numbers", param, ctx)
-        return number, unit
+        return number, unit  # "" = bare: counts on a drive, the axis's unit on a machine
+
+
+def check_drive_target(number: float, unit: str) -> None:
+    """A TARGET for a single drive (no machine): whole counts, no mm (nothing is opened)."""
+    if unit in ("", "counts", "cmd") and not number.is_integer():
+        raise click.BadParameter(f"{number:g}: {unit or 'counts'} are whole numbers",
+                                 param_hint="TARGET")
+    if unit == "mm":
+        raise click.BadParameter("mm needs a machine file that gives the axis's mechanics "
+                                 "(--machine FILE, docs/machine.md)", param_hint="TARGET")
 
 
 def to_counts(axis: Axis, number: float, unit: str) -> int:
@@ -79,6 +88,8 @@ def status_record(axis: Axis, status: AxisStatus) -> dict[str, object]:
 def render_status(con: Console, record: dict[str, object], title: str) -> None:
     nested = ("config", "vendor_status")
     top = {k: v for k, v in record.items() if k not in (*nested, "drive_id", "protocol")}
+    if top.get("alarm") == "":  # people read an empty field as "not read"
+        top["alarm"] = "none"
     con.print(kv_text(title, top), markup=False)
     for key in nested:
         block = record.get(key)
@@ -90,6 +101,9 @@ def render_status(con: Console, record: dict[str, object], title: str) -> None:
 @pass_cli
 def status_cmd(ctx: CliContext) -> None:
     """Decoded drive status (and the drive's configuration where it has one)."""
+    if ctx.machine_mode:  # one table of every axis, or the one --axis names
+        machine_cli.status(ctx)
+        return
     with open_axis(ctx) as axis:
         record = status_record(axis, axis.status())
         label = connection_label(ctx, axis)
@@ -100,6 +114,9 @@ def status_cmd(ctx: CliContext) -> None:
 @pass_cli
 def position_cmd(ctx: CliContext) -> None:
     """Absolute position in encoder counts (and revolutions) of the drive family."""
+    if ctx.machine_mode:  # in the axis's unit and counts
+        machine_cli.position(ctx)
+        return
     with open_axis(ctx) as axis:
         pos, per_rev = axis.position(), axis.counts_per_rev
     emit(ctx, {"position": pos, "counts_per_rev": per_rev, "rev": pos / per_rev},
@@ -107,10 +124,18 @@ def position_cmd(ctx: CliContext) -> None:
 
 
 @click.command("speed", cls=ServobusCommand)
-@click.argument("rpm", type=int)
+@click.argument("rpm", type=float)
 @pass_cli
-def speed_cmd(ctx: CliContext, rpm: int) -> None:
-    """Turn at constant speed RPM (positive = towards increasing position; 0 ramps down)."""
+def speed_cmd(ctx: CliContext, rpm: float) -> None:
+    """Turn at constant speed RPM (positive = towards increasing position; 0 ramps down).
+
+    On a machine axis (--machine/--axis) the speed is in its unit per second (mm/s, deg/s)."""
+    if ctx.machine_mode:
+        machine_cli.speed(ctx, rpm)
+        return
+    if not rpm.is_integer():
+        raise click.BadParameter(f"{rpm:g} is not a whole number of rpm", param_hint="RPM")
+    rpm = int(rpm)
     with open_axis(ctx) as axis:
         axis.turn(rpm)
     emit(ctx, {"speed_command": rpm}, lambda con: con.print(f"turning at {rpm} rpm"))
@@ -127,8 +152,15 @@ def speed_cmd(ctx: CliContext, rpm: int) -> None:
 @pass_cli
 def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float, confirm: bool,
              target: tuple[float, str]) -> None:
-    """Point-to-point move to/by TARGET: counts (16384), 2.5rev, 90deg or 120cmd."""
+    """Point-to-point move to/by TARGET: counts (16384), 2.5rev, 90deg or 120cmd.
+
+    On a machine axis (--machine/--axis) a bare number is in the axis's unit (12.5 = 12.5 mm),
+    checked against its soft limits before anything is sent."""
     number, unit = target
+    if ctx.machine_mode:
+        machine_cli.move(ctx, f"{number!r}{unit}", relative, wait, wait_timeout)
+        return
+    check_drive_target(number, unit)
     with open_axis(ctx) as axis, stop_on_interrupt(axis):
         if unit == "cmd":
             if not hasattr(axis.core, "move_to_command"):
@@ -157,6 +189,9 @@ def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float, c
 @pass_cli
 def stop_cmd(ctx: CliContext) -> None:
     """Stop: ramp down at the drive's deceleration and hold position."""
+    if ctx.machine_mode:
+        machine_cli.stop(ctx)
+        return
     with open_axis(ctx) as axis:
         axis.stop()
     emit(ctx, {"stopped": True}, lambda con: con.print("stopping"))

@@ -1,8 +1,10 @@
-"""``servobus gui``: the browser app for every axis on one connection (servobus.gui).
+"""``servobus gui``: the browser app for every axis of a machine or of one connection.
 
-The drive comes from ``gui --url`` or the global ``--url``/``--port``/``--can``/
-SERVOBUS_URL; with none, three built-in virtual drives (ids 1, 2, 3). ``--ids`` names the
-drives on the line or bus, ``--id`` one of them.
+``--machine FILE`` (or the global ``--machine``/SERVOBUS_MACHINE): every axis of the file,
+across links and vendors (docs/machine.md). Otherwise the drive comes from ``gui --url`` or
+the global ``--url``/``--port``/``--can``/SERVOBUS_URL, ``--ids`` naming the drives on the
+line or bus, ``--id`` one of them; ``--ids`` alone: those virtual drives on one line. With
+nothing named: the built-in virtual machine (two DMM axes on RS-485, a YZ-AIM on CAN).
 """
 
 from __future__ import annotations
@@ -33,6 +35,8 @@ def parse_ids(text: str) -> tuple[int, ...]:
 @click.option("--url", "gui_url", metavar="URL", default=None,
               help="the drive connection (default: the global --url, else three virtual "
                    "drives)")
+@click.option("--machine", "machine", metavar="FILE", default=None,
+              help="a machine file: every axis it names (default: the global --machine)")
 @click.option("--id", "one_id", type=click.IntRange(0, 255), default=None,
               help="one drive id on the connection")
 @click.option("--ids", "ids_text", metavar="1,2,3", default=None,
@@ -45,8 +49,9 @@ def parse_ids(text: str) -> tuple[int, ...]:
 @click.option("--token", default=None,
               help="required in the page URL; generated when listening beyond loopback")
 @pass_cli
-def gui(ctx: CliContext, gui_url: str | None, one_id: int | None, ids_text: str | None,
-        host: str, port: int, no_browser: bool, token: str | None) -> None:
+def gui(ctx: CliContext, gui_url: str | None, machine: str | None, one_id: int | None,
+        ids_text: str | None, host: str, port: int, no_browser: bool,
+        token: str | None) -> None:
     """Tune, command and watch drives in a browser (live scope, step tests, parameters).
 
     Binds 127.0.0.1 by default. Ctrl-C stops every axis, then the server.
@@ -62,8 +67,13 @@ def gui(ctx: CliContext, gui_url: str | None, one_id: int | None, ids_text: str 
     else:
         ids = None
     url = gui_url or ctx.named_url
+    machine = machine or (ctx.machine_path if gui_url is None else None)
+    if machine is not None and (gui_url or ctx.url_option or ctx.port or ctx.can or ids):
+        raise click.UsageError("give --machine FILE or a drive (--url/--id/--ids), not both")
+    if machine is not None:
+        url = None
     options = ServeOptions(url=url, ids=ids, host=host, port=port, token=token,
-                           open_browser=not no_browser)
+                           open_browser=not no_browser, machine=machine)
     try:
         serve(options, lambda line: click.echo(line))
     except KeyboardInterrupt as exc:

@@ -18,7 +18,7 @@ from types import FrameType
 import click
 
 from servobus import __version__
-from servobus.cli.context import URL_ENV, CliContext
+from servobus.cli.context import MACHINE_ENV, URL_ENV, CliContext
 from servobus.cli.failures import Terminated, describe
 from servobus.cli.param_types import Seconds
 
@@ -59,6 +59,11 @@ QUIET_LOGGERS = ("can",)
               help="serial baud rate [default: the protocol's]")
 @click.option("--timeout", type=Seconds(), default=None,
               help="reply deadline in seconds (> 0)")
+@click.option("--machine", "machine", metavar="FILE", default=None,
+              help=f"a machine file naming the axes (docs/machine.md; or {MACHINE_ENV})")
+@click.option("--axis", "axis", metavar="NAME", default=None,
+              help="the machine axis a command acts on (without --machine: the built-in "
+                   "virtual machine)")
 @click.option("--json", "as_json", is_flag=True,
               help="machine-readable output (also accepted after the command)")
 @click.option("--debug", is_flag=True,
@@ -66,15 +71,16 @@ QUIET_LOGGERS = ("can",)
 @click.version_option(__version__, prog_name="servobus")
 @click.pass_context
 def cli(ctx: click.Context, url: str | None, port: str | None, can: str | None,
-        drive_id: int | None, baud: int | None, timeout: float | None, as_json: bool,
-        debug: bool) -> None:
+        drive_id: int | None, baud: int | None, timeout: float | None, machine: str | None,
+        axis: str | None, as_json: bool, debug: bool) -> None:
     """servobus: command, tune and monitor servo drives (or their virtual twins).
 
     Exit status: 0 done; 1 the drive reports a fault (alarm, drive error); 2 usage or
     connection problem; 130 interrupted (Ctrl-C, SIGTERM; a motion in progress is stopped).
     """
     ctx.obj = CliContext(url_option=url, port=port, can=can, drive_id_option=drive_id,
-                         baud=baud, json=as_json, timeout=timeout)
+                         baud=baud, json=as_json, timeout=timeout, machine_option=machine,
+                         axis_option=axis)
 
 
 def _register_commands() -> None:

@@ -32,6 +32,12 @@ def open_axis(ctx: CliContext, drive_id: int | None = None) -> Iterator[Axis]:
     (servobus.cli.open_failures); argument errors (a bad id for the protocol) pass through;
     failures after that are the command's own.
     """
+    if ctx.machine_mode:  # --machine/--axis: the Axis of that machine axis
+        from servobus.cli.machine_cli import open_axis_of_machine
+
+        with open_axis_of_machine(ctx) as machine_axis:
+            yield machine_axis
+        return
     from servobus.axis import connect  # lazy: keeps `servobus decode` free of the client
 
     url = parse_url(ctx.url)

@@ -27,6 +27,7 @@ async def info(request: Request) -> Response:
         "signals": [{"name": s.name, "unit": s.unit, "label": s.label}
                     for s in SIGNALS.values()],
         "units": list(UNITS), "jog_lease_s": gui.jog.lease_s,
+        "machine": gui.fleet.machine.name if gui.fleet.machine is not None else None,
     })
 
 
@@ -62,8 +63,15 @@ async def command(request: Request) -> Response:
 async def move(request: Request) -> Response:
     h = handle(request)
     doc = await body(request)
-    counts = to_counts(h.axis, number(doc, "value"), str(doc.get("unit", "counts")))
+    value, unit = number(doc, "value"), str(doc.get("unit", "counts"))
     relative = bool(doc.get("relative", False))
+    m = h.machine_axis
+    if m is not None:  # a machine axis: its own unit, and its soft limits before the wire
+        user = value if unit == m.unit else m.to_user(to_counts(h.axis, value, unit))
+        await h.call(m.move_by(user) if relative else m.move_to(user))
+        return ok(counts=m.to_counts(user), relative=relative, value=user, unit=m.unit,
+                  status=await _refresh(request, h.id))
+    counts = to_counts(h.axis, value, unit)
     if relative:
         await h.call(h.axis.move_by(counts))
     else:
@@ -75,7 +83,11 @@ async def move(request: Request) -> Response:
 async def turn(request: Request) -> Response:
     h = handle(request)
     rpm = integer(await body(request), "rpm")
-    await h.call(h.axis.turn(rpm))
+    m = h.machine_axis
+    if m is not None and m.limits is not None:  # refused at the limit, watched to it
+        await h.call(m.turn(m.scale.from_rpm(rpm)))
+    else:
+        await h.call(h.axis.turn(rpm))
     return ok(rpm=rpm)
 
 

@@ -32,12 +32,18 @@ async def index(request: Request) -> Response:
 
 def create_app(url: str | None = None, ids: Sequence[int] | None = None, *,
                fleet: Fleet | None = None, token: str | None = None,
-               jog_lease_s: float = LEASE_S) -> Starlette:
-    """The app; it opens ``url`` (or takes an opened ``fleet``) when the server starts."""
+               jog_lease_s: float = LEASE_S, machine: str | Path | None = None) -> Starlette:
+    """The app; it opens ``url`` or the ``machine`` file (or takes an opened ``fleet``) when
+    the server starts."""
 
     @contextlib.asynccontextmanager
     async def lifespan(app: Starlette) -> AsyncIterator[None]:
-        opened = fleet if fleet is not None else await Fleet.open(url, ids)
+        if fleet is not None:
+            opened = fleet
+        elif machine is not None:
+            opened = await Fleet.open_machine(machine)
+        else:
+            opened = await Fleet.open(url, ids)
         gui = GuiState.build(opened, jog_lease_s)
         app.state.gui = gui
         gui.start()

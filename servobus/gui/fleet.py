@@ -1,16 +1,25 @@
-"""The axes the GUI serves: one connection (a drive URL), one AsyncAxis per drive id.
+"""The axes the GUI serves: one connection (a drive URL) or a machine file.
 
-The first id opens the connection (``connect_async``); the others are its siblings (the
-same line or bus). With no URL the GUI runs on :data:`DEFAULT_URL`, three in-process
-virtual drives. On ``sim://`` the ids become the virtual drives' ids unless the URL names
-its own.
+One URL: the first id opens the connection (``connect_async``); the others are its
+siblings (the same line or bus). With no URL :meth:`Fleet.open` runs on :data:`DEFAULT_URL`,
+three in-process virtual drives. On ``sim://`` the ids become the virtual drives' ids unless
+the URL names its own.
+
+A machine (:meth:`Fleet.open_machine`, servobus.machine): every axis of every link and vendor,
+keyed 1..n in file order (drive ids repeat across links, so the GUI's axis number is the
+axis's place in the file), named as in the file, with its unit and limits in the identity
+and its position/speed in that unit in every status. Links open with ``retry=True``: an
+axis whose link is down shows its link error and comes back when the link does (reload the
+page for its identity). The machine's guard stops a jog or wave at a soft limit.
 """
 
 from __future__ import annotations
 
-from collections.abc import Awaitable, Sequence
+import inspect
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
-from typing import TypeVar
+from pathlib import Path
+from typing import TYPE_CHECKING, TypeVar, cast
 
 from servobus.axis.base import AsyncAxis
 from servobus.axis.connect import connect_async
@@ -18,35 +27,86 @@ from servobus.errors import ArgumentRangeError
 from servobus.gui.link_stats import CallStats, client_counters
 from servobus.gui.traffic import TrafficLog
 
+if TYPE_CHECKING:
+    from servobus.machine import AsyncMachine, AsyncMachineAxis
+
 T = TypeVar("T")
 DEFAULT_URL = "sim://dyn232?fast=1"
 DEFAULT_IDS = (1, 2, 3)
 
 
+class _OfflineAxis:
+    """Stands in for the Axis of an offline machine axis: a coroutine method raises its
+    MachineLinkError when awaited (so STOP ALL and the monitor go on with the others);
+    anything else (family, parameters(), ...) raises it at once."""
+
+    def __init__(self, machine_axis: AsyncMachineAxis) -> None:
+        self._machine_axis = machine_axis
+
+    def __getattr__(self, name: str) -> Callable[..., Awaitable[object]]:
+        if not inspect.iscoroutinefunction(getattr(AsyncAxis, name, None)):
+            self._machine_axis.core()  # raises MachineLinkError
+
+        async def offline(*args: object, **kwargs: object) -> object:
+            return self._machine_axis.core()  # raises MachineLinkError
+
+        return offline
+
+
 @dataclass
 class AxisHandle:
-    """One axis and what the GUI counts about it."""
+    """One axis and what the GUI counts about it (on a machine: its name, unit, limits)."""
 
-    axis: AsyncAxis
+    base_axis: AsyncAxis | None
     stats: CallStats = field(default_factory=CallStats)
+    key: int | None = None  # the GUI's axis number on a machine (its place in the file)
+    machine_axis: AsyncMachineAxis | None = None
+
+    @property
+    def axis(self) -> AsyncAxis:
+        m = self.machine_axis
+        if m is not None:
+            return m.axis if m.axis is not None else cast(AsyncAxis, _OfflineAxis(m))
+        assert self.base_axis is not None
+        return self.base_axis
 
     @property
     def id(self) -> int:
-        return self.axis.drive_id
+        return self.key if self.key is not None else self.axis.drive_id
+
+    def user_values(self, position: float, speed: float) -> dict[str, object]:
+        """Position and speed in the machine axis's unit (nothing on a plain connection)."""
+        m = self.machine_axis
+        if m is None or not m.online:
+            return {}
+        return {"name": m.name, "unit": m.unit, "user_position": m.to_user(position),
+                "user_speed": m.scale.from_rpm(speed), "speed_unit": m.speed_unit}
 
     async def call(self, awaitable: Awaitable[T]) -> T:
         return await self.stats.timed(awaitable)
 
     def identity(self) -> dict[str, object]:
+        m = self.machine_axis
+        named: dict[str, object] = {} if m is None else {
+            "name": m.name, "unit": m.unit, "speed_unit": m.speed_unit, "url": m.url,
+            "drive_id": m.drive_id, "limits": list(m.limits) if m.limits else None,
+            "default_speed": m.default_speed, "label": m.spec.label, "online": m.online}
+        if m is not None and not m.online:  # what the page can show until it comes back
+            return {"id": self.id, "protocol": "", "family": "", "family_title": "offline",
+                    "counts_per_rev": 1, "features": [], "alarms": {}, "params": 0,
+                    "virtual_io": False, **named}
         a = self.axis
         fam = a.family
+        if m is not None:
+            named["counts_per_unit"] = m.scale.counts_per_unit
         return {
-            "id": a.drive_id, "protocol": a.protocol, "family": fam.name,
+            "id": self.id, "protocol": a.protocol, "family": fam.name,
             "family_title": fam.title, "counts_per_rev": a.counts_per_rev,
             "features": sorted(fam.features),
             "alarms": {str(k): v for k, v in fam.alarms.items()},
             "params": len(a.parameters()),
             "virtual_io": a.io_source is not None,
+            **named,
         }
 
     def link(self) -> dict[str, object]:
@@ -54,10 +114,31 @@ class AxisHandle:
 
 
 class Fleet:
-    def __init__(self, url: str, handles: Sequence[AxisHandle], traffic: TrafficLog) -> None:
+    def __init__(self, url: str, handles: Sequence[AxisHandle], traffic: TrafficLog,
+                 machine: AsyncMachine | None = None) -> None:
         self.url = url
         self.handles = {h.id: h for h in handles}
         self.traffic = traffic
+        self.machine = machine
+
+    @classmethod
+    async def open_machine(cls, path: str | Path | None = None) -> Fleet:
+        """Every axis of the machine file ``path`` (None: the built-in virtual machine)."""
+        from servobus.machine import open_machine_async
+
+        machine = await open_machine_async(path, retry=True)
+        try:
+            traffic = TrafficLog()
+            for link in machine.links:  # siblings share their owner's trace
+                if link.owner is not None:
+                    await link.owner.add_trace(traffic.hook)
+            machine.guard_limits()
+        except BaseException:
+            await machine.close()
+            raise
+        handles = [AxisHandle(None, key=i, machine_axis=a)
+                   for i, a in enumerate(machine.axes.values(), start=1)]
+        return cls(machine.source, handles, traffic, machine)
 
     @classmethod
     async def open(cls, url: str | None = None, ids: Sequence[int] | None = None) -> Fleet:
@@ -97,6 +178,9 @@ class Fleet:
                                      f"{', '.join(map(str, self.handles))}") from None
 
     async def close(self) -> None:
-        """Siblings first, the connection's owner last."""
+        """Siblings first, the connection's owner last (a machine: stopped, then closed)."""
+        if self.machine is not None:
+            await self.machine.close()
+            return
         for handle in reversed(list(self.handles.values())):
             await handle.axis.close()

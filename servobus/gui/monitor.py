@@ -60,6 +60,7 @@ class StatusMonitor:
             "id": handle.id, "link": "", "t": time.time(), **st.as_dict(),
             "alarm_code": st.alarm_code, "position": position,
             "revolutions": position / axis.counts_per_rev, "speed": speed, "current": current,
+            **handle.user_values(position, speed),
         }
         self._track(handle.id, st.alarm_code, st.alarm_text, st.alarm_latched)
         self.snapshots[handle.id] = snap

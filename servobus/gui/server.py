@@ -45,6 +45,12 @@ class ServeOptions:
     port: int = DEFAULT_PORT
     token: str | None = None
     open_browser: bool = True
+    machine: str | None = None  # a machine file (servobus.machine)
+
+    @property
+    def on_machine(self) -> bool:
+        """A machine file, or nothing named at all: the built-in virtual machine."""
+        return self.machine is not None or (self.url is None and self.ids is None)
 
 
 def page_url(host: str, port: int, token: str | None) -> str:
@@ -85,7 +91,10 @@ def serve(options: ServeOptions, say: Callable[[str], None]) -> None:
 
 async def _serve(options: ServeOptions, token: str | None, loopback: bool,
                  sock: socket.socket, say: Callable[[str], None]) -> None:
-    fleet = await Fleet.open(options.url, options.ids)
+    if options.on_machine:
+        fleet = await Fleet.open_machine(options.machine)
+    else:
+        fleet = await Fleet.open(options.url, options.ids)
     app = create_app(fleet=fleet, token=token)
     config = uvicorn.Config(app, log_level="warning", lifespan="on", access_log=False,
                             ws_per_message_deflate=False)  # scope frames do not compress
@@ -99,12 +108,22 @@ async def _serve(options: ServeOptions, token: str | None, loopback: bool,
                 return
             await asyncio.sleep(0.02)
         axes = ", ".join(str(i) for i in fleet.handles)
+        if fleet.machine is not None:
+            axes = ", ".join(f"{i} {h.machine_axis.name}" for i, h in fleet.handles.items()
+                             if h.machine_axis is not None)
         if not loopback:
             say(f"warning: listening on {options.host}: anyone who can reach this address "
                 "and has the token can move the drives")
         say(f"servobus gui: {url}")
-        say(f"drives: {fleet.url if options.url else DEFAULT_URL + ' (built-in virtual drives)'}"
-            f"; axes {axes}. Ctrl-C stops every axis and the server.")
+        if fleet.machine is not None:
+            offline = [h.machine_axis.name for h in fleet.handles.values()
+                       if h.machine_axis is not None and not h.machine_axis.online]
+            say(f"drives: machine {fleet.machine.name} ({fleet.url}); axes {axes}"
+                + (f"; offline, retrying: {', '.join(offline)}" if offline else "")
+                + ". Ctrl-C stops every axis and the server.")
+        else:
+            drives = fleet.url if options.url else f"{DEFAULT_URL} (built-in virtual drives)"
+            say(f"drives: {drives}; axes {axes}. Ctrl-C stops every axis and the server.")
         if options.open_browser:
             await asyncio.get_running_loop().run_in_executor(None, webbrowser.open, url)
 

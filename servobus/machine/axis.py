@@ -26,7 +26,7 @@ import logging
 import math
 from typing import TYPE_CHECKING
 
-from servobus.errors import LimitError, MachineLinkError, NotSupported
+from servobus.errors import ArgumentRangeError, LimitError, MachineLinkError, NotSupported
 from servobus.machine.config import AxisSpec
 from servobus.machine.units import Scale
 
@@ -94,6 +94,11 @@ class AsyncMachineAxis:
         """``speed`` of the file, user units per second (turn's and the GUI jog's default)."""
         return self.spec.speed
 
+    @property
+    def watching(self) -> bool:
+        """A limit watcher of a ``turn`` runs (it ends when it stopped the axis)."""
+        return self._watcher is not None and not self._watcher.done()
+
     def core(self) -> AsyncAxis:
         """The underlying Axis, or MachineLinkError naming the axis and its URL."""
         if self.axis is None:
@@ -118,8 +123,8 @@ class AsyncMachineAxis:
         """``target`` (user units) inside the limits, else LimitError; nothing is sent."""
         if isinstance(target, bool) or not isinstance(target, int | float) \
                 or not math.isfinite(target):
-            raise LimitError(f"axis {self.name}: a target must be a finite number of "
-                             f"{self.unit}, got {target!r}")
+            raise ArgumentRangeError(f"axis {self.name}: a target must be a finite number "
+                                     f"of {self.unit}, got {target!r}")
         if self.limits is not None:
             low, high = self.limits
             if not low <= target <= high:
@@ -156,8 +161,8 @@ class AsyncMachineAxis:
         """Relative move by ``distance`` user units; the end point is checked first."""
         if isinstance(distance, bool) or not isinstance(distance, int | float) \
                 or not math.isfinite(distance):
-            raise LimitError(f"axis {self.name}: a distance must be a finite number of "
-                             f"{self.unit}, got {distance!r}")
+            raise ArgumentRangeError(f"axis {self.name}: a distance must be a finite "
+                                     f"number of {self.unit}, got {distance!r}")
         if self.limits is not None:
             low, high = self.limits
             if abs(distance) > high - low:
@@ -175,12 +180,13 @@ class AsyncMachineAxis:
         if speed is None:
             speed = self.spec.speed
             if speed is None:
-                raise LimitError(f"axis {self.name}: give a speed in {self.speed_unit} (the "
-                                 "machine file sets no default speed)")
+                raise ArgumentRangeError(f"axis {self.name}: give a speed in "
+                                         f"{self.speed_unit} (the machine file sets no "
+                                         "default speed)")
         if isinstance(speed, bool) or not isinstance(speed, int | float) \
                 or not math.isfinite(speed):
-            raise LimitError(f"axis {self.name}: a speed must be a finite number of "
-                             f"{self.speed_unit}, got {speed!r}")
+            raise ArgumentRangeError(f"axis {self.name}: a speed must be a finite number "
+                                     f"of {self.speed_unit}, got {speed!r}")
         rpm = round(self.scale.to_rpm(speed))
         if rpm == 0:
             await self.stop()
@@ -281,9 +287,9 @@ class AsyncMachineAxis:
             home = getattr(self.core(), "home", None)
             if home is None:
                 core = self.core()
-                raise NotSupported(f"axis {self.name}: {core.family.title} over "
-                                   f"{core.protocol} has no homing; use origin = \"set\"",
-                                   family=core.family.name)
+                raise NotSupported(f"{self.source}: axis {self.name}: origin: "
+                                   f"{core.family.title} over {core.protocol} has no "
+                                   "homing; use origin = \"set\"", family=core.family.name)
             await home()
 
     async def _closed(self) -> None:

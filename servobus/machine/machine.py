@@ -16,7 +16,7 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import Mapping
+from collections.abc import Collection, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType, TracebackType
@@ -93,15 +93,20 @@ class AsyncMachine:
             raise ArgumentRangeError(f"no axis {name!r} in {self.source}; axes: "
                                      f"{', '.join(self._axes)}") from None
 
-    def __iter__(self) -> object:
+    def __iter__(self) -> Iterator[str]:
         return iter(self._axes)
 
     def __len__(self) -> int:
         return len(self._axes)
 
     # ------------------------------------------------------------- opening
-    async def _open(self, retry: bool) -> None:
+    async def _open(self, retry: bool, only: Collection[str] | None = None) -> None:
+        if only is not None:
+            for name in only:
+                self[name]  # the one line naming the axes
         for link in self.links:
+            if only is not None and not any(a.name in only for a in link.axes):
+                continue  # not asked for: stays offline, never opened
             try:
                 await link.open()
                 await self._apply_origins(link)
@@ -221,13 +226,17 @@ class AsyncMachine:
         return report
 
     # ------------------------------------------------------------- closing
-    async def close(self) -> None:
-        """Stop every axis first (halt), then the watchers, retries and links; idempotent."""
+    async def close(self, *, stop: bool = True) -> None:
+        """Stop every axis first (halt), then the watchers, retries and links; idempotent.
+
+        ``stop=False`` leaves the drives doing what they were told (a one-shot command
+        such as ``servobus move`` without ``--wait`` exits while the motor moves)."""
         if self._closed:
             return
         self._closed = True
         try:
-            await halt(self.online_cores())
+            if stop:
+                await halt(self.online_cores())
         finally:
             for task in [*self._retries, *self._guards]:
                 task.cancel()
@@ -255,14 +264,17 @@ def _retryable(exc: BaseException) -> bool:
     return not isinstance(exc, ArgumentRangeError | LimitError)
 
 
-async def open_machine_async(path: str | Path | None = None, *,
-                             retry: bool = False) -> AsyncMachine:
-    """Open the machine file ``path`` (None: the built-in virtual machine)."""
+async def open_machine_async(path: str | Path | None = None, *, retry: bool = False,
+                             only: Collection[str] | None = None) -> AsyncMachine:
+    """Open the machine file ``path`` (None: the built-in virtual machine).
+
+    ``only``: open just the links of these axes (the others stay offline, never opened);
+    the CLI opens only the axis a command acts on."""
     if path is None:
         spec, source = builtin_spec(), BUILTIN_SOURCE
     else:
         spec = load_machine_file(path)
         source = str(path)
     machine = AsyncMachine(spec, source=source)
-    await machine._open(retry)
+    await machine._open(retry, only)
     return machine

@@ -6,7 +6,7 @@ machine's loop thread and blocks on the result.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from pathlib import Path
 from types import MappingProxyType, TracebackType
 from typing import TYPE_CHECKING
@@ -165,12 +165,13 @@ class Machine:
                       timeout: float | None = None) -> TogetherReport:
         return self._runner.run(self._core.move_together(targets, wait=wait, timeout=timeout))
 
-    def close(self) -> None:
-        """Stop every axis, close the links and the loop thread; idempotent."""
+    def close(self, *, stop: bool = True) -> None:
+        """Stop every axis (unless ``stop=False``), close the links and the loop thread;
+        idempotent."""
         if self._runner.stopped:
             return
         try:
-            self._runner.run(self._core.close())
+            self._runner.run(self._core.close(stop=stop))
         finally:
             self._runner.stop()
 
@@ -185,11 +186,12 @@ class Machine:
         return repr(self._core).replace("AsyncMachine", "Machine", 1)
 
 
-def open_machine(path: str | Path | None = None, *, retry: bool = False) -> Machine:
+def open_machine(path: str | Path | None = None, *, retry: bool = False,
+                 only: Collection[str] | None = None) -> Machine:
     """Synchronous :func:`open_machine_async` on a private loop thread."""
     runner = LoopThread("servobus-machine")
     try:
-        core = runner.run(open_machine_async(path, retry=retry))
+        core = runner.run(open_machine_async(path, retry=retry, only=only))
     except BaseException:
         runner.stop()
         raise

@@ -14,7 +14,7 @@ import pytest
 import servobus
 
 ROOT = Path(servobus.__file__).parent
-SHARED = ("axis", "cli", "families", "transport", "sim", "gui")
+SHARED = ("axis", "cli", "families", "transport", "sim", "gui", "machine")
 CLIENT_MODULES = ("client.py", "opener.py", "commands.py", "codec.py")
 
 

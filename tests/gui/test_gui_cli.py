@@ -60,12 +60,13 @@ def get(url: str) -> tuple[int, object]:
         return exc.code, json.loads(exc.read())
 
 
-def test_default_serves_three_virtual_axes_on_loopback_and_stops_on_ctrl_c() -> None:
+def test_default_serves_the_builtin_machine_on_loopback_and_stops_on_ctrl_c() -> None:
     with gui() as (proc, lines):
         assert len(lines) == 2  # no warning on loopback
         url = re.search(r"http://127\.0\.0\.1:\d+/", lines[0])
         assert url is not None and "token" not in lines[0]
-        assert "built-in virtual drives" in lines[1] and "axes 1, 2, 3" in lines[1]
+        # issue 20: with nothing named, the built-in virtual machine (x, y DMM; c YZ-AIM)
+        assert "built-in virtual machine" in lines[1] and "axes 1 x, 2 y, 3 c" in lines[1]
         status, info = get(url.group(0) + "api/info")
         assert status == 200 and [a["id"] for a in info["axes"]] == [1, 2, 3]  # type: ignore[index]
         proc.send_signal(signal.SIGINT)

@@ -1,6 +1,6 @@
 // The servobus GUI page: one WebSocket, the Axes panel, and one module per tab.
 import { api, Link } from "./net.js";
-import { $, $$ } from "./util.js";
+import { $, $$, axisLabel } from "./util.js";
 import { AxesPanel } from "./axes.js";
 import { MotionPanel } from "./motion.js";
 import { ParamsPanel } from "./params.js";
@@ -41,7 +41,7 @@ async function main() {
   const link = new Link();
   const ctx = new Context(info, link);
   window.servobus = ctx;  // for people poking around, and for the browser tests
-  $("#conn-url").textContent = info.url;
+  $("#conn-url").textContent = info.machine ? `machine ${info.machine} · ${info.url}` : info.url;
   link.onState((state) => {
     const node = $("#conn");
     node.dataset.state = state;
@@ -67,7 +67,7 @@ async function main() {
   };
   for (const b of $$("#tabs button")) b.addEventListener("click", () => show(b.dataset.tab));
   ctx.showTab = show;
-  ctx.onSelect((id) => { $("#tab-axis").textContent = `axis ${id} · ${ctx.identity(id).family_title}`; });
+  ctx.onSelect((id) => { $("#tab-axis").textContent = `${axisLabel(ctx.identity(id))} · ${ctx.identity(id).family_title}`; });
   ctx.select(ctx.selected);
   show(location.hash.slice(1) in panels ? location.hash.slice(1) : active);
 

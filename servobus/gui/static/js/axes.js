@@ -11,8 +11,9 @@ export class AxesPanel {
     for (const ident of ctx.info.axes) {
       const card = el("div", { class: "axis-card", "data-axis": ident.id, onclick: () => ctx.select(ident.id) },
         el("div", { class: "head" },
-          el("span", { class: "name", text: `Axis ${ident.id}` }),
-          el("span", { class: "ident", text: `${ident.protocol} · ${ident.family_title}` })),
+          el("span", { class: "name", text: ident.name ? ident.name : `Axis ${ident.id}`,
+            title: ident.name ? `${ident.label || ""} ${ident.url} id ${ident.drive_id}`.trim() : "" }),
+          el("span", { class: "ident", text: `${ident.protocol} · ${ident.family_title}${ident.unit ? ` · ${ident.unit}` : ""}` })),
         el("div", { class: "lights" }, ...LIGHTS.map(([k, label]) =>
           el("span", { class: `light ${k === "alarm_code" ? "alarm" : k}`, "data-light": k, text: label }))),
         el("div", { class: "values" },
@@ -37,13 +38,20 @@ export class AxesPanel {
         node.classList.toggle("on", k === "alarm_code" ? Boolean(s.alarm_code) : Boolean(s[k]));
       }
       const set = (k, text) => { card.querySelector(`[data-v=${k}]`).textContent = text; };
-      set("position", s.position === undefined ? "–" : `${fmt(s.position)} counts`);
-      set("revolutions", s.revolutions === undefined ? "" : `${s.revolutions.toFixed(4)} rev`);
-      set("speed", `${fmt(s.speed)} rpm`);
+      if (s.unit !== undefined) {  // a machine axis: its own unit first, counts below
+        set("position", `${fmt(s.user_position)} ${s.unit}`);
+        set("revolutions", s.position === undefined ? "" : `${fmt(s.position)} counts`);
+        set("speed", `${fmt(s.user_speed)} ${s.speed_unit}`);
+      } else {
+        set("position", s.position === undefined ? "–" : `${fmt(s.position)} counts`);
+        set("revolutions", s.revolutions === undefined ? "" : `${s.revolutions.toFixed(4)} rev`);
+        set("speed", `${fmt(s.speed)} rpm`);
+      }
       set("current", `${fmt(s.current)} A`);
       set("alarm", s.alarm_code ? `alarm ${s.alarm_code}: ${s.alarm}${s.alarm_latched ? " (latched: Reset clears)" : ""}` : "");
       set("link", s.link || "");
       card.dataset.position = s.position ?? "";
+      card.dataset.userPosition = s.user_position ?? "";
       card.dataset.speed = s.speed ?? "";
     }
   }

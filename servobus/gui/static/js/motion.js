@@ -1,6 +1,6 @@
 // Motion panel: servo on/off, jog while held, moves in counts/rev/deg, constant speed, waves.
 import { api } from "./net.js";
-import { $, $$, el, fmt, message } from "./util.js";
+import { $, $$, axisLabel, el, fmt, message } from "./util.js";
 
 const JOG_REPEAT_MS = 150;  // the server stops a jog not repeated within its lease (0.6 s)
 
@@ -34,7 +34,7 @@ export class MotionPanel {
   async run(path, body, what) {
     try {
       await api(this.url(path), body);
-      message(this.msg, `${what}: sent to axis ${this.ctx.selected}`, "ok");
+      message(this.msg, `${what}: sent to ${axisLabel(this.ctx.identity(this.ctx.selected))}`, "ok");
     } catch (err) {
       message(this.msg, `${what}: ${err.message}`, "error");
     }
@@ -92,7 +92,14 @@ export class MotionPanel {
     $("#wave-hint").textContent = waves
       ? "Amplitude in the drive's own wave units (DMM: 4096 = 180°); the wave runs until Off or Stop."
       : `${ident.family_title} drives have no drive-generated test motion.`;
-    $("#move-hint").textContent = `1 rev = ${ident.counts_per_rev.toLocaleString("en-US")} counts on ${ident.family_title}.`;
+    // a machine axis moves in its own unit first (limits checked by the server)
+    const units = [...new Set([ident.unit, "rev", "deg", "counts"].filter(Boolean))];
+    const unitSel = $("#move-unit");
+    unitSel.replaceChildren(...units.map((u) => el("option", { value: u, text: u })));
+    unitSel.value = units[0];
+    const limits = ident.limits ? `; soft limits ${ident.limits[0]} … ${ident.limits[1]} ${ident.unit}` : "";
+    const own = ident.unit && ident.unit !== "counts" ? `1 ${ident.unit} = ${fmt(ident.counts_per_unit)} counts; ` : "";
+    $("#move-hint").textContent = `${own}1 rev = ${ident.counts_per_rev.toLocaleString("en-US")} counts on ${ident.family_title}${limits}.`;
     this.renderReadout();
   }
 
@@ -102,9 +109,10 @@ export class MotionPanel {
     const item = (k, v, big = true) => el("div", {}, el("span", { class: "k", text: k }),
       el("span", { class: big ? "big" : "", text: v }));
     box.replaceChildren(
-      item(`axis ${this.ctx.selected} position`, `${fmt(s.position)} counts`),
+      item(`${axisLabel(this.ctx.identity(this.ctx.selected))} position`,
+        s.unit !== undefined ? `${fmt(s.user_position)} ${s.unit}` : `${fmt(s.position)} counts`),
       item("revolutions", s.revolutions === undefined ? "–" : s.revolutions.toFixed(4)),
-      item("speed", `${fmt(s.speed)} rpm`),
+      item("speed", s.unit !== undefined ? `${fmt(s.user_speed)} ${s.speed_unit}` : `${fmt(s.speed)} rpm`),
       item("current", `${fmt(s.current)} A`),
       item("state", s.link ? "link error" : s.alarm_code ? `ALARM ${s.alarm_code}` :
         `${s.enabled ? "enabled" : "disabled"}${s.moving ? ", moving" : ""}${s.in_position ? ", in position" : ""}`, false));

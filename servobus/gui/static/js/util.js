@@ -41,4 +41,9 @@ export function download(name, blob) {
   setTimeout(() => { URL.revokeObjectURL(a.href); a.remove(); }, 1000);
 }
 
+// An axis as people know it: its name in the machine file, else its number.
+export function axisLabel(ident) {
+  return ident && ident.name ? ident.name : `axis ${ident ? ident.id : "?"}`;
+}
+
 export const COLORS = ["#4da3ff", "#ffb84d", "#3ecf6e", "#ff6b9a", "#b48cff", "#43d1d1", "#e6e65c", "#ff7f50"];

@@ -1,0 +1,257 @@
+"""The drive commands on a machine file (``--machine FILE --axis NAME``; docs/machine.md).
+
+Decisions:
+
+* A command that acts on one axis opens only that axis's link. On a machine of several axes
+  it needs ``--axis``: without it, one line lists the names. ``status`` without ``--axis``
+  opens every link and shows one table of every axis (an axis whose link cannot be opened
+  shows offline and the command exits 2).
+* Positions, distances and speeds are in the axis's unit (``move 12.5`` = 12.5 mm on a mm
+  axis; ``12.5mm``, ``100counts`` also work; ``speed 20`` = 20 mm/s). Every move is
+  checked against the soft limits before anything is sent (LimitError, exit 2).
+* ``speed`` on an axis with limits stays in the foreground, watching the limit, until the
+  axis stops there or Ctrl-C stops it: a watcher cannot outlive the command.
+* The machine is closed without a stop on success (``move`` without ``--wait`` leaves the
+  motor moving, as on a single drive); Ctrl-C/SIGTERM stop the axis (motion_guard).
+* ``--axis`` without ``--machine`` and without a drive URL uses the built-in virtual
+  machine (servobus.machine.builtin), announced on stderr.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager, suppress
+from typing import TYPE_CHECKING
+
+import click
+from rich.console import Console
+
+from servobus.cli.context import CliContext
+from servobus.cli.failures import CliError
+from servobus.cli.open_axis import emit, kv_text, note
+
+if TYPE_CHECKING:
+    from servobus.axis.sync import Axis
+    from servobus.machine import Machine, MachineAxis
+
+#: How often ``speed`` on a limited axis checks whether the watcher stopped it.
+FOLLOW_S = 0.05
+
+
+def _spec_names(ctx: CliContext) -> tuple[str, list[str]]:
+    from servobus.machine.builtin import BUILTIN_SOURCE, builtin_spec
+    from servobus.machine.config import load_machine_file
+
+    path = ctx.machine_path
+    spec = builtin_spec() if path is None else load_machine_file(path)
+    return (BUILTIN_SOURCE if path is None else path), [a.name for a in spec.axes]
+
+
+def chosen_axis(ctx: CliContext) -> str:
+    """The axis a one-axis command acts on: --axis, the only axis, or one line listing them."""
+    source, names = _spec_names(ctx)
+    if ctx.axis_option is not None:
+        if ctx.axis_option not in names:
+            raise click.UsageError(f"no axis {ctx.axis_option!r} in {source}; axes: "
+                                   f"{', '.join(names)}")
+        return ctx.axis_option
+    if len(names) == 1:
+        return names[0]
+    raise click.UsageError(f"{source} has axes {', '.join(names)}: give --axis NAME")
+
+
+@contextmanager
+def open_machine_cli(ctx: CliContext, only: list[str] | None) -> Iterator[Machine]:
+    """Open the machine (only the links of ``only``); close it without a stop on the way out
+    (a failure keeps its one stderr line)."""
+    from servobus.machine import open_machine
+
+    machine = open_machine(ctx.machine_path, only=only)
+    try:
+        yield machine
+    except BaseException:
+        with suppress(Exception):
+            machine.close(stop=False)
+        raise
+    machine.close(stop=False)
+    if ctx.machine_path is None:
+        note_builtin_machine_once()
+
+
+@contextmanager
+def open_machine_axis(ctx: CliContext) -> Iterator[MachineAxis]:
+    name = chosen_axis(ctx)
+    with open_machine_cli(ctx, [name]) as machine:
+        yield machine[name]
+
+
+@contextmanager
+def open_axis_of_machine(ctx: CliContext) -> Iterator[Axis]:
+    """The underlying Axis of the chosen machine axis (params, profile, scan ...)."""
+    with open_machine_axis(ctx) as axis:
+        core = axis.axis
+        assert core is not None  # opened (retry is off: a failure raised)
+        yield core
+
+
+_noted: list[bool] = []
+
+
+def note_builtin_machine_once() -> None:
+    from servobus.machine.builtin import BUILTIN_NOTE
+
+    if not _noted:
+        _noted.append(True)
+        note(BUILTIN_NOTE)
+
+
+def label(axis: MachineAxis) -> str:
+    return f"axis {axis.name} ({axis.url}, id {axis.drive_id})"
+
+
+# ------------------------------------------------------------------ commands
+def axis_record(axis: MachineAxis) -> dict[str, object]:
+    """One axis for ``status``: identity, position in the unit and counts, the status."""
+    record: dict[str, object] = {"axis": axis.name, "unit": axis.unit, "url": axis.url,
+                                 "id": axis.drive_id, "online": axis.online,
+                                 "limits": list(axis.limits) if axis.limits else None}
+    if not axis.online:
+        record["error"] = str(axis.last_error or "not opened")
+        return record
+    counts = axis.counts()
+    record.update(protocol=axis.protocol, position=axis.to_user(counts), counts=counts,
+                  **axis.status().as_dict())
+    return record
+
+
+def status(ctx: CliContext) -> None:
+    if ctx.axis_option is not None:
+        with open_machine_axis(ctx) as axis:
+            record = axis_record(axis)
+            title = f"status of {label(axis)}"
+        emit(ctx, record, lambda con: con.print(kv_text(title, record), markup=False))
+        return
+    from servobus.machine import open_machine
+
+    machine = open_machine(ctx.machine_path, retry=True)  # an unreachable link: offline row
+    try:
+        records = [axis_record(a) for a in machine.axes.values()]
+        name = machine.name
+    finally:
+        machine.close(stop=False)
+    if ctx.machine_path is None:
+        note_builtin_machine_once()
+    emit(ctx, {"machine": name, "axes": records},
+         lambda con: render_machine_table(con, name, records))
+    offline = [str(r["axis"]) for r in records if not r["online"]]
+    if offline:
+        raise CliError(f"axes offline: {', '.join(offline)} "
+                       f"({'; '.join(str(r.get('error')) for r in records if not r['online'])})",
+                       "check those links (power, cable, URL in the machine file)")
+
+
+def render_machine_table(con: Console, name: str, records: list[dict[str, object]]) -> None:
+    """Plain columns (no wrapping or ellipsis whatever the terminal width)."""
+    head = ("axis", "position", "counts", "enabled", "moving", "in_pos", "alarm", "link")
+    rows: list[tuple[str, ...]] = []
+    for r in records:
+        link = f"{r['url']} id {r['id']}"
+        if not r["online"]:
+            rows.append((str(r["axis"]), "-", "-", "-", "-", "-", "-",
+                         f"{link} OFFLINE: {r.get('error', '')}"))
+            continue
+        position = r["position"]
+        assert isinstance(position, float)
+        rows.append((str(r["axis"]), f"{position:.3f} {r['unit']}", str(r["counts"]),
+                     _yes(r["enabled"]), _yes(r["moving"]), _yes(r["in_position"]),
+                     str(r["alarm"]) or "-", f"{link} ({r['protocol']})"))
+    widths = [max(len(row[i]) for row in (head, *rows)) for i in range(len(head))]
+    right = (1, 2)
+    lines = [f"machine {name}"]
+    for row in (head, *rows):
+        cells = [cell.rjust(w) if i in right else cell.ljust(w)
+                 for i, (cell, w) in enumerate(zip(row, widths, strict=True))]
+        lines.append("  ".join(cells).rstrip())
+    con.print("\n".join(lines), markup=False)
+
+
+def _yes(value: object) -> str:
+    return "yes" if value else "no"
+
+
+def position(ctx: CliContext) -> None:
+    with open_machine_axis(ctx) as axis:
+        counts = axis.counts()
+        user = axis.to_user(counts)
+        record = {"axis": axis.name, "position": user, "unit": axis.unit, "counts": counts}
+    emit(ctx, record,
+         lambda con: con.print(f"{user:.4f} {axis.unit} ({counts} counts)", markup=False))
+
+
+def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: float) -> None:
+    from servobus.cli.motion_guard import stop_on_interrupt
+    from servobus.machine import parse_quantity
+
+    with open_machine_axis(ctx) as axis:
+        number, unit = parse_quantity(text, axis.unit, axis=axis.name)
+        user = axis.to_user(number) if unit == "counts" and axis.online else number
+        core = axis.axis
+        assert core is not None
+        with stop_on_interrupt(core):
+            if relative:
+                axis.move_by(user)
+            else:
+                axis.move_to(user)
+            record: dict[str, object] = {"axis": axis.name,
+                                         "move": "relative" if relative else "absolute",
+                                         "target": user, "unit": axis.unit}
+            if wait:
+                st = axis.wait_idle(wait_timeout) if wait_timeout > 0 else axis.status()
+                counts = axis.counts()
+                record.update(in_position=st.in_position, position=axis.to_user(counts),
+                              counts=counts)
+
+    def render(con: Console) -> None:
+        verb = "moving by" if relative else "moving to"
+        done = (f"; done at {record['position']:.4f} {axis.unit} ({record['counts']} counts)"
+                if wait else "")
+        con.print(f"axis {axis.name} {verb} {user:g} {axis.unit}{done}", markup=False)
+
+    emit(ctx, record, render)
+
+
+def speed(ctx: CliContext, value: float) -> None:
+    from servobus.cli.motion_guard import stop_on_interrupt
+
+    with open_machine_axis(ctx) as axis:
+        core = axis.axis
+        assert core is not None
+        with stop_on_interrupt(core):
+            axis.turn(value)
+            record: dict[str, object] = {"axis": axis.name, "speed": value,
+                                         "unit": axis.speed_unit}
+            if axis.limits is not None and value != 0:
+                if not ctx.json:
+                    note(f"axis {axis.name} turning at {value:g} {axis.speed_unit}; watching "
+                         "its soft limits (Ctrl-C stops it)")
+                while abs(axis.speed()) > 0 or _starting(axis):
+                    time.sleep(FOLLOW_S)
+                record["stopped_at"] = axis.position()
+    emit(ctx, record, lambda con: con.print(
+        f"axis {axis.name} turning at {value:g} {axis.speed_unit}"
+        + (f"; stopped at its soft limit, {record['stopped_at']:.3f} {axis.unit}"
+           if "stopped_at" in record else ""), markup=False))
+
+
+def _starting(axis: MachineAxis) -> bool:
+    """The limit watcher still runs (the drive may not show speed yet)."""
+    return axis.core.watching
+
+
+def stop(ctx: CliContext) -> None:
+    with open_machine_axis(ctx) as axis:
+        axis.stop()
+    emit(ctx, {"axis": axis.name, "stopped": True},
+         lambda con: con.print(f"axis {axis.name} stopping", markup=False))
+
