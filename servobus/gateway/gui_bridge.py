@@ -1,13 +1,11 @@
 """``servobus serve --gui``: the web GUI on the machine's own axes, in the gateway's process.
 
 One process owns each link, so the GUI cannot open the machine's links again; it is handed
-the machine's Axis objects instead. Limitation (the GUI is keyed by drive id, one
-connection): axes whose drive id is already taken by an earlier axis of the machine (the
-same id on another link) are left out, and a line says so. The GUI moves axes in counts,
-past the machine API: the machine's limit guard (``guard_limits``) watches the limited axes
-while it runs. The GUI serves 127.0.0.1 only
-(a person at the gateway PC; no token); its STOP and shutdown stop only its axes, and
-closing it leaves the links to the machine.
+the open machine instead (every axis, keyed by its place in the file, in its own unit, as
+``servobus gui --machine``). The GUI moves axes in counts past the machine API, so the
+machine's limit guard (``guard_limits``) watches the limited axes. The GUI serves
+127.0.0.1 only (a person at the gateway PC, no token); closing it leaves the machine to the
+gateway, which stops and closes it.
 """
 
 from __future__ import annotations
@@ -19,6 +17,7 @@ from dataclasses import dataclass
 
 import uvicorn
 
+from servobus.errors import ArgumentRangeError
 from servobus.gateway.source import Machine
 from servobus.gui.app import create_app
 from servobus.gui.fleet import AxisHandle, Fleet
@@ -27,27 +26,25 @@ from servobus.gui.traffic import TrafficLog
 
 
 class MachineFleet(Fleet):
-    """A Fleet over axes the machine owns: closing it closes nothing."""
+    """The GUI's fleet over a machine the gateway owns: closing it closes nothing."""
 
     async def close(self) -> None:
         return None
 
 
-async def machine_fleet(machine: Machine) -> tuple[MachineFleet, list[str]]:
-    handles: list[AxisHandle] = []
-    left_out: list[str] = []
-    traced: set[str] = set()
+async def machine_fleet(machine: Machine) -> MachineFleet:
+    from servobus.machine import AsyncMachine
+
+    if not isinstance(machine, AsyncMachine):
+        raise ArgumentRangeError("--gui needs a machine opened by servobus.machine")
     traffic = TrafficLog()
-    for name, axis in machine.axes.items():
-        core = axis.axis
-        if core is None or any(h.id == core.drive_id for h in handles):
-            left_out.append(name)
-            continue
-        if axis.url not in traced:
-            traced.add(axis.url)
-            await core.add_trace(traffic.hook)
-        handles.append(AxisHandle(core))
-    return MachineFleet(f"machine {machine.name}", handles, traffic), left_out
+    for link in machine.links:  # siblings share their owner's trace
+        if link.owner is not None:
+            await link.owner.add_trace(traffic.hook)
+    machine.guard_limits()
+    handles = [AxisHandle(None, key=i, machine_axis=a)
+               for i, a in enumerate(machine.axes.values(), start=1)]
+    return MachineFleet(machine.source, handles, traffic, machine)
 
 
 @dataclass
@@ -62,10 +59,7 @@ class RunningGui:
 
 
 async def start_gui(machine: Machine, port: int, say: Callable[[str], None]) -> RunningGui:
-    guard = getattr(machine, "guard_limits", None)
-    if guard is not None:  # the GUI jogs and waves past the machine API: watch the limits
-        guard()
-    fleet, left_out = await machine_fleet(machine)
+    fleet = await machine_fleet(machine)
     sock = bind("127.0.0.1", port)
     app = create_app(fleet=fleet)
     server = uvicorn.Server(uvicorn.Config(app, log_level="warning", lifespan="on",
@@ -77,10 +71,7 @@ async def start_gui(machine: Machine, port: int, say: Callable[[str], None]) -> 
         await asyncio.sleep(0.02)
     if task.done():
         task.result()
-    names = {h.axis.drive_id: n for n, a in machine.axes.items() for h in fleet.handles.values()
-             if a.axis is h.axis}
-    shown = ", ".join(f"{names[i]} (id {i})" for i in fleet.handles)
-    say(f"servobus serve: gui {page_url('127.0.0.1', sock.getsockname()[1], None)} axes {shown}"
-        + (f"; left out (drive id taken): {', '.join(left_out)}" if left_out else ""))
+    say(f"servobus serve: gui {page_url('127.0.0.1', sock.getsockname()[1], None)} "
+        f"axes {', '.join(machine.axes)}")
     return RunningGui(server, task)
 

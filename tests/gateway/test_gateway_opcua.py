@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import asyncio
+import json
 import math
+import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -29,7 +31,8 @@ MACHINE = "virtual-cell"
 @pytest.fixture(scope="module")
 def gateway(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningGateway]:
     folder: Path = tmp_path_factory.mktemp("gateway")
-    running = start_gateway("--users", str(users_file(folder)), "--rate", "50")
+    running = start_gateway("--users", str(users_file(folder)), "--rate", "50", "--gui",
+                            "--gui-port", "0")
     yield running
     err = running.stop()
     assert running.proc.returncode == 130, err
@@ -152,3 +155,14 @@ async def test_garbage_connections_do_not_stop_the_server(gateway: RunningGatewa
                 ).StatusCode.is_good()
     for _, writer in writers:
         writer.close()
+
+
+async def test_the_gui_is_served_from_the_same_process(gateway: RunningGateway) -> None:
+    line = next(x for x in gateway.lines if x.startswith("servobus serve: gui "))
+    url = line.split()[3]
+    assert url.startswith("http://127.0.0.1:")
+    loop = asyncio.get_running_loop()
+    body = await loop.run_in_executor(
+        None, lambda: urllib.request.urlopen(url + "api/axes", timeout=10).read())
+    axes = json.loads(body)
+    assert [a["identity"].get("name") for a in axes] == ["x", "y", "c"]
