@@ -15,6 +15,7 @@ from pathlib import Path
 import click
 
 from servobus.cli.command_class import ServobusCommand
+from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.failures import Interrupted
 
 SHUTDOWN_NOTE = "every axis was stopped and the gateway closed"
@@ -25,9 +26,8 @@ EXISTING = click.Path(dir_okay=False, exists=True, path_type=Path)
 
 @click.command("serve", cls=ServobusCommand)
 @click.option("--machine", "machine_path", type=EXISTING, default=None,
-              envvar="SERVOBUS_MACHINE",
-              help="the machine file (TOML, docs/machine.md) [default: SERVOBUS_MACHINE, else "
-                   "the built-in virtual machine]")
+              help="the machine file (TOML, docs/machine.md) [default: the global --machine, "
+                   "SERVOBUS_MACHINE, else the built-in virtual machine]")
 @click.option("--opcua", "endpoint", default="opc.tcp://127.0.0.1:4840", show_default=True,
               metavar="opc.tcp://HOST:PORT",
               help="OPC UA endpoint; beyond loopback Basic256Sha256 Sign&Encrypt only")
@@ -54,7 +54,8 @@ EXISTING = click.Path(dir_okay=False, exists=True, path_type=Path)
 @click.option("--gui", is_flag=True, help="serve the web GUI from this process too")
 @click.option("--gui-port", type=click.IntRange(0, 65535), default=8080, show_default=True,
               help="port of the GUI on 127.0.0.1")
-def serve(machine_path: Path | None, endpoint: str, users_path: Path | None,
+@pass_cli
+def serve(ctx: CliContext, machine_path: Path | None, endpoint: str, users_path: Path | None,
           cert: Path | None, key: Path | None, rate: float, mqtt_url: str | None,
           mqtt_rate: float, mqtt_commands: bool, mqtt_user: str | None,
           mqtt_password_file: Path | None, mqtt_ca: Path | None, mqtt_cert: Path | None,
@@ -69,6 +70,10 @@ def serve(machine_path: Path | None, endpoint: str, users_path: Path | None,
     from servobus.gateway.serve import GatewayOptions, open_and_serve
     from servobus.gateway.users import Users
 
+    if machine_path is None and ctx.machine_path is not None:
+        machine_path = Path(ctx.machine_path)
+        if not machine_path.is_file():
+            raise click.BadParameter(f"{machine_path}: no such file", param_hint="--machine")
     if (cert is None) != (key is None):
         raise click.UsageError("give --cert and --key together")
     if mqtt_commands and mqtt_url is None:

@@ -63,11 +63,11 @@ def plant(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[RunningGat
     (folder / "b.toml").write_text(CELL_B)
     cert, key = asyncio.run(certificate(folder, "server", ExtendedKeyUsageOID.SERVER_AUTH))
     users = users_file(folder)
-    args = [("--machine", str(folder / "a.toml")),
-            ("--machine", str(folder / "b.toml"), "--users", str(users), "--cert", str(cert),
-             "--key", str(key))]
+    runs = [((), {"SERVOBUS_MACHINE": str(folder / "a.toml")}),  # the machine from the env
+            (("--machine", str(folder / "b.toml"), "--users", str(users), "--cert", str(cert),
+              "--key", str(key)), {})]
     with ThreadPoolExecutor(2) as pool:  # both start at once: half the waiting
-        gateways = tuple(pool.map(lambda a: start_gateway(*a), args))
+        gateways = tuple(pool.map(lambda run: start_gateway(*run[0], env=run[1]), runs))
     yield gateways
     for gateway in gateways:  # both stop at once
         gateway.proc.send_signal(signal.SIGTERM)
