@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import asyncio
 import json
+import ssl
+from pathlib import Path
+from typing import Any
 
 import pytest
 from fake_machine import FakeMachine
@@ -92,3 +96,45 @@ def test_state_json_has_the_named_fields() -> None:
     body = json.loads(state_json(Sample("x", NOW, False, "axis offline"), "mm"))
     assert {"position", "speed", "moving", "alarm", "unit"} <= set(body)
     assert body["ok"] is False and body["position"] is None and body["unit"] == "mm"
+
+
+def test_tls_options_make_a_verifying_context(tmp_path: Path) -> None:
+    machine = FakeMachine()
+    sampler = Sampler(machine, 10)  # type: ignore[arg-type]
+    commander = Commander(machine)  # type: ignore[arg-type]
+
+    def gateway(url: str, **options: Any) -> MqttGateway:
+        return MqttGateway(machine, sampler, commander,  # type: ignore[arg-type]
+                           MqttOptions(url, **options))
+
+    assert gateway("mqtt://127.0.0.1")._tls() is None  # plain TCP unless asked
+    context = gateway("mqtts://broker.example")._tls()
+    assert isinstance(context, ssl.SSLContext)
+    assert context.verify_mode == ssl.CERT_REQUIRED and context.check_hostname
+    ca = tmp_path / "ca.pem"
+    ca.write_bytes(asyncio.run(_self_signed(tmp_path)))
+    with_ca = gateway("mqtt://127.0.0.1:8883", ca=ca)._tls()  # a CA file turns TLS on
+    assert with_ca is not None and with_ca.get_ca_certs()
+
+
+async def _self_signed(folder: Path) -> bytes:
+    from asyncua.crypto.cert_gen import setup_self_signed_certificate
+    from cryptography.hazmat.primitives.serialization import Encoding
+    from cryptography.x509 import load_der_x509_certificate
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+
+    cert, key = folder / "c.der", folder / "k.pem"
+    await setup_self_signed_certificate(key, cert, "urn:test:broker", "broker.example",
+                                        [ExtendedKeyUsageOID.SERVER_AUTH], {"commonName": "ca"})
+    return load_der_x509_certificate(cert.read_bytes()).public_bytes(Encoding.PEM)
+
+
+def test_serve_refuses_half_given_options() -> None:
+    from click.testing import CliRunner
+
+    from servobus.cli.main import cli
+
+    result = CliRunner().invoke(cli, ["serve", "--mqtt-commands"])
+    assert result.exit_code == 2 and "--mqtt-commands needs --mqtt" in result.output
+    result = CliRunner().invoke(cli, ["serve", "--opcua", "http://x:1"])
+    assert result.exit_code != 0
