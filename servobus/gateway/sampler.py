@@ -15,8 +15,11 @@ rate. ``achieved_hz`` holds what each link reached; it is logged once per link a
 first seconds.
 
 A read that fails (the link dropped, the drive did not answer, the axis is offline) gives
-a Bad sample with the error's text; the sampling goes on and the next good read makes the
-axis good again. A change between good and bad is logged in one line.
+a Bad sample with the error's text once :data:`BAD_AFTER` rounds in a row have failed (an
+offline axis at once): one lost answer on a busy link leaves the last good sample
+standing rather than flapping every value to Bad and back. The sampling goes on and the
+next good read makes the axis good again. A change between good and bad is logged in one
+line.
 """
 
 from __future__ import annotations
@@ -38,6 +41,9 @@ DEFAULT_RATE_HZ = 20.0
 DEFAULT_DUTY = 0.5
 #: A whole axis read (four transactions) that takes longer than this is a failed read.
 READ_DEADLINE_S = 2.0
+#: Rounds in a row that must fail before an axis's values turn Bad.
+BAD_AFTER = 3
+OFFLINE = "axis offline"
 
 
 @dataclass(frozen=True)
@@ -87,6 +93,7 @@ class Sampler:
         self.listeners: list[Listener] = []
         self.achieved_hz: dict[str, float] = dict.fromkeys(self.links, 0.0)
         self._no_current: set[str] = set()
+        self._failures: dict[str, int] = {}
         self.first_round = asyncio.Event()
         self._first_pending = set(self.links)
 
@@ -102,14 +109,14 @@ class Sampler:
                 return await self._read(axis)
         except asyncio.CancelledError:
             raise
-        except TimeoutError:
-            return Sample(axis.name, time.time(), False, "no answer in time")
+        except TimeoutError as exc:
+            return Sample(axis.name, time.time(), False, str(exc) or "no answer in time")
         except Exception as exc:  # any failure of the link or drive is a Bad sample
             return Sample(axis.name, time.time(), False, f"{type(exc).__name__}: {exc}")
 
     async def _read(self, axis: MachineAxis) -> Sample:
         if not axis.online:
-            return Sample(axis.name, time.time(), False, "axis offline")
+            return Sample(axis.name, time.time(), False, OFFLINE)
         position, speed, status, current = await asyncio.gather(
             axis.position(), axis.speed(), axis.status(), self._current(axis))
         return Sample(axis.name, time.time(), True, "", position, speed, current, status)
@@ -126,6 +133,13 @@ class Sampler:
 
     def _publish(self, sample: Sample) -> None:
         before = self.latest.get(sample.axis)
+        if sample.ok:
+            self._failures[sample.axis] = 0
+        else:
+            failures = self._failures[sample.axis] = self._failures.get(sample.axis, 0) + 1
+            if (before is not None and before.ok and failures < BAD_AFTER
+                    and sample.error != OFFLINE):
+                return  # a lost answer: the last good sample stands
         if before is None or before.ok != sample.ok:
             if sample.ok:
                 if before is not None:

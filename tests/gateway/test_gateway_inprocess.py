@@ -15,7 +15,7 @@ from gateway_rig import axes_of, names, parameter
 
 from servobus.gateway.commands import Command, Commander, Refused
 from servobus.gateway.opcua_server import OpcUaOptions
-from servobus.gateway.sampler import Sampler, pause_after
+from servobus.gateway.sampler import BAD_AFTER, OFFLINE, Sample, Sampler, pause_after
 from servobus.gateway.serve import GatewayOptions, serve_machine
 
 OPTIONS = GatewayOptions(OpcUaOptions("opc.tcp://127.0.0.1:0"), rate_hz=50)
@@ -146,3 +146,23 @@ async def _true(value: bool) -> bool:
 
 async def _value_is(node: object, value: object) -> bool:
     return bool(await node.read_value() == value)  # type: ignore[attr-defined]
+
+
+def test_one_lost_answer_does_not_turn_an_axis_bad() -> None:
+    machine = FakeMachine()
+    sampler = Sampler(machine, 10)  # type: ignore[arg-type]
+    seen: list[Sample] = []
+    sampler.listeners.append(seen.append)
+    good = Sample("a0", 1.0, True, position=5.0)
+    lost = Sample("a0", 2.0, False, "no reply")
+    sampler._publish(good)
+    for _ in range(BAD_AFTER - 1):
+        sampler._publish(lost)
+    assert seen == [good] and sampler.latest["a0"] is good  # the last good one stands
+    sampler._publish(lost)
+    assert seen[-1] is lost and not sampler.latest["a0"].ok  # then Bad
+    sampler._publish(good)
+    assert sampler.latest["a0"] is good
+    offline = Sample("a0", 3.0, False, OFFLINE)
+    sampler._publish(offline)
+    assert sampler.latest["a0"] is offline  # offline is Bad at once
