@@ -171,7 +171,7 @@ async def _add_axis(folder: Node, ns: Namespaces, m: str, axis: MachineAxis,
         params, ns.robotics, ns.servobus, f"{a}.ActualPosition", "ActualPosition", axis.unit,
         axis.limits)
     out.variables["ActualSpeed"] = await add_analog(
-        params, ns.robotics, ns.servobus, f"{a}.ActualSpeed", "ActualSpeed", f"{axis.unit}/s",
+        params, ns.robotics, ns.servobus, f"{a}.ActualSpeed", "ActualSpeed", axis.speed_unit,
         None)
     for name, (vtype, initial) in STATE_VARIABLES.items():
         if name == "ActualCurrent":

@@ -166,6 +166,10 @@ class OpcUaGateway:
         policies = await self._security()
         s.set_security_policy(policies, permission_ruleset=GatewayRules())
         _, self.axes = await build_model(s, self.machine, self.source, self._call)
+        waiting = ua.DataValue(StatusCode=ua.StatusCode(ua.StatusCodes.BadWaitingForInitialData))
+        for nodes in self.axes.values():  # until the first sample of the axis
+            for node in nodes.variables.values():
+                await s.write_attribute_value(node.nodeid, waiting)
         await self._alarm_events()
         await s.start()
         if s.bserver is not None:

@@ -26,6 +26,8 @@ from servobus.gateway.source import Machine
 
 log = logging.getLogger(__name__)
 Say = Callable[[str], None]
+#: At most this long a start waits for the first samples before it says "ready".
+FIRST_ROUND_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -56,6 +58,10 @@ class Gateway:
                       asyncio.create_task(self.opcua.run_updates(), name="gateway-opcua")]
         if self.mqtt is not None:
             self.tasks.append(asyncio.create_task(self.mqtt.run(), name="gateway-mqtt"))
+        # "ready" means values to read: every link's first round (good or Bad) is in
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(FIRST_ROUND_S):
+                await self.sampler.first_round.wait()
 
     async def wait_failed(self) -> None:
         """Returns (raising its error) when a part stops by itself."""

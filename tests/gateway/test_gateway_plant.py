@@ -13,12 +13,14 @@ from pathlib import Path
 import pytest
 from asyncua import Client, ua
 from asyncua.crypto.cert_gen import setup_self_signed_certificate
+from conftest import wait_until_async
 from cryptography.x509.oid import ExtendedKeyUsageOID
 from gateway_rig import (
     PASSWORD,
     USER,
     RunningGateway,
     axes_of,
+    free_port,
     names,
     parameter,
     start_gateway,
@@ -34,6 +36,11 @@ id = 1
 unit = "mm"
 per_rev = 10.0
 limits = [0.0, 500.0]
+[axes.clamp]
+url = "dyn232+socket://127.0.0.1:{closed_port}"
+id = 3
+unit = "mm"
+per_rev = 2.0
 """
 CELL_B = """name = "packer"
 [axes.turntable]
@@ -59,7 +66,7 @@ async def certificate(folder: Path, name: str, use: object) -> tuple[Path, Path]
 @pytest.fixture(scope="module")
 def plant(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[RunningGateway, ...]]:
     folder = tmp_path_factory.mktemp("plant")
-    (folder / "a.toml").write_text(CELL_A)
+    (folder / "a.toml").write_text(CELL_A.format(closed_port=free_port()))  # nobody listens
     (folder / "b.toml").write_text(CELL_B)
     cert, key = asyncio.run(certificate(folder, "server", ExtendedKeyUsageOID.SERVER_AUTH))
     users = users_file(folder)
@@ -87,7 +94,15 @@ async def test_one_client_reads_two_gateways(plant: tuple[RunningGateway, ...],
     secure.set_user(USER)
     secure.set_password(PASSWORD)
     async with Client(a.endpoint) as plain, secure:
-        assert sorted(await axes_of(plain, "press-line")) == ["feed"]
+        axes_a = await axes_of(plain, "press-line")
+        assert sorted(axes_a) == ["clamp", "feed"]
+        clamp = await parameter(plain, axes_a["clamp"], "ActualPosition")
+
+        async def link_down() -> bool:
+            value = await clamp.read_data_value(raise_on_bad_status=False)
+            return bool(value.StatusCode.value == ua.StatusCodes.BadCommunicationError)
+
+        await wait_until_async(link_down, timeout=10, what="the clamp's link reads Bad")
         axes_b = await axes_of(secure, "packer")
         assert sorted(axes_b) == ["lift", "turntable"]
         feed = await parameter(plain, (await axes_of(plain, "press-line"))["feed"],
