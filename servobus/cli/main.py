@@ -37,6 +37,8 @@ COMMAND_MODULES: list[str] = [
     "servobus.cli.demo_cmd",
     "servobus.cli.profile_cmd",
     "servobus.cli.gui_cmd",
+    "servobus.cli.serve_cmd",
+    "servobus.cli.users_cmd",
 ]
 
 DEBUG_ENV = "SERVOBUS_DEBUG"

@@ -1,0 +1,95 @@
+"""Which MQTT commands may run: never a retained one, a repeated id, or a stale one.
+
+Decisions (docs/gateway.md "MQTT commands"): a command is a JSON object
+``{"id": "...", "ts": <unix seconds>, "cmd": "move_relative", "value": 1.5}``. A motion
+command (MOTION) must carry ``id`` (1-128 characters) and ``ts``; a stop may leave them
+out. Refused, never run, and answered on ``.../reply``:
+
+* a retained message (the broker would replay it to every new subscription);
+* an id seen before (QoS 1 redelivers a message after a reconnect) - ids are remembered
+  for ``2 x max_age``, longer than any command is accepted, so a repeat is always caught;
+  when :data:`MAX_IDS` are remembered new commands are refused until old ids expire
+  (bounded memory: more than 10,000 commands in 10 s is not a control program);
+* ``ts`` older than ``max_age`` (default 5 s) or more than :data:`MAX_FUTURE_S` ahead of
+  this computer's clock (the sender's clock must be synchronised, NTP);
+* a payload that is not such an object, or larger than :data:`MAX_PAYLOAD` bytes.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections import OrderedDict
+from dataclasses import dataclass
+
+from servobus.gateway.commands import AXIS_COMMANDS, MOTION, Command, Refused
+
+MAX_PAYLOAD = 4096
+MAX_IDS = 10_000
+MAX_FUTURE_S = 2.0
+DEFAULT_MAX_AGE_S = 5.0
+
+
+@dataclass(frozen=True)
+class Accepted:
+    command: Command
+    id: str | None
+
+
+class CommandGate:
+    def __init__(self, max_age_s: float = DEFAULT_MAX_AGE_S) -> None:
+        self.max_age_s = max_age_s
+        self._seen: OrderedDict[str, float] = OrderedDict()
+
+    def admit(self, axis: str, payload: bytes, retained: bool,
+              now: float | None = None) -> Accepted:
+        """The command to run, or Refused with the reason."""
+        now = time.time() if now is None else now
+        if retained:
+            raise Refused("BadRequestNotAllowed", "a retained command is never run")
+        if len(payload) > MAX_PAYLOAD:
+            raise Refused("BadRequestTooLarge", f"a command has at most {MAX_PAYLOAD} bytes")
+        try:
+            data = json.loads(payload)
+        except (ValueError, UnicodeDecodeError):
+            raise Refused("BadDecodingError", "a command is a JSON object") from None
+        if not isinstance(data, dict):
+            raise Refused("BadDecodingError", "a command is a JSON object")
+        name = data.get("cmd")
+        if not isinstance(name, str) or name not in AXIS_COMMANDS:
+            raise Refused("BadMethodInvalid",
+                          f"cmd must be one of {', '.join(sorted(AXIS_COMMANDS))}")
+        ident, ts = data.get("id"), data.get("ts")
+        if ident is not None and (not isinstance(ident, str) or not 1 <= len(ident) <= 128):
+            raise Refused("BadInvalidArgument", "id is a string of 1..128 characters")
+        if name in MOTION and (ident is None or ts is None):
+            raise Refused("BadInvalidArgument", f"{name} needs an id and a timestamp ts")
+        if ts is not None:
+            if isinstance(ts, bool) or not isinstance(ts, int | float) or not math.isfinite(ts):
+                raise Refused("BadInvalidArgument", "ts is a number: unix time in seconds")
+            if now - ts > self.max_age_s:
+                raise Refused("BadInvalidTimestamp",
+                              f"stale: sent {now - ts:.1f} s ago (at most {self.max_age_s:g} s)")
+            if ts - now > MAX_FUTURE_S:
+                raise Refused("BadInvalidTimestamp",
+                              f"ts is {ts - now:.1f} s in the future: check the sender's clock")
+        value = data.get("value")
+        if AXIS_COMMANDS[name] and (isinstance(value, bool) or not isinstance(value, int | float)):
+            raise Refused("BadInvalidArgument", f"{name} needs a number value")
+        if ident is not None:
+            self._expire(now)
+            if ident in self._seen:
+                raise Refused("BadRequestNotAllowed", f"id {ident!r} was seen before: not re-run")
+            if len(self._seen) >= MAX_IDS:
+                raise Refused("BadTooManyOperations", "too many commands: try again later")
+            self._seen[ident] = now
+        return Accepted(Command(axis, name, None if value is None else float(value)), ident)
+
+    def _expire(self, now: float) -> None:
+        horizon = now - 2 * self.max_age_s
+        while self._seen:
+            oldest, when = next(iter(self._seen.items()))
+            if when >= horizon:
+                break
+            del self._seen[oldest]

@@ -1,0 +1,203 @@
+"""The OPC UA address space of one machine, after OPC 40010-1 (Robotics) and OPC 10000-100 (DI).
+
+Decision (docs/gateway.md "Information model"): the companion specifications' NodeSets are
+not imported (they are large, and a client that does not know them gains nothing); the model
+is built in code with their browse names in their namespaces, so a client that browses by
+the standard names finds what it expects::
+
+    Objects
+      DeviceSet                         (DI)
+        MotionDeviceSystem              (Robotics)
+          MotionDevices                 (Robotics)
+            <machine>                   (servobus)   one MotionDevice per machine
+              Identification            (DI)         Manufacturer, Model, ProductInstanceUri, ...
+              Axes                      (Robotics)
+                <axis>                  (servobus)   named as in the machine file
+                  ParameterSet          (DI)
+                    ActualPosition      (Robotics)   Double, axis unit, EngineeringUnits, EURange
+                    ActualSpeed         (Robotics)   Double, axis unit per second
+                    ActualCurrent, Enabled, Moving, InPosition, AlarmCode, AlarmText,
+                    Online, LastError   (servobus)
+                  Identification        (DI)         Manufacturer, Model (family), Protocol,
+                                                     DeviceAddress (link and drive id)
+                  MoveAbsolute(Double), MoveRelative(Double), SetSpeed(Double), Stop(),
+                  Enable(), Disable(), ResetAlarm()  (servobus)
+              StopAll()                 (servobus)
+
+Node ids are strings in the servobus namespace (``<machine>.<axis>.ActualPosition``), so
+they stay the same from one start to the next. Alarms are events of AxisAlarmEventType
+(servobus namespace, a BaseEventType) emitted by the axis object.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+
+from asyncua import Node, Server, ua
+
+from servobus import __version__
+from servobus.gateway.source import Machine, MachineAxis, family_name, family_title
+from servobus.gateway.units import eu_information
+
+DI_URI = "http://opcfoundation.org/UA/DI/"
+ROBOTICS_URI = "http://opcfoundation.org/UA/Robotics/"
+SERVOBUS_URI = "urn:servobus:gateway"
+MANUFACTURER = "servobus"
+
+#: ParameterSet variables of the servobus namespace: name -> (variant type, initial value).
+STATE_VARIABLES: dict[str, tuple[ua.VariantType, object]] = {
+    "ActualCurrent": (ua.VariantType.Double, math.nan),
+    "Enabled": (ua.VariantType.Boolean, False),
+    "Moving": (ua.VariantType.Boolean, False),
+    "InPosition": (ua.VariantType.Boolean, False),
+    "AlarmCode": (ua.VariantType.Int32, 0),
+    "AlarmText": (ua.VariantType.String, ""),
+}
+
+#: OPC UA method name -> (command name, takes a Double argument, its description).
+AXIS_METHODS: dict[str, tuple[str, bool, str]] = {
+    "MoveAbsolute": ("move_absolute", True, "target position in the axis unit"),
+    "MoveRelative": ("move_relative", True, "distance in the axis unit"),
+    "SetSpeed": ("set_speed", True, "constant speed in the axis unit per second (0 stops)"),
+    "Stop": ("stop", False, ""),
+    "Enable": ("enable", False, ""),
+    "Disable": ("disable", False, ""),
+    "ResetAlarm": ("reset_alarm", False, ""),
+}
+
+MethodHandler = Callable[[str, str, float | None], Awaitable[ua.StatusCode]]
+
+
+@dataclass
+class AxisNodes:
+    axis: MachineAxis
+    node: Node
+    variables: dict[str, Node] = field(default_factory=dict)
+
+
+@dataclass
+class Namespaces:
+    di: int
+    robotics: int
+    servobus: int
+
+
+def qn(ns: int, name: str) -> ua.QualifiedName:
+    return ua.QualifiedName(name, ns)
+
+
+async def register_namespaces(server: Server) -> Namespaces:
+    return Namespaces(await server.register_namespace(DI_URI),
+                      await server.register_namespace(ROBOTICS_URI),
+                      await server.register_namespace(SERVOBUS_URI))
+
+
+def method_argument(name: str, description: str) -> ua.Argument:
+    arg = ua.Argument()
+    arg.Name = name
+    arg.DataType = ua.NodeId(ua.ObjectIds.Double)
+    arg.ValueRank = -1
+    arg.Description = ua.LocalizedText(description)
+    return arg
+
+
+async def add_identification(parent: Node, ns: Namespaces, nid: str,
+                             fields: dict[str, str]) -> Node:
+    ident = await parent.add_object(ua.NodeId(f"{nid}.Identification", ns.servobus),
+                                    qn(ns.di, "Identification"))
+    for key, value in fields.items():
+        await ident.add_property(ua.NodeId(f"{nid}.Identification.{key}", ns.servobus),
+                                 qn(ns.di, key), value, ua.VariantType.String)
+    return ident
+
+
+async def add_analog(parent: Node, ns_name: int, ns_id: int, nid: str, name: str, unit: str,
+                     limits: tuple[float, float] | None) -> Node:
+    var = await parent.add_variable(ua.NodeId(nid, ns_id), qn(ns_name, name), math.nan,
+                                    ua.VariantType.Double)
+    await var.add_property(ua.NodeId(f"{nid}.EngineeringUnits", ns_id),
+                           qn(0, "EngineeringUnits"), eu_information(unit),
+                           datatype=ua.NodeId(ua.ObjectIds.EUInformation))
+    if limits is not None:
+        await var.add_property(ua.NodeId(f"{nid}.EURange", ns_id), qn(0, "EURange"),
+                               ua.Range(Low=limits[0], High=limits[1]),
+                               datatype=ua.NodeId(ua.ObjectIds.Range))
+    return var
+
+
+async def build_model(server: Server, machine: Machine, source: str,
+                      handler: MethodHandler) -> tuple[Node, dict[str, AxisNodes]]:
+    """Add the machine's nodes; methods call ``handler(axis, command, value)``."""
+    ns = await register_namespaces(server)
+    m = machine.name
+    objects = server.nodes.objects
+    device_set = await objects.add_folder(ua.NodeId("DeviceSet", ns.servobus),
+                                          qn(ns.di, "DeviceSet"))
+    system = await device_set.add_object(ua.NodeId("MotionDeviceSystem", ns.servobus),
+                                         qn(ns.robotics, "MotionDeviceSystem"))
+    devices = await system.add_folder(ua.NodeId("MotionDevices", ns.servobus),
+                                      qn(ns.robotics, "MotionDevices"))
+    device = await devices.add_object(ua.NodeId(m, ns.servobus), qn(ns.servobus, m))
+    await add_identification(device, ns, m, {
+        "Manufacturer": MANUFACTURER, "Model": "servobus machine", "ProductInstanceUri":
+        f"{SERVOBUS_URI}:{m}", "SoftwareRevision": __version__, "SerialNumber": source})
+    axes_folder = await device.add_folder(ua.NodeId(f"{m}.Axes", ns.servobus),
+                                          qn(ns.robotics, "Axes"))
+
+    async def stop_all(parent: ua.NodeId) -> ua.StatusCode:
+        return await handler("", "stop_all", None)
+
+    await device.add_method(ua.NodeId(f"{m}.StopAll", ns.servobus), qn(ns.servobus, "StopAll"),
+                            stop_all, [], [])
+    nodes: dict[str, AxisNodes] = {}
+    for name, axis in machine.axes.items():
+        nodes[name] = await _add_axis(axes_folder, ns, m, axis, handler)
+    return device, nodes
+
+
+async def _add_axis(folder: Node, ns: Namespaces, m: str, axis: MachineAxis,
+                    handler: MethodHandler) -> AxisNodes:
+    a = f"{m}.{axis.name}"
+    obj = await folder.add_object(ua.NodeId(a, ns.servobus), qn(ns.servobus, axis.name))
+    await add_identification(obj, ns, a, {
+        "Manufacturer": family_title(axis), "Model": family_name(axis),
+        "Protocol": str(axis.protocol), "DeviceAddress": f"{axis.url} id {axis.drive_id}"})
+    params = await obj.add_object(ua.NodeId(f"{a}.ParameterSet", ns.servobus),
+                                  qn(ns.di, "ParameterSet"))
+    out = AxisNodes(axis, obj)
+    out.variables["ActualPosition"] = await add_analog(
+        params, ns.robotics, ns.servobus, f"{a}.ActualPosition", "ActualPosition", axis.unit,
+        axis.limits)
+    out.variables["ActualSpeed"] = await add_analog(
+        params, ns.robotics, ns.servobus, f"{a}.ActualSpeed", "ActualSpeed", axis.speed_unit,
+        None)
+    for name, (vtype, initial) in STATE_VARIABLES.items():
+        if name == "ActualCurrent":
+            var = await add_analog(params, ns.servobus, ns.servobus, f"{a}.{name}", name, "A",
+                                   None)
+        else:
+            var = await params.add_variable(ua.NodeId(f"{a}.{name}", ns.servobus),
+                                            qn(ns.servobus, name), initial, vtype)
+        out.variables[name] = var
+    for method, (command, takes_value, description) in AXIS_METHODS.items():
+        inputs = [method_argument("Value", description)] if takes_value else []
+        await obj.add_method(ua.NodeId(f"{a}.{method}", ns.servobus), qn(ns.servobus, method),
+                             _method(handler, axis.name, command, takes_value), inputs, [])
+    return out
+
+
+def _method(handler: MethodHandler, axis: str, command: str,
+            takes_value: bool) -> Callable[..., Awaitable[ua.StatusCode]]:
+    async def call(parent: ua.NodeId, *args: ua.Variant) -> ua.StatusCode:
+        value: float | None = None
+        if takes_value:
+            if len(args) != 1 or not isinstance(args[0].Value, float | int) \
+                    or isinstance(args[0].Value, bool):
+                return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
+            value = float(args[0].Value)
+        elif args:
+            return ua.StatusCode(ua.StatusCodes.BadTooManyArguments)
+        return await handler(axis, command, value)
+    return call

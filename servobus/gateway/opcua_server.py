@@ -1,0 +1,312 @@
+"""The gateway's OPC UA server (asyncua): security, users, values and alarm events.
+
+Security (decision, docs/gateway.md "Security"):
+
+* on a loopback address the endpoint offers security policy None (and Basic256Sha256
+  Sign&Encrypt as well when a certificate is given); anonymous sessions may browse, read
+  and subscribe, nothing else;
+* beyond loopback, policy None is refused: only Basic256Sha256 Sign&Encrypt is served, with
+  the given certificate or one generated on first start and kept next to the machine file
+  (``<machine>.opcua-cert.der`` / ``.opcua-key.pem``; for the built-in machine in
+  ``~/.config/servobus/``);
+* every method (anything that moves, stops or powers an axis) needs a user of the users
+  file (``--users``), on loopback too; without one it answers BadUserAccessDenied. The
+  address space itself cannot be changed by any client (no writable node, no AddNodes).
+
+How the caller is known: asyncua tells a method callback nothing about the session, but
+it asks the permission ruleset about every request before serving it, in the same task.
+:class:`GatewayRules` keeps the session's user in a context variable there, and the method
+callback reads it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import contextvars
+import ipaddress
+import logging
+import math
+import socket
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+from urllib.parse import urlparse
+
+from asyncua import Server, ua
+from asyncua.common.connection import TransportLimits
+from asyncua.crypto.permission_rules import User, UserRole
+from asyncua.server.user_managers import UserManager
+
+from servobus.errors import ArgumentRangeError
+from servobus.gateway.commands import Command, Commander, Refused
+from servobus.gateway.opcua_model import SERVOBUS_URI, AxisNodes, build_model
+from servobus.gateway.sampler import Sample
+from servobus.gateway.source import Machine
+from servobus.gateway.users import Users
+
+log = logging.getLogger(__name__)
+
+DEFAULT_ENDPOINT = "opc.tcp://127.0.0.1:4840"
+#: Bounds (decision): no request to this model needs more than a few hundred kB; a session
+#: that is not activated within 10 s is dropped; at most 200 subscriptions in all.
+MAX_MESSAGE_BYTES = 4 * 1024 * 1024
+BUFFER_BYTES = 65_535
+PENDING_ACTIVATION_S = 10.0
+MAX_SUBSCRIPTIONS = 200
+MAX_ITEM_QUEUE = 1_000
+_caller: contextvars.ContextVar[User | None] = contextvars.ContextVar("opcua_caller",
+                                                                      default=None)
+ADMIN_REQUESTS = {ua.NodeId(i) for i in (
+    ua.ObjectIds.AddNodesRequest_Encoding_DefaultBinary,
+    ua.ObjectIds.DeleteNodesRequest_Encoding_DefaultBinary,
+    ua.ObjectIds.AddReferencesRequest_Encoding_DefaultBinary,
+    ua.ObjectIds.DeleteReferencesRequest_Encoding_DefaultBinary,
+    ua.ObjectIds.RegisterServerRequest_Encoding_DefaultBinary,
+    ua.ObjectIds.RegisterServer2Request_Encoding_DefaultBinary,
+)}
+
+
+class GatewayRules:
+    """asyncua permission ruleset: no client changes the address space; remember the user."""
+
+    def check_validity(self, user: User, action_type_id: ua.NodeId, body: Any) -> bool:
+        _caller.set(user)
+        return action_type_id not in ADMIN_REQUESTS
+
+
+class FileUsers(UserManager):  # type: ignore[misc]
+    """Anonymous sessions are read-only users; a name and password must be in the file."""
+
+    def __init__(self, users: Users) -> None:
+        self.users = users
+
+    def get_user(self, iserver: Any, username: str | None = None, password: str | None = None,
+                 certificate: Any = None) -> User | None:
+        if username is None:  # certificate tokens are not offered: anonymous
+            return User(role=UserRole.Anonymous)
+        if username is not None and self.users.verify(username, password):
+            return User(role=UserRole.User, name=username)
+        log.warning("OPC UA login refused for user %r", username)
+        return None
+
+
+def is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+def parse_endpoint(url: str) -> tuple[str, int]:
+    parsed = urlparse(url)
+    if parsed.scheme != "opc.tcp" or not parsed.hostname:
+        raise ArgumentRangeError(f"{url!r}: give the endpoint as opc.tcp://HOST:PORT")
+    try:
+        port = parsed.port if parsed.port is not None else 4840
+    except ValueError:
+        raise ArgumentRangeError(f"{url!r}: the port must be 0..65535") from None
+    return parsed.hostname, port
+
+
+@dataclass(frozen=True)
+class OpcUaOptions:
+    endpoint: str = DEFAULT_ENDPOINT
+    users: Users | None = None
+    cert: Path | None = None  # DER certificate; generated next to ``cert_dir`` when missing
+    key: Path | None = None
+    cert_dir: Path | None = None
+    cert_stem: str = "servobus"
+
+
+def _status(code: str) -> ua.StatusCode:
+    return ua.StatusCode(getattr(ua.StatusCodes, code, ua.StatusCodes.BadInternalError))
+
+
+class OpcUaGateway:
+    """Build, serve and update the address space of one machine."""
+
+    def __init__(self, machine: Machine, commander: Commander, options: OpcUaOptions,
+                 source: str = "") -> None:
+        self.machine = machine
+        self.commander = commander
+        self.options = options
+        self.source = source
+        self.host, self.port = parse_endpoint(options.endpoint)
+        self.loopback = is_loopback(self.host)
+        self.server = Server(user_manager=FileUsers(options.users or Users()))
+        self.axes: dict[str, AxisNodes] = {}
+        self._pending: dict[str, Sample] = {}
+        self._wake = asyncio.Event()
+        self._last: dict[Any, tuple[Any, bool]] = {}
+        self._alarm: dict[str, int] = {}
+        self._events: dict[str, Any] = {}
+        self.notifications = 0  # value writes that changed something (for the benchmark)
+
+    @property
+    def endpoint(self) -> str:
+        host = self.host if ":" not in self.host else f"[{self.host}]"
+        return f"opc.tcp://{host}:{self.port}"
+
+    async def start(self) -> None:
+        s = self.server
+        await s.init()
+        s.limits = TransportLimits(max_recv_buffer=BUFFER_BYTES, max_send_buffer=BUFFER_BYTES,
+                                   max_chunk_count=MAX_MESSAGE_BYTES // BUFFER_BYTES + 1,
+                                   max_message_size=MAX_MESSAGE_BYTES)
+        s.iserver.max_pending_activation_seconds = PENDING_ACTIVATION_S
+        s.iserver.max_subscriptions = MAX_SUBSCRIPTIONS
+        s.iserver.max_monitored_item_queue_size = MAX_ITEM_QUEUE
+        s.set_endpoint(f"opc.tcp://{self.host}:{self.port}")
+        s.set_server_name(f"servobus gateway {self.machine.name}")
+        await s.set_application_uri(f"{SERVOBUS_URI}:{self.machine.name}")
+        s.set_identity_tokens([ua.AnonymousIdentityToken, ua.UserNameIdentityToken])
+        policies = await self._security()
+        s.set_security_policy(policies, permission_ruleset=GatewayRules())
+        _, self.axes = await build_model(s, self.machine, self.source, self._call)
+        waiting = ua.DataValue(StatusCode=ua.StatusCode(ua.StatusCodes.BadWaitingForInitialData))
+        for nodes in self.axes.values():  # until the first sample of the axis
+            for node in nodes.variables.values():
+                await s.write_attribute_value(node.nodeid, waiting)
+        await self._alarm_events()
+        await s.start()
+        if s.bserver is not None:
+            self.port = s.bserver.port
+
+    async def _security(self) -> list[ua.SecurityPolicyType]:
+        o = self.options
+        secure = ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt
+        if self.loopback and o.cert is None:
+            return [ua.SecurityPolicyType.NoSecurity]
+        cert, key = o.cert, o.key
+        if cert is None or key is None:
+            from asyncua.crypto.cert_gen import setup_self_signed_certificate
+            from cryptography.x509.oid import ExtendedKeyUsageOID
+
+            folder = o.cert_dir or Path.home() / ".config" / "servobus"
+            folder.mkdir(parents=True, exist_ok=True)
+            cert = folder / f"{o.cert_stem}.opcua-cert.der"
+            key = folder / f"{o.cert_stem}.opcua-key.pem"
+            await setup_self_signed_certificate(
+                key, cert, f"{SERVOBUS_URI}:{self.machine.name}", socket.gethostname(),
+                [ExtendedKeyUsageOID.SERVER_AUTH], {"commonName": "servobus gateway"})
+            key.chmod(0o600)
+        await self.server.load_certificate(str(cert))
+        await self.server.load_private_key(str(key))
+        self.cert_path = cert
+        if self.loopback:
+            return [ua.SecurityPolicyType.NoSecurity, secure]
+        return [secure]
+
+    async def _alarm_events(self) -> None:
+        s = self.server
+        ns = await s.get_namespace_index(SERVOBUS_URI)
+        etype = await s.create_custom_event_type(
+            ns, "AxisAlarmEventType", ua.ObjectIds.BaseEventType,
+            [("AxisName", ua.VariantType.String), ("AlarmCode", ua.VariantType.Int32),
+             ("AlarmText", ua.VariantType.String)])
+        for name, nodes in self.axes.items():
+            self._events[name] = await s.get_event_generator(etype, nodes.node)
+
+    async def stop(self) -> None:
+        # asyncua's stop waits for its clock task's 1 s sleep; end that task first
+        clock = getattr(self.server.iserver, "time_task", None)
+        if clock is not None:
+            clock.cancel()
+            with contextlib.suppress(BaseException):
+                await clock
+            self.server.iserver.time_task = None
+        await self.server.stop()
+
+    # ---------------------------------------------------------------- methods
+    async def _call(self, axis: str, command: str, value: float | None) -> ua.StatusCode:
+        user = _caller.get()
+        name = user.name if user is not None and user.role == UserRole.User else None
+        try:
+            await self.commander.run(name, Command(axis, command, value), "opcua")
+        except Refused as exc:
+            return _status(exc.code)
+        return ua.StatusCode(ua.StatusCodes.Good)
+
+    # ---------------------------------------------------------------- values
+    def on_sample(self, sample: Sample) -> None:
+        """Sampler listener: the newest sample per axis waits for :meth:`run_updates`."""
+        self._pending[sample.axis] = sample
+        self._wake.set()
+
+    async def run_updates(self) -> None:
+        while True:
+            await self._wake.wait()
+            self._wake.clear()
+            pending, self._pending = self._pending, {}
+            for sample in pending.values():
+                try:
+                    await self._apply(sample)
+                except Exception:  # one bad update must not end the updates
+                    log.exception("OPC UA update of axis %s failed", sample.axis)
+
+    async def _apply(self, sample: Sample) -> None:
+        nodes = self.axes.get(sample.axis)
+        if nodes is None:
+            return
+        st = sample.status
+        values: dict[str, object] = {
+            "ActualPosition": sample.position, "ActualSpeed": sample.speed,
+            "ActualCurrent": math.nan if sample.current is None else sample.current,
+        }
+        if st is not None:
+            values.update(Enabled=st.enabled, Moving=st.moving, InPosition=st.in_position,
+                          AlarmCode=st.alarm_code, AlarmText=st.alarm_text)
+        for name, node in nodes.variables.items():
+            if name in values or not sample.ok:
+                await self._write(node, values.get(name), sample)
+        if sample.ok and st is not None and self._alarm.get(sample.axis, 0) != st.alarm_code:
+            self._alarm[sample.axis] = st.alarm_code
+            await self._raise_event(sample.axis, st.alarm_code, st.alarm_text)
+
+    async def _write(self, node: Any, value: object, sample: Sample) -> None:
+        key = node.nodeid
+        state = (value, sample.ok)
+        if self._last.get(key) == state:
+            return
+        before = self._last.get(key)
+        self._last[key] = state
+        if sample.ok:
+            dv = ua.DataValue(ua.Variant(value, _variant_type(value)),
+                              SourceTimestamp=_utc(sample.time))
+        else:
+            if before is not None and not before[1]:
+                return
+            dv = ua.DataValue(StatusCode=ua.StatusCode(ua.StatusCodes.BadCommunicationError),
+                              SourceTimestamp=_utc(sample.time))
+        self.notifications += 1
+        await self.server.write_attribute_value(key, dv)
+
+    async def _raise_event(self, axis: str, code: int, text: str) -> None:
+        gen = self._events[axis]
+        gen.event.AxisName = axis
+        gen.event.AlarmCode = code
+        gen.event.AlarmText = text
+        gen.event.Severity = 800 if code else 100
+        gen.event.Message = ua.LocalizedText(
+            f"axis {axis}: alarm {code} {text}" if code else f"axis {axis}: alarm cleared")
+        await gen.trigger()
+        log.warning("axis %s: %s", axis, gen.event.Message.Text)
+
+
+def _variant_type(value: object) -> ua.VariantType:
+    if isinstance(value, bool):
+        return ua.VariantType.Boolean
+    if isinstance(value, int):
+        return ua.VariantType.Int32
+    if isinstance(value, str):
+        return ua.VariantType.String
+    return ua.VariantType.Double
+
+
+def _utc(t: float) -> Any:
+    import datetime
+
+    return datetime.datetime.fromtimestamp(t, datetime.UTC)

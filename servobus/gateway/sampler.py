@@ -1,0 +1,177 @@
+"""Sample every axis of a machine: position, speed, current and status, link by link.
+
+How the rate is shared (decision, docs/gateway.md "Sampling"): axes are grouped by their
+link (the axis URL: one serial line, bus or TCP connection). Each link has one sampling
+loop; a round asks every axis of the link for its four readings at once and lets the
+link's transaction layer queue them (a serial line carries them one after the other, a
+CAN bus overlaps the drives' answers); every axis gets one sample per round, so each has
+the same share. Then the loop waits: a round starts every ``1 / rate`` seconds, but never
+sooner than the last round's own duration times ``(1 - duty) / duty`` after it ended.
+With the default duty of 0.5, sampling takes at most half of what a link can carry and
+the other half stays free for commands. The per-axis rate is therefore
+``min(rate, duty / time of one round)`` - measured, not configured, so a 38,400 baud line
+with four drives settles at what it can carry while a fast link reaches the configured
+rate. ``achieved_hz`` holds what each link reached; it is logged once per link after the
+first seconds.
+
+A read that fails (the link dropped, the drive did not answer, the axis is offline) gives
+a Bad sample with the error's text once :data:`BAD_AFTER` rounds in a row have failed (an
+offline axis at once): one lost answer on a busy link leaves the last good sample
+standing rather than flapping every value to Bad and back. The sampling goes on and the
+next good read makes the axis good again. A change between good and bad is logged in one
+line.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from servobus.errors import NotSupported
+from servobus.families.base import AxisStatus
+from servobus.gateway.source import Machine, MachineAxis
+
+log = logging.getLogger(__name__)
+
+DEFAULT_RATE_HZ = 20.0
+DEFAULT_DUTY = 0.5
+#: A whole axis read (four transactions) that takes longer than this is a failed read.
+READ_DEADLINE_S = 2.0
+#: Rounds in a row that must fail before an axis's values turn Bad.
+BAD_AFTER = 3
+OFFLINE = "axis offline"
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One axis at one time (wall clock, seconds); ``ok`` False carries ``error``."""
+
+    axis: str
+    time: float
+    ok: bool
+    error: str = ""
+    position: float = math.nan
+    speed: float = math.nan
+    current: float | None = None
+    status: AxisStatus | None = None
+
+
+Listener = Callable[[Sample], None]
+
+
+def pause_after(period: float, started: float, ended: float, duty: float) -> float:
+    """Seconds to wait after a round: to the next period, and at least so long that the
+    round took no more than ``duty`` of the time (the rest is left for commands)."""
+    took = ended - started
+    return max(started + period - ended, took * (1 - duty) / duty)
+
+
+def check_rate(rate_hz: float) -> float:
+    if not (math.isfinite(rate_hz) and 0.1 <= rate_hz <= 1000):
+        raise ValueError(f"sampling rate {rate_hz!r} Hz: give 0.1..1000")
+    return rate_hz
+
+
+class Sampler:
+    """One loop per link; :attr:`latest` holds each axis's last sample."""
+
+    def __init__(self, machine: Machine, rate_hz: float = DEFAULT_RATE_HZ,
+                 duty: float = DEFAULT_DUTY) -> None:
+        self.machine = machine
+        self.rate_hz = check_rate(rate_hz)
+        if not 0.05 <= duty <= 1.0:
+            raise ValueError("duty must be 0.05..1")
+        self.duty = duty
+        self.links: dict[str, list[MachineAxis]] = {}
+        for axis in machine.axes.values():
+            self.links.setdefault(axis.url, []).append(axis)
+        self.latest: dict[str, Sample] = {}
+        self.listeners: list[Listener] = []
+        self.achieved_hz: dict[str, float] = dict.fromkeys(self.links, 0.0)
+        self._no_current: set[str] = set()
+        self._failures: dict[str, int] = {}
+        self.first_round = asyncio.Event()
+        self._first_pending = set(self.links)
+
+    async def run(self) -> None:
+        """Sample until cancelled."""
+        await asyncio.gather(*(self._link_loop(url, axes) for url, axes in self.links.items()))
+
+    async def sample_once(self, axis: MachineAxis) -> Sample:
+        try:
+            # asyncio.timeout, not wait_for: 3.11's wait_for can swallow a cancellation that
+            # meets a read just finishing, and the loop would never end
+            async with asyncio.timeout(READ_DEADLINE_S):
+                return await self._read(axis)
+        except asyncio.CancelledError:
+            raise
+        except TimeoutError as exc:
+            return Sample(axis.name, time.time(), False, str(exc) or "no answer in time")
+        except Exception as exc:  # any failure of the link or drive is a Bad sample
+            return Sample(axis.name, time.time(), False, f"{type(exc).__name__}: {exc}")
+
+    async def _read(self, axis: MachineAxis) -> Sample:
+        if not axis.online:
+            return Sample(axis.name, time.time(), False, OFFLINE)
+        position, speed, status, current = await asyncio.gather(
+            axis.position(), axis.speed(), axis.status(), self._current(axis))
+        return Sample(axis.name, time.time(), True, "", position, speed, current, status)
+
+    async def _current(self, axis: MachineAxis) -> float | None:
+        raw = axis.axis
+        if raw is None or axis.name in self._no_current:
+            return None
+        try:
+            return await raw.current()
+        except NotSupported:
+            self._no_current.add(axis.name)
+            return None
+
+    def _publish(self, sample: Sample) -> None:
+        before = self.latest.get(sample.axis)
+        if sample.ok:
+            self._failures[sample.axis] = 0
+        else:
+            failures = self._failures[sample.axis] = self._failures.get(sample.axis, 0) + 1
+            if (before is not None and before.ok and failures < BAD_AFTER
+                    and sample.error != OFFLINE):
+                return  # a lost answer: the last good sample stands
+        if before is None or before.ok != sample.ok:
+            if sample.ok:
+                if before is not None:
+                    log.info("axis %s: readings are back", sample.axis)
+            else:
+                log.warning("axis %s: no readings: %s", sample.axis, sample.error)
+        self.latest[sample.axis] = sample
+        for listener in self.listeners:
+            try:
+                listener(sample)
+            except Exception:
+                log.exception("sample listener failed")
+
+    async def _link_loop(self, url: str, axes: list[MachineAxis]) -> None:
+        period = 1.0 / self.rate_hz
+        loop = asyncio.get_running_loop()
+        rounds, since = 0, loop.time()
+        while True:
+            start = loop.time()
+            for sample in await asyncio.gather(*(self.sample_once(a) for a in axes)):
+                self._publish(sample)
+            end = loop.time()
+            if url in self._first_pending:
+                self._first_pending.discard(url)
+                if not self._first_pending:
+                    self.first_round.set()
+            rest = pause_after(period, start, end, self.duty)
+            rounds += 1
+            if end - since >= 2.0:
+                if not self.achieved_hz[url]:
+                    log.info("link %s: %d axes sampled at %.1f Hz each", url, len(axes),
+                             rounds / (end - since))
+                self.achieved_hz[url] = rounds / (end - since)
+                rounds, since = 0, end
+            await asyncio.sleep(rest)

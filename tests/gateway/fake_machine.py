@@ -1,0 +1,92 @@
+"""A machine of fake axes (the shape servobus.gateway.source.Machine asks for): a link that
+can be cut, an alarm that can be raised, and a log of what was called, in order."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from servobus.axis.base import AsyncAxis
+from servobus.errors import ConnectionLost, LimitError
+from servobus.families.base import AxisStatus, Family
+
+
+class FakeAxis:
+    def __init__(self, name: str, log: list[str], url: str = "fake://line",
+                 drive_id: int = 1, limits: tuple[float, float] | None = (0.0, 100.0)) -> None:
+        self.name, self.url, self.drive_id, self.limits = name, url, drive_id, limits
+        self.unit, self.speed_unit = "mm", "mm/s"
+        self.axis: AsyncAxis | None = None
+        self.online = True
+        self.family: Family | None = None
+        self.protocol: str | None = "fake"
+        self.pos, self.velocity, self.alarm, self.cut = 5.0, 0.0, 0, False
+        self.log = log
+        self.reads = 0
+
+    def _link(self) -> None:
+        if self.cut:
+            raise ConnectionLost(f"{self.url}: cable cut")
+
+    async def position(self) -> float:
+        self._link()
+        self.reads += 1
+        return self.pos
+
+    async def speed(self) -> float:
+        self._link()
+        return self.velocity
+
+    async def status(self) -> AxisStatus:
+        self._link()
+        return AxisStatus(enabled=True, moving=self.velocity != 0, in_position=True,
+                          alarm_code=self.alarm, alarm_text="over current" if self.alarm else "",
+                          alarm_latched=bool(self.alarm), raw=0, family="fake")
+
+    async def move_to(self, target: float, /) -> None:
+        self._link()
+        if self.limits and not self.limits[0] <= target <= self.limits[1]:
+            raise LimitError(f"{target} outside")
+        self.log.append(f"{self.name} move_to {target:g}")
+        self.pos = target
+
+    async def move_by(self, distance: float, /) -> None:
+        await self.move_to(self.pos + distance)
+
+    async def turn(self, speed: float, /) -> None:
+        self._link()
+        self.log.append(f"{self.name} turn {speed:g}")
+        self.velocity = speed
+
+    async def stop(self) -> None:
+        self.log.append(f"{self.name} stop")
+        self.velocity = 0.0
+
+    async def enable(self) -> None:
+        self.log.append(f"{self.name} enable")
+
+    async def disable(self) -> None:
+        self.log.append(f"{self.name} disable")
+
+    async def reset(self) -> None:
+        self.log.append(f"{self.name} reset")
+        self.alarm = 0
+
+
+class FakeMachine:
+    def __init__(self, name: str = "bench", count: int = 2) -> None:
+        self.name = name
+        self.log: list[str] = []
+        self._axes = {f"a{i}": FakeAxis(f"a{i}", self.log, drive_id=i + 1) for i in range(count)}
+
+    @property
+    def axes(self) -> Mapping[str, FakeAxis]:
+        return self._axes
+
+    async def stop_all(self) -> dict[str, BaseException | None]:
+        self.log.append("stop_all")
+        for axis in self._axes.values():
+            axis.velocity = 0.0
+        return dict.fromkeys(self._axes)
+
+    async def close(self) -> None:
+        self.log.append("close")

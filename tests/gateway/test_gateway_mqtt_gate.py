@@ -1,0 +1,140 @@
+"""The refusal rules of MQTT commands (servobus.gateway.mqtt_gate), without a broker."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import ssl
+from pathlib import Path
+from typing import Any
+
+import pytest
+from fake_machine import FakeMachine
+
+from servobus.errors import ArgumentRangeError
+from servobus.gateway.commands import Commander, Refused
+from servobus.gateway.mqtt import MqttGateway, MqttOptions, parse_broker, state_json
+from servobus.gateway.mqtt_gate import MAX_IDS, CommandGate
+from servobus.gateway.sampler import Sample, Sampler
+
+NOW = 1_800_000_000.0
+
+
+def msg(**fields: object) -> bytes:
+    return json.dumps(fields).encode()
+
+
+def refused(gate: CommandGate, payload: bytes, *, retained: bool = False,
+            now: float = NOW) -> str:
+    with pytest.raises(Refused) as exc:
+        gate.admit("x", payload, retained, now)
+    return exc.value.code
+
+
+def test_a_motion_command_runs_once() -> None:
+    gate = CommandGate(max_age_s=5)
+    ok = gate.admit("x", msg(id="a1", ts=NOW - 1, cmd="move_relative", value=2), False, NOW)
+    assert (ok.id, ok.command.name, ok.command.value) == ("a1", "move_relative", 2.0)
+    assert refused(gate, msg(id="a1", ts=NOW - 1, cmd="move_relative", value=2),
+                   now=NOW + 1) == "BadRequestNotAllowed"  # a QoS 1 redelivery
+
+
+def test_retained_stale_future_and_malformed_commands_are_refused() -> None:
+    gate = CommandGate(max_age_s=5)
+    good = {"id": "b", "ts": NOW, "cmd": "move_absolute", "value": 1.0}
+    assert refused(gate, msg(**good), retained=True) == "BadRequestNotAllowed"
+    assert refused(gate, msg(**{**good, "ts": NOW - 6})) == "BadInvalidTimestamp"
+    assert refused(gate, msg(**{**good, "ts": NOW + 3})) == "BadInvalidTimestamp"
+    assert refused(gate, msg(**{**good, "ts": "now"})) == "BadInvalidArgument"
+    assert refused(gate, msg(cmd="move_absolute", value=1.0, ts=NOW)) == "BadInvalidArgument"
+    assert refused(gate, msg(id="c", cmd="move_absolute", value=1.0)) == "BadInvalidArgument"
+    assert refused(gate, msg(**{**good, "value": "far"})) == "BadInvalidArgument"
+    assert refused(gate, msg(**{**good, "cmd": "explode"})) == "BadMethodInvalid"
+    assert refused(gate, b"[1, 2]") == "BadDecodingError"
+    assert refused(gate, b"\xff\xfe") == "BadDecodingError"
+    assert refused(gate, b" " * 5000) == "BadRequestTooLarge"
+    assert refused(gate, msg(**{**good, "id": "x" * 129})) == "BadInvalidArgument"
+    # none of these used up the id: the good command still runs
+    assert gate.admit("x", msg(**good), False, NOW).id == "b"
+    # a stop needs no id and no timestamp
+    assert gate.admit("x", msg(cmd="stop"), False, NOW).command.name == "stop"
+
+
+def test_ids_are_remembered_longer_than_a_command_is_fresh_and_bounded() -> None:
+    gate = CommandGate(max_age_s=5)
+    gate.admit("x", msg(id="old", ts=NOW, cmd="enable"), False, NOW)
+    # 9 s later the id is still known (its message would be stale anyway at 5 s)
+    assert refused(gate, msg(id="old", ts=NOW + 9, cmd="enable"), now=NOW + 9) == \
+        "BadRequestNotAllowed"
+    for i in range(MAX_IDS - 1):
+        gate.admit("x", msg(id=f"n{i}", ts=NOW + 9, cmd="enable"), False, NOW + 9)
+    assert refused(gate, msg(id="full", ts=NOW + 9, cmd="enable"), now=NOW + 9) == \
+        "BadTooManyOperations"
+    # after 2 x max_age the old ids are gone and room is made
+    assert gate.admit("x", msg(id="later", ts=NOW + 30, cmd="enable"), False, NOW + 30).id
+
+
+def test_commands_need_the_brokers_authentication() -> None:
+    machine = FakeMachine()
+    sampler = Sampler(machine, 10)  # type: ignore[arg-type]
+    commander = Commander(machine)  # type: ignore[arg-type]
+    with pytest.raises(ArgumentRangeError, match="authentication"):
+        MqttGateway(machine, sampler, commander,  # type: ignore[arg-type]
+                    MqttOptions("mqtt://127.0.0.1:1883", commands=True))
+    gw = MqttGateway(machine, sampler, commander,  # type: ignore[arg-type]
+                     MqttOptions("mqtt://u:p%40ss@127.0.0.1:1884", commands=True))
+    assert (gw.username, gw.password, gw.broker.port) == ("u", "p@ss", 1884)
+    assert parse_broker("mqtts://h").port == 8883 and parse_broker("mqtts://h").tls
+    with pytest.raises(ArgumentRangeError):
+        parse_broker("http://h")
+    bad = FakeMachine(name="cell/1")
+    with pytest.raises(ArgumentRangeError, match="topic"):
+        MqttGateway(bad, sampler, commander, MqttOptions("mqtt://h"))  # type: ignore[arg-type]
+
+
+def test_state_json_has_the_named_fields() -> None:
+    body = json.loads(state_json(Sample("x", NOW, False, "axis offline"), "mm"))
+    assert {"position", "speed", "moving", "alarm", "unit"} <= set(body)
+    assert body["ok"] is False and body["position"] is None and body["unit"] == "mm"
+
+
+def test_tls_options_make_a_verifying_context(tmp_path: Path) -> None:
+    machine = FakeMachine()
+    sampler = Sampler(machine, 10)  # type: ignore[arg-type]
+    commander = Commander(machine)  # type: ignore[arg-type]
+
+    def gateway(url: str, **options: Any) -> MqttGateway:
+        return MqttGateway(machine, sampler, commander,  # type: ignore[arg-type]
+                           MqttOptions(url, **options))
+
+    assert gateway("mqtt://127.0.0.1")._tls() is None  # plain TCP unless asked
+    context = gateway("mqtts://broker.example")._tls()
+    assert isinstance(context, ssl.SSLContext)
+    assert context.verify_mode == ssl.CERT_REQUIRED and context.check_hostname
+    ca = tmp_path / "ca.pem"
+    ca.write_bytes(asyncio.run(_self_signed(tmp_path)))
+    with_ca = gateway("mqtt://127.0.0.1:8883", ca=ca)._tls()  # a CA file turns TLS on
+    assert with_ca is not None and with_ca.get_ca_certs()
+
+
+async def _self_signed(folder: Path) -> bytes:
+    from asyncua.crypto.cert_gen import setup_self_signed_certificate
+    from cryptography.hazmat.primitives.serialization import Encoding
+    from cryptography.x509 import load_der_x509_certificate
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+
+    cert, key = folder / "c.der", folder / "k.pem"
+    await setup_self_signed_certificate(key, cert, "urn:test:broker", "broker.example",
+                                        [ExtendedKeyUsageOID.SERVER_AUTH], {"commonName": "ca"})
+    return load_der_x509_certificate(cert.read_bytes()).public_bytes(Encoding.PEM)
+
+
+def test_serve_refuses_half_given_options() -> None:
+    from click.testing import CliRunner
+
+    from servobus.cli.main import cli
+
+    result = CliRunner().invoke(cli, ["serve", "--mqtt-commands"])
+    assert result.exit_code == 2 and "--mqtt-commands needs --mqtt" in result.output
+    result = CliRunner().invoke(cli, ["serve", "--opcua", "http://x:1"])
+    assert result.exit_code != 0

@@ -1,0 +1,138 @@
+"""The plant in miniature: two gateways with different machines, read by one client; the
+second serves Basic256Sha256 Sign&Encrypt with its own certificate."""
+
+from __future__ import annotations
+
+import asyncio
+import signal
+import socket
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+from asyncua import Client, ua
+from asyncua.crypto.cert_gen import setup_self_signed_certificate
+from conftest import wait_until_async
+from cryptography.x509.oid import ExtendedKeyUsageOID
+from gateway_rig import (
+    PASSWORD,
+    USER,
+    RunningGateway,
+    axes_of,
+    free_port,
+    names,
+    parameter,
+    start_gateway,
+    users_file,
+)
+
+from servobus.gateway.opcua_server import OpcUaGateway, OpcUaOptions
+
+CELL_A = """name = "press-line"
+[axes.feed]
+url = "sim://dyn232?fast=1"
+id = 1
+unit = "mm"
+per_rev = 10.0
+limits = [0.0, 500.0]
+[axes.clamp]
+url = "dyn232+socket://127.0.0.1:{closed_port}"
+id = 3
+unit = "mm"
+per_rev = 2.0
+"""
+CELL_B = """name = "packer"
+[axes.turntable]
+url = "sim://easycan?fast=1"
+id = 1
+unit = "deg"
+limits = [-360.0, 360.0]
+[axes.lift]
+url = "sim://easycan?fast=1"
+id = 2
+unit = "mm"
+per_rev = 4.0
+"""
+
+
+async def certificate(folder: Path, name: str, use: object) -> tuple[Path, Path]:
+    cert, key = folder / f"{name}.der", folder / f"{name}.pem"
+    await setup_self_signed_certificate(key, cert, f"urn:test:{name}", socket.gethostname(),
+                                        [use], {"commonName": name})
+    return cert, key
+
+
+@pytest.fixture(scope="module")
+def plant(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[RunningGateway, ...]]:
+    folder = tmp_path_factory.mktemp("plant")
+    (folder / "a.toml").write_text(CELL_A.format(closed_port=free_port()))  # nobody listens
+    (folder / "b.toml").write_text(CELL_B)
+    cert, key = asyncio.run(certificate(folder, "server", ExtendedKeyUsageOID.SERVER_AUTH))
+    users = users_file(folder)
+    runs = [((), {"SERVOBUS_MACHINE": str(folder / "a.toml")}),  # the machine from the env
+            (("--machine", str(folder / "b.toml"), "--users", str(users), "--cert", str(cert),
+              "--key", str(key)), {})]
+    with ThreadPoolExecutor(2) as pool:  # both start at once: half the waiting
+        gateways = tuple(pool.map(lambda run: start_gateway(*run[0], env=run[1]), runs))
+    yield gateways
+    for gateway in gateways:  # both stop at once
+        gateway.proc.send_signal(signal.SIGTERM)
+    for gateway in gateways:
+        gateway.stop()
+
+
+async def test_one_client_reads_two_gateways(plant: tuple[RunningGateway, ...],
+                                             tmp_path: Path) -> None:
+    a, b = plant
+    client_cert, client_key = await certificate(tmp_path, "client",
+                                                ExtendedKeyUsageOID.CLIENT_AUTH)
+    secure = Client(b.endpoint)
+    secure.application_uri = "urn:test:client"
+    await secure.set_security_string(
+        f"Basic256Sha256,SignAndEncrypt,{client_cert},{client_key}")
+    secure.set_user(USER)
+    secure.set_password(PASSWORD)
+    async with Client(a.endpoint) as plain, secure:
+        axes_a = await axes_of(plain, "press-line")
+        assert sorted(axes_a) == ["clamp", "feed"]
+        clamp = await parameter(plain, axes_a["clamp"], "ActualPosition")
+
+        async def link_down() -> bool:
+            value = await clamp.read_data_value(raise_on_bad_status=False)
+            return bool(value.StatusCode.value == ua.StatusCodes.BadCommunicationError)
+
+        await wait_until_async(link_down, timeout=10, what="the clamp's link reads Bad")
+        axes_b = await axes_of(secure, "packer")
+        assert sorted(axes_b) == ["lift", "turntable"]
+        feed = await parameter(plain, (await axes_of(plain, "press-line"))["feed"],
+                               "ActualPosition")
+        table = await parameter(secure, axes_b["turntable"], "ActualPosition")
+        for node in (feed, table):
+            assert (await node.read_data_value()).StatusCode.is_good()
+        units = [(await (await node.get_child("0:EngineeringUnits")).read_value()
+                  ).DisplayName.Text for node in (feed, table)]
+        assert units == ["mm", "deg"]
+        n = await names(secure)
+        await axes_b["lift"].call_method(f"{n.servobus}:MoveRelative", 1.0)  # a user, encrypted
+
+
+async def test_beyond_loopback_only_sign_and_encrypt_with_a_kept_certificate(
+        tmp_path: Path) -> None:
+    # no server is started (tests bind loopback only): the policy choice and the certificate
+    from fake_machine import FakeMachine
+
+    from servobus.gateway.commands import Commander
+
+    machine = FakeMachine()
+    options = OpcUaOptions("opc.tcp://0.0.0.0:4840", cert_dir=tmp_path, cert_stem="cell")
+    gateway = OpcUaGateway(machine, Commander(machine), options)  # type: ignore[arg-type]
+    assert not gateway.loopback
+    policies = await gateway._security()
+    assert policies == [ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt]
+    cert = tmp_path / "cell.opcua-cert.der"
+    first = cert.read_bytes()
+    assert (tmp_path / "cell.opcua-key.pem").stat().st_mode & 0o077 == 0
+    again = OpcUaGateway(machine, Commander(machine), options)  # type: ignore[arg-type]
+    await again._security()
+    assert cert.read_bytes() == first  # kept, not made anew on the next start
