@@ -25,6 +25,7 @@ from collections.abc import Callable, Coroutine, Iterable, Mapping, Sequence
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
 
+from servobus import fastloop
 from servobus.axis.base import DEFAULT_POLL_S, DEFAULT_WAIT_TIMEOUT_S
 
 if TYPE_CHECKING:
@@ -41,7 +42,7 @@ class LoopThread:
     """Owns an asyncio loop running on its own daemon thread until :meth:`stop`."""
 
     def __init__(self, name: str = "servobus-loop") -> None:
-        self.loop = asyncio.new_event_loop()
+        self.loop = fastloop.new_event_loop()  # uvloop with servobus[fast] (issue 22)
         self._started = threading.Event()
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()

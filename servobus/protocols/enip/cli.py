@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 
 import click
 
+from servobus import fastloop
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.open_axis import emit_json, note, open_axis
@@ -131,8 +132,8 @@ def discover_cmd(ctx: CliContext, addresses: tuple[str, ...], port: int, wait: f
     from servobus.protocols.enip.discover import discover
 
     targets = [a.strip() for text in addresses for a in text.split(",") if a.strip()]
-    found = asyncio.run(discover(targets or None, port=port, timeout=wait,
-                                 broadcast=broadcast))
+    found = fastloop.run(discover(targets or None, port=port, timeout=wait,
+                                   broadcast=broadcast))
     if ctx.json:
         emit_json([f.as_dict() for f in found])
         return
