@@ -86,7 +86,8 @@ class LoopThread:
             with contextlib.suppress(RuntimeError):
                 self.loop.call_soon_threadsafe(call.cancel)
             raise
-        return call.result()
+        result: T = call.result()
+        return result
 
     def stop(self) -> None:
         """Stop the loop and join the thread; idempotent."""

@@ -36,6 +36,7 @@ from servobus.families import dyn5
 from servobus.families.dmm import units as U
 from servobus.protocols.enip import io
 from servobus.protocols.enip.encap import TCP_PORT
+from servobus.realtime import request_realtime
 from servobus.sim.fine_selector import fine_event_loop
 
 if TYPE_CHECKING:
@@ -96,9 +97,12 @@ async def run_adapters(hosts: str, tcp_port: int, udp_port: int, state: str | No
               show_default=True, help="seconds the adapter is silent after a Reset (0x21)")
 @click.option("--duration", type=click.FloatRange(min=0.0), default=None, metavar="SECONDS",
               help="stop by itself after this many seconds [default: run until Ctrl-C]")
+@click.option("--realtime/--no-realtime", default=True, show_default=True,
+              help="run the adapters' loop at SCHED_FIFO where permitted (root or "
+                   "CAP_SYS_NICE): Class 1 frames on time beside CPU-bound work")
 @control_option
 def sim_enip_cmd(hosts: str, tcp_port: int, udp_port: int, state: str | None, model: str,
-                 reset_downtime: float, duration: float | None,
+                 reset_downtime: float, duration: float | None, realtime: bool,
                  control: tuple[str, int] | None) -> None:
     """Virtual DYN5 drives on EtherNet/IP (explicit messaging, ListIdentity, Class 1 I/O)."""
     from servobus.protocols.enip.server import parse_hosts
@@ -109,6 +113,8 @@ def sim_enip_cmd(hosts: str, tcp_port: int, udp_port: int, state: str | None, mo
         raise click.BadParameter(str(exc), param_hint="--listen") from None
     click.echo(f"servobus sim enip: {len(host_list)} virtual DYN5 ({model}) on "
                f"{', '.join(host_list)}", err=True)
+    if realtime:  # this thread runs the loop (issue 22: measured in bench_enip)
+        request_realtime("servobus sim enip")
     with asyncio.Runner(loop_factory=fine_event_loop) as runner:
         runner.run(run_adapters(hosts, tcp_port, udp_port, state, model, duration,
                                 reset_downtime, control))
