@@ -20,6 +20,7 @@ from contextlib import contextmanager
 
 import can
 
+from benchmarks.breakdown import Breakdown, loops, print_all, profile_async, profile_sync, run_on
 from benchmarks.verdict import mark, percent, summary
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan.client import DynCanAxis, open_can_client
@@ -121,6 +122,30 @@ async def client_round_trips(channel: str, n: int) -> float:
         await client.close()
 
 
+async def client_breakdown(channel: str, label: str) -> Breakdown:
+    client = await open_can_client(f"virtual:{channel}", timeout=1.0)  # profiled: slower
+    axis = DynCanAxis(client, 1)
+    try:
+        return await profile_async(label, axis.status)
+    finally:
+        await client.close()
+
+
+def raw_breakdown(channel: str) -> Breakdown:
+    bus = can.Bus(interface="virtual", channel=channel)
+    ident, data = c.encode(c.request(1, c.Function.READ_DRIVE_STATUS))
+    msg = can.Message(arbitration_id=ident, data=data, is_extended_id=False)
+
+    def once() -> None:
+        bus.send(msg)
+        bus.recv(1.0)
+
+    try:
+        return profile_sync("python-can raw send+recv", once)
+    finally:
+        bus.shutdown()
+
+
 def bench_transactions() -> tuple[float, float, float]:
     """Best of ROUNDS interleaved rounds per method: the machine is shared and noisy."""
     channel = "servobus-bench-dyncan-rt"
@@ -171,6 +196,13 @@ def bench_stream_load() -> None:
 
 def main() -> None:
     raw, aio, ours = bench_transactions()
+    channel = "servobus-bench-dyncan-uv"
+    with node_thread(channel, (1,)):
+        fast = {name: max(run_on(factory, client_round_trips(channel, ROUND_TRIPS // ROUNDS))
+                          for _ in range(ROUNDS)) for name, factory in loops()[1:]}
+        profiles = [run_on(factory, client_breakdown(channel, f"servobus {name} status()"))
+                    for name, factory in loops()]
+        profiles.append(raw_breakdown(channel))
     print(f"DYN CAN status reads on python-can's virtual bus (best of {ROUNDS} x "
           f"{ROUND_TRIPS // ROUNDS}, same node):")
     print(f"  python-can raw send+recv (blocking):   {raw:8.0f} transactions/s")
@@ -180,6 +212,12 @@ def main() -> None:
     print(f"  servobus client (asyncio, full rules): {ours:8.0f} transactions/s  "
           f"= {ours / raw * 100:.0f} % of raw {verdict}, "
           f"{ours / aio * 100:.0f} % of python-can asyncio")
+    for name, rate in fast.items():
+        verdict = mark(f"dyncan: client transactions vs python-can raw ({name})", rate / raw,
+                       at_least=0.8, show=percent)
+        print(f"  servobus client on {name}:            {rate:8.0f} transactions/s  "
+              f"= {rate / raw * 100:.0f} % of raw {verdict}")
+    print_all(profiles)
     bench_stream_load()
 
 

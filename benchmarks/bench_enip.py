@@ -28,12 +28,14 @@ import struct
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
+from benchmarks.breakdown import Breakdown, loops, print_all, profile_async, profile_sync, run_on
 from benchmarks.verdict import mark, percent, summary
-from servobus.axis import connect_async
+from servobus.axis import connect, connect_async
+from servobus.fastloop import fast_available
 from servobus.protocols.enip.axis import EnipAxis
 from servobus.protocols.enip.client import AsyncEnipClient
 from servobus.protocols.enip.scanner import InputFrame
@@ -203,36 +205,92 @@ def raw_rate(host: str, port: int, seconds: float) -> float:
 
 
 def bench_explicit() -> None:
-    names = ("raw socket", "asyncio floor", "pycomm3", "servobus", f"servobus x{IN_FLIGHT}")
+    runs = [(f"servobus {name}", factory) for name, factory in loops()]
+    names = ("raw socket", "asyncio floor", "pycomm3", *(n for n, _ in runs),
+             "servobus sync", f"servobus x{IN_FLIGHT}")
     best = dict.fromkeys(names, 0.0)
-    with adapters(1, ROUNDS * len(names) * (ROUND_S + 1) + 30) as (_, [(host, port)]):
+    with adapters(1, ROUNDS * len(names) * (ROUND_S + 1) + 60) as (_, [(host, port)]):
         for _ in range(ROUNDS):
-            rates = (raw_rate(host, port, ROUND_S),
+            rates = [raw_rate(host, port, ROUND_S),
                      asyncio.run(asyncio_floor_rate(host, port, ROUND_S)),
-                     pycomm3_rate(host, port, ROUND_S),
-                     asyncio.run(servobus_rate(host, port, ROUND_S)),
-                     asyncio.run(servobus_rate(host, port, ROUND_S, IN_FLIGHT)))
+                     pycomm3_rate(host, port, ROUND_S)]
+            rates += [run_on(factory, servobus_rate(host, port, ROUND_S))
+                      for _, factory in runs]
+            rates += [sync_rate(host, port, ROUND_S),
+                      asyncio.run(servobus_rate(host, port, ROUND_S, IN_FLIGHT))]
             for name, rate in zip(names, rates, strict=True):
                 best[name] = max(best[name], rate)
+        profiles = explicit_breakdowns(host, port, runs)
     ceiling = best["raw socket"]
     notes = {"raw socket": "blocking socket, prebuilt request: the ceiling",
              "asyncio floor": "bare asyncio protocol, prebuilt request",
              "pycomm3": "CIPDriver.generic_message, one at a time",
-             "servobus": "AsyncEnipClient, one request at a time",
+             "servobus asyncio": "AsyncEnipClient on asyncio's loop, one at a time",
+             "servobus uvloop": "AsyncEnipClient on uvloop, one at a time",
+             "servobus sync": f"sync Axis.position() (facade loop: {_facade_loop()})",
              f"servobus x{IN_FLIGHT}": f"{IN_FLIGHT} tasks, max_in_flight={IN_FLIGHT}, one "
                                       "session"}
     for name, rate in best.items():
-        print(f"explicit Get_Attribute_Single, {name:>13}: {rate:8.0f}/s "
+        print(f"explicit Get_Attribute_Single, {name:>16}: {rate:8.0f}/s "
               f"({rate / ceiling:6.1%} of the raw socket; {notes[name]})")
-    one = best["servobus"] / best["pycomm3"]
-    floor = best["servobus"] / best["asyncio floor"]
-    print(f"one at a time: servobus / pycomm3 = {one:.2f}x, servobus / asyncio floor = "
-          f"{floor:.0%} (a blocking client waits in recv; any asyncio client pays a loop "
-          "wake-up per reply)")
+    print_all(profiles)
+    for name, _ in runs:
+        one = best[name] / best["pycomm3"]
+        floor = best[name] / best["asyncio floor"]
+        verdict = mark(f"enip: {name} one at a time vs pycomm3", one, at_least=1.0,
+                       show="{:g}x".format)
+        print(f"one at a time: {name} / pycomm3 = {one:.2f}x  {verdict}; / asyncio floor "
+              f"= {floor:.0%}")
+    print(f"one at a time: servobus sync facade / pycomm3 = "
+          f"{best['servobus sync'] / best['pycomm3']:.2f}x (a call hops to the facade's "
+          "loop thread and back)")
     ratio = best[f"servobus x{IN_FLIGHT}"] / best["pycomm3"]
     verdict = mark(f"enip: servobus ({IN_FLIGHT} in flight) vs pycomm3 round trips", ratio,
                    at_least=1.5, show="{:g}x".format)
     print(f"servobus ({IN_FLIGHT} in flight) / pycomm3 = {ratio:.2f}x  {verdict}")
+
+
+def _facade_loop() -> str:
+    return "uvloop" if fast_available() else "asyncio"
+
+
+def sync_rate(host: str, port: int, seconds: float) -> float:
+    """The sync Axis facade (what a script calls): ``position()`` one at a time."""
+    with connect(f"enip://{host}:{port}") as axis:
+        for _ in range(200):
+            axis.position()
+        n, t0 = 0, time.perf_counter()
+        while time.perf_counter() - t0 < seconds:
+            axis.position()
+            n += 1
+        return n / (time.perf_counter() - t0)
+
+
+def explicit_breakdowns(host: str, port: int,
+                        runs: list[tuple[str, Callable[[], asyncio.AbstractEventLoop]]]
+                        ) -> list[Breakdown]:
+    """Per transaction: the async client on each loop, the sync facade, pycomm3."""
+    out: list[Breakdown] = []
+
+    async def client(label: str) -> Breakdown:
+        c = await AsyncEnipClient.connect(host, port)
+        try:
+            return await profile_async(label, lambda: c.get_attribute_single(
+                PARAM, POSITION, ATTRIBUTE))
+        finally:
+            await c.close()
+
+    for name, factory in runs:
+        out.append(run_on(factory, client(f"{name} get_attribute_single")))
+    with connect(f"enip://{host}:{port}") as axis:
+        out.append(profile_sync(f"servobus sync Axis.position() ({_facade_loop()})",
+                                axis.position))
+    from pycomm3 import DINT, CIPDriver
+    with CIPDriver(f"{host}:{port}") as plc:
+        out.append(profile_sync("pycomm3 generic_message", lambda: plc.generic_message(
+            service=0x0E, class_code=PARAM, instance=POSITION, attribute=ATTRIBUTE,
+            data_type=DINT, connected=False, route_path=False)))
+    return out
 
 
 # ---------------------------------------------------------------- implicit
