@@ -8,7 +8,9 @@ own, so it asks for SCHED_FIFO (:mod:`servobus.realtime`; fallback: the default
 scheduler, one log line). Deadlines are absolute on ``time.monotonic_ns``: frame k of a
 producer is due at ``first + k * period`` (never "now + period", which drifts by every
 wake-up's lateness); the thread sleeps until :data:`SPIN_NS` before the deadline and
-spins the rest, so the wake-up latency of ``sleep`` does not add to the frame's. A
+spins the rest, so the wake-up latency of ``sleep`` does not add to the frame's (the spin
+holds the interpreter lock: it is kept short, and producers of one period share one
+wake-up, see :meth:`ClockThread.add`). A
 producer that fell more than a period behind restarts its grid from now (no burst of
 catch-up frames: the consumer wants the latest data).
 
@@ -30,7 +32,9 @@ log = logging.getLogger("servobus.enip")
 
 #: The last stretch before a deadline is spun, not slept (a sleep may wake ~50-100 us
 #: late; a spin is as late as the next time check). Short: the thread may be real-time.
-SPIN_NS = 150_000
+SPIN_NS = 100_000
+#: Producers due this close after a wake-up's deadline leave in that wake-up.
+EARLY_NS = 100_000
 
 
 def next_due(due_ns: int, period_ns: int, now_ns: int) -> int:
@@ -83,8 +87,14 @@ class ClockThread:
             return cls._shared
 
     def add(self, period_s: float, send: Callable[[], None]) -> Tick:
-        """Produce with ``send()`` every ``period_s``, the first frame now."""
-        tick = Tick(round(period_s * 1e9), self._now(), send)
+        """Produce with ``send()`` every ``period_s``, the first frame now - or, when a
+        producer of the same period runs already, on its next deadline: producers of one
+        period share their wake-ups (16 connections at 5 ms: one wake-up per 5 ms, not
+        16; the thread spins and takes the interpreter lock once per period)."""
+        period_ns = round(period_s * 1e9)
+        with self._cond:
+            same = [t.due_ns for t in self._ticks if t.period_ns == period_ns]
+        tick = Tick(period_ns, min(same) if same else self._now(), send)
         with self._cond:
             self._ticks.append(tick)
             if not self._started:
@@ -135,7 +145,7 @@ class ClockThread:
         while self._now() < due:  # the final spin, outside the lock
             pass
         with self._cond:
-            ticks = [t for t in self._ticks if t.active and t.due_ns <= due]
+            ticks = [t for t in self._ticks if t.active and t.due_ns <= due + EARLY_NS]
         for tick in ticks:
             try:
                 tick.send()

@@ -109,3 +109,17 @@ def test_realtime_off_by_env_asks_nothing(monkeypatch: pytest.MonkeyPatch) -> No
     monkeypatch.setenv(realtime.ENV, "0")
     monkeypatch.setattr(os, "sched_setscheduler", must_not_run, raising=False)
     assert realtime.request_realtime("test clock") is False
+
+
+def test_producers_of_one_period_share_their_wake_ups() -> None:
+    clock = FakeClock()
+    sent: list[tuple[str, int]] = []
+    thread = ClockThread(realtime=False, now_ns=clock)
+    thread._started = True
+    a = thread.add(0.005, lambda: sent.append(("a", clock.t)))
+    clock.t += 2 * MS  # opened 2 ms later: joins a's grid instead of its own
+    b = thread.add(0.005, lambda: sent.append(("b", clock.t)))
+    assert b.due_ns == a.due_ns
+    thread.step()
+    assert [name for name, _ in sent] == ["a", "b"]
+    assert a.due_ns == b.due_ns
