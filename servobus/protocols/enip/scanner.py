@@ -228,7 +228,8 @@ class CyclicIo:
         event loop, before the frame iterators see it: the low-latency path (keep it short).
         ``clock``: ``"thread"`` (default) sends the O->T frames from servobus's clock thread
         (absolute deadlines, SCHED_FIFO where permitted: ``clock.py``); ``"loop"`` from the
-        event loop's timer (``production.py``), as before issue 22."""
+        event loop's timer (``production.py``), as before issue 22 - also where the UDP
+        socket is an asyncio transport that only its loop may use (no ``add_reader``)."""
         if clock not in ("thread", "loop"):
             raise ArgumentRangeError(f"clock must be 'thread' or 'loop', got {clock!r}")
         self.clock = clock
@@ -381,7 +382,7 @@ class CyclicIo:
         self._last_rx = now
         with self._send_lock:
             self._producing = True
-        if self.clock == "thread":
+        if self.clock == "thread" and self._udp is not None and self._udp.threadsafe_send:
             self._tick = ClockThread.shared().add(self.api_us[0] / 1e6, self._send)
         else:
             self._tick = ProductionWheel.for_loop(self._loop).add(
