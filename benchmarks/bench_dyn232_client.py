@@ -219,12 +219,12 @@ async def _asyncio_floor_rate(host: str, port: int, request: bytes) -> float:
 
 def bench_tcp_round_trips() -> float:
     sim = [sys.executable, "-m", "servobus", "sim", "dyn232",
-           "--fast", "--listen", "tcp://127.0.0.1:0", "--duration", "120"]
-    echo = [sys.executable, "-c", _ECHO_SERVER, "120"]
+           "--fast", "--listen", "tcp://127.0.0.1:0", "--duration", "900"]
+    echo = [sys.executable, "-c", _ECHO_SERVER, "900"]
     request = c.encode(0, c.HostFunction.READ_DRIVE_STATUS, 0)
     reply_len = len(c.encode_reply(0, c.DriveFunction.IS_STATUS, 0))
     reply = c.encode_reply(0, c.DriveFunction.IS_STATUS, 0)
-    canned = [sys.executable, "-c", _REPLY_SERVER, "120", reply.hex()]
+    canned = [sys.executable, "-c", _REPLY_SERVER, "900", reply.hex()]
     with _server(echo) as (host, port):
         raw = _raw_echo_rate(host, port, request, reply_len)
     runs = loops()

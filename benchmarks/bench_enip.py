@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import asyncio
 import itertools
+import logging
 import os
 import socket
 import statistics
@@ -410,6 +411,8 @@ def implicit_case(count: int, realtime: bool, hogs: int, seconds: float,
                   marked: bool) -> None:
     """One run: ``count`` adapters, real-time scheduling on or off (the adapters' loop and
     the scanner's clock thread), beside ``hogs`` CPU-bound processes."""
+    # each connection loss is counted in the run's line: not one warning per loss as well
+    logging.getLogger("servobus.enip").setLevel(logging.ERROR)
     previous = os.environ.get(REALTIME_ENV)
     os.environ[REALTIME_ENV] = "1" if realtime else "0"  # the scanner's clock thread
     ClockThread.shared().stop()  # a fresh clock thread picks the setting up
