@@ -129,8 +129,8 @@ async def profile_async(label: str, call: Callable[[], Awaitable[object]], n: in
 
 def profile_sync(label: str, call: Callable[[], object], n: int = 2000) -> Breakdown:
     """The same for a blocking call (e.g. the sync Axis facade). CPU time counts every
-    thread of this process (the facade's loop thread too); cProfile sees this thread only
-    unless the profiled code runs here (the fast path does)."""
+    thread of this process (the facade's loop thread too); cProfile sees this thread only,
+    so the calls and layers of a sync facade call are the caller's side of the hop."""
     for _ in range(min(200, n)):
         call()
     t0 = time.process_time()
@@ -143,16 +143,6 @@ def profile_sync(label: str, call: Callable[[], object], n: int = 2000) -> Break
         call()
     prof.disable()
     return _analyse(prof, n, label, cpu_us)
-
-
-def cpu_per_call_us(call: Callable[[], object], n: int = 2000) -> float:
-    """Process CPU time per blocking call (no profiler)."""
-    for _ in range(min(200, n)):
-        call()
-    t0 = time.process_time()
-    for _ in range(n):
-        call()
-    return (time.process_time() - t0) / n * 1e6
 
 
 def print_all(items: list[Breakdown]) -> None:
