@@ -6,8 +6,9 @@ Decision (issue 22), measured with benchmarks/bench_enip.py on a 2-core machine 
 thread at SCHED_FIFO. A CPU-bound process beside a normal thread takes its core for
 whole scheduler slices (several ms); a SCHED_FIFO thread preempts it as soon as its timer
 expires. Linux applies ``sched_setscheduler(0, ...)`` to the calling thread only, so
-servobus asks for it on threads it owns (the Class 1 clock thread, the ``servobus sim
-enip`` loop), never on a user's thread. It needs root or CAP_SYS_NICE (or an RLIMIT_RTPRIO
+servobus asks for it on threads it owns - the ``servobus sim enip`` loop, and the Class 1
+clock thread when ``SERVOBUS_CLOCK_REALTIME=1`` (opt-in: ``enip/clock.py`` says why) -
+never on a user's thread. It needs root or CAP_SYS_NICE (or an RLIMIT_RTPRIO
 above 0, e.g. ``@realtime - rtprio 20`` in /etc/security/limits.conf); without it the
 thread runs as before and one log line says so. Safety: the threads that ask for it sleep
 between frames and spin at most :data:`servobus.protocols.enip.clock.SPIN_NS`, and the

@@ -4,8 +4,15 @@ Decision (issue 22): the scanner's O->T production runs on this thread, not on t
 loop it was opened on. A loop wakes up late whenever it is busy with anything else (a
 reply being decoded, a user's task, the epoll selector's millisecond rounding), and it is
 a user's thread: servobus may not change its scheduling. The clock thread is servobus's
-own, so it asks for SCHED_FIFO (:mod:`servobus.realtime`; fallback: the default
-scheduler, one log line). Deadlines are absolute on ``time.monotonic_ns``: frame k of a
+own, so it may run at SCHED_FIFO (:mod:`servobus.realtime`) - but only when asked,
+``SERVOBUS_CLOCK_REALTIME=1``: measured, a real-time clock thread once stalled O->T
+production for ~0.4 s (1 run in 12, two scanner processes at once on a loaded 2-core
+machine; the same runs without it never did). The likely cause is the interpreter lock:
+a real-time thread that waits for it waits for a normal thread to be scheduled. A drive
+whose watchdog is 16 RPIs must not meet that, so the default is the normal scheduler
+(measured beside two CPU hogs, 16 connections at 5 ms: O->T p99 0.3-4 ms).
+
+Deadlines are absolute on ``time.monotonic_ns``: frame k of a
 producer is due at ``first + k * period`` (never "now + period", which drifts by every
 wake-up's lateness); the thread sleeps until :data:`SPIN_NS` before the deadline and
 spins the rest, so the wake-up latency of ``sleep`` does not add to the frame's (the spin
@@ -21,6 +28,7 @@ takes its connection's lock and calls ``socket.sendto``, which is).
 from __future__ import annotations
 
 import logging
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -29,6 +37,14 @@ from typing import ClassVar
 from servobus.realtime import request_realtime
 
 log = logging.getLogger("servobus.enip")
+
+#: Environment variable: ``1`` runs the clock thread at SCHED_FIFO (module docstring).
+CLOCK_REALTIME_ENV = "SERVOBUS_CLOCK_REALTIME"
+
+
+def clock_realtime_requested() -> bool:
+    return os.environ.get(CLOCK_REALTIME_ENV, "").strip().lower() in ("1", "on", "yes", "true")
+
 
 #: The last stretch before a deadline is spun, not slept (a sleep may wake ~50-100 us
 #: late; a spin is as late as the next time check). Short: the thread may be real-time.
@@ -64,7 +80,7 @@ class ClockThread:
     _shared: ClassVar[ClockThread | None] = None
     _shared_lock: ClassVar[threading.Lock] = threading.Lock()
 
-    def __init__(self, *, realtime: bool = True, now_ns: Callable[[], int] = time.monotonic_ns,
+    def __init__(self, *, realtime: bool = False, now_ns: Callable[[], int] = time.monotonic_ns,
                  name: str = "servobus-clock"
                  ) -> None:
         self.realtime = realtime
@@ -80,10 +96,11 @@ class ClockThread:
 
     @classmethod
     def shared(cls) -> ClockThread:
-        """The process's clock (started on first use, real-time where permitted)."""
+        """The process's clock (started on first use); SCHED_FIFO only when
+        ``SERVOBUS_CLOCK_REALTIME=1`` (module docstring: opt-in)."""
         with cls._shared_lock:
             if cls._shared is None or cls._shared._stopped:
-                cls._shared = cls()
+                cls._shared = cls(realtime=clock_realtime_requested())
             return cls._shared
 
     def add(self, period_s: float, send: Callable[[], None]) -> Tick:

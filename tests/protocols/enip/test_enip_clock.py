@@ -123,3 +123,15 @@ def test_producers_of_one_period_share_their_wake_ups() -> None:
     thread.step()
     assert [name for name, _ in sent] == ["a", "b"]
     assert a.due_ns == b.due_ns
+
+
+def test_shared_clock_is_realtime_only_when_asked(monkeypatch: pytest.MonkeyPatch) -> None:
+    from servobus.protocols.enip import clock
+
+    monkeypatch.setattr(ClockThread, "_shared", None)
+    monkeypatch.delenv(clock.CLOCK_REALTIME_ENV, raising=False)
+    assert ClockThread.shared().realtime is False  # not started: no thread yet
+    ClockThread.shared().stop()
+    monkeypatch.setenv(clock.CLOCK_REALTIME_ENV, "1")
+    assert ClockThread.shared().realtime is True
+    ClockThread.shared().stop()
