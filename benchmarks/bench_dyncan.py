@@ -20,6 +20,7 @@ from contextlib import contextmanager
 
 import can
 
+from benchmarks.breakdown import Breakdown, loops, print_all, profile_async, profile_sync, run_on
 from benchmarks.verdict import mark, percent, summary
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan.client import DynCanAxis, open_can_client
@@ -108,17 +109,44 @@ async def python_can_asyncio_round_trips(channel: str, n: int) -> float:
 
 
 async def client_round_trips(channel: str, n: int) -> float:
-    client = await open_can_client(f"virtual:{channel}")
+    """``drive_status()``: one READ_DRIVE_STATUS transaction, as the raw figure's (since
+    issue 18 ``status()`` also reads the speed when no profile runs: two transactions).
+    A generous deadline: a reply late on a loaded host counts in the rate, not fatal."""
+    client = await open_can_client(f"virtual:{channel}", timeout=1.0)
     axis = DynCanAxis(client, 1)
     try:
         for _ in range(50):
-            await axis.status()
+            await axis.drive_status()
         t = time.perf_counter()
         for _ in range(n):
-            await axis.status()
+            await axis.drive_status()
         return n / (time.perf_counter() - t)
     finally:
         await client.close()
+
+
+async def client_breakdown(channel: str, label: str) -> Breakdown:
+    client = await open_can_client(f"virtual:{channel}", timeout=1.0)  # profiled: slower
+    axis = DynCanAxis(client, 1)
+    try:
+        return await profile_async(label, axis.drive_status)
+    finally:
+        await client.close()
+
+
+def raw_breakdown(channel: str) -> Breakdown:
+    bus = can.Bus(interface="virtual", channel=channel)
+    ident, data = c.encode(c.request(1, c.Function.READ_DRIVE_STATUS))
+    msg = can.Message(arbitration_id=ident, data=data, is_extended_id=False)
+
+    def once() -> None:
+        bus.send(msg)
+        bus.recv(1.0)
+
+    try:
+        return profile_sync("python-can raw send+recv", once)
+    finally:
+        bus.shutdown()
 
 
 def bench_transactions() -> tuple[float, float, float]:
@@ -171,6 +199,13 @@ def bench_stream_load() -> None:
 
 def main() -> None:
     raw, aio, ours = bench_transactions()
+    channel = "servobus-bench-dyncan-uv"
+    with node_thread(channel, (1,)):
+        fast = {name: max(run_on(factory, client_round_trips(channel, ROUND_TRIPS // ROUNDS))
+                          for _ in range(ROUNDS)) for name, factory in loops()[1:]}
+        profiles = [run_on(factory, client_breakdown(channel, f"servobus {name} drive_status()"))
+                    for name, factory in loops()]
+        profiles.append(raw_breakdown(channel))
     print(f"DYN CAN status reads on python-can's virtual bus (best of {ROUNDS} x "
           f"{ROUND_TRIPS // ROUNDS}, same node):")
     print(f"  python-can raw send+recv (blocking):   {raw:8.0f} transactions/s")
@@ -180,6 +215,12 @@ def main() -> None:
     print(f"  servobus client (asyncio, full rules): {ours:8.0f} transactions/s  "
           f"= {ours / raw * 100:.0f} % of raw {verdict}, "
           f"{ours / aio * 100:.0f} % of python-can asyncio")
+    for name, rate in fast.items():
+        verdict = mark(f"dyncan: client transactions vs python-can raw ({name})", rate / raw,
+                       at_least=0.8, show=percent)
+        print(f"  servobus client on {name}:            {rate:8.0f} transactions/s  "
+              f"= {rate / raw * 100:.0f} % of raw {verdict}")
+    print_all(profiles)
     bench_stream_load()
 
 

@@ -15,8 +15,9 @@ depends on the protocol) or, asynchronously on the loop thread, ``axis.core``.
 
 from __future__ import annotations
 
+import _thread
 import asyncio
-import concurrent.futures
+import contextlib
 import functools
 import inspect
 import threading
@@ -25,6 +26,7 @@ from collections.abc import Callable, Coroutine, Iterable, Mapping, Sequence
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
 
+from servobus import fastloop
 from servobus.axis.base import DEFAULT_POLL_S, DEFAULT_WAIT_TIMEOUT_S
 
 if TYPE_CHECKING:
@@ -41,7 +43,7 @@ class LoopThread:
     """Owns an asyncio loop running on its own daemon thread until :meth:`stop`."""
 
     def __init__(self, name: str = "servobus-loop") -> None:
-        self.loop = asyncio.new_event_loop()
+        self.loop = fastloop.new_event_loop()  # uvloop with servobus[fast] (issue 22)
         self._started = threading.Event()
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
@@ -54,19 +56,38 @@ class LoopThread:
         self.loop.run_forever()
 
     def run(self, coro: Coroutine[Any, Any, T], timeout: float | None = None) -> T:
-        """Run ``coro`` on the loop and wait for its result (exceptions propagate)."""
+        """Run ``coro`` on the loop and wait for its result (exceptions propagate).
+
+        ``timeout`` (a safety net: the core enforces the deadlines) raises TimeoutError;
+        it and Ctrl-C cancel the coroutine on the loop, so a transaction in progress is
+        given up by its own rules (its reply, if it comes, is owed and dropped).
+
+        Decision (issue 22): one task and one bare lock per call instead of
+        ``asyncio.run_coroutine_threadsafe`` (a concurrent Future with its Condition and
+        two chained callbacks): the same hop to the loop thread and back, about a third
+        less CPU per call (benchmarks/bench_enip.py prints the breakdown).
+        """
         if self._stopped:
             coro.close()
             raise RuntimeError("the connection is closed")
         if threading.current_thread() is self._thread:
             coro.close()
             raise RuntimeError("sync facade called from its own loop thread (use the async API)")
-        future = asyncio.run_coroutine_threadsafe(coro, self.loop)
+        call = _Call(coro)
         try:
-            return future.result(timeout)
-        except (KeyboardInterrupt, concurrent.futures.TimeoutError):
-            future.cancel()
+            self.loop.call_soon_threadsafe(call.start, self.loop)
+        except RuntimeError:  # the loop was closed under us
+            coro.close()
+            raise RuntimeError("the connection is closed") from None
+        try:
+            if not call.done.acquire(timeout=-1 if timeout is None else timeout):
+                raise TimeoutError(f"no result within {timeout} s")
+        except BaseException:  # the timeout above, or Ctrl-C while waiting
+            with contextlib.suppress(RuntimeError):
+                self.loop.call_soon_threadsafe(call.cancel)
             raise
+        result: T = call.result()
+        return result
 
     def stop(self) -> None:
         """Stop the loop and join the thread; idempotent."""
@@ -81,6 +102,39 @@ class LoopThread:
     @property
     def stopped(self) -> bool:
         return self._stopped
+
+
+class _Call:
+    """One coroutine run for a thread waiting on :attr:`done` (a bare lock, held until the
+    task is finished)."""
+
+    __slots__ = ("_cancelled", "_coro", "_task", "done")
+
+    def __init__(self, coro: Coroutine[Any, Any, Any]) -> None:
+        self._coro = coro
+        self._task: asyncio.Task[Any] | None = None
+        self._cancelled = False
+        self.done = _thread.allocate_lock()
+        self.done.acquire()
+
+    def start(self, loop: asyncio.AbstractEventLoop) -> None:  # on the loop thread
+        if self._cancelled:  # given up before it started: never sent anything
+            self._coro.close()
+            return
+        self._task = loop.create_task(self._coro)
+        self._task.add_done_callback(self._finished)
+
+    def _finished(self, _task: asyncio.Task[Any]) -> None:
+        self.done.release()
+
+    def cancel(self) -> None:  # on the loop thread
+        self._cancelled = True
+        if self._task is not None:
+            self._task.cancel()
+
+    def result(self) -> Any:
+        assert self._task is not None
+        return self._task.result()
 
 
 class Axis:

@@ -14,6 +14,7 @@ import asyncio
 import contextlib
 import socket
 import time
+from typing import cast
 from urllib.parse import urlsplit
 
 from servobus.errors import ConnectionLost, ServobusError
@@ -45,8 +46,8 @@ class _Protocol(asyncio.Protocol):
         self.closed: asyncio.Future[None] = asyncio.get_running_loop().create_future()
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)
-        self.transport = transport
+        # a cast, not an isinstance check: uvloop's transports do not derive from asyncio's
+        self.transport = cast(asyncio.Transport, transport)
 
     def data_received(self, data: bytes) -> None:
         if self.traces:
@@ -122,7 +123,6 @@ class TcpStream:
                 loop.create_connection(_Protocol, host, port), timeout)
         except (OSError, TimeoutError) as exc:
             raise ServobusError(f"cannot connect to {host}:{port}: {exc}") from exc
-        assert isinstance(transport, asyncio.Transport)
         return cls(transport, protocol)
 
     @classmethod

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 
 import click
 
+from servobus import fastloop
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.open_axis import emit_json, note, open_axis
@@ -35,6 +36,7 @@ from servobus.families import dyn5
 from servobus.families.dmm import units as U
 from servobus.protocols.enip import io
 from servobus.protocols.enip.encap import TCP_PORT
+from servobus.realtime import request_realtime
 from servobus.sim.fine_selector import fine_event_loop
 
 if TYPE_CHECKING:
@@ -95,9 +97,12 @@ async def run_adapters(hosts: str, tcp_port: int, udp_port: int, state: str | No
               show_default=True, help="seconds the adapter is silent after a Reset (0x21)")
 @click.option("--duration", type=click.FloatRange(min=0.0), default=None, metavar="SECONDS",
               help="stop by itself after this many seconds [default: run until Ctrl-C]")
+@click.option("--realtime/--no-realtime", default=True, show_default=True,
+              help="run the adapters' loop at SCHED_FIFO where permitted (root or "
+                   "CAP_SYS_NICE): Class 1 frames on time beside CPU-bound work")
 @control_option
 def sim_enip_cmd(hosts: str, tcp_port: int, udp_port: int, state: str | None, model: str,
-                 reset_downtime: float, duration: float | None,
+                 reset_downtime: float, duration: float | None, realtime: bool,
                  control: tuple[str, int] | None) -> None:
     """Virtual DYN5 drives on EtherNet/IP (explicit messaging, ListIdentity, Class 1 I/O)."""
     from servobus.protocols.enip.server import parse_hosts
@@ -108,6 +113,8 @@ def sim_enip_cmd(hosts: str, tcp_port: int, udp_port: int, state: str | None, mo
         raise click.BadParameter(str(exc), param_hint="--listen") from None
     click.echo(f"servobus sim enip: {len(host_list)} virtual DYN5 ({model}) on "
                f"{', '.join(host_list)}", err=True)
+    if realtime:  # this thread runs the loop (issue 22: measured in bench_enip)
+        request_realtime("servobus sim enip")
     with asyncio.Runner(loop_factory=fine_event_loop) as runner:
         runner.run(run_adapters(hosts, tcp_port, udp_port, state, model, duration,
                                 reset_downtime, control))
@@ -131,8 +138,8 @@ def discover_cmd(ctx: CliContext, addresses: tuple[str, ...], port: int, wait: f
     from servobus.protocols.enip.discover import discover
 
     targets = [a.strip() for text in addresses for a in text.split(",") if a.strip()]
-    found = asyncio.run(discover(targets or None, port=port, timeout=wait,
-                                 broadcast=broadcast))
+    found = fastloop.run(discover(targets or None, port=port, timeout=wait,
+                                   broadcast=broadcast))
     if ctx.json:
         emit_json([f.as_dict() for f in found])
         return

@@ -44,6 +44,7 @@ import itertools
 import logging
 import random
 import socket
+import threading
 from collections import deque
 from collections.abc import AsyncIterator, Callable
 from dataclasses import asdict, dataclass
@@ -63,6 +64,7 @@ from servobus.families.base import AxisStatus
 from servobus.families.dyn5_family import axis_status
 from servobus.protocols.enip import io
 from servobus.protocols.enip.cip import GeneralStatus, MessageRouterRequest, Service
+from servobus.protocols.enip.clock import ClockThread, Tick
 from servobus.protocols.enip.connection_manager import (
     CONNECTION_MANAGER_PATH,
     TIMEOUT_MULTIPLIER_MAX,
@@ -220,9 +222,17 @@ class CyclicIo:
     def __init__(self, axis: EnipAxis, *, rpi_ms: float = 10.0,
                  multiplier: int = DEFAULT_MULTIPLIER, reconnect: bool = True,
                  queue: int = DEFAULT_QUEUE,
-                 on_frame: Callable[[InputFrame], None] | None = None) -> None:
+                 on_frame: Callable[[InputFrame], None] | None = None,
+                 clock: str = "thread") -> None:
         """``on_frame`` (optional) is called with each input frame as it arrives, on the
-        event loop, before the frame iterators see it: the low-latency path (keep it short)."""
+        event loop, before the frame iterators see it: the low-latency path (keep it short).
+        ``clock``: ``"thread"`` (default) sends the O->T frames from servobus's clock thread
+        (absolute deadlines, SCHED_FIFO where permitted: ``clock.py``); ``"loop"`` from the
+        event loop's timer (``production.py``), as before issue 22 - also where the UDP
+        socket is an asyncio transport that only its loop may use (no ``add_reader``)."""
+        if clock not in ("thread", "loop"):
+            raise ArgumentRangeError(f"clock must be 'thread' or 'loop', got {clock!r}")
+        self.clock = clock
         rpi_s = checks.seconds("rpi_ms", rpi_ms) / 1e3
         self.rpi_us = round(rpi_s * 1e6)
         if self.rpi_us < dyn5.MIN_RPI_US:
@@ -256,7 +266,9 @@ class CyclicIo:
         self._word = NO_COMMAND
         self._last_seq: int | None = None
         self._last_rx = 0.0
-        self._tick: Producer | None = None
+        self._tick: Producer | Tick | None = None
+        self._producing = False  # O->T frames may leave (guarded by _send_lock)
+        self._send_lock = threading.Lock()  # _send runs on the clock thread too
         self._watch: asyncio.TimerHandle | None = None
         self._reconnecting: asyncio.Task[None] | None = None
         self._streams: set[FrameStream] = set()
@@ -314,7 +326,11 @@ class CyclicIo:
             stream.finish()
 
     def _stop_timers(self) -> None:
-        if self._tick is not None and self._loop is not None:
+        with self._send_lock:
+            self._producing = False
+        if isinstance(self._tick, Tick):
+            ClockThread.shared().remove(self._tick)
+        elif self._tick is not None and self._loop is not None:
             ProductionWheel.for_loop(self._loop).remove(self._tick)
         if self._watch is not None:
             self._watch.cancel()
@@ -364,8 +380,13 @@ class CyclicIo:
         assert self._loop is not None
         now = self._loop.time()
         self._last_rx = now
-        self._tick = ProductionWheel.for_loop(self._loop).add(
-            Producer(self.api_us[0] / 1e6, now, self._send))
+        with self._send_lock:
+            self._producing = True
+        if self.clock == "thread" and self._udp is not None and self._udp.threadsafe_send:
+            self._tick = ClockThread.shared().add(self.api_us[0] / 1e6, self._send)
+        else:
+            self._tick = ProductionWheel.for_loop(self._loop).add(
+                Producer(self.api_us[0] / 1e6, now, self._send))
         self._watch = self._loop.call_at(now + self.watchdog_s, self._check_watchdog)
         log.info("Class 1 I/O with %s open: O->T 0x%08X to %s:%d, T->O 0x%08X to %s:%d, "
                  "RPI %.1f ms", self.axis.ip, self._o_t_id, *self._o_t_dest, self._t_o_id,
@@ -386,16 +407,20 @@ class CyclicIo:
 
     # ---------------------------------------------------------------- O->T
     def _send(self) -> None:
-        if self._udp is None or self._packer is None or not self._connected:
-            return
-        self._sequence = (self._sequence + 1) & 0xFFFF_FFFF
-        frame = self._packer.pack(self._sequence, self._count, io.RUN_BIT, self._word)
-        self._udp.sendto(frame, self._o_t_dest)
-        self.stats.sent += 1
+        """One O->T frame: on the clock thread (each period) or the loop (a new word)."""
+        with self._send_lock:
+            if (self._udp is None or self._packer is None or not self._connected
+                    or not self._producing):
+                return
+            self._sequence = (self._sequence + 1) & 0xFFFF_FFFF
+            frame = self._packer.pack(self._sequence, self._count, io.RUN_BIT, self._word)
+            self._udp.sendto(frame, self._o_t_dest)
+            self.stats.sent += 1
 
     def _new_data(self, word: int) -> None:
-        self._word = word
-        self._count = (self._count + 1) & 0xFFFF
+        with self._send_lock:
+            self._word = word
+            self._count = (self._count + 1) & 0xFFFF
         self._send()
 
     async def set_output(self, word: int) -> None:

@@ -82,6 +82,12 @@ class UdpSocket:
         name = self.sock.getsockname()
         return str(name[0]), int(name[1])
 
+    @property
+    def threadsafe_send(self) -> bool:
+        """:meth:`sendto` may be called from another thread (the plain socket; not the
+        asyncio transport of the fallback path, e.g. Windows' proactor loop)."""
+        return self._transport is None
+
     def sendto(self, data: bytes | bytearray, addr: tuple[str, int]) -> None:
         """Send now or drop (cyclic data: the next period carries fresh data anyway)."""
         if self._transport is not None:
