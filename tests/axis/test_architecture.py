@@ -20,15 +20,6 @@ SHARED = ("axis", "cli", "families", "transport", "sim", "gui", "link", "machine
 #: Everything above transport/: it moves bytes and frames and knows none of these.
 ABOVE_TRANSPORT = ("sim", "axis", "protocols", "families", "cli", "gui", "link", "sniff",
                    "machine")
-#: Known violations, each with its follow-up; the test fails when one is fixed, so the
-#: entry goes with the fix.
-TRANSPORT_ALLOWED = {
-    # TEMPORARY (issue 19, follow-up): the socketcand hub is a virtual CAN bus with drive
-    # FIFOs that reads the simulator's server limits; it moves beside the simulators
-    # (servobus/sim/) in the scheduled simulator split, and this entry goes with it.
-    ("socketcand_hub.py", "servobus.sim"),
-    ("socketcand_hub.py", "servobus.sim.server_limits"),
-}
 #: What link/ may take from the Axis layer (argument checks, the drive URL's type).
 LINK_FROM_AXIS = ("servobus.axis.checks", "servobus.axis.url")
 CLIENT_MODULES = ("client.py", "opener.py", "commands.py", "codec.py")
@@ -113,10 +104,12 @@ def above(name: str, layers: tuple[str, ...]) -> bool:
 
 
 def test_transport_imports_nothing_above_it() -> None:
+    """No exception: the socketcand hub (a virtual CAN bus with drive FIFOs) lives in
+    ``servobus/sim/`` since issue 19; its old path has no alias, which would itself import
+    the simulator from transport/."""
     found = {(path.name, name) for path in sources(ROOT / "transport")
              for name in imports(path) if above(name, ABOVE_TRANSPORT)}
-    assert found - TRANSPORT_ALLOWED == set()
-    assert TRANSPORT_ALLOWED - found == set(), "a violation was fixed: drop its entry"
+    assert found == set()
 
 
 def test_link_imports_no_protocol_and_no_simulator() -> None:

@@ -34,7 +34,7 @@ from servobus.sim.fleet import make_drives, parse_ids
 from servobus.sim.realtime import RealtimeClock
 from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS, fit_fd_limit, log_to_stderr
 from servobus.sim.socketcand_bus import socketcand_bus
-from servobus.transport.socketcand_hub import SocketcandHub, parse_socketcand_address
+from servobus.sim.socketcand_hub import SocketcandHub, parse_socketcand_address
 
 
 async def run_socketcand_nodes(drives: Sequence[VirtualDrive], host: str, port: int, *,
