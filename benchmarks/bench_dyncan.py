@@ -24,7 +24,7 @@ from benchmarks.verdict import mark, percent, summary
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan.client import DynCanAxis, open_can_client
 from servobus.protocols.dyncan.node import DynCanNetwork, serve
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.transport.can_bus import AsyncCanBus, BitTiming
 
 ROUND_TRIPS = 5000

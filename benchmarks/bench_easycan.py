@@ -40,7 +40,7 @@ from servobus.protocols.easycan.messages import ReadRequest
 from servobus.protocols.easycan.node import EasyCanNetwork, serve
 from servobus.protocols.easycan.sync import SyncGroup
 from servobus.sim.realtime import RealtimeClock
-from servobus.sim.yzaim_motor import YzaimMotor
+from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.transport.can_bus import AsyncCanBus, BitTiming
 
 ROUND_TRIPS = 5000

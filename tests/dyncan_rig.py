@@ -16,7 +16,7 @@ from typing import Any
 
 from servobus.protocols.dyncan.client import AsyncDynCanClient, DynCanAxis, open_can_client
 from servobus.protocols.dyncan.node import DynCanNetwork, serve
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.realtime import RealtimeClock
 from servobus.transport.can_bus import AsyncCanBus
 

@@ -19,7 +19,7 @@ from servobus.protocols.modbus.client import ModbusClient
 from servobus.protocols.modbus.inprocess import make_motors
 from servobus.protocols.modbus.line import ModbusLine
 from servobus.protocols.modbus.pacing import RtuLineRunner
-from servobus.sim.yzaim_motor import YzaimMotor
+from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.transport.base import Direction
 from servobus.transport.pair import Manipulator, PairStream, open_pair
 from servobus.transport.trace import TraceRecorder

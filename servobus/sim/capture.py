@@ -39,7 +39,7 @@ from servobus.families.dmm import units as U
 from servobus.sim.core.constants import CONTROL_HZ
 
 if TYPE_CHECKING:
-    from servobus.sim.drive import VirtualDrive
+    from servobus.sim.dmm.drive import VirtualDrive
 
 #: Samples kept between reads (2 s at 4 kHz); older ones are dropped and counted as lost.
 CAPACITY = 2 * CONTROL_HZ
@@ -174,7 +174,7 @@ class Recorder:
 
 
 def _traced(item: VirtualDrive | Traced) -> Traced:
-    from servobus.sim.drive import VirtualDrive  # drive imports this module
+    from servobus.sim.dmm.drive import VirtualDrive  # drive imports this module
 
     return DriveTrace(item) if isinstance(item, VirtualDrive) else item
 

@@ -10,7 +10,7 @@ JSON file), ``model=NAME`` (motor/drive model).
 
 Every ``sim://`` axis reads its virtual drives' 4 kHz trace with ``trace_buffer()``
 (servobus.sim.capture), whatever the protocol; the axes of the DMM families reach their
-drives' JP3 inputs and outputs with ``virtual_io()`` (servobus.sim.virtual_io).
+drives' JP3 inputs and outputs with ``virtual_io()`` (servobus.sim.dmm.virtual_io).
 """
 
 from __future__ import annotations
@@ -20,7 +20,8 @@ from typing import TYPE_CHECKING, Any
 from servobus.axis import registry
 from servobus.axis.url import DriveUrl
 from servobus.errors import ArgumentRangeError
-from servobus.sim import capture, virtual_io
+from servobus.sim import capture
+from servobus.sim.dmm import virtual_io
 
 if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis

@@ -29,7 +29,7 @@ from servobus.families.dmm import units as U
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232.line import Dyn232Line
 from servobus.protocols.dyn232.pacing import HostPort, LineRunner
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.fleet import make_drives, parse_ids
 from servobus.transport.base import Direction
 from servobus.transport.buffered import PushInput

@@ -56,8 +56,8 @@ from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import CONFIG_DEFINED_MASK, AlarmCode
 from servobus.families.dmm.vocabulary import GeneralReadSelector as GR
 from servobus.protocols.dyncan import codec as c
-from servobus.sim.dmm_actions import run_action
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.actions import run_action
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.realtime import RealtimeClock
 from servobus.transport.can_bus import FramePort
 

@@ -29,7 +29,7 @@ from servobus.cli.sim_control import control_option, start_control
 from servobus.families.dmm import units as U
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan.node import DynCanNetwork, serve
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.fleet import make_drives, parse_ids
 from servobus.sim.realtime import RealtimeClock
 from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS, fit_fd_limit, log_to_stderr

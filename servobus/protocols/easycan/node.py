@@ -3,7 +3,7 @@
 ``EasyCanNetwork.handle_raw(id, data)`` executes one host frame on the motor it addresses
 and returns the frames to send back; the caller advances the motors' time first.
 :func:`serve` runs a network on any FramePort (a python-can bus, the socketcand hub) in
-wall-clock time. The motors' behaviour is :mod:`servobus.sim.yzaim_motor`'s; this module only
+wall-clock time. The motors' behaviour is :mod:`servobus.sim.yzaim.motor`'s; this module only
 maps frames. Decisions where the manual is silent:
 
 * A frame that does not decode as a request (a reply on the host's identifier, an identifier
@@ -58,7 +58,7 @@ from servobus.protocols.easycan.messages import (
     WriteRequest,
 )
 from servobus.sim.realtime import RealtimeClock
-from servobus.sim.yzaim_motor import MotorRefused, Refusal, YzaimMotor
+from servobus.sim.yzaim.motor import MotorRefused, Refusal, YzaimMotor
 from servobus.transport.can_bus import CanFrame, FramePort
 
 _ABS_LOW = yzaim.PAIR_BY_NAME["absolute_position"].low

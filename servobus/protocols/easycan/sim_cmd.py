@@ -31,8 +31,8 @@ from servobus.sim.realtime import RealtimeClock
 from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS, fit_fd_limit, log_to_stderr
 from servobus.sim.socketcand_bus import socketcand_bus
 from servobus.sim.socketcand_hub import parse_socketcand_address
-from servobus.sim.yzaim_fleet import make_motors, parse_addresses
-from servobus.sim.yzaim_motor import YzaimMotor
+from servobus.sim.yzaim.fleet import make_motors, parse_addresses
+from servobus.sim.yzaim.motor import YzaimMotor
 
 
 async def run_socketcand_motors(motors: Sequence[YzaimMotor], host: str, port: int, *,

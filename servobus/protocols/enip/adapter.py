@@ -60,7 +60,7 @@ from servobus.protocols.enip.parameter_object import (
     status_word,
     torque_readout,
 )
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 
 log = logging.getLogger("servobus.enip")
 

@@ -26,7 +26,7 @@ from servobus.families import dyn5
 from servobus.families.dmm.registers import ServoMode
 from servobus.families.dyn5 import Instance, Kind
 from servobus.families.dyn5_family import DYN5
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 
 _SPEED_LIMIT = dyn5.BY_NAME["torque_speed_limit"].number
 

@@ -71,7 +71,7 @@ from servobus.protocols.enip.encap import (
     RegisterSessionData,
 )
 from servobus.protocols.enip.production import Producer, ProductionWheel
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.eeprom import EepromStore, StateKind, check_drive_record
 from servobus.sim.realtime import RealtimeClock
 from servobus.sim.server_limits import MAX_OUTPUT_BYTES, WRITE_HIGH_WATER

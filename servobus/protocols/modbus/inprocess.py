@@ -33,8 +33,8 @@ from servobus.protocols.modbus.client import ModbusClient
 from servobus.protocols.modbus.line import ModbusLine
 from servobus.protocols.modbus.pacing import RtuLineRunner, RtuPort
 from servobus.protocols.modbus.timing import DEFAULT_BAUD
-from servobus.sim.yzaim_fleet import FACTORY_ADDRESS, make_motors, parse_addresses
-from servobus.sim.yzaim_motor import YzaimMotor
+from servobus.sim.yzaim.fleet import FACTORY_ADDRESS, make_motors, parse_addresses
+from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.transport.base import Direction
 from servobus.transport.buffered import PushInput
 

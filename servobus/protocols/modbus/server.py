@@ -25,7 +25,7 @@ from servobus.sim.line_server import (
     serve_line,
 )
 from servobus.sim.wire import COARSE_S, FINE_COARSE_S
-from servobus.sim.yzaim_motor import YzaimMotor
+from servobus.sim.yzaim.motor import YzaimMotor
 
 WHAT = "sim modbus"  # how log lines name this server
 

@@ -19,7 +19,7 @@ from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
 from servobus.protocols.dyn232.client import Dyn232Axis
 from servobus.protocols.dyn232.server import Dyn232Server
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.transport.base import Direction
 from servobus.transport.serial_stream import SerialStream
 from servobus.transport.tcp_stream import TcpStream

@@ -9,7 +9,7 @@ from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, DriveStatus
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan.node import DynCanNetwork
-from servobus.sim.drive import CONTROL_HZ, VirtualDrive
+from servobus.sim.dmm.drive import CONTROL_HZ, VirtualDrive
 
 F = c.Function
 ERR = c.DriveErrorCode

@@ -24,7 +24,7 @@ from servobus.protocols.easycan.commands import EasyCanCommand
 from servobus.protocols.easycan.messages import ReadReply, ReadRequest, WriteRequest
 from servobus.protocols.easycan.node import EasyCanNetwork, serve
 from servobus.sim.realtime import RealtimeClock
-from servobus.sim.yzaim_motor import YzaimMotor
+from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.transport.base import Direction
 from servobus.transport.can_bus import AsyncCanBus, CanFrame, FrameTraceHook
 

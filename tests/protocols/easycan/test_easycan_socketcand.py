@@ -29,7 +29,7 @@ from servobus.protocols.easycan.messages import (
 from servobus.protocols.easycan.node import EasyCanNetwork, serve
 from servobus.sim.realtime import RealtimeClock
 from servobus.sim.socketcand_hub import SocketcandHub
-from servobus.sim.yzaim_motor import YzaimMotor
+from servobus.sim.yzaim.motor import YzaimMotor
 
 pytestmark = pytest.mark.timeout(90)
 SERVER_S = 40.0

@@ -41,7 +41,7 @@ from servobus.protocols.easycan.messages import (
     WriteReply,
 )
 from servobus.protocols.easycan.node import EasyCanNetwork
-from servobus.sim.yzaim_motor import YzaimMotor
+from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.transport.base import Direction
 from servobus.transport.can_bus import CanFrame, FrameReceiver, FrameTraceHook
 

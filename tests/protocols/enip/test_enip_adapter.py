@@ -19,7 +19,7 @@ from servobus.protocols.enip.connection_manager import ForwardOpenReply, Unconne
 from servobus.protocols.enip.epath import PortSegment
 from servobus.protocols.enip.identity import IdentityReply
 from servobus.protocols.enip.io import IoFrame, OutputImage
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 
 ORIGIN = Origin("127.0.0.1")
 UNREADABLE = dyn5.encode_udint(0x12345)

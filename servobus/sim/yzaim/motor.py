@@ -3,8 +3,8 @@
 Front ends (EasyCan nodes, the Modbus RTU line) turn frames into :meth:`YzaimMotor.read_words`,
 :meth:`write_words`, :meth:`emergency_stop`, :meth:`clear_position` and
 :meth:`write_position_cache`; registers, ranges and units are the family table's
-(servobus.families.yzaim), the physics is the shared :class:`servobus.sim.drive.VirtualDrive`
-(motor sizing in servobus.sim.yzaim_physics). Positions here are YZ-AIM counts (32,768 per
+(servobus.families.yzaim), the physics is the shared :class:`servobus.sim.dmm.drive.VirtualDrive`
+(motor sizing in servobus.sim.yzaim.physics). Positions here are YZ-AIM counts (32,768 per
 revolution), speeds rpm, currents A; time is simulated seconds (``advance``/``advance_to``,
 driven by a RealtimeClock in servers).
 
@@ -79,9 +79,9 @@ from servobus.errors import ServobusError
 from servobus.families import yzaim
 from servobus.families.base import motion_state
 from servobus.sim import capture
-from servobus.sim import yzaim_physics as phys
-from servobus.sim.drive import VirtualDrive
-from servobus.sim.yzaim_store import YzaimStore
+from servobus.sim.dmm.drive import VirtualDrive
+from servobus.sim.yzaim import physics as phys
+from servobus.sim.yzaim.store import YzaimStore
 
 TICK_S = yzaim.SYNC_CYCLE_S  # limits, alarms and the synchronous cache: every 2 ms
 STANDSTILL_RPM = 5.0

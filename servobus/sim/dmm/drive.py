@@ -53,7 +53,7 @@ Public additions beyond the DYN232M set (contract for the other front ends and t
   below the 24 V minimum input (2.5) the drive is off meanwhile and powers on afterwards).
   A powered-off drive answers nothing: front ends skip it (``powered``).
 
-Hooks for front ends of other families (YZ-AIM, servobus.sim.yzaim_motor), which keep their
+Hooks for front ends of other families (YZ-AIM, servobus.sim.yzaim.motor), which keep their
 own registers and units on top of this core:
 
 * ``model`` may be a ``MotorModel`` instance (a motor sized from another vendor's tables).
