@@ -126,3 +126,14 @@ def test_axis_holds_no_client_plumbing() -> None:
     for name in ("transaction", "late_replies", "eeprom_guard"):
         names = imports(ROOT / "axis" / f"{name}.py")
         assert names and all(n.startswith("servobus.link.") for n in names), name
+
+
+def test_old_simulator_paths_are_aliases() -> None:
+    """Issue 19 moved the virtual drives into sim/dmm/ and sim/yzaim/; the public names keep
+    their old import paths for one release (docs examples use them)."""
+    from servobus.sim import drive, yzaim_motor
+    from servobus.sim.dmm.drive import VirtualDrive
+    from servobus.sim.yzaim.motor import YzaimMotor
+
+    assert drive.VirtualDrive is VirtualDrive
+    assert yzaim_motor.YzaimMotor is YzaimMotor
