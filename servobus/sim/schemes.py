@@ -22,6 +22,7 @@ from servobus.axis.url import DriveUrl
 from servobus.errors import ArgumentRangeError
 from servobus.sim import capture
 from servobus.sim.dmm import virtual_io
+from servobus.sim.dmm.drive import VirtualDrive
 
 if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis
@@ -48,5 +49,6 @@ async def open_axis(url: DriveUrl, *, drive_id: int | None = None, **keywords: A
     if traced and axis.capture_source is None:
         axis.capture_source = capture.SimCapture(traced)  # trace_buffer(): their 4 kHz trace
     if traced and axis.io_source is None and virtual_io.has_jp3(axis.family.name):
-        axis.io_source = virtual_io.SimIoSource([t.drive for t in traced])  # their JP3 I/O
+        drives = [t.drive for t in traced if isinstance(t.drive, VirtualDrive)]
+        axis.io_source = virtual_io.SimIoSource(drives)  # their JP3 I/O
     return axis

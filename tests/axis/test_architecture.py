@@ -137,3 +137,23 @@ def test_old_simulator_paths_are_aliases() -> None:
 
     assert drive.VirtualDrive is VirtualDrive
     assert yzaim_motor.YzaimMotor is YzaimMotor
+
+
+SIM_FAMILIES = ("dmm", "yzaim")
+
+
+@pytest.mark.parametrize("family", SIM_FAMILIES)
+def test_a_simulated_family_imports_no_other(family: str) -> None:
+    """sim/dmm (the DMM drive) and sim/yzaim (the YZ-AIM motor) both sit on sim/core and
+    never reach into each other (no switching the other vendor's features off)."""
+    others = tuple(f"sim.{f}" for f in SIM_FAMILIES if f != family)
+    bad = [(path.name, name) for path in sources(ROOT / "sim" / family)
+           for name in imports(path) if above(name, others)]
+    assert bad == []
+
+
+def test_the_simulator_core_imports_no_family_simulator() -> None:
+    layers = tuple(f"sim.{f}" for f in SIM_FAMILIES)
+    bad = [(path.name, name) for path in sources(ROOT / "sim" / "core")
+           for name in imports(path) if above(name, layers)]
+    assert bad == []

@@ -53,19 +53,10 @@ Public additions beyond the DYN232M set (contract for the other front ends and t
   below the 24 V minimum input (2.5) the drive is off meanwhile and powers on afterwards).
   A powered-off drive answers nothing: front ends skip it (``powered``).
 
-Hooks for front ends of other families (YZ-AIM, servobus.sim.yzaim.motor), which keep their
-own registers and units on top of this core:
-
-* ``model`` may be a ``MotorModel`` instance (a motor sized from another vendor's tables).
-* ``set_protections(False)``: no DMM alarms (lost phase, over current, overheat, over
-  voltage); the front end models its family's own.
-* ``set_raw_profile(speed_rpm, accel_rpm_s)``: the generator's cruise speed and acceleration
-  in rpm and rpm/s instead of Max Speed / Max Accel (None, None restores those).
-* ``move_to_counts(counts, smooth=)``: absolute move to encoder counts from the origin
-  (counts of this core, 65,536 per revolution); ``halt()``: an emergency stop, the reference
-  stops where it is (servo on; the motor runs out its following error and brakes);
-  ``follow_counts(counts, seconds)``: interpolated motion without a curve (cyclic synchronous
-  position mode); ``target_counts``: where the commanded motion ends.
+``model`` may be a ``MotorModel`` instance (a motor sized from tables other than the DMM ones).
+The YZ-AIM motor does not sit on this class: it has the protocol-free core
+(:class:`servobus.sim.core.motor.Motor`) with its own registers and protections, so this
+drive has no switches for another vendor's features.
 """
 
 from __future__ import annotations
@@ -117,8 +108,6 @@ class VirtualDrive:
     ) -> None:
         self.model = model if isinstance(model, U.MotorModel) else U.MODELS[model]
         self.set_family(family)
-        self._raw_profile: tuple[float, float] | None = None
-        self._protections = True
         self.eeprom = eeprom if eeprom is not None else EepromStore()
         self.eeprom.setdefault_drive(drive_id)
         self.axis_ids = axis_ids
@@ -320,71 +309,14 @@ class VirtualDrive:
         self._apply_profile()
 
     def _max_speed_counts(self) -> float:
-        """The axis' configured top speed, counts/s (Max Speed, or the raw profile's)."""
-        if self._raw_profile is not None:
-            return U.rpm_to_counts_per_s(self._raw_profile[0])
+        """The axis' configured top speed, counts/s (Max Speed)."""
         return PR.speed_counts_per_s(self._ram["max_speed"], self._ram["gear_num"])
 
     def _apply_profile(self) -> None:
-        if self._raw_profile is not None:
-            speed, accel = self._raw_profile
-            self._engine.set_profile(U.rpm_to_counts_per_s(speed) * self._feed_scale,
-                                     U.rpm_to_counts_per_s(accel))
-            return
         g = self._ram["gear_num"]
         self._engine.set_profile(PR.speed_counts_per_s(self._ram["max_speed"], g)
                                  * self._feed_scale,
                                  PR.accel_counts_per_s2(self._ram["max_accel"], g))
-
-    # ---------------------------------------------------------------- other families' hooks
-    def set_protections(self, enabled: bool) -> None:
-        """DMM alarms on (default) or off (a front end that models its own protections)."""
-        self._protections = bool(enabled)
-        self._engine.set_protections(self._protections)
-
-    def set_raw_profile(self, speed_rpm: float | None, accel_rpm_s: float | None) -> None:
-        """Cruise speed (rpm) and acceleration (rpm/s) of every generated motion instead of
-        Max Speed / Max Accel; both None restores the parameters. Both must be > 0."""
-        if speed_rpm is None or accel_rpm_s is None:
-            self._raw_profile = None
-        else:
-            self._raw_profile = (float(speed_rpm), float(accel_rpm_s))
-        self._apply_profile()
-
-    def move_to_counts(self, counts: float, *, smooth: bool = True) -> bool:
-        """Absolute move to ``counts`` (65,536 per rev) from the origin; as move_absolute."""
-        if not self._accepts_motion():
-            return False
-        self._go(self._origin + counts, smooth=smooth)
-        return True
-
-    def halt(self) -> bool:
-        """Emergency stop: the reference stops where it is now (servo stays on)."""
-        if not self._accepts_motion():
-            return False
-        self._engine.freeze_reference()
-        return True
-
-    def follow_counts(self, counts: float, seconds: float) -> bool:
-        """Interpolated motion (a cyclic synchronous position mode): the reference moves by
-        ``counts`` evenly over ``seconds``, no curve; adds to what is left of the last one."""
-        if not self._accepts_motion():
-            return False
-        self._ptp_limits()
-        self._engine.ext_move(counts, seconds)
-        return True
-
-    @property
-    def target_counts(self) -> float:
-        """Where the commanded motion ends (counts from the origin; the reference if none)."""
-        eng = self._engine
-        if eng.ref_mode == Ref.GEN and eng.path is None:
-            end = eng.gT
-        elif eng.ref_mode == Ref.EXT:
-            end = eng.ref + eng.ext_step * eng.ext_left
-        else:
-            end = eng.ref
-        return end - self._origin
 
     # ---------------------------------------------------------------- registers
     def peek_status(self) -> DriveStatus:
@@ -868,8 +800,6 @@ class VirtualDrive:
         return self._encoder_fault
 
     def _check_faults(self) -> None:
-        if not self._protections:
-            return
         if self._engine.bus_voltage > U.OVER_VOLTAGE_V:
             self.trip(AlarmCode.OVER_VOLTAGE)
         elif self._encoder_fault:
@@ -922,7 +852,7 @@ class VirtualDrive:
         frac = (float(temperature_c) - K.AMBIENT_C) / (K.OVERHEAT_C - K.AMBIENT_C)
         eng.heat = max(0.0, frac) * eng.heat_trip
         eng.wake()
-        if frac >= 1.0 and self._protections:
+        if frac >= 1.0:
             self.trip(AlarmCode.OVERHEAT)
 
     @property

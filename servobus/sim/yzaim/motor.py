@@ -3,8 +3,9 @@
 Front ends (EasyCan nodes, the Modbus RTU line) turn frames into :meth:`YzaimMotor.read_words`,
 :meth:`write_words`, :meth:`emergency_stop`, :meth:`clear_position` and
 :meth:`write_position_cache`; registers, ranges and units are the family table's
-(servobus.families.yzaim), the physics is the shared :class:`servobus.sim.dmm.drive.VirtualDrive`
-(motor sizing in servobus.sim.yzaim.physics). Positions here are YZ-AIM counts (32,768 per
+(servobus.families.yzaim), the physics is the protocol-free
+:class:`servobus.sim.core.motor.Motor` (motor sizing in servobus.sim.yzaim.physics); the
+YZ-AIM protections are modelled here. Positions here are YZ-AIM counts (32,768 per
 revolution), speeds rpm, currents A; time is simulated seconds (``advance``/``advance_to``,
 driven by a RealtimeClock in servers).
 
@@ -79,7 +80,7 @@ from servobus.errors import ServobusError
 from servobus.families import yzaim
 from servobus.families.base import motion_state
 from servobus.sim import capture
-from servobus.sim.dmm.drive import VirtualDrive
+from servobus.sim.core.motor import Motor
 from servobus.sim.yzaim import physics as phys
 from servobus.sim.yzaim.store import YzaimStore
 
@@ -129,9 +130,8 @@ class YzaimMotor:
             if communication:
                 self.store.registers["gear_numerator"] = 0
         core = phys.core_model(self.model)
-        self.drive = VirtualDrive(0, model=core)
-        capture.note_front(self)  # sim:// traces this motor, not its core (id 0, DMM counts)
-        self.drive.set_protections(False)
+        self.drive = Motor(core)  # the motor and its position loop (engine counts)
+        capture.note_front(self)  # sim:// traces this motor (its address and counts)
         self.peak_a = core.peak_current_a
         self.refused_writes = 0  # writes not applied (range, access, modbus_enable 0)
         self.refused_cache = 0  # cache writes within one cycle (TOO_FAST)
@@ -470,19 +470,20 @@ class YzaimMotor:
         param = phys.torque_limit_param(limit, self.peak_a)
         if param != self._torque_param:
             self._torque_param = param
-            self.drive.set_param("torque_limit", param, ram_only=True)
+            self.drive.set_gains(*self.drive.gains[:4], param)
 
     def _apply_gains(self) -> None:
         r = self._ram
         gains = phys.engine_gains(r["position_loop_kp"], r["speed_loop_kp"],
                                   r["speed_loop_integration_time"])
-        for name, value in gains.items():
-            self.drive.set_param(name, value, ram_only=True)
+        _, _, _, trq, limit = self.drive.gains
+        self.drive.set_gains(gains["main_gain"], gains["speed_gain"], gains["int_gain"], trq,
+                             limit)
 
     def _apply_profile(self) -> None:
         speed, accel = phys.profile(self._ram["target_speed"], self._ram["acceleration"],
                                     self.model.max_rpm)
-        self.drive.set_raw_profile(speed, accel)
+        self.drive.set_profile(speed, accel)
 
     def _apply_mode(self) -> None:
         speed_mode = self._ram["special_function"] == yzaim.SpecialFunction.SPEED_MODE
@@ -491,18 +492,18 @@ class YzaimMotor:
             self._run_speed()
         elif self._speed_mode:
             self._speed_mode = False
-            self.drive.turn_const_speed(0)
+            self.drive.run_speed(0)
 
     def _speed_limit_rpm(self) -> int:
         return min(self._ram["target_speed"], self.model.max_rpm)
 
     def _run_speed(self) -> None:
         rpm = self._speed_limit_rpm()
-        self.drive.turn_const_speed(-rpm if self._ram["dir_polarity"] else rpm)
+        self.drive.run_speed(-rpm if self._ram["dir_polarity"] else rpm)
 
     def _move_to(self, position: int) -> None:
         core = (position - self._offset) * phys.CORE_PER_COUNT
-        self.drive.move_to_counts(core, smooth=False)
+        self.drive.move_to_counts(core)
 
     def _set_output(self, on: bool) -> None:
         if not on:
