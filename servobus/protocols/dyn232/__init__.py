@@ -18,7 +18,7 @@ SPEC = ProtocolSpec(
     serial_schemes=("", *PYSERIAL_SCHEMES),
     sim="servobus.protocols.dyn232.inprocess:open_sim_axis",
     sim_aliases=("dyn2", "dc2", "dyn4"),
-    cli="servobus.protocols.dyn232.sim_cmd:register",
+    cli="servobus.protocols.dyn232.cli:register",
     decoder="servobus.protocols.dyn232.sniff:DECODER",
     params="servobus.protocols.dyn232.commands:REACHABLE_PARAMS",
 )

@@ -21,7 +21,7 @@ SPEC = ProtocolSpec(
     opener="servobus.protocols.easycan.opener:open_axis",
     schemes=("easycan",),
     sim="servobus.protocols.easycan.inprocess:open_sim_axis",
-    cli="servobus.protocols.easycan.sim_cmd:register",
+    cli="servobus.protocols.easycan.cli:register",
     decoder="servobus.protocols.easycan.sniff:DECODER",
     params="servobus.protocols.easycan.commands:REACHABLE_PARAMS",
 )
