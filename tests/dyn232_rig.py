@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 
 from servobus.protocols.dyn232.client import AsyncDyn232Client, Dyn232Axis
-from servobus.protocols.dyn232.line import Dyn232Line
+from servobus.protocols.dyn232.device import Dyn232Line
 from servobus.sim.dmm.drive import VirtualDrive
 from servobus.transport.base import Direction
 from servobus.transport.pair import Manipulator, PairStream, open_pair

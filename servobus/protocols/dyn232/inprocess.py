@@ -27,7 +27,7 @@ from servobus.axis.url import DriveUrl, merge_options
 from servobus.errors import ArgumentRangeError
 from servobus.families.dmm import units as U
 from servobus.protocols.dyn232 import codec as c
-from servobus.protocols.dyn232.line import Dyn232Line
+from servobus.protocols.dyn232.device import Dyn232Line
 from servobus.protocols.dyn232.pacing import HostPort, LineRunner
 from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.fleet import make_drives, parse_ids

@@ -17,7 +17,7 @@ from servobus.families.dmm import units as U
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan.client import DynCanAxis, open_can_client
 from servobus.protocols.dyncan.commands import check_drive_id
-from servobus.protocols.dyncan.node import DynCanNetwork, serve
+from servobus.protocols.dyncan.device import DynCanNetwork, serve
 from servobus.sim.fleet import make_drives, parse_ids
 from servobus.sim.realtime import RealtimeClock
 from servobus.transport.can_bus import AsyncCanBus, BitTiming

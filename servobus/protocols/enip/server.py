@@ -50,7 +50,6 @@ from servobus.errors import ArgumentRangeError, FramingError
 from servobus.families import dyn5
 from servobus.families.dyn5 import Identity
 from servobus.protocols.enip import discovery, io
-from servobus.protocols.enip.adapter import Dyn5Adapter, Origin, Outcome
 from servobus.protocols.enip.connections import IoConnection
 from servobus.protocols.enip.cpf import (
     RRData,
@@ -59,6 +58,7 @@ from servobus.protocols.enip.cpf import (
     plain_rr_data,
     unconnected_message,
 )
+from servobus.protocols.enip.device import Dyn5Adapter, Origin, Outcome
 from servobus.protocols.enip.encap import (
     MAX_DATA,
     TCP_PORT,

@@ -30,7 +30,7 @@ from servobus.errors import ConnectionLost
 from servobus.families import yzaim as Y
 from servobus.protocols.modbus.axis import ModbusAxis, check_address
 from servobus.protocols.modbus.client import ModbusClient
-from servobus.protocols.modbus.line import ModbusLine
+from servobus.protocols.modbus.device import ModbusLine
 from servobus.protocols.modbus.pacing import RtuLineRunner, RtuPort
 from servobus.protocols.modbus.timing import DEFAULT_BAUD
 from servobus.sim.yzaim.fleet import FACTORY_ADDRESS, make_motors, parse_addresses

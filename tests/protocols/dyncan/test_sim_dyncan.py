@@ -8,7 +8,7 @@ from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, DriveStatus
 from servobus.protocols.dyncan import codec as c
-from servobus.protocols.dyncan.node import DynCanNetwork
+from servobus.protocols.dyncan.device import DynCanNetwork
 from servobus.sim.dmm.drive import CONTROL_HZ, VirtualDrive
 
 F = c.Function

@@ -30,6 +30,7 @@ from servobus.protocols.dyncan import commands as dyncan_cmds
 from servobus.protocols.easycan import codec
 from servobus.protocols.easycan import commands as cmds
 from servobus.protocols.easycan.client import AsyncEasyCanClient
+from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.functions import ErrorCode, Function
 from servobus.protocols.easycan.messages import (
     ErrorReply,
@@ -40,7 +41,6 @@ from servobus.protocols.easycan.messages import (
     Request,
     WriteReply,
 )
-from servobus.protocols.easycan.node import EasyCanNetwork
 from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.transport.base import Direction
 from servobus.transport.can_bus import CanFrame, FrameReceiver, FrameTraceHook

@@ -1,6 +1,6 @@
 """DYN CAN front end: virtual nodes on one CAN bus (DYN CAN specification section 6).
 
-Pure-ish like :mod:`servobus.protocols.dyn232.line`: ``DynCanNetwork.handle(frame)`` executes one
+Pure-ish like :mod:`servobus.protocols.dyn232.device`: ``DynCanNetwork.handle(frame)`` executes one
 host frame on every node it addresses and returns the frames the nodes send back; the
 caller advances the drives' time first. :func:`serve` runs a network on any FramePort
 (a python-can bus, the socketcand hub) in wall-clock time.
