@@ -17,7 +17,8 @@ from typing import Any
 
 import pytest
 
-from servobus.protocols.dyn232.client import AsyncDyn232Client, Dyn232Axis
+from servobus.protocols.dyn232.axis import Dyn232Axis
+from servobus.protocols.dyn232.client import AsyncDyn232Client
 from servobus.protocols.dyn232.device import Dyn232Line
 from servobus.sim.dmm.drive import VirtualDrive
 from servobus.transport.base import Direction

@@ -14,7 +14,8 @@ from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from typing import Any
 
-from servobus.protocols.dyncan.client import AsyncDynCanClient, DynCanAxis, open_can_client
+from servobus.protocols.dyncan.axis import DynCanAxis
+from servobus.protocols.dyncan.client import AsyncDynCanClient, open_can_client
 from servobus.protocols.dyncan.device import DynCanNetwork, serve
 from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.realtime import RealtimeClock

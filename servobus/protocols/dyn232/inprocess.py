@@ -175,7 +175,8 @@ async def open_sim_axis(url: DriveUrl, *, drive_id: int | None = None,
     Without ``ids`` the line holds one drive with the id asked for (the factory id 0 when
     none is), so ``connect("sim://dyn232", drive_id=3)`` just works.
     """
-    from servobus.protocols.dyn232.client import AsyncDyn232Client, Dyn232Axis
+    from servobus.protocols.dyn232.axis import Dyn232Axis
+    from servobus.protocols.dyn232.client import AsyncDyn232Client
     from servobus.protocols.dyn232.commands import check_drive_id
 
     options = merge_options(url, dict(keywords), SIM_OPTIONS)

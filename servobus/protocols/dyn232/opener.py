@@ -16,7 +16,8 @@ from typing import Any
 from servobus.axis.url import DriveUrl, merge_options
 from servobus.errors import ArgumentRangeError
 from servobus.protocols.dyn232 import codec as c
-from servobus.protocols.dyn232.client import AsyncDyn232Client, Dyn232Axis
+from servobus.protocols.dyn232.axis import Dyn232Axis
+from servobus.protocols.dyn232.client import AsyncDyn232Client
 from servobus.protocols.dyn232.commands import check_drive_id
 from servobus.transport.base import ByteStream
 

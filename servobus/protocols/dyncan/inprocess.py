@@ -15,7 +15,8 @@ from servobus.axis.url import DriveUrl, merge_options
 from servobus.errors import ArgumentRangeError
 from servobus.families.dmm import units as U
 from servobus.protocols.dyncan import codec as c
-from servobus.protocols.dyncan.client import DynCanAxis, open_can_client
+from servobus.protocols.dyncan.axis import DynCanAxis
+from servobus.protocols.dyncan.client import open_can_client
 from servobus.protocols.dyncan.commands import check_drive_id
 from servobus.protocols.dyncan.device import DynCanNetwork, serve
 from servobus.sim.fleet import make_drives, parse_ids
