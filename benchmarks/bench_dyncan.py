@@ -24,7 +24,8 @@ from benchmarks.verdict import mark, percent, summary
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan.axis import DynCanAxis
 from servobus.protocols.dyncan.client import open_can_client
-from servobus.protocols.dyncan.device import DynCanNetwork, serve
+from servobus.protocols.dyncan.device import DynCanNetwork
+from servobus.protocols.dyncan.server import serve
 from servobus.sim.dmm.drive import VirtualDrive
 from servobus.transport.can_bus import AsyncCanBus, BitTiming
 

@@ -35,9 +35,10 @@ from servobus.protocols.easycan import codec
 from servobus.protocols.easycan import commands as cmds
 from servobus.protocols.easycan.axis import EasyCanAxis
 from servobus.protocols.easycan.client import AsyncEasyCanClient, open_easycan_client
-from servobus.protocols.easycan.device import EasyCanNetwork, serve
+from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.functions import BITRATE, POSITION_BYTES
 from servobus.protocols.easycan.messages import ReadRequest
+from servobus.protocols.easycan.server import serve
 from servobus.protocols.easycan.sync import SyncGroup
 from servobus.sim.realtime import RealtimeClock
 from servobus.sim.yzaim.motor import YzaimMotor

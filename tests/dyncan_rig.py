@@ -1,6 +1,6 @@
 """Test rig (not a test module): a DYN CAN client and virtual nodes on python-can's virtual bus.
 
-Each harness gets its own virtual channel; the nodes run ``servobus.protocols.dyncan.device.serve``
+Each harness gets its own virtual channel; the nodes run ``servobus.protocols.dyncan.server.serve``
 on the loop, in stepped time unless ``realtime=True``.
 """
 
@@ -16,7 +16,8 @@ from typing import Any
 
 from servobus.protocols.dyncan.axis import DynCanAxis
 from servobus.protocols.dyncan.client import AsyncDynCanClient, open_can_client
-from servobus.protocols.dyncan.device import DynCanNetwork, serve
+from servobus.protocols.dyncan.device import DynCanNetwork
+from servobus.protocols.dyncan.server import serve
 from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.realtime import RealtimeClock
 from servobus.transport.can_bus import AsyncCanBus

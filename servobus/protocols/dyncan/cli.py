@@ -28,7 +28,8 @@ from servobus.cli.sim_cmd import (
 from servobus.cli.sim_control import control_option, start_control
 from servobus.families.dmm import units as U
 from servobus.protocols.dyncan import codec as c
-from servobus.protocols.dyncan.device import DynCanNetwork, serve
+from servobus.protocols.dyncan.device import DynCanNetwork
+from servobus.protocols.dyncan.server import serve
 from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.fleet import make_drives, parse_ids
 from servobus.sim.realtime import RealtimeClock

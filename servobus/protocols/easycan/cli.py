@@ -25,8 +25,9 @@ from servobus.cli.sim_cmd import (
     sim_options,
 )
 from servobus.families import yzaim
-from servobus.protocols.easycan.device import EasyCanNetwork, serve
+from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.functions import BITRATE
+from servobus.protocols.easycan.server import serve
 from servobus.sim.realtime import RealtimeClock
 from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS, fit_fd_limit, log_to_stderr
 from servobus.sim.socketcand_bus import socketcand_bus

@@ -21,8 +21,9 @@ from servobus.protocols.easycan import commands as cmds
 from servobus.protocols.easycan.axis import EasyCanAxis
 from servobus.protocols.easycan.client import AsyncEasyCanClient
 from servobus.protocols.easycan.commands import EasyCanCommand
-from servobus.protocols.easycan.device import EasyCanNetwork, serve
+from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.messages import ReadReply, ReadRequest, WriteRequest
+from servobus.protocols.easycan.server import serve
 from servobus.sim.realtime import RealtimeClock
 from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.transport.base import Direction

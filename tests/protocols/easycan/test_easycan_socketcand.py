@@ -20,13 +20,14 @@ from sim_abuse_rig import can_session, readable
 from servobus.axis import connect
 from servobus.families import yzaim as Y
 from servobus.protocols.easycan import codec
-from servobus.protocols.easycan.device import EasyCanNetwork, serve
+from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.messages import (
     ErrorReply,
     PositionReply,
     ReadReply,
     ReadRequest,
 )
+from servobus.protocols.easycan.server import serve
 from servobus.sim.realtime import RealtimeClock
 from servobus.sim.socketcand_hub import SocketcandHub
 from servobus.sim.yzaim.motor import YzaimMotor

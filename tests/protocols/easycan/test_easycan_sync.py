@@ -13,7 +13,8 @@ import pytest
 from servobus.errors import ArgumentRangeError
 from servobus.families import yzaim as Y
 from servobus.protocols.easycan.client import AsyncEasyCanClient
-from servobus.protocols.easycan.device import EasyCanNetwork, serve
+from servobus.protocols.easycan.device import EasyCanNetwork
+from servobus.protocols.easycan.server import serve
 from servobus.protocols.easycan.sync import SyncGroup
 from servobus.sim.realtime import RealtimeClock
 from servobus.sim.yzaim.motor import YzaimMotor
