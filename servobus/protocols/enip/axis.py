@@ -53,10 +53,10 @@ from servobus.families.dmm.family import command_to_counts, counts_to_command
 from servobus.families.dyn5 import Instance
 from servobus.families.dyn5_family import DYN5, PARAM_INSTANCES, Dyn5Status, axis_status
 from servobus.link.transaction import DEFAULT_RETRIES
-from servobus.protocols.enip.cip import ClassCode
 from servobus.protocols.enip.client import CONNECT_TIMEOUT_S, DEFAULT_TIMEOUT_S, AsyncEnipClient
-from servobus.protocols.enip.encap import TCP_PORT
-from servobus.protocols.enip.identity import IdentityReply
+from servobus.protocols.enip.codec.cip import ClassCode
+from servobus.protocols.enip.codec.encap import TCP_PORT
+from servobus.protocols.enip.codec.identity import IdentityReply
 
 if TYPE_CHECKING:
     from servobus.protocols.enip.scanner import CyclicIo, InputFrame

@@ -33,8 +33,8 @@ from servobus.cli.sim_control import control_option, start_control
 from servobus.errors import ArgumentRangeError, NotSupported, ServobusError
 from servobus.families import dyn5
 from servobus.families.dmm import units as U
-from servobus.protocols.enip import io
-from servobus.protocols.enip.encap import TCP_PORT
+from servobus.protocols.enip.codec import io
+from servobus.protocols.enip.codec.encap import TCP_PORT
 from servobus.sim.fine_selector import fine_event_loop
 
 if TYPE_CHECKING:

@@ -48,15 +48,15 @@ from servobus.errors import (
 )
 from servobus.link.stats import TransactionStats
 from servobus.link.transaction import DEFAULT_RETRIES, TransactionManager
-from servobus.protocols.enip import discovery, epath
-from servobus.protocols.enip.cip import (
+from servobus.protocols.enip.codec import discovery, epath
+from servobus.protocols.enip.codec.cip import (
     GeneralStatus,
     MessageRouterRequest,
     MessageRouterResponse,
     Service,
     request_target,
 )
-from servobus.protocols.enip.cpf import (
+from servobus.protocols.enip.codec.cpf import (
     CpfItem,
     RRData,
     UnconnectedMessage,
@@ -64,7 +64,7 @@ from servobus.protocols.enip.cpf import (
     unconnected,
     unconnected_message,
 )
-from servobus.protocols.enip.encap import (
+from servobus.protocols.enip.codec.encap import (
     HEADER,
     TCP_PORT,
     Command,

@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 from servobus.errors import FramingError
 from servobus.families import dyn5
-from servobus.protocols.enip.cip import (
+from servobus.protocols.enip.client import describe, status_text
+from servobus.protocols.enip.codec.cip import (
     REPLY_FLAG,
     ClassCode,
     MessageRouterRequest,
@@ -25,9 +26,8 @@ from servobus.protocols.enip.cip import (
     Service,
     request_target,
 )
-from servobus.protocols.enip.client import describe, status_text
-from servobus.protocols.enip.cpf import unconnected_message
-from servobus.protocols.enip.encap import (
+from servobus.protocols.enip.codec.cpf import unconnected_message
+from servobus.protocols.enip.codec.encap import (
     Command,
     EncapFramer,
     EncapPacket,

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 from servobus.errors import FramingError
 from servobus.families import dyn5
-from servobus.protocols.enip import cpf
-from servobus.protocols.enip.cpf import CpfItem, ItemType, SequencedAddress
+from servobus.protocols.enip.codec import cpf
+from servobus.protocols.enip.codec.cpf import CpfItem, ItemType, SequencedAddress
 
 _INPUT = struct.Struct("<iiiI")
 _OUTPUT = struct.Struct("<II")  # run/idle header, command word

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 from servobus.errors import FramingError
 from servobus.families.dyn5 import Identity
-from servobus.protocols.enip.discovery import decode_short_string, encode_short_string
+from servobus.protocols.enip.codec.discovery import decode_short_string, encode_short_string
 
 INSTANCE_ATTRIBUTES = (1, 2, 3, 4, 5, 6, 7)
 CLASS_ATTRIBUTES = {1: 1, 2: 1, 3: 1, 6: 7, 7: 7}
