@@ -157,3 +157,53 @@ def test_the_simulator_core_imports_no_family_simulator() -> None:
     bad = [(path.name, name) for path in sources(ROOT / "sim" / "core")
            for name in imports(path) if above(name, layers)]
     assert bad == []
+
+
+#: One file-name scheme in every protocol package (issue 19), host and device side visible
+#: by name: codec (a module or a package of pure wire formats), commands (pure request
+#: builders), client (the transaction-level client only), axis (the Axis class), opener (URL
+#: -> Axis), device (the virtual-drive front end), server, cli, sniff.
+PROTOCOL_MODULES = ("codec", "commands", "client", "axis", "opener", "device", "server", "cli",
+                    "sniff")
+
+
+@pytest.mark.parametrize("protocol", protocols())
+def test_every_protocol_package_has_the_same_module_names(protocol: str) -> None:
+    package = ROOT / "protocols" / protocol
+    missing = [m for m in PROTOCOL_MODULES if not (package / f"{m}.py").is_file()
+               and not (package / m / "__init__.py").is_file()]
+    assert missing == []
+
+
+def defines_an_axis(path: Path) -> list[str]:
+    """Classes in ``path`` deriving AsyncAxis or one of its servobus subclasses (by name:
+    ``...Axis`` bases, CommandAxis, RegisterAxis)."""
+    found: list[str] = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ClassDef):
+            for base in node.bases:
+                target = base.value if isinstance(base, ast.Subscript) else base
+                name = target.attr if isinstance(target, ast.Attribute) else \
+                    target.id if isinstance(target, ast.Name) else ""
+                if name.endswith("Axis"):
+                    found.append(node.name)
+    return found
+
+
+@pytest.mark.parametrize("protocol", protocols())
+def test_no_axis_class_lives_in_a_client_module(protocol: str) -> None:
+    client = ROOT / "protocols" / protocol / "client.py"
+    assert defines_an_axis(client) == []
+    assert defines_an_axis(ROOT / "protocols" / protocol / "axis.py") != []  # the rule bites
+
+
+def test_moved_axis_classes_keep_their_old_path() -> None:
+    """One-release aliases (issue 19): the Axis classes left dyn232/dyncan client.py."""
+    from servobus.protocols.dyn232 import axis as dyn232_axis
+    from servobus.protocols.dyn232 import client as dyn232_client
+    from servobus.protocols.dyncan import axis as dyncan_axis
+    from servobus.protocols.dyncan import client as dyncan_client
+
+    assert dyn232_client.Dyn232Axis is dyn232_axis.Dyn232Axis
+    assert dyncan_client.DynCanAxis is dyncan_axis.DynCanAxis
+    assert dyncan_client.open_can_axis is dyncan_axis.open_can_axis
