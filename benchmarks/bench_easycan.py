@@ -30,7 +30,7 @@ from contextlib import contextmanager
 import can
 
 from benchmarks.verdict import mark, percent, summary
-from servobus.families import yzaim
+from servobus.families.yzaim import registers as yzaim
 from servobus.protocols.easycan import codec
 from servobus.protocols.easycan import commands as cmds
 from servobus.protocols.easycan.axis import EasyCanAxis

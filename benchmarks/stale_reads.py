@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from servobus.errors import ServobusError
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232.axis import Dyn232Axis
 from servobus.protocols.dyn232.client import AsyncDyn232Client

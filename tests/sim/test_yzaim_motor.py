@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.sim.yzaim import physics as phys
 from servobus.sim.yzaim.motor import MotorRefused, Refusal, YzaimMotor
 from servobus.sim.yzaim.store import YzaimStore

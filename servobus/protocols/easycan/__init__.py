@@ -5,7 +5,7 @@
 directions, ``describe`` one line per frame for decode/sniff, ``commands`` the host's pure
 commands, ``client``/``axis`` the host side, ``node`` the virtual motors' side, ``sync``
 synchronised multi-axis motion. Registers, ranges and units are the YZ-AIM family's
-(servobus.families.yzaim). This module only declares the registry tables (nothing heavy is
+(servobus.families.yzaim.registers). This module only declares the registry tables (nothing heavy is
 imported: docs/architecture.md).
 
 URLs: ``easycan+<python-can interface>://<channel>``, e.g. ``easycan+pcan://PCAN_USBBUS1``,

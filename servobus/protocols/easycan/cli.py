@@ -24,7 +24,7 @@ from servobus.cli.sim_cmd import (
     sim_banner,
     sim_options,
 )
-from servobus.families import yzaim
+from servobus.families.yzaim import registers as yzaim
 from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.functions import BITRATE
 from servobus.protocols.easycan.server import serve

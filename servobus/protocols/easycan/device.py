@@ -31,7 +31,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from servobus.errors import FramingError
-from servobus.families import yzaim
+from servobus.families.yzaim import registers as yzaim
 from servobus.protocols.easycan import codec
 from servobus.protocols.easycan.functions import (
     CACHE_ERROR_FUNCTION,

@@ -16,7 +16,7 @@ import itertools
 from typing import Any
 
 from servobus.axis.url import DriveUrl, merge_options
-from servobus.families import yzaim
+from servobus.families.yzaim import registers as yzaim
 from servobus.protocols.easycan import commands as cmds
 from servobus.protocols.easycan.axis import EasyCanAxis
 from servobus.protocols.easycan.client import open_easycan_client

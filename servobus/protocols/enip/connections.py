@@ -39,8 +39,8 @@ import random
 from dataclasses import dataclass
 
 from servobus.errors import FramingError
-from servobus.families import dyn5
-from servobus.families.dyn5 import Identity
+from servobus.families.dyn5 import params as dyn5
+from servobus.families.dyn5.params import Identity
 from servobus.protocols.enip.codec import io
 from servobus.protocols.enip.codec.connection_manager import (
     ConnectionType,

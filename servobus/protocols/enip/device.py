@@ -28,9 +28,9 @@ import logging
 from dataclasses import dataclass
 
 from servobus.errors import FramingError
-from servobus.families import dyn5
 from servobus.families.dmm import units as U
-from servobus.families.dyn5 import Identity
+from servobus.families.dyn5 import params as dyn5
+from servobus.families.dyn5.params import Identity
 from servobus.protocols.enip.codec import connection_manager as cm
 from servobus.protocols.enip.codec import identity as ident
 from servobus.protocols.enip.codec import io

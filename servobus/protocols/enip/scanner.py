@@ -58,9 +58,9 @@ from servobus.errors import (
     FramingError,
     ProtocolError,
 )
-from servobus.families import dyn5
 from servobus.families.base import AxisStatus
-from servobus.families.dyn5_family import axis_status
+from servobus.families.dyn5 import params as dyn5
+from servobus.families.dyn5.family import axis_status
 from servobus.protocols.enip.codec import io
 from servobus.protocols.enip.codec.cip import GeneralStatus, MessageRouterRequest, Service
 from servobus.protocols.enip.codec.connection_manager import (

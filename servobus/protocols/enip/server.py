@@ -47,8 +47,8 @@ from dataclasses import dataclass
 from typing import Any, cast
 
 from servobus.errors import ArgumentRangeError, FramingError
-from servobus.families import dyn5
-from servobus.families.dyn5 import Identity
+from servobus.families.dyn5 import params as dyn5
+from servobus.families.dyn5.params import Identity
 from servobus.protocols.enip.codec import discovery, io
 from servobus.protocols.enip.codec.cpf import (
     RRData,

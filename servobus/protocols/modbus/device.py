@@ -35,7 +35,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from servobus.errors import ProtocolError
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.protocols.modbus import codec as C
 from servobus.sim.yzaim.motor import MotorRefused, Refusal, YzaimMotor
 

@@ -3,7 +3,7 @@
 Front ends (EasyCan nodes, the Modbus RTU line) turn frames into :meth:`YzaimMotor.read_words`,
 :meth:`write_words`, :meth:`emergency_stop`, :meth:`clear_position` and
 :meth:`write_position_cache`; registers, ranges and units are the family table's
-(servobus.families.yzaim), the physics is the protocol-free
+(servobus.families.yzaim.registers), the physics is the protocol-free
 :class:`servobus.sim.core.motor.Motor` (motor sizing in servobus.sim.yzaim.physics); the
 YZ-AIM protections are modelled here. Positions here are YZ-AIM counts (32,768 per
 revolution), speeds rpm, currents A; time is simulated seconds (``advance``/``advance_to``,
@@ -77,8 +77,8 @@ from enum import IntEnum
 
 from servobus.axis.capture import status_bits
 from servobus.errors import ServobusError
-from servobus.families import yzaim
 from servobus.families.base import motion_state
+from servobus.families.yzaim import registers as yzaim
 from servobus.sim import capture
 from servobus.sim.core.motor import Motor
 from servobus.sim.yzaim import physics as phys
@@ -605,7 +605,7 @@ class YzaimMotor:
 
     def trace_sample(self) -> tuple[float, float, float, float, int]:
         """Position, following error (counts), speed, current, status bits; the status bits
-        as the Axis reads them (servobus.families.yzaim_family.axis_status)."""
+        as the Axis reads them (servobus.families.yzaim.family.axis_status)."""
         drive = self.drive
         position = drive.position / phys.CORE_PER_COUNT + self._offset
         speed = drive.speed_rpm

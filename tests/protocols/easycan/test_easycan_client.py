@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import pytest
 
 from servobus.errors import ArgumentRangeError, ConnectionLost, DriveError, DriveTimeout
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.protocols.easycan import codec
 from servobus.protocols.easycan import commands as cmds
 from servobus.protocols.easycan.axis import EasyCanAxis

@@ -18,7 +18,7 @@ import pytest
 from sim_abuse_rig import can_session, readable
 
 from servobus.axis import connect
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.protocols.easycan import codec
 from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.messages import (

@@ -11,7 +11,7 @@ from contextlib import asynccontextmanager
 import pytest
 
 from servobus.errors import ArgumentRangeError
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.protocols.easycan.client import AsyncEasyCanClient
 from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.server import serve

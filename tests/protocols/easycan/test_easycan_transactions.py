@@ -23,7 +23,7 @@ from servobus.errors import (
     DriveTimeout,
     EepromGuardError,
 )
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.link.eeprom_guard import EepromGuard
 from servobus.link.transaction import TransactionStats
 from servobus.protocols.dyncan import commands as dyncan_cmds

@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from servobus.families import dyn5
 from servobus.families.dmm import profile as PR
+from servobus.families.dyn5 import params as dyn5
 from servobus.protocols.enip.codec import epath
 from servobus.protocols.enip.codec.cip import MessageRouterRequest, MessageRouterResponse
 from servobus.protocols.enip.codec.connection_manager import (

@@ -14,7 +14,7 @@ import pytest
 from enip_rig import adapters
 
 from servobus.errors import ConnectionLost, DriveError, DriveTimeout, ProtocolError
-from servobus.families import dyn5
+from servobus.families.dyn5 import params as dyn5
 from servobus.protocols.enip.client import AsyncEnipClient
 from servobus.protocols.enip.codec.cip import MessageRouterRequest, MessageRouterResponse
 from servobus.protocols.enip.codec.cpf import RRData, UnconnectedMessage

@@ -9,7 +9,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from servobus.errors import FramingError, ProtocolError
-from servobus.families import dyn5
+from servobus.families.dyn5 import params as dyn5
 from servobus.protocols.enip.codec import cpf, discovery, epath
 from servobus.protocols.enip.codec import identity as ident
 from servobus.protocols.enip.codec.cip import (

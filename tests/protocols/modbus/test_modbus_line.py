@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.protocols.modbus import codec as C
 from servobus.protocols.modbus.crc import with_crc
 from servobus.protocols.modbus.device import ModbusLine

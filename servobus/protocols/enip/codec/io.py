@@ -16,7 +16,7 @@ import struct
 from dataclasses import dataclass
 
 from servobus.errors import FramingError
-from servobus.families import dyn5
+from servobus.families.dyn5 import params as dyn5
 from servobus.protocols.enip.codec import cpf
 from servobus.protocols.enip.codec.cpf import CpfItem, ItemType, SequencedAddress
 

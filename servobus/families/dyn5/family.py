@@ -1,6 +1,6 @@
 """The DMM DYN5 (EtherNet/IP option) as the vendor-neutral Axis sees it (docs/enip.md).
 
-Built on the one instance table, :mod:`servobus.families.dyn5` (DYN5 EtherNet/IP
+Built on the one instance table, :mod:`servobus.families.dyn5.params` (DYN5 EtherNet/IP
 Specification 1.1A, sections 4.3/4.4). What this module adds:
 
 * **Parameters** in the Axis's names: the drive parameters keep the names the other DMM
@@ -29,12 +29,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from servobus.families import dyn5
 from servobus.families.base import AxisStatus, Family, ParamInfo, Storage, motion_state
 from servobus.families.dmm import params as dmm_params
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import ALARM_SHIFT, AlarmCode, StatusBits
-from servobus.families.dyn5 import Instance, Kind
+from servobus.families.dyn5 import params as dyn5
+from servobus.families.dyn5.params import Instance, Kind
 
 NAME = "dmm-dyn5"
 

@@ -1,6 +1,6 @@
 """YZ-AIM integrated servos as the vendor-neutral Axis sees them (docs/yzaim.md).
 
-Built on the one register table, :mod:`servobus.families.yzaim` (YZ-AIM EasyCan v3.5
+Built on the one register table, :mod:`servobus.families.yzaim.registers` (YZ-AIM EasyCan v3.5
 manual, 5.2). What this module adds:
 
 * **Parameters**: the settings among the registers, under the table's snake_case names
@@ -27,8 +27,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from servobus.families import yzaim
 from servobus.families.base import AxisStatus, Family, ParamInfo, Storage, motion_state
+from servobus.families.yzaim import registers as yzaim
 
 NAME = yzaim.FAMILY
 #: Registers that are Axis calls or motion rather than settings (module docstring).
