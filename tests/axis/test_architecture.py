@@ -207,3 +207,21 @@ def test_moved_axis_classes_keep_their_old_path() -> None:
     assert dyn232_client.Dyn232Axis is dyn232_axis.Dyn232Axis
     assert dyncan_client.DynCanAxis is dyncan_axis.DynCanAxis
     assert dyncan_client.open_can_axis is dyncan_axis.open_can_axis
+
+
+def test_old_family_paths_are_aliases() -> None:
+    """Issue 19 made every family a package; the old flat modules stay one release."""
+    from servobus.families import dyn5, dyn5_family, yzaim, yzaim_family
+    from servobus.families.dyn5 import family as dyn5_new
+    from servobus.families.dyn5 import params
+    from servobus.families.yzaim import family as yzaim_new
+    from servobus.families.yzaim import registers
+
+    assert dyn5_family.DYN5 is dyn5_new.DYN5 and yzaim_family.YZAIM is yzaim_new.YZAIM
+    assert dyn5.INSTANCES is params.INSTANCES and yzaim.REGISTERS is registers.REGISTERS
+
+
+def test_every_family_is_a_package_with_a_family_module() -> None:
+    packages = [p for p in (ROOT / "families").iterdir() if (p / "__init__.py").is_file()]
+    assert {p.name for p in packages} == {"dmm", "dyn5", "yzaim"}
+    assert all((p / "family.py").is_file() for p in packages)
