@@ -15,13 +15,4 @@ runs virtual YZ-AIM motors on an in-process python-can virtual bus (docs/easycan
 
 from servobus.protocols import ProtocolSpec
 
-SPEC = ProtocolSpec(
-    name="easycan",
-    family="yzaim",
-    opener="servobus.protocols.easycan.opener:open_axis",
-    schemes=("easycan",),
-    sim="servobus.protocols.easycan.inprocess:open_sim_axis",
-    cli="servobus.protocols.easycan.cli:register",
-    decoder="servobus.protocols.easycan.sniff:DECODER",
-    params="servobus.protocols.easycan.commands:REACHABLE_PARAMS",
-)
+SPEC = ProtocolSpec.conventional("easycan", "yzaim")

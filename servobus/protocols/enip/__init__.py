@@ -9,13 +9,5 @@ Identity values, quirks) is ``servobus.families.dyn5.params``.
 
 from servobus.protocols import ProtocolSpec
 
-SPEC = ProtocolSpec(
-    name="enip",
-    family="dmm-dyn5",
-    opener="servobus.protocols.enip.opener:open_axis",
-    schemes=("enip",),
-    sim="servobus.protocols.enip.inprocess:open_sim_axis",
-    cli="servobus.protocols.enip.cli:register",
-    decoder="servobus.protocols.enip.sniff:DECODER",
-    params="servobus.families.dyn5.family:PARAM_NAMES",
-)
+SPEC = ProtocolSpec.conventional("enip", "dmm-dyn5",
+                                  params="servobus.families.dyn5.family:PARAM_NAMES")

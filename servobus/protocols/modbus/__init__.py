@@ -12,13 +12,5 @@ URLs: ``modbus:///dev/ttyUSB0?baud=19200``, ``modbus:COM3``, ``modbus+socket://H
 
 from servobus.protocols import ProtocolSpec
 
-SPEC = ProtocolSpec(
-    name="modbus",
-    family="yzaim",
-    opener="servobus.protocols.modbus.opener:open_axis",
-    schemes=("modbus",),
-    sim="servobus.protocols.modbus.inprocess:open_sim_axis",
-    cli="servobus.protocols.modbus.cli:register",
-    decoder="servobus.protocols.modbus.sniff:DECODER",
-    params="servobus.protocols.modbus.params:REACHABLE_PARAMS",
-)
+SPEC = ProtocolSpec.conventional("modbus", "yzaim",
+                                  params="servobus.protocols.modbus.params:REACHABLE_PARAMS")
