@@ -8,6 +8,7 @@ import contextlib
 
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan.device import DynCanNetwork
+from servobus.sim.can_requests import requests
 from servobus.sim.realtime import RealtimeClock
 from servobus.transport.can_bus import FramePort
 
@@ -33,13 +34,7 @@ async def serve(network: DynCanNetwork, port: FramePort, *,
 
     pusher = asyncio.get_running_loop().create_task(pump_outbox())
     try:
-        while not stop.is_set():
-            try:
-                raw = await port.recv(0.1)
-            except ConnectionError:
-                break
-            if raw is None or raw.is_extended_id:
-                continue
+        async for raw in requests(port, stop):
             if clock is not None:
                 clock.sync()
             for frame in network.handle_raw(raw.arbitration_id, raw.data):

@@ -7,6 +7,7 @@ import asyncio
 import time
 
 from servobus.protocols.easycan.device import EasyCanNetwork
+from servobus.sim.can_requests import requests
 from servobus.sim.realtime import RealtimeClock
 from servobus.transport.can_bus import CanFrame, FramePort
 
@@ -35,13 +36,7 @@ async def serve(network: EasyCanNetwork, port: FramePort, *,
     if clock is not None:
         clock.start()
     try:
-        while not stop.is_set():
-            try:
-                raw = await port.recv(0.1)
-            except ConnectionError:
-                break
-            if raw is None or raw.is_extended_id:
-                continue
+        async for raw in requests(port, stop):
             now = None if clock is None else clock.sim_time(arrival(raw))
             for arbitration_id, data in network.handle_raw(raw.arbitration_id, raw.data, now):
                 await port.send(arbitration_id, data)
