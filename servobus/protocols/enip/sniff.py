@@ -34,7 +34,7 @@ from servobus.protocols.enip.codec.encap import (
     EncapReject,
     EncapStatus,
 )
-from servobus.sniff import BYTES, ErrorEvent
+from servobus.sniff import ByteDecoder, ErrorEvent
 
 MAX_REMEMBERED = 64  # outstanding requests whose replies can be named
 
@@ -167,17 +167,4 @@ class EnipStreamDecoder:
         return []
 
 
-class EnipDecoder:
-    """The EtherNet/IP entry of ``DECODERS``: a TCP capture of encapsulation packets."""
-
-    name = "enip"
-    medium = BYTES
-
-    def stream(self) -> EnipStreamDecoder:
-        return EnipStreamDecoder()
-
-    def frame(self, arbitration_id: int, data: bytes) -> ErrorEvent:
-        return ErrorEvent("frame", "EtherNet/IP has no CAN frames")
-
-
-DECODER = EnipDecoder()
+DECODER = ByteDecoder("enip", "EtherNet/IP", EnipStreamDecoder)  # a TCP capture

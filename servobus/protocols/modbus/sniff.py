@@ -23,7 +23,7 @@ from servobus.families.yzaim import registers as Y
 from servobus.protocols.modbus import codec as C
 from servobus.protocols.modbus.framer import GapFramer, TimedFrame
 from servobus.protocols.modbus.timing import DEFAULT_BAUD, char_time_s
-from servobus.sniff import BYTES, ErrorEvent
+from servobus.sniff import ByteDecoder, ErrorEvent
 
 #: Register address -> name, for describe().
 REGISTER_NAMES: Mapping[int, str] = {r.address: r.name for r in Y.REGISTERS}
@@ -124,17 +124,4 @@ class RtuStreamDecoder:
             yield event
 
 
-class ModbusDecoder:
-    """The Modbus RTU entry of ``DECODERS``: byte streams on a TTL/RS-485 line."""
-
-    name = "modbus"
-    medium = BYTES
-
-    def stream(self) -> RtuStreamDecoder:
-        return RtuStreamDecoder()
-
-    def frame(self, arbitration_id: int, data: bytes) -> ErrorEvent:
-        return ErrorEvent("frame", "Modbus RTU has no CAN frames")
-
-
-DECODER = ModbusDecoder()
+DECODER = ByteDecoder("modbus", "Modbus RTU", RtuStreamDecoder)  # TTL/RS-485 line
