@@ -10,7 +10,7 @@ from __future__ import annotations
 import time
 
 from benchmarks.verdict import mark, percent, summary
-from servobus.sim.drive import CONTROL_HZ, VirtualDrive
+from servobus.sim.dmm.drive import CONTROL_HZ, VirtualDrive
 
 TICK_S = 0.001  # how often a server calls advance_to() (a front end's event-loop tick)
 

@@ -26,7 +26,8 @@ from benchmarks.verdict import mark, percent, summary
 from servobus.axis import connect_async
 from servobus.families.dmm import params as P
 from servobus.protocols.dyn232 import codec as c
-from servobus.protocols.dyn232.client import AsyncDyn232Client, Dyn232Axis
+from servobus.protocols.dyn232.axis import Dyn232Axis
+from servobus.protocols.dyn232.client import AsyncDyn232Client
 from servobus.transport.trace import ByteCounter
 
 POLL_SECONDS = 2.0

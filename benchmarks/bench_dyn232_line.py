@@ -24,9 +24,9 @@ from contextlib import contextmanager
 
 from benchmarks.verdict import mark, percent, summary
 from servobus.protocols.dyn232 import codec as c
+from servobus.protocols.dyn232.device import Dyn232Line
 from servobus.protocols.dyn232.inprocess import open_sim_stream
-from servobus.protocols.dyn232.line import Dyn232Line
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 
 SECONDS = 2.0
 FAST_TRIPS = 3000

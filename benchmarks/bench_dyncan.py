@@ -23,9 +23,11 @@ import can
 from benchmarks.breakdown import Breakdown, loops, print_all, profile_async, profile_sync, run_on
 from benchmarks.verdict import mark, percent, summary
 from servobus.protocols.dyncan import codec as c
-from servobus.protocols.dyncan.client import DynCanAxis, open_can_client
-from servobus.protocols.dyncan.node import DynCanNetwork, serve
-from servobus.sim.drive import VirtualDrive
+from servobus.protocols.dyncan.axis import DynCanAxis
+from servobus.protocols.dyncan.client import open_can_client
+from servobus.protocols.dyncan.device import DynCanNetwork
+from servobus.protocols.dyncan.server import serve
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.transport.can_bus import AsyncCanBus, BitTiming
 
 ROUND_TRIPS = 5000

@@ -30,17 +30,18 @@ from contextlib import contextmanager
 import can
 
 from benchmarks.verdict import mark, percent, summary
-from servobus.families import yzaim
+from servobus.families.yzaim import registers as yzaim
 from servobus.protocols.easycan import codec
 from servobus.protocols.easycan import commands as cmds
 from servobus.protocols.easycan.axis import EasyCanAxis
 from servobus.protocols.easycan.client import AsyncEasyCanClient, open_easycan_client
+from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.functions import BITRATE, POSITION_BYTES
 from servobus.protocols.easycan.messages import ReadRequest
-from servobus.protocols.easycan.node import EasyCanNetwork, serve
+from servobus.protocols.easycan.server import serve
 from servobus.protocols.easycan.sync import SyncGroup
 from servobus.sim.realtime import RealtimeClock
-from servobus.sim.yzaim_motor import YzaimMotor
+from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.transport.can_bus import AsyncCanBus, BitTiming
 
 ROUND_TRIPS = 5000

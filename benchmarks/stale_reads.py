@@ -26,11 +26,13 @@ from dataclasses import dataclass
 from typing import Any
 
 from servobus.errors import ServobusError
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.protocols.dyn232 import codec as c
-from servobus.protocols.dyn232.client import AsyncDyn232Client, Dyn232Axis
+from servobus.protocols.dyn232.axis import Dyn232Axis
+from servobus.protocols.dyn232.client import AsyncDyn232Client
 from servobus.protocols.dyncan import codec as cc
-from servobus.protocols.dyncan.client import AsyncDynCanClient, DynCanAxis
+from servobus.protocols.dyncan.axis import DynCanAxis
+from servobus.protocols.dyncan.client import AsyncDynCanClient
 from servobus.protocols.easycan import codec as ec
 from servobus.protocols.easycan import messages as em
 from servobus.protocols.easycan.axis import EasyCanAxis

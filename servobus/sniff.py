@@ -8,9 +8,9 @@ types. Each protocol package declares its decoder in ``DECODERS`` (name -> "modu
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import Generic, Protocol, TypeVar, runtime_checkable
 
 BYTES, CAN = "bytes", "can"  # the two media a decoder can read
 
@@ -87,6 +87,41 @@ class Decoder(Protocol):
 
     def frame(self, arbitration_id: int, data: bytes) -> Event:
         """One CAN frame (medium CAN)."""
+
+
+S = TypeVar("S")
+
+
+class ByteDecoder(Generic[S]):
+    """The ``DECODERS`` entry of a protocol on a byte stream (serial line, TCP capture):
+    ``make()`` gives a new stream decoder; CAN frames are not its medium."""
+
+    medium = BYTES
+
+    def __init__(self, name: str, label: str, make: Callable[[], S]) -> None:
+        self.name, self._label, self._make = name, label, make
+
+    def stream(self) -> S:
+        return self._make()
+
+    def frame(self, arbitration_id: int, data: bytes) -> Event:
+        return ErrorEvent("frame", f"{self._label} has no CAN frames")
+
+
+class CanDecoder:
+    """The ``DECODERS`` entry of a protocol on CAN: ``frame(arbitration_id, data)`` decodes
+    one frame; there is no byte stream to feed."""
+
+    medium = CAN
+
+    def __init__(self, name: str, label: str, frame: Callable[[int, bytes], Event]) -> None:
+        self.name, self._label, self._frame = name, label, frame
+
+    def stream(self) -> StreamDecoder:
+        raise NotImplementedError(f"{self._label} is read frame by frame")
+
+    def frame(self, arbitration_id: int, data: bytes) -> Event:
+        return self._frame(arbitration_id, data)
 
 
 def decoders() -> dict[str, Decoder]:

@@ -17,9 +17,10 @@ from typing import Any
 
 import pytest
 
-from servobus.protocols.dyn232.client import AsyncDyn232Client, Dyn232Axis
-from servobus.protocols.dyn232.line import Dyn232Line
-from servobus.sim.drive import VirtualDrive
+from servobus.protocols.dyn232.axis import Dyn232Axis
+from servobus.protocols.dyn232.client import AsyncDyn232Client
+from servobus.protocols.dyn232.device import Dyn232Line
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.transport.base import Direction
 from servobus.transport.pair import Manipulator, PairStream, open_pair
 from servobus.transport.trace import ByteCounter, TraceRecorder

@@ -1,6 +1,6 @@
 """Test rig (not a test module): a DYN CAN client and virtual nodes on python-can's virtual bus.
 
-Each harness gets its own virtual channel; the nodes run ``servobus.protocols.dyncan.node.serve``
+Each harness gets its own virtual channel; the nodes run ``servobus.protocols.dyncan.server.serve``
 on the loop, in stepped time unless ``realtime=True``.
 """
 
@@ -14,9 +14,11 @@ from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from typing import Any
 
-from servobus.protocols.dyncan.client import AsyncDynCanClient, DynCanAxis, open_can_client
-from servobus.protocols.dyncan.node import DynCanNetwork, serve
-from servobus.sim.drive import VirtualDrive
+from servobus.protocols.dyncan.axis import DynCanAxis
+from servobus.protocols.dyncan.client import AsyncDynCanClient, open_can_client
+from servobus.protocols.dyncan.device import DynCanNetwork
+from servobus.protocols.dyncan.server import serve
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.realtime import RealtimeClock
 from servobus.transport.can_bus import AsyncCanBus
 

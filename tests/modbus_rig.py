@@ -16,10 +16,10 @@ from typing import Any
 
 from servobus.protocols.modbus.axis import ModbusAxis
 from servobus.protocols.modbus.client import ModbusClient
+from servobus.protocols.modbus.device import ModbusLine
 from servobus.protocols.modbus.inprocess import make_motors
-from servobus.protocols.modbus.line import ModbusLine
 from servobus.protocols.modbus.pacing import RtuLineRunner
-from servobus.sim.yzaim_motor import YzaimMotor
+from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.transport.base import Direction
 from servobus.transport.pair import Manipulator, PairStream, open_pair
 from servobus.transport.trace import TraceRecorder

@@ -40,9 +40,9 @@ from servobus.axis import checks
 from servobus.axis.base import check_int
 from servobus.axis.client_axis import ClientAxis, LinkClient
 from servobus.errors import ArgumentRangeError, DriveError, DriveTimeout, ProtocolError
-from servobus.families import yzaim as Y
 from servobus.families.base import AxisStatus, Family, ParamInfo
-from servobus.families.yzaim_family import YZAIM, axis_status
+from servobus.families.yzaim import registers as Y
+from servobus.families.yzaim.family import YZAIM, axis_status
 
 R = Y.BY_NAME
 ABS = Y.PAIR_BY_NAME["absolute_position"]

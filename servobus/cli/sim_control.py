@@ -19,7 +19,7 @@ import click
 from servobus.errors import ArgumentRangeError
 from servobus.sim.control import DriveControl
 from servobus.sim.control_server import ControlServer, print_endpoint
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.line_server import parse_listen_url
 from servobus.sim.realtime import RealtimeClock
 

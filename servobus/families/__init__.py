@@ -13,8 +13,8 @@ if TYPE_CHECKING:
 
 FAMILIES: dict[str, str] = {
     "dmm-dyn2": "servobus.families.dmm.family:DYN2",
-    "dmm-dyn5": "servobus.families.dyn5_family:DYN5",
-    "yzaim": "servobus.families.yzaim_family:YZAIM",
+    "dmm-dyn5": "servobus.families.dyn5.family:DYN5",
+    "yzaim": "servobus.families.yzaim.family:YZAIM",
 }
 
 

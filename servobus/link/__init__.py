@@ -3,6 +3,7 @@
 ``transaction`` the one transaction policy (deadlines, retries, lanes, pacing, dead links),
 ``late_replies`` the replies owed by timed-out attempts, ``eeprom_guard`` the EEPROM wear
 guard, ``stats`` the counters, ``can`` what the CAN clients share (the python-can channel
-of a URL, the receive loop). A link knows no protocol and no simulator; it moves nothing
+of a URL, the receive loop), ``opening`` a client on an open medium (closed again when
+the client refuses its options). A link knows no protocol and no simulator; it moves nothing
 itself (``servobus.transport`` does).
 """

@@ -10,6 +10,7 @@ imports another one.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 
 @dataclass(frozen=True)
@@ -42,6 +43,19 @@ class ProtocolSpec:
     params: str | None = None
     #: CLI shortcuts: option name -> URL template (``("can", "dyncan+{interface}://{channel}")``).
     shortcuts: tuple[tuple[str, str], ...] = ()
+
+    @classmethod
+    def conventional(cls, name: str, family: str, **fields: Any) -> ProtocolSpec:
+        """The spec of a package laid out as every ``servobus/protocols/<name>/`` is: targets
+        by convention - ``opener:open_axis`` for scheme ``<name>``, ``inprocess:open_sim_axis``,
+        ``cli:register``, ``sniff:DECODER``, ``commands:REACHABLE_PARAMS`` - unless ``fields``
+        name another (any field of the spec)."""
+        base = f"servobus.protocols.{name}"
+        conventions: dict[str, Any] = {
+            "opener": f"{base}.opener:open_axis", "schemes": (name,),
+            "sim": f"{base}.inprocess:open_sim_axis", "cli": f"{base}.cli:register",
+            "decoder": f"{base}.sniff:DECODER", "params": f"{base}.commands:REACHABLE_PARAMS"}
+        return cls(name=name, family=family, **{**conventions, **fields})
 
     @property
     def sim_names(self) -> tuple[str, ...]:

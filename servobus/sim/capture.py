@@ -39,7 +39,8 @@ from servobus.families.dmm import units as U
 from servobus.sim.core.constants import CONTROL_HZ
 
 if TYPE_CHECKING:
-    from servobus.sim.drive import VirtualDrive
+    from servobus.sim.core.motor import Motor
+    from servobus.sim.dmm.drive import VirtualDrive
 
 #: Samples kept between reads (2 s at 4 kHz); older ones are dropped and counted as lost.
 CAPACITY = 2 * CONTROL_HZ
@@ -53,7 +54,7 @@ class Traced(Protocol):
     """What a trace records every control period of its core :attr:`drive`."""
 
     @property
-    def drive(self) -> VirtualDrive: ...
+    def drive(self) -> VirtualDrive | Motor: ...
 
     @property
     def trace_id(self) -> int:
@@ -138,7 +139,7 @@ class Recorder:
     def active(self) -> bool:
         return self.drive.period_observer is self
 
-    def __call__(self, drive: VirtualDrive) -> None:
+    def __call__(self, drive: VirtualDrive | Motor) -> None:
         if drive.periods - self.last_read > IDLE_STOP_S * CONTROL_HZ:
             drive.period_observer = None  # nobody reads: stop costing CPU
             return
@@ -174,7 +175,7 @@ class Recorder:
 
 
 def _traced(item: VirtualDrive | Traced) -> Traced:
-    from servobus.sim.drive import VirtualDrive  # drive imports this module
+    from servobus.sim.dmm.drive import VirtualDrive  # drive imports this module
 
     return DriveTrace(item) if isinstance(item, VirtualDrive) else item
 
@@ -189,8 +190,10 @@ class SimCapture:
 
     @property
     def drives(self) -> list[VirtualDrive]:
-        """The virtual drives recorded (a YZ-AIM motor's core drive)."""
-        return [t.drive for t in self.traced]
+        """The DMM virtual drives recorded (a YZ-AIM motor's core is no drive: left out)."""
+        from servobus.sim.dmm.drive import VirtualDrive  # drive imports this module
+
+        return [t.drive for t in self.traced if isinstance(t.drive, VirtualDrive)]
 
     def _find(self, drive_id: int) -> Traced:
         for traced in self.traced:

@@ -4,7 +4,7 @@ A host program talks to a virtual drive over its protocol (DYN232M, DYN CAN, ...
 real machine does *around* the drive - the analog reference, a pulse generator, the ENA
 switch, the outputs wired to a PLC, a blocked shaft, a supply dip - is reached here, so a
 whole machine's software can be tested against virtual drives. The vocabulary is
-protocol-free: it talks to :class:`servobus.sim.drive.VirtualDrive` (any clocked motor built
+protocol-free: it talks to :class:`servobus.sim.dmm.drive.VirtualDrive` (any clocked motor built
 on one), addressed by drive id.
 
 From Python, :class:`DriveControl` (``execute(request) -> reply``, or its methods); over TCP,
@@ -33,7 +33,7 @@ from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, CommandMode
 from servobus.sim.core import constants as K
 from servobus.sim.core.io import PulseFormat
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 
 Reply = dict[str, Any]
 MAX_COUNT = 1 << 31  # |pulses| per request (a 28-bit position range fits many times over)

@@ -30,7 +30,7 @@ The state file (:class:`StateFile`), decisions:
   survives the simulator being killed, not a power cut of the host.
 * A write that fails later (disk full, directory removed) logs one line; the drive keeps
   running on the values in RAM and the next write tries again.
-* The same machinery keeps the YZ-AIM motors' EEPROM (:mod:`servobus.sim.yzaim_store`): a
+* The same machinery keeps the YZ-AIM motors' EEPROM (:mod:`servobus.sim.yzaim.store`): a
   :class:`StateKind` names what a file holds and checks one record; a file is opened as one
   kind per process (a DMM and a YZ-AIM simulator cannot share one file).
 * A file nested too deeply to be a state file (JSON parsing would exhaust the recursion limit)

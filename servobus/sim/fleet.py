@@ -7,7 +7,7 @@ from collections.abc import Sequence
 from servobus.errors import ArgumentRangeError
 from servobus.families.dmm import units as U
 from servobus.families.dmm.vocabulary import MAX_DRIVE_ID
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.eeprom import EepromStore
 
 DEFAULT_MAX_ID = MAX_DRIVE_ID  # DMM: six id bits on both protocols

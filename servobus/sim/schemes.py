@@ -10,7 +10,7 @@ JSON file), ``model=NAME`` (motor/drive model).
 
 Every ``sim://`` axis reads its virtual drives' 4 kHz trace with ``trace_buffer()``
 (servobus.sim.capture), whatever the protocol; the axes of the DMM families reach their
-drives' JP3 inputs and outputs with ``virtual_io()`` (servobus.sim.virtual_io).
+drives' JP3 inputs and outputs with ``virtual_io()`` (servobus.sim.dmm.virtual_io).
 """
 
 from __future__ import annotations
@@ -20,7 +20,9 @@ from typing import TYPE_CHECKING, Any
 from servobus.axis import registry
 from servobus.axis.url import DriveUrl
 from servobus.errors import ArgumentRangeError
-from servobus.sim import capture, virtual_io
+from servobus.sim import capture
+from servobus.sim.dmm import virtual_io
+from servobus.sim.dmm.drive import VirtualDrive
 
 if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis
@@ -47,5 +49,6 @@ async def open_axis(url: DriveUrl, *, drive_id: int | None = None, **keywords: A
     if traced and axis.capture_source is None:
         axis.capture_source = capture.SimCapture(traced)  # trace_buffer(): their 4 kHz trace
     if traced and axis.io_source is None and virtual_io.has_jp3(axis.family.name):
-        axis.io_source = virtual_io.SimIoSource([t.drive for t in traced])  # their JP3 I/O
+        drives = [t.drive for t in traced if isinstance(t.drive, VirtualDrive)]
+        axis.io_source = virtual_io.SimIoSource(drives)  # their JP3 I/O
     return axis

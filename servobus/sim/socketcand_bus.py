@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import click
 
 from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS
+from servobus.sim.socketcand_hub import HubPort, SocketcandHub
 from servobus.transport.can_bus import BitTiming
-from servobus.transport.socketcand_hub import HubPort, SocketcandHub
 
 
 def stop_event(duration: float | None) -> asyncio.Event:

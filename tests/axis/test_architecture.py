@@ -20,15 +20,6 @@ SHARED = ("axis", "cli", "families", "transport", "sim", "gui", "link", "machine
 #: Everything above transport/: it moves bytes and frames and knows none of these.
 ABOVE_TRANSPORT = ("sim", "axis", "protocols", "families", "cli", "gui", "link", "sniff",
                    "machine")
-#: Known violations, each with its follow-up; the test fails when one is fixed, so the
-#: entry goes with the fix.
-TRANSPORT_ALLOWED = {
-    # TEMPORARY (issue 19, follow-up): the socketcand hub is a virtual CAN bus with drive
-    # FIFOs that reads the simulator's server limits; it moves beside the simulators
-    # (servobus/sim/) in the scheduled simulator split, and this entry goes with it.
-    ("socketcand_hub.py", "servobus.sim"),
-    ("socketcand_hub.py", "servobus.sim.server_limits"),
-}
 #: What link/ may take from the Axis layer (argument checks, the drive URL's type).
 LINK_FROM_AXIS = ("servobus.axis.checks", "servobus.axis.url")
 CLIENT_MODULES = ("client.py", "opener.py", "commands.py", "codec.py")
@@ -113,10 +104,12 @@ def above(name: str, layers: tuple[str, ...]) -> bool:
 
 
 def test_transport_imports_nothing_above_it() -> None:
+    """No exception: the socketcand hub (a virtual CAN bus with drive FIFOs) lives in
+    ``servobus/sim/`` since issue 19; its old path has no alias, which would itself import
+    the simulator from transport/."""
     found = {(path.name, name) for path in sources(ROOT / "transport")
              for name in imports(path) if above(name, ABOVE_TRANSPORT)}
-    assert found - TRANSPORT_ALLOWED == set()
-    assert TRANSPORT_ALLOWED - found == set(), "a violation was fixed: drop its entry"
+    assert found == set()
 
 
 def test_link_imports_no_protocol_and_no_simulator() -> None:
@@ -133,3 +126,102 @@ def test_axis_holds_no_client_plumbing() -> None:
     for name in ("transaction", "late_replies", "eeprom_guard"):
         names = imports(ROOT / "axis" / f"{name}.py")
         assert names and all(n.startswith("servobus.link.") for n in names), name
+
+
+def test_old_simulator_paths_are_aliases() -> None:
+    """Issue 19 moved the virtual drives into sim/dmm/ and sim/yzaim/; the public names keep
+    their old import paths for one release (docs examples use them)."""
+    from servobus.sim import drive, yzaim_motor
+    from servobus.sim.dmm.drive import VirtualDrive
+    from servobus.sim.yzaim.motor import YzaimMotor
+
+    assert drive.VirtualDrive is VirtualDrive
+    assert yzaim_motor.YzaimMotor is YzaimMotor
+
+
+SIM_FAMILIES = ("dmm", "yzaim")
+
+
+@pytest.mark.parametrize("family", SIM_FAMILIES)
+def test_a_simulated_family_imports_no_other(family: str) -> None:
+    """sim/dmm (the DMM drive) and sim/yzaim (the YZ-AIM motor) both sit on sim/core and
+    never reach into each other (no switching the other vendor's features off)."""
+    others = tuple(f"sim.{f}" for f in SIM_FAMILIES if f != family)
+    bad = [(path.name, name) for path in sources(ROOT / "sim" / family)
+           for name in imports(path) if above(name, others)]
+    assert bad == []
+
+
+def test_the_simulator_core_imports_no_family_simulator() -> None:
+    layers = tuple(f"sim.{f}" for f in SIM_FAMILIES)
+    bad = [(path.name, name) for path in sources(ROOT / "sim" / "core")
+           for name in imports(path) if above(name, layers)]
+    assert bad == []
+
+
+#: One file-name scheme in every protocol package (issue 19), host and device side visible
+#: by name: codec (a module or a package of pure wire formats), commands (pure request
+#: builders), client (the transaction-level client only), axis (the Axis class), opener (URL
+#: -> Axis), device (the virtual-drive front end), server, cli, sniff.
+PROTOCOL_MODULES = ("codec", "commands", "client", "axis", "opener", "device", "server", "cli",
+                    "sniff")
+
+
+@pytest.mark.parametrize("protocol", protocols())
+def test_every_protocol_package_has_the_same_module_names(protocol: str) -> None:
+    package = ROOT / "protocols" / protocol
+    missing = [m for m in PROTOCOL_MODULES if not (package / f"{m}.py").is_file()
+               and not (package / m / "__init__.py").is_file()]
+    assert missing == []
+
+
+def defines_an_axis(path: Path) -> list[str]:
+    """Classes in ``path`` deriving AsyncAxis or one of its servobus subclasses (by name:
+    ``...Axis`` bases, CommandAxis, RegisterAxis)."""
+    found: list[str] = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ClassDef):
+            for base in node.bases:
+                target = base.value if isinstance(base, ast.Subscript) else base
+                name = target.attr if isinstance(target, ast.Attribute) else \
+                    target.id if isinstance(target, ast.Name) else ""
+                if name.endswith("Axis"):
+                    found.append(node.name)
+    return found
+
+
+@pytest.mark.parametrize("protocol", protocols())
+def test_no_axis_class_lives_in_a_client_module(protocol: str) -> None:
+    client = ROOT / "protocols" / protocol / "client.py"
+    assert defines_an_axis(client) == []
+    assert defines_an_axis(ROOT / "protocols" / protocol / "axis.py") != []  # the rule bites
+
+
+def test_moved_axis_classes_keep_their_old_path() -> None:
+    """One-release aliases (issue 19): the Axis classes left dyn232/dyncan client.py."""
+    from servobus.protocols.dyn232 import axis as dyn232_axis
+    from servobus.protocols.dyn232 import client as dyn232_client
+    from servobus.protocols.dyncan import axis as dyncan_axis
+    from servobus.protocols.dyncan import client as dyncan_client
+
+    assert dyn232_client.Dyn232Axis is dyn232_axis.Dyn232Axis
+    assert dyncan_client.DynCanAxis is dyncan_axis.DynCanAxis
+    assert dyncan_client.open_can_axis is dyncan_axis.open_can_axis
+
+
+def test_old_family_paths_are_aliases() -> None:
+    """Issue 19 made every family a package; the old flat modules stay one release."""
+    from servobus.families import dyn5, dyn5_family, yzaim, yzaim_family
+    from servobus.families.dyn5 import family as dyn5_new
+    from servobus.families.dyn5 import params
+    from servobus.families.yzaim import family as yzaim_new
+    from servobus.families.yzaim import registers
+
+    assert dyn5_family.DYN5 is dyn5_new.DYN5 and yzaim_family.YZAIM is yzaim_new.YZAIM
+    assert dyn5.INSTANCES is params.INSTANCES and yzaim.REGISTERS is registers.REGISTERS
+
+
+def test_every_family_is_a_package_with_a_family_module() -> None:
+    packages = [p for p in (ROOT / "families").iterdir() if (p / "__init__.py").is_file()]
+    assert {p.name for p in packages} == {"dmm", "dyn5", "yzaim"}
+    assert all((p / "family.py").is_file() for p in packages)

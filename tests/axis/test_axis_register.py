@@ -7,7 +7,7 @@ import pytest
 
 from servobus.axis.register_axis import RegisterAxis
 from servobus.errors import ArgumentRangeError, DriveError, DriveTimeout, FramingError
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.protocols.easycan.axis import EasyCanAxis
 from servobus.protocols.modbus.axis import ModbusAxis
 

@@ -11,7 +11,7 @@ from servobus import connect_async
 from servobus.axis.capture import STATUS_BITS, Capture, status_bits
 from servobus.errors import NotSupported
 from servobus.sim.capture import IDLE_STOP_S, SimCapture
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 
 pytestmark = pytest.mark.timeout(60)
 

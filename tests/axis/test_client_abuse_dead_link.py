@@ -24,8 +24,10 @@ from dyncan_rig import harness
 from servobus.axis import connect_async
 from servobus.axis.base import AsyncAxis
 from servobus.errors import ConnectionLost, DriveTimeout, ServobusError
-from servobus.protocols.dyn232.client import AsyncDyn232Client, Dyn232Axis
-from servobus.protocols.dyncan.client import AsyncDynCanClient, DynCanAxis, open_can_axis
+from servobus.protocols.dyn232.axis import Dyn232Axis
+from servobus.protocols.dyn232.client import AsyncDyn232Client
+from servobus.protocols.dyncan.axis import DynCanAxis, open_can_axis
+from servobus.protocols.dyncan.client import AsyncDynCanClient
 from servobus.transport.base import TraceHook
 from servobus.transport.can_bus import CanFrame, FrameTraceHook
 

@@ -25,7 +25,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository r
 from benchmarks.stale_reads import StaleCount, dyn232_stale, dyncan_stale
 from servobus.errors import ConnectionLost, DriveTimeout
 from servobus.protocols.dyncan import codec as cc
-from servobus.protocols.dyncan.client import AsyncDynCanClient, DynCanAxis
+from servobus.protocols.dyncan.axis import DynCanAxis
+from servobus.protocols.dyncan.client import AsyncDynCanClient
 from servobus.transport.base import Direction
 from servobus.transport.can_bus import CanFrame, FrameReceiver, FrameTraceHook
 

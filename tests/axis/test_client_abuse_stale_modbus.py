@@ -32,8 +32,9 @@ from benchmarks.stale_reads import (
     modbus_stale,
 )
 from servobus.errors import DriveTimeout
-from servobus.families import yzaim as Y
-from servobus.protocols.dyn232.client import AsyncDyn232Client, Dyn232Axis
+from servobus.families.yzaim import registers as Y
+from servobus.protocols.dyn232.axis import Dyn232Axis
+from servobus.protocols.dyn232.client import AsyncDyn232Client
 from servobus.protocols.modbus.axis import ModbusAxis
 from servobus.protocols.modbus.client import ModbusClient
 from servobus.transport.base import Direction

@@ -19,7 +19,8 @@ from servobus.axis import connect_async
 from servobus.axis.base import AsyncAxis
 from servobus.errors import ArgumentRangeError, DriveTimeout
 from servobus.protocols.dyn232.client import AsyncDyn232Client
-from servobus.protocols.dyncan.client import AsyncDynCanClient, DynCanAxis
+from servobus.protocols.dyncan.axis import DynCanAxis
+from servobus.protocols.dyncan.client import AsyncDynCanClient
 from servobus.transport.can_bus import CanFrame, FrameTraceHook
 from servobus.transport.pair import open_pair
 

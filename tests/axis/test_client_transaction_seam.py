@@ -19,7 +19,8 @@ from servobus.link.transaction import TransactionStats
 from servobus.protocols.dyn232 import commands as c232
 from servobus.protocols.dyncan import codec as cc
 from servobus.protocols.dyncan import commands as ccan
-from servobus.protocols.dyncan.client import AsyncDynCanClient, DynCanAxis
+from servobus.protocols.dyncan.axis import DynCanAxis
+from servobus.protocols.dyncan.client import AsyncDynCanClient
 from servobus.transport.can_bus import CanFrame, FrameReceiver, FrameTraceHook
 
 pytestmark = pytest.mark.timeout(20)

@@ -6,9 +6,9 @@ import pytest
 
 from servobus.errors import ArgumentRangeError, NotSupported
 from servobus.families import family
-from servobus.families import yzaim as Y
 from servobus.families.base import Storage
-from servobus.families.yzaim_family import YZAIM, axis_status
+from servobus.families.yzaim import registers as Y
+from servobus.families.yzaim.family import YZAIM, axis_status
 
 
 def test_registered_as_yzaim_with_32768_counts() -> None:

@@ -18,7 +18,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from servobus.errors import ArgumentRangeError
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 
 # ------------------------------------------------------------------ table sanity
 

@@ -14,7 +14,7 @@ from conftest import wait_until_async
 
 from servobus.gui.app import create_app
 from servobus.gui.state import GuiState
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 
 pytestmark = pytest.mark.timeout(60)
 

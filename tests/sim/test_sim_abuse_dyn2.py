@@ -24,9 +24,9 @@ from sim_abuse_rig import (
     sim,
 )
 
-from servobus.protocols.dyn232.line import Dyn232Line
+from servobus.protocols.dyn232.device import Dyn232Line
 from servobus.protocols.dyn232.pacing import RX_BUFFER_BYTES, LineRunner
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.server_limits import is_loopback
 
 pytestmark = pytest.mark.timeout(90)

@@ -23,8 +23,8 @@ from sim_abuse_rig import (
 )
 
 from servobus.protocols.dyncan import codec as cc
+from servobus.sim.socketcand_hub import RX_FIFO_FRAMES, SocketcandHub, parse_send
 from servobus.transport.can_bus import CanFrame
-from servobus.transport.socketcand_hub import RX_FIFO_FRAMES, SocketcandHub, parse_send
 
 pytestmark = pytest.mark.timeout(90)
 BUS = ("dyncan", "--socketcand", "127.0.0.1:0", "--ids", "1,2")

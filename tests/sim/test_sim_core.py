@@ -10,7 +10,7 @@ import pytest
 from servobus.families.dmm import units as U
 from servobus.families.dmm.profile import ptp_profile
 from servobus.families.dmm.registers import DriveStatus
-from servobus.sim.drive import CONTROL_HZ, VirtualDrive
+from servobus.sim.dmm.drive import CONTROL_HZ, VirtualDrive
 
 DT = 1.0 / CONTROL_HZ
 

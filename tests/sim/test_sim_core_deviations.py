@@ -9,10 +9,10 @@ import pytest
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode
 from servobus.protocols.dyn232 import codec as c232
-from servobus.protocols.dyn232.line import Dyn232Line
+from servobus.protocols.dyn232.device import Dyn232Line
 from servobus.protocols.dyncan import codec as ccan
-from servobus.protocols.dyncan.node import DynCanNetwork
-from servobus.sim.drive import CONTROL_HZ, VirtualDrive
+from servobus.protocols.dyncan.device import DynCanNetwork
+from servobus.sim.dmm.drive import CONTROL_HZ, VirtualDrive
 
 DT = 1.0 / CONTROL_HZ
 H = c232.HostFunction

@@ -15,7 +15,7 @@ from servobus.families.dmm.profile import (
     trapezoid_time,
 )
 from servobus.families.dmm.registers import AlarmCode
-from servobus.sim.drive import CONTROL_HZ, VirtualDrive
+from servobus.sim.dmm.drive import CONTROL_HZ, VirtualDrive
 from servobus.sim.eeprom import EEPROM_CYCLE_LIMIT, EepromStore
 
 DT = 1.0 / CONTROL_HZ

@@ -18,7 +18,7 @@ from sim_abuse_rig import SERVOBUS, readable, run_cli, sim
 
 from servobus.families.dmm import params as P
 from servobus.protocols.dyn232 import codec as c
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.eeprom import EepromStore, StateFile, StateFileError, parse_state
 
 pytestmark = pytest.mark.timeout(60)

@@ -1,4 +1,4 @@
-"""The virtual YZ-AIM motor (servobus.sim.yzaim_motor), protocol-free, in simulated time.
+"""The virtual YZ-AIM motor (servobus.sim.yzaim.motor), protocol-free, in simulated time.
 
 Figures from the YZ-AIM manual: 1 (57AIM30C 0.96 N*m, 1000/1500 rpm; 42AIM single-turn),
 4.1 (0x03 >= 60000: no curve), 4.7 (gear numerator 0: 0 to 0x16 clears, 0 to 0x0C stops),
@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pytest
 
-from servobus.families import yzaim as Y
-from servobus.sim import yzaim_physics as phys
-from servobus.sim.yzaim_motor import MotorRefused, Refusal, YzaimMotor
-from servobus.sim.yzaim_store import YzaimStore
+from servobus.families.yzaim import registers as Y
+from servobus.sim.yzaim import physics as phys
+from servobus.sim.yzaim.motor import MotorRefused, Refusal, YzaimMotor
+from servobus.sim.yzaim.store import YzaimStore
 
 ABS, INC, CACHE = 0x16, 0x0C, 0x1A
 REV = Y.COUNTS_PER_REV

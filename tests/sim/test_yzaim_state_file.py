@@ -12,9 +12,9 @@ from sim_abuse_rig import run_cli, sim
 
 from servobus.axis.connect import connect
 from servobus.sim.eeprom import EepromStore, StateFile, StateFileError
-from servobus.sim.yzaim_fleet import make_motors
-from servobus.sim.yzaim_motor import YzaimMotor
-from servobus.sim.yzaim_store import YZAIM_STATE, YzaimStore
+from servobus.sim.yzaim.fleet import make_motors
+from servobus.sim.yzaim.motor import YzaimMotor
+from servobus.sim.yzaim.store import YZAIM_STATE, YzaimStore
 
 pytestmark = pytest.mark.timeout(60)
 

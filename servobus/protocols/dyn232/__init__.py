@@ -10,15 +10,5 @@ from servobus.protocols import ProtocolSpec
 #: pyserial's URL handlers (serial.serial_for_url) are bare serial ports: DYN232M.
 PYSERIAL_SCHEMES = ("socket", "tcp", "loop", "rfc2217", "spy", "alt", "hwgrep", "cp2110")
 
-SPEC = ProtocolSpec(
-    name="dyn232",
-    family="dmm-dyn2",
-    opener="servobus.protocols.dyn232.opener:open_axis",
-    schemes=("dyn232",),
-    serial_schemes=("", *PYSERIAL_SCHEMES),
-    sim="servobus.protocols.dyn232.inprocess:open_sim_axis",
-    sim_aliases=("dyn2", "dc2", "dyn4"),
-    cli="servobus.protocols.dyn232.sim_cmd:register",
-    decoder="servobus.protocols.dyn232.sniff:DECODER",
-    params="servobus.protocols.dyn232.commands:REACHABLE_PARAMS",
-)
+SPEC = ProtocolSpec.conventional("dyn232", "dmm-dyn2", sim_aliases=("dyn2", "dc2", "dyn4"),
+                                  serial_schemes=("", *PYSERIAL_SCHEMES))

@@ -55,13 +55,12 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from typing import ClassVar, Generic, TypeVar, cast
+from typing import Generic, TypeVar, cast
 
 from servobus.axis import checks
 from servobus.axis.base import AxisTraceHook
-from servobus.axis.command_axis import CommandAxis, CommandSet, Request
+from servobus.axis.command_axis import Request
 from servobus.errors import ArgumentRangeError, ChecksumError, ConnectionLost
-from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import DriveConfig, DriveStatus
 from servobus.link.eeprom_guard import EepromGuard
 from servobus.link.late_replies import DEFAULT_LATE_REPLY_S, LateReplies
@@ -348,13 +347,11 @@ def _guard_item(command: Command[T]) -> str:
     return command.function.name.lower()
 
 
-class Dyn232Axis(CommandAxis):
-    """One DYN2/DC2/DYN4 drive on a DYN232M line (everything is CommandAxis).
+def __getattr__(name: str) -> object:
+    """One-release alias (issue 19): ``Dyn232Axis`` moved to servobus.protocols.dyn232.axis
+    (no Axis class lives in a client module); goes in the next release."""
+    if name == "Dyn232Axis":
+        from servobus.protocols.dyn232.axis import Dyn232Axis
 
-    The torque readout counts milliamperes (a servobus decision, docs/dyn232.md).
-    """
-
-    commands: ClassVar[CommandSet] = cmds
-    protocol_name = "dyn232"
-    drive_id_range = range(c.FACTORY_ID, c.MAX_DRIVE_ID + 1)
-    amps_per_torque_unit = 1.0 / U.DYN232_TORQUE_UNITS_PER_A
+        return Dyn232Axis
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

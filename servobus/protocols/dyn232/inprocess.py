@@ -27,9 +27,9 @@ from servobus.axis.url import DriveUrl, merge_options
 from servobus.errors import ArgumentRangeError
 from servobus.families.dmm import units as U
 from servobus.protocols.dyn232 import codec as c
-from servobus.protocols.dyn232.line import Dyn232Line
+from servobus.protocols.dyn232.device import Dyn232Line
 from servobus.protocols.dyn232.pacing import HostPort, LineRunner
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.fleet import make_drives, parse_ids
 from servobus.transport.base import Direction
 from servobus.transport.buffered import PushInput
@@ -175,7 +175,8 @@ async def open_sim_axis(url: DriveUrl, *, drive_id: int | None = None,
     Without ``ids`` the line holds one drive with the id asked for (the factory id 0 when
     none is), so ``connect("sim://dyn232", drive_id=3)`` just works.
     """
-    from servobus.protocols.dyn232.client import AsyncDyn232Client, Dyn232Axis
+    from servobus.protocols.dyn232.axis import Dyn232Axis
+    from servobus.protocols.dyn232.client import AsyncDyn232Client
     from servobus.protocols.dyn232.commands import check_drive_id
 
     options = merge_options(url, dict(keywords), SIM_OPTIONS)

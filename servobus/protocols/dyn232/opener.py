@@ -15,8 +15,10 @@ from typing import Any
 
 from servobus.axis.url import DriveUrl, merge_options
 from servobus.errors import ArgumentRangeError
+from servobus.link.opening import client_on
 from servobus.protocols.dyn232 import codec as c
-from servobus.protocols.dyn232.client import AsyncDyn232Client, Dyn232Axis
+from servobus.protocols.dyn232.axis import Dyn232Axis
+from servobus.protocols.dyn232.client import AsyncDyn232Client
 from servobus.protocols.dyn232.commands import check_drive_id
 from servobus.transport.base import ByteStream
 
@@ -64,9 +66,6 @@ async def open_axis(url: DriveUrl, *, drive_id: int | None = None, **keywords: A
     options.setdefault("query_interval_s",
                        0.0 if scheme in FAST_LINK_SCHEMES else HARDWARE_QUERY_INTERVAL_S)
     stream = await open_stream(port, baud=baud, transport=transport)
-    try:
-        client = AsyncDyn232Client(stream, baud=baud, **options)  # type: ignore[arg-type]
-    except BaseException:
-        await stream.close()
-        raise
+    client = await client_on(stream, lambda s: AsyncDyn232Client(
+        s, baud=baud, **options))  # type: ignore[arg-type]
     return Dyn232Axis(client, drive_id)

@@ -33,7 +33,7 @@ import time
 from collections.abc import Callable, Iterator
 
 from servobus.protocols.dyn232 import codec as c
-from servobus.protocols.dyn232.line import Dyn232Line
+from servobus.protocols.dyn232.device import Dyn232Line
 from servobus.sim.realtime import RealtimeClock
 from servobus.sim.wire import (
     COARSE_S,

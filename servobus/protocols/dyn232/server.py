@@ -23,10 +23,10 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import TextIO
 
-from servobus.protocols.dyn232.line import Dyn232Line
+from servobus.protocols.dyn232.device import Dyn232Line
 from servobus.protocols.dyn232.pacing import COARSE_S, FINE_COARSE_S, HostPort, LineRunner
 from servobus.sim import server_limits as lim
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.line_server import (
     CLOSE_TIMEOUT_S,
     DEFAULT_HOST,

@@ -30,7 +30,7 @@ from servobus.errors import ChecksumError, ProtocolError
 from servobus.families.dmm import params as P
 from servobus.families.dmm.registers import DriveConfig, DriveStatus
 from servobus.protocols.dyn232 import codec as c
-from servobus.sniff import BYTES, ErrorEvent
+from servobus.sniff import ByteDecoder, ErrorEvent
 
 REPLY, CODE, VALUE, AMBIGUOUS = "reply", "code", "value", "ambiguous"
 
@@ -208,17 +208,4 @@ class LineDecoder:
             self._pending = (packet.drive_id, reply)
 
 
-class Dyn232Decoder:
-    """The DYN232M entry of ``DECODERS``: byte streams on an RS232/RS485 line."""
-
-    name = "dyn232"
-    medium = BYTES
-
-    def stream(self) -> LineDecoder:
-        return LineDecoder()
-
-    def frame(self, arbitration_id: int, data: bytes) -> ErrorEvent:
-        return ErrorEvent("frame", "DYN232M has no CAN frames")
-
-
-DECODER = Dyn232Decoder()
+DECODER = ByteDecoder("dyn232", "DYN232M", LineDecoder)  # the DYN232M entry of DECODERS

@@ -7,14 +7,5 @@ URLs: ``dyncan+<python-can interface>://<channel>``, e.g. ``dyncan+pcan://PCAN_U
 
 from servobus.protocols import ProtocolSpec
 
-SPEC = ProtocolSpec(
-    name="dyncan",
-    family="dmm-dyn2",
-    opener="servobus.protocols.dyncan.opener:open_axis",
-    schemes=("dyncan",),
-    sim="servobus.protocols.dyncan.inprocess:open_sim_axis",
-    cli="servobus.protocols.dyncan.sim_cmd:register",
-    decoder="servobus.protocols.dyncan.sniff:DECODER",
-    params="servobus.protocols.dyncan.commands:REACHABLE_PARAMS",
-    shortcuts=(("can", "dyncan+{interface}://{channel}"),),
-)
+SPEC = ProtocolSpec.conventional("dyncan", "dmm-dyn2",
+                                  shortcuts=(("can", "dyncan+{interface}://{channel}"),))

@@ -15,9 +15,11 @@ from servobus.axis.url import DriveUrl, merge_options
 from servobus.errors import ArgumentRangeError
 from servobus.families.dmm import units as U
 from servobus.protocols.dyncan import codec as c
-from servobus.protocols.dyncan.client import DynCanAxis, open_can_client
+from servobus.protocols.dyncan.axis import DynCanAxis
+from servobus.protocols.dyncan.client import open_can_client
 from servobus.protocols.dyncan.commands import check_drive_id
-from servobus.protocols.dyncan.node import DynCanNetwork, serve
+from servobus.protocols.dyncan.device import DynCanNetwork
+from servobus.protocols.dyncan.server import serve
 from servobus.sim.fleet import make_drives, parse_ids
 from servobus.sim.realtime import RealtimeClock
 from servobus.transport.can_bus import AsyncCanBus, BitTiming

@@ -12,7 +12,8 @@ from typing import Any
 from servobus.axis.url import DriveUrl, merge_options
 from servobus.link.can import can_spec
 from servobus.protocols.dyncan import codec as c
-from servobus.protocols.dyncan.client import DynCanAxis, open_can_client
+from servobus.protocols.dyncan.axis import DynCanAxis
+from servobus.protocols.dyncan.client import open_can_client
 from servobus.protocols.dyncan.commands import check_drive_id
 
 OPTIONS: dict[str, type] = {

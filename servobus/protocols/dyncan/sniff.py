@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from servobus.errors import ProtocolError
 from servobus.protocols.dyncan import codec as dyncan
-from servobus.sniff import CAN, ErrorEvent, FrameEvent
+from servobus.sniff import CanDecoder, ErrorEvent, FrameEvent
 
 
 def can_length_error(frame: dyncan.Frame) -> str | None:
@@ -45,17 +45,4 @@ def can_event(arbitration_id: int, data: bytes) -> FrameEvent | ErrorEvent:
     return FrameEvent(arbitration_id, bytes(data), dyncan.describe(frame))
 
 
-class DynCanDecoder:
-    """The DYN CAN entry of ``DECODERS``."""
-
-    name = "dyncan"
-    medium = CAN
-
-    def stream(self) -> None:
-        raise NotImplementedError("DYN CAN is read frame by frame")
-
-    def frame(self, arbitration_id: int, data: bytes) -> FrameEvent | ErrorEvent:
-        return can_event(arbitration_id, data)
-
-
-DECODER = DynCanDecoder()
+DECODER = CanDecoder("dyncan", "DYN CAN", can_event)

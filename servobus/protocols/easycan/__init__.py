@@ -5,7 +5,7 @@
 directions, ``describe`` one line per frame for decode/sniff, ``commands`` the host's pure
 commands, ``client``/``axis`` the host side, ``node`` the virtual motors' side, ``sync``
 synchronised multi-axis motion. Registers, ranges and units are the YZ-AIM family's
-(servobus.families.yzaim). This module only declares the registry tables (nothing heavy is
+(servobus.families.yzaim.registers). This module only declares the registry tables (nothing heavy is
 imported: docs/architecture.md).
 
 URLs: ``easycan+<python-can interface>://<channel>``, e.g. ``easycan+pcan://PCAN_USBBUS1``,
@@ -15,13 +15,4 @@ runs virtual YZ-AIM motors on an in-process python-can virtual bus (docs/easycan
 
 from servobus.protocols import ProtocolSpec
 
-SPEC = ProtocolSpec(
-    name="easycan",
-    family="yzaim",
-    opener="servobus.protocols.easycan.opener:open_axis",
-    schemes=("easycan",),
-    sim="servobus.protocols.easycan.inprocess:open_sim_axis",
-    cli="servobus.protocols.easycan.sim_cmd:register",
-    decoder="servobus.protocols.easycan.sniff:DECODER",
-    params="servobus.protocols.easycan.commands:REACHABLE_PARAMS",
-)
+SPEC = ProtocolSpec.conventional("easycan", "yzaim")

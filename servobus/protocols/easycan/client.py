@@ -38,7 +38,7 @@ from servobus.errors import (
     DriveTimeout,
     FramingError,
 )
-from servobus.families import yzaim
+from servobus.families.yzaim import registers as yzaim
 from servobus.link.can import CanClient
 from servobus.link.eeprom_guard import EepromGuard
 from servobus.link.late_replies import DEFAULT_LATE_REPLY_S

@@ -22,8 +22,8 @@ from collections.abc import Hashable
 from dataclasses import dataclass, field
 
 from servobus.errors import ArgumentRangeError
-from servobus.families import yzaim
-from servobus.families.yzaim_family import PARAM_NAMES
+from servobus.families.yzaim import registers as yzaim
+from servobus.families.yzaim.family import PARAM_NAMES
 from servobus.protocols.easycan import codec
 from servobus.protocols.easycan.functions import MAX_MULTI_READ
 from servobus.protocols.easycan.matching import Key, request_key, request_lane

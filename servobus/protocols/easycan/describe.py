@@ -7,7 +7,7 @@ decode is shown with the reason instead of raising.
 from __future__ import annotations
 
 from servobus.errors import FramingError
-from servobus.families import yzaim
+from servobus.families.yzaim import registers as yzaim
 from servobus.protocols.easycan.codec import decode
 from servobus.protocols.easycan.functions import HOST_ADDRESS, Function, error_text
 from servobus.protocols.easycan.messages import (

@@ -30,7 +30,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntEnum
 
-from servobus.families import yzaim
+from servobus.families.yzaim import registers as yzaim
 
 BITRATE = 1_000_000
 HOST_ADDRESS = 0xFF

@@ -6,7 +6,7 @@ Each URL opened gets its own virtual channel, so two in-process buses never meet
 (a YZ-AIM model of the manual's tables, default 57AIM30C), plus the client's ``timeout``,
 ``retries``, ``late_reply_s`` and ``eeprom_guard``. The motors come set up for
 communication control (gear numerator 0 saved, so modbus_enable is 1 at power-on:
-servobus.sim.yzaim_motor).
+servobus.sim.yzaim.motor).
 """
 
 from __future__ import annotations
@@ -16,14 +16,15 @@ import itertools
 from typing import Any
 
 from servobus.axis.url import DriveUrl, merge_options
-from servobus.families import yzaim
+from servobus.families.yzaim import registers as yzaim
 from servobus.protocols.easycan import commands as cmds
 from servobus.protocols.easycan.axis import EasyCanAxis
 from servobus.protocols.easycan.client import open_easycan_client
+from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.functions import BITRATE
-from servobus.protocols.easycan.node import EasyCanNetwork, serve
+from servobus.protocols.easycan.server import serve
 from servobus.sim.realtime import RealtimeClock
-from servobus.sim.yzaim_fleet import FACTORY_ADDRESS, make_motors, parse_addresses
+from servobus.sim.yzaim.fleet import FACTORY_ADDRESS, make_motors, parse_addresses
 from servobus.transport.can_bus import AsyncCanBus, BitTiming
 
 SIM_OPTIONS: dict[str, type] = {

@@ -2,7 +2,7 @@
 
 Construction checks structure only (bytes fit, word counts the frame can carry), raising
 ArgumentRangeError; register ranges and access are the family table's business
-(servobus.families.yzaim), so a virtual drive can still be sent out-of-range values.
+(servobus.families.yzaim.registers), so a virtual drive can still be sent out-of-range values.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from servobus.errors import ArgumentRangeError
-from servobus.families.yzaim import INT32_MAX, INT32_MIN, WORD_MAX, join32
+from servobus.families.yzaim.registers import INT32_MAX, INT32_MIN, WORD_MAX, join32
 from servobus.protocols.easycan.functions import (
     ERROR_FLAG,
     HOST_ADDRESS,

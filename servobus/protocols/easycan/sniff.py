@@ -10,7 +10,7 @@ from __future__ import annotations
 from servobus.errors import ProtocolError
 from servobus.protocols.easycan.codec import decode
 from servobus.protocols.easycan.describe import describe
-from servobus.sniff import CAN, ErrorEvent, FrameEvent
+from servobus.sniff import CanDecoder, ErrorEvent, FrameEvent
 
 
 def can_event(arbitration_id: int, data: bytes) -> FrameEvent | ErrorEvent:
@@ -22,17 +22,4 @@ def can_event(arbitration_id: int, data: bytes) -> FrameEvent | ErrorEvent:
     return FrameEvent(arbitration_id, bytes(data), describe(message))
 
 
-class EasyCanDecoder:
-    """The EasyCan entry of ``DECODERS``."""
-
-    name = "easycan"
-    medium = CAN
-
-    def stream(self) -> None:
-        raise NotImplementedError("EasyCan is read frame by frame")
-
-    def frame(self, arbitration_id: int, data: bytes) -> FrameEvent | ErrorEvent:
-        return can_event(arbitration_id, data)
-
-
-DECODER = EasyCanDecoder()
+DECODER = CanDecoder("easycan", "EasyCan", can_event)

@@ -33,7 +33,7 @@ import asyncio
 from collections.abc import Iterable, Mapping
 
 from servobus.errors import ArgumentRangeError
-from servobus.families import yzaim
+from servobus.families.yzaim import registers as yzaim
 from servobus.link.stats import StreamStats
 from servobus.protocols.easycan import commands as cmds
 from servobus.protocols.easycan.client import AsyncEasyCanClient

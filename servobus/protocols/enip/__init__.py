@@ -4,18 +4,10 @@ explicit-messaging client, the Axis and the Class 1 scanner, docs/enip.md.
 
 URLs: ``enip://192.168.50.18[:44818]``; ``sim://enip`` (in-process adapters on loopback).
 Spec: DMM "DYN5 EtherNet/IP Specification" 1.1A; the device model (Parameter instances,
-Identity values, quirks) is ``servobus.families.dyn5``.
+Identity values, quirks) is ``servobus.families.dyn5.params``.
 """
 
 from servobus.protocols import ProtocolSpec
 
-SPEC = ProtocolSpec(
-    name="enip",
-    family="dmm-dyn5",
-    opener="servobus.protocols.enip.opener:open_axis",
-    schemes=("enip",),
-    sim="servobus.protocols.enip.inprocess:open_sim_axis",
-    cli="servobus.protocols.enip.cli:register",
-    decoder="servobus.protocols.enip.sniff:DECODER",
-    params="servobus.families.dyn5_family:PARAM_NAMES",
-)
+SPEC = ProtocolSpec.conventional("enip", "dmm-dyn5",
+                                  params="servobus.families.dyn5.family:PARAM_NAMES")

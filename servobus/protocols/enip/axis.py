@@ -3,7 +3,7 @@
 Units (docs/axis.md): positions in encoder counts (65,536 per revolution), speed in rpm,
 current in amperes. Every call is a Get/Set_Attribute_Single on the Parameter object
 (class 0x0F, attribute 1) through :class:`AsyncEnipClient`; the instance table is
-``servobus.families.dyn5`` and the Axis view of it ``servobus.families.dyn5_family``.
+``servobus.families.dyn5.params`` and the Axis view of it ``servobus.families.dyn5.family``.
 
 * Moves: counts -> command units through GEAR_NUM (read once, then tracked through this
   axis's own writes; forgotten at Reset and origin, which reload RAM), written to 0x15 /
@@ -46,17 +46,17 @@ from servobus.errors import (
     FramingError,
     ProtocolError,
 )
-from servobus.families import dyn5
 from servobus.families.base import AxisStatus, Family, ParamInfo
 from servobus.families.dmm import units as U
 from servobus.families.dmm.family import command_to_counts, counts_to_command
-from servobus.families.dyn5 import Instance
-from servobus.families.dyn5_family import DYN5, PARAM_INSTANCES, Dyn5Status, axis_status
+from servobus.families.dyn5 import params as dyn5
+from servobus.families.dyn5.family import DYN5, PARAM_INSTANCES, Dyn5Status, axis_status
+from servobus.families.dyn5.params import Instance
 from servobus.link.transaction import DEFAULT_RETRIES
-from servobus.protocols.enip.cip import ClassCode
 from servobus.protocols.enip.client import CONNECT_TIMEOUT_S, DEFAULT_TIMEOUT_S, AsyncEnipClient
-from servobus.protocols.enip.encap import TCP_PORT
-from servobus.protocols.enip.identity import IdentityReply
+from servobus.protocols.enip.codec.cip import ClassCode
+from servobus.protocols.enip.codec.encap import TCP_PORT
+from servobus.protocols.enip.codec.identity import IdentityReply
 
 if TYPE_CHECKING:
     from servobus.protocols.enip.scanner import CyclicIo, InputFrame

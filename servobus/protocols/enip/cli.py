@@ -32,10 +32,10 @@ from servobus.cli.param_types import Seconds
 from servobus.cli.sim_cmd import add_sim_command
 from servobus.cli.sim_control import control_option, start_control
 from servobus.errors import ArgumentRangeError, NotSupported, ServobusError
-from servobus.families import dyn5
 from servobus.families.dmm import units as U
-from servobus.protocols.enip import io
-from servobus.protocols.enip.encap import TCP_PORT
+from servobus.families.dyn5 import params as dyn5
+from servobus.protocols.enip.codec import io
+from servobus.protocols.enip.codec.encap import TCP_PORT
 from servobus.realtime import request_realtime
 from servobus.sim.fine_selector import fine_event_loop
 

@@ -48,15 +48,16 @@ from servobus.errors import (
 )
 from servobus.link.stats import TransactionStats
 from servobus.link.transaction import DEFAULT_RETRIES, TransactionManager
-from servobus.protocols.enip import discovery, epath
-from servobus.protocols.enip.cip import (
+from servobus.protocols.enip import commands
+from servobus.protocols.enip.codec import discovery
+from servobus.protocols.enip.codec.cip import (
     GeneralStatus,
     MessageRouterRequest,
     MessageRouterResponse,
     Service,
     request_target,
 )
-from servobus.protocols.enip.cpf import (
+from servobus.protocols.enip.codec.cpf import (
     CpfItem,
     RRData,
     UnconnectedMessage,
@@ -64,7 +65,7 @@ from servobus.protocols.enip.cpf import (
     unconnected,
     unconnected_message,
 )
-from servobus.protocols.enip.encap import (
+from servobus.protocols.enip.codec.encap import (
     HEADER,
     TCP_PORT,
     Command,
@@ -84,7 +85,6 @@ CONNECT_TIMEOUT_S = 2.0
 #: Replies are small; a bound well above any DYN5 reply keeps the framer's memory bounded.
 MAX_REPLY_DATA = 4096
 _CONTEXT = struct.Struct("<Q")
-_READ_SERVICES = frozenset({Service.GET_ATTRIBUTES_ALL, Service.GET_ATTRIBUTE_SINGLE})
 
 TraceHook = Callable[[Direction, object, float], None]
 
@@ -277,7 +277,7 @@ class AsyncEnipClient:
             raise FramingError("empty Message Router request")
         service = message[0]
         if read is None:
-            read = service in _READ_SERVICES
+            read = commands.is_read(service)
         reply = await self._exchange(Command.SEND_RR_DATA, self._rr_data(message, extra),
                                      read=read, timeout=timeout, retries=retries)
         if reply.status != EncapStatus.SUCCESS:
@@ -312,8 +312,8 @@ class AsyncEnipClient:
         key = (service, class_id, instance, attribute)
         raw = self._messages.get(key)
         if raw is None:
-            path = epath.request_path(class_id, instance, attribute)
-            raw = self._messages[key] = MessageRouterRequest(service, path).encode()
+            raw = self._messages[key] = commands.make_message(service, class_id, instance,
+                                                              attribute)
         return raw
 
     async def get_attribute_single(self, class_id: int, instance: int, attribute: int, *,

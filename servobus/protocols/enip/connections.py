@@ -39,10 +39,10 @@ import random
 from dataclasses import dataclass
 
 from servobus.errors import FramingError
-from servobus.families import dyn5
-from servobus.families.dyn5 import Identity
-from servobus.protocols.enip import io
-from servobus.protocols.enip.connection_manager import (
+from servobus.families.dyn5 import params as dyn5
+from servobus.families.dyn5.params import Identity
+from servobus.protocols.enip.codec import io
+from servobus.protocols.enip.codec.connection_manager import (
     ConnectionType,
     ExtendedStatus,
     ForwardCloseRequest,
@@ -53,7 +53,7 @@ from servobus.protocols.enip.connection_manager import (
     Triad,
     watchdog_s,
 )
-from servobus.protocols.enip.epath import (
+from servobus.protocols.enip.codec.epath import (
     DataSegment,
     KeySegment,
     LogicalType,

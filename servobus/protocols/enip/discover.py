@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 
 from servobus.axis import checks
 from servobus.errors import ArgumentRangeError, FramingError
-from servobus.protocols.enip import discovery
 from servobus.protocols.enip.axis import check_ip
-from servobus.protocols.enip.encap import TCP_PORT, Command, EncapPacket, EncapStatus
+from servobus.protocols.enip.codec import discovery
+from servobus.protocols.enip.codec.encap import TCP_PORT, Command, EncapPacket, EncapStatus
 from servobus.protocols.enip.scanner import local_address_for
 
 BROADCAST = "255.255.255.255"

@@ -17,8 +17,8 @@ from typing import TYPE_CHECKING, Any
 from servobus.axis import checks
 from servobus.axis.url import DriveUrl, merge_options
 from servobus.errors import ArgumentRangeError
-from servobus.families import dyn5
 from servobus.families.dmm import units as U
+from servobus.families.dyn5 import params as dyn5
 from servobus.protocols.enip.axis import DRIVE_IDS, EnipAxis, with_last_octet
 from servobus.protocols.enip.client import AsyncEnipClient
 from servobus.protocols.enip.opener import OPTIONS, axis_options

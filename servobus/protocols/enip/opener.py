@@ -20,7 +20,7 @@ from servobus.axis.url import DriveUrl, merge_options
 from servobus.errors import ArgumentRangeError
 from servobus.protocols.enip.axis import EnipAxis, EnipOptions, with_last_octet
 from servobus.protocols.enip.client import AsyncEnipClient
-from servobus.protocols.enip.encap import TCP_PORT
+from servobus.protocols.enip.codec.encap import TCP_PORT
 
 OPTIONS: dict[str, type] = {
     "timeout": float, "retries": int, "connect_timeout": float, "peak_current_a": float,

@@ -1,6 +1,6 @@
 """The DYN5 Parameter object (class 0x0F) on the shared drive core. No I/O.
 
-Reads and writes of attribute 1 follow ``servobus.families.dyn5`` (the one instance table)
+Reads and writes of attribute 1 follow ``servobus.families.dyn5.params`` (the one instance table)
 and the general rules of manual 4.1:
 
 * reads of write-only or non-existent instances (1..255) return 0x12345;
@@ -22,11 +22,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import Enum
 
-from servobus.families import dyn5
 from servobus.families.dmm.registers import ServoMode
-from servobus.families.dyn5 import Instance, Kind
-from servobus.families.dyn5_family import DYN5
-from servobus.sim.drive import VirtualDrive
+from servobus.families.dyn5 import params as dyn5
+from servobus.families.dyn5.family import DYN5
+from servobus.families.dyn5.params import Instance, Kind
+from servobus.sim.dmm.drive import VirtualDrive
 
 _SPEED_LIMIT = dyn5.BY_NAME["torque_speed_limit"].number
 

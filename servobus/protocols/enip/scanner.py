@@ -59,13 +59,13 @@ from servobus.errors import (
     FramingError,
     ProtocolError,
 )
-from servobus.families import dyn5
 from servobus.families.base import AxisStatus
-from servobus.families.dyn5_family import axis_status
-from servobus.protocols.enip import io
-from servobus.protocols.enip.cip import GeneralStatus, MessageRouterRequest, Service
+from servobus.families.dyn5 import params as dyn5
+from servobus.families.dyn5.family import axis_status
 from servobus.protocols.enip.clock import ClockThread, Tick
-from servobus.protocols.enip.connection_manager import (
+from servobus.protocols.enip.codec import io
+from servobus.protocols.enip.codec.cip import GeneralStatus, MessageRouterRequest, Service
+from servobus.protocols.enip.codec.connection_manager import (
     CONNECTION_MANAGER_PATH,
     TIMEOUT_MULTIPLIER_MAX,
     ExtendedStatus,
@@ -77,8 +77,8 @@ from servobus.protocols.enip.connection_manager import (
     Triad,
     watchdog_s,
 )
-from servobus.protocols.enip.cpf import ItemType, SockaddrInfo
-from servobus.protocols.enip.epath import LogicalType, Segment, logical
+from servobus.protocols.enip.codec.cpf import ItemType, SockaddrInfo
+from servobus.protocols.enip.codec.epath import LogicalType, Segment, logical
 from servobus.protocols.enip.production import Producer, ProductionWheel
 from servobus.protocols.enip.udp import UdpSocket
 

@@ -47,19 +47,17 @@ from dataclasses import dataclass
 from typing import Any, cast
 
 from servobus.errors import ArgumentRangeError, FramingError
-from servobus.families import dyn5
-from servobus.families.dyn5 import Identity
-from servobus.protocols.enip import discovery, io
-from servobus.protocols.enip.adapter import Dyn5Adapter, Origin, Outcome
-from servobus.protocols.enip.connections import IoConnection
-from servobus.protocols.enip.cpf import (
+from servobus.families.dyn5 import params as dyn5
+from servobus.families.dyn5.params import Identity
+from servobus.protocols.enip.codec import discovery, io
+from servobus.protocols.enip.codec.cpf import (
     RRData,
     SockaddrInfo,
     UnconnectedMessage,
     plain_rr_data,
     unconnected_message,
 )
-from servobus.protocols.enip.encap import (
+from servobus.protocols.enip.codec.encap import (
     MAX_DATA,
     TCP_PORT,
     UDP_COMMANDS,
@@ -70,8 +68,10 @@ from servobus.protocols.enip.encap import (
     EncapStatus,
     RegisterSessionData,
 )
+from servobus.protocols.enip.connections import IoConnection
+from servobus.protocols.enip.device import Dyn5Adapter, Origin, Outcome
 from servobus.protocols.enip.production import Producer, ProductionWheel
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.eeprom import EepromStore, StateKind, check_drive_record
 from servobus.sim.realtime import RealtimeClock
 from servobus.sim.server_limits import MAX_OUTPUT_BYTES, WRITE_HIGH_WATER

@@ -4,7 +4,7 @@ The bytes are a TCP stream of encapsulation packets (24-byte header + data, CIP 
 as a capture of port 44818 holds them; the framer keeps alignment by the length field. Each
 packet becomes one line: the command, session, status and, for SendRRData, the Message
 Router request or reply inside, with the DYN5 meaning of Parameter instances (the instance
-table, ``servobus.families.dyn5``). Direction: a Message Router reply has bit 7 of its
+table, ``servobus.families.dyn5.params``). Direction: a Message Router reply has bit 7 of its
 service set (CIP Vol. 1 2-4); other packets are shown without one. A packet that does not
 parse is an error line; a length above the framer's bound is reported and skipped.
 """
@@ -15,8 +15,9 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 from servobus.errors import FramingError
-from servobus.families import dyn5
-from servobus.protocols.enip.cip import (
+from servobus.families.dyn5 import params as dyn5
+from servobus.protocols.enip.client import describe, status_text
+from servobus.protocols.enip.codec.cip import (
     REPLY_FLAG,
     ClassCode,
     MessageRouterRequest,
@@ -25,16 +26,15 @@ from servobus.protocols.enip.cip import (
     Service,
     request_target,
 )
-from servobus.protocols.enip.client import describe, status_text
-from servobus.protocols.enip.cpf import unconnected_message
-from servobus.protocols.enip.encap import (
+from servobus.protocols.enip.codec.cpf import unconnected_message
+from servobus.protocols.enip.codec.encap import (
     Command,
     EncapFramer,
     EncapPacket,
     EncapReject,
     EncapStatus,
 )
-from servobus.sniff import BYTES, ErrorEvent
+from servobus.sniff import ByteDecoder, ErrorEvent
 
 MAX_REMEMBERED = 64  # outstanding requests whose replies can be named
 
@@ -167,17 +167,4 @@ class EnipStreamDecoder:
         return []
 
 
-class EnipDecoder:
-    """The EtherNet/IP entry of ``DECODERS``: a TCP capture of encapsulation packets."""
-
-    name = "enip"
-    medium = BYTES
-
-    def stream(self) -> EnipStreamDecoder:
-        return EnipStreamDecoder()
-
-    def frame(self, arbitration_id: int, data: bytes) -> ErrorEvent:
-        return ErrorEvent("frame", "EtherNet/IP has no CAN frames")
-
-
-DECODER = EnipDecoder()
+DECODER = ByteDecoder("enip", "EtherNet/IP", EnipStreamDecoder)  # a TCP capture

@@ -4,7 +4,7 @@
 character and inter-frame times; ``framer`` cutting a byte stream into frames (by silence
 and content for a line or sniffer, by predicted length for a host awaiting a reply);
 ``client``/``policy``/``axis``/``opener`` the host side; ``line``/``pacing``/``server``/
-``inprocess``/``sim_cmd`` the virtual line of YZ-AIM motors; ``sniff`` decode/sniff.
+``inprocess``/``cli`` the virtual line of YZ-AIM motors; ``sniff`` decode/sniff.
 
 URLs: ``modbus:///dev/ttyUSB0?baud=19200``, ``modbus:COM3``, ``modbus+socket://HOST:PORT``
 (any pyserial URL after the ``+``); ``sim://modbus`` is the in-process virtual line.
@@ -12,13 +12,5 @@ URLs: ``modbus:///dev/ttyUSB0?baud=19200``, ``modbus:COM3``, ``modbus+socket://H
 
 from servobus.protocols import ProtocolSpec
 
-SPEC = ProtocolSpec(
-    name="modbus",
-    family="yzaim",
-    opener="servobus.protocols.modbus.opener:open_axis",
-    schemes=("modbus",),
-    sim="servobus.protocols.modbus.inprocess:open_sim_axis",
-    cli="servobus.protocols.modbus.sim_cmd:register",
-    decoder="servobus.protocols.modbus.sniff:DECODER",
-    params="servobus.protocols.modbus.params:REACHABLE_PARAMS",
-)
+SPEC = ProtocolSpec.conventional("modbus", "yzaim",
+                                  params="servobus.protocols.modbus.params:REACHABLE_PARAMS")

@@ -23,7 +23,7 @@ from __future__ import annotations
 from servobus.axis.base import check_int
 from servobus.axis.register_axis import ABS, ADDRESS, INC, R, RegisterAxis
 from servobus.errors import ArgumentRangeError, DriveError
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.protocols.modbus import codec as C
 from servobus.protocols.modbus.client import ModbusClient
 from servobus.protocols.modbus.params import REACHABLE_PARAMS

@@ -51,6 +51,7 @@ from servobus.link.late_replies import DEFAULT_LATE_REPLY_S, LateReplies
 from servobus.link.stats import TransactionStats
 from servobus.link.transaction import DEFAULT_RETRIES, TransactionManager, check_call
 from servobus.protocols.modbus import codec as C
+from servobus.protocols.modbus import commands
 from servobus.protocols.modbus.framer import GapFramer, ReplyFramer
 from servobus.protocols.modbus.policy import DEFAULT_TURNAROUND_S, RtuPolicy
 from servobus.protocols.modbus.sniff import REGISTER_NAMES, reply_event, request_event
@@ -189,11 +190,7 @@ class ModbusClient:
     async def read(self, address: int, start: int, count: int = 1, *,
                    retries: int | None = None, timeout: float | None = None) -> tuple[int, ...]:
         """Read ``count`` holding registers (function 0x03) from device ``address``."""
-        if isinstance(address, bool) or not isinstance(address, int):
-            raise ArgumentRangeError(f"device address must be an integer, got {address!r}")
-        if address == C.BROADCAST:
-            raise ArgumentRangeError("a read cannot be broadcast (address 0 gets no reply)")
-        reply = await self.transact(C.ReadHoldingRequest(address, start, count),
+        reply = await self.transact(commands.make_read(address, start, count),
                                     retries=retries, timeout=timeout)
         assert isinstance(reply, C.ReadHoldingReply)
         return reply.values
@@ -202,13 +199,8 @@ class ModbusClient:
                     timeout: float | None = None) -> C.Reply | None:
         """Write registers once: function 0x06 for one word, 0x10 for more (a 32-bit pair in
         one frame, so the device takes both words together). Address 0 broadcasts (None)."""
-        words = tuple(values)
-        request: C.Request
-        if len(words) == 1:
-            request = C.WriteSingleRequest(address, start, words[0])
-        else:
-            request = C.WriteMultipleRequest(address, start, words)
-        return await self.transact(request, timeout=timeout)
+        return await self.transact(commands.make_write(address, start, values),
+                                   timeout=timeout)
 
     async def transact(self, request: C.Request, *, retries: int | None = None,
                        timeout: float | None = None) -> C.Reply | None:

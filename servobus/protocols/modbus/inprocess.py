@@ -11,7 +11,7 @@ URL options (``sim://modbus?ids=1,2&fast=1&state=FILE&model=57AIM30C&baud=19200`
 | ``ids`` | device addresses on the line (1..254) | one motor with the id asked for (1 if none) |
 | ``fast`` / ``paced`` | ``fast=1``: no wire pacing | paced |
 | ``state`` | JSON file keeping each motor's EEPROM (saved registers, position) | none |
-| ``model`` | YZ-AIM model (``servobus.families.yzaim.MODELS``) | 57AIM30C |
+| ``model`` | YZ-AIM model (``servobus.families.yzaim.registers.MODELS``) | 57AIM30C |
 | ``baud`` | the line's baud rate (pacing and the client's deadlines) | 19200 |
 
 Client options (``timeout``, ``retries``, ``turnaround_s``, ``late_reply_s``,
@@ -27,14 +27,14 @@ from typing import Any
 
 from servobus.axis.url import DriveUrl, merge_options
 from servobus.errors import ConnectionLost
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.protocols.modbus.axis import ModbusAxis, check_address
 from servobus.protocols.modbus.client import ModbusClient
-from servobus.protocols.modbus.line import ModbusLine
+from servobus.protocols.modbus.device import ModbusLine
 from servobus.protocols.modbus.pacing import RtuLineRunner, RtuPort
 from servobus.protocols.modbus.timing import DEFAULT_BAUD
-from servobus.sim.yzaim_fleet import FACTORY_ADDRESS, make_motors, parse_addresses
-from servobus.sim.yzaim_motor import YzaimMotor
+from servobus.sim.yzaim.fleet import FACTORY_ADDRESS, make_motors, parse_addresses
+from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.transport.base import Direction
 from servobus.transport.buffered import PushInput
 

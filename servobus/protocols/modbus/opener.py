@@ -18,6 +18,7 @@ from typing import Any
 from servobus.axis import checks
 from servobus.axis.url import DriveUrl, merge_options
 from servobus.errors import ArgumentRangeError
+from servobus.link.opening import client_on
 from servobus.protocols.modbus.axis import ModbusAxis, check_address
 from servobus.protocols.modbus.client import ModbusClient
 from servobus.protocols.modbus.timing import DEFAULT_BAUD
@@ -70,9 +71,6 @@ async def open_axis(url: DriveUrl, *, drive_id: int | None = None,
         raise ArgumentRangeError(f"transport={transport!r}: use 'auto', 'tcp' or 'pyserial'")
     ModbusClient.check_options(options)
     stream = await open_stream(port, baud=baud, transport=transport)
-    try:
-        client = ModbusClient(stream, baud=baud, **options)  # type: ignore[arg-type]
-    except BaseException:
-        await stream.close()
-        raise
+    client = await client_on(stream, lambda s: ModbusClient(
+        s, baud=baud, **options))  # type: ignore[arg-type]
     return ModbusAxis(client, address)

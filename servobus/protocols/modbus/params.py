@@ -3,6 +3,6 @@ serial port reads and writes every register, manual section 6)."""
 
 from __future__ import annotations
 
-from servobus.families.yzaim_family import PARAM_NAMES
+from servobus.families.yzaim.family import PARAM_NAMES
 
 REACHABLE_PARAMS: tuple[str, ...] = PARAM_NAMES

@@ -3,7 +3,7 @@ and a tap: ``servobus sim modbus``.
 
 The mechanics (each TCP client its own host port on the line, PTY, tap, fairness,
 backpressure, half-close, connection cap) are :mod:`servobus.sim.line_server`'s; this module
-puts the RTU line (:mod:`servobus.protocols.modbus.line`) and its baud-rate runner
+puts the RTU line (:mod:`servobus.protocols.modbus.device`) and its baud-rate runner
 (:mod:`servobus.protocols.modbus.pacing`) behind them. The tap carries every frame of the
 line in wire order: host frames when their last byte arrived, replies when their last byte
 left (``servobus sniff --tap tcp://... --protocol modbus``).
@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import TextIO
 
-from servobus.protocols.modbus.line import ModbusLine
+from servobus.protocols.modbus.device import ModbusLine
 from servobus.protocols.modbus.pacing import RtuLineRunner, RtuPort
 from servobus.protocols.modbus.timing import DEFAULT_BAUD
 from servobus.sim import server_limits as lim
@@ -25,7 +25,7 @@ from servobus.sim.line_server import (
     serve_line,
 )
 from servobus.sim.wire import COARSE_S, FINE_COARSE_S
-from servobus.sim.yzaim_motor import YzaimMotor
+from servobus.sim.yzaim.motor import YzaimMotor
 
 WHAT = "sim modbus"  # how log lines name this server
 

@@ -4,7 +4,7 @@ Pure (no I/O, no clock): bytes in, events out. Frames are cut from the byte stre
 content with the eager :class:`~servobus.protocols.modbus.framer.GapFramer` (a capture or a
 hex string carries no timing; a caller that has timestamps may pass them to
 :meth:`RtuStreamDecoder.iter_feed`). Register addresses are named from the YZ-AIM register
-table (``servobus.families.yzaim``).
+table (``servobus.families.yzaim.registers``).
 
 Direction. A read request is 8 bytes and its reply 5 + 2n, a write-multiple request
 9 + 2n and its reply 8, an exception reply has bit 7 of its function set: the codec tells
@@ -19,11 +19,11 @@ from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 
 from servobus.errors import ProtocolError
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.protocols.modbus import codec as C
 from servobus.protocols.modbus.framer import GapFramer, TimedFrame
 from servobus.protocols.modbus.timing import DEFAULT_BAUD, char_time_s
-from servobus.sniff import BYTES, ErrorEvent
+from servobus.sniff import ByteDecoder, ErrorEvent
 
 #: Register address -> name, for describe().
 REGISTER_NAMES: Mapping[int, str] = {r.address: r.name for r in Y.REGISTERS}
@@ -124,17 +124,4 @@ class RtuStreamDecoder:
             yield event
 
 
-class ModbusDecoder:
-    """The Modbus RTU entry of ``DECODERS``: byte streams on a TTL/RS-485 line."""
-
-    name = "modbus"
-    medium = BYTES
-
-    def stream(self) -> RtuStreamDecoder:
-        return RtuStreamDecoder()
-
-    def frame(self, arbitration_id: int, data: bytes) -> ErrorEvent:
-        return ErrorEvent("frame", "Modbus RTU has no CAN frames")
-
-
-DECODER = ModbusDecoder()
+DECODER = ByteDecoder("modbus", "Modbus RTU", RtuStreamDecoder)  # TTL/RS-485 line

@@ -177,9 +177,10 @@ class ServoEngine:
     def set_protections(self, enabled: bool) -> None:
         """The DMM alarms (lost phase, over current, I^2 t over power) on or off.
 
-        A front end of another family that models its own protections (YZ-AIM: stall and
-        current limit, docs/yzaim.md) switches them off: the thresholds become infinite, so
-        the hot loops stay unchanged."""
+        On for the DMM drive (servobus.sim.dmm.drive); off in the protocol-free
+        :class:`servobus.sim.core.motor.Motor`, under a family that models its own (YZ-AIM:
+        stall and current limit, docs/yzaim.md). Off, the thresholds are infinite, so the
+        hot loops stay unchanged."""
         inf = math.inf
         self.lp_fast = K.LOST_PHASE_FAST_COUNTS if enabled else inf
         self.lp_slow = K.LOST_PHASE_SLOW_COUNTS if enabled else inf

@@ -29,7 +29,8 @@ from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, DriveConfig, ServoMode
 from servobus.link.eeprom_guard import EepromGuard, EepromWearWarning
 from servobus.protocols.dyn232 import codec as c
-from servobus.protocols.dyn232.client import AsyncDyn232Client, Dyn232Axis
+from servobus.protocols.dyn232.axis import Dyn232Axis
+from servobus.protocols.dyn232.client import AsyncDyn232Client
 from servobus.transport.base import ByteReceiver, Direction, TraceHook
 from servobus.transport.pair import Fault, PairStream, PushPairStream
 

@@ -17,9 +17,9 @@ from servobus.axis import AsyncAxis, Axis, connect, connect_async
 from servobus.errors import ArgumentRangeError, DriveTimeout, ServobusError
 from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
-from servobus.protocols.dyn232.client import Dyn232Axis
+from servobus.protocols.dyn232.axis import Dyn232Axis
 from servobus.protocols.dyn232.server import Dyn232Server
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.transport.base import Direction
 from servobus.transport.serial_stream import SerialStream
 from servobus.transport.tcp_stream import TcpStream

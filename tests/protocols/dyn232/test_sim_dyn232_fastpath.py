@@ -6,8 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from servobus.protocols.dyn232 import codec as c
-from servobus.protocols.dyn232.line import Dyn232Line
-from servobus.sim.drive import VirtualDrive
+from servobus.protocols.dyn232.device import Dyn232Line
+from servobus.sim.dmm.drive import VirtualDrive
 
 IDS = (0, 1, 2, 3, c.BROADCAST_ID, 9)  # 9 is absent; 127 reaches every drive
 

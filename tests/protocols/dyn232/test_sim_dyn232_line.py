@@ -12,10 +12,10 @@ from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, DriveConfig, DriveStatus
 from servobus.protocols.dyn232 import codec as c
+from servobus.protocols.dyn232.device import Dyn232Line, wrap28
 from servobus.protocols.dyn232.inprocess import open_sim_stream, open_sim_url, parse_sim_url
-from servobus.protocols.dyn232.line import Dyn232Line, wrap28
 from servobus.protocols.dyn232.pacing import BYTE_TIME_S, WireClock
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.eeprom import EepromStore
 
 H, D, GR = c.HostFunction, c.DriveFunction, c.GeneralReadSelector

@@ -20,7 +20,7 @@ from servobus.errors import ArgumentRangeError
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232.pacing import BYTE_TIME_S
 from servobus.protocols.dyn232.server import Dyn232Server, parse_listen_url
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 
 H, D, GR = c.HostFunction, c.DriveFunction, c.GeneralReadSelector
 CLI = [sys.executable, "-c", "from servobus.cli.main import main; main()"]

@@ -15,8 +15,9 @@ from click.testing import CliRunner, Result
 from servobus.cli.main import cli
 from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
-from servobus.protocols.dyncan.node import DynCanNetwork, serve
-from servobus.sim.drive import VirtualDrive
+from servobus.protocols.dyncan.device import DynCanNetwork
+from servobus.protocols.dyncan.server import serve
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.realtime import RealtimeClock
 from servobus.transport.can_bus import AsyncCanBus
 

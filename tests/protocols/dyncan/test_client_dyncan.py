@@ -14,9 +14,10 @@ from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, DriveConfig
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan import commands as cmds
-from servobus.protocols.dyncan.client import open_can_axis
-from servobus.protocols.dyncan.node import DynCanNetwork, serve
-from servobus.sim.drive import VirtualDrive
+from servobus.protocols.dyncan.axis import open_can_axis
+from servobus.protocols.dyncan.device import DynCanNetwork
+from servobus.protocols.dyncan.server import serve
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.transport.base import Direction
 from servobus.transport.can_bus import AsyncCanBus, parse_can_spec
 

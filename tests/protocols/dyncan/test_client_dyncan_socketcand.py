@@ -14,13 +14,13 @@ import pytest
 
 from servobus.axis import connect
 from servobus.protocols.dyncan import codec as c
-from servobus.transport.can_bus import CanFrame
-from servobus.transport.socketcand_hub import (
+from servobus.sim.socketcand_hub import (
     RAWMODE_SETTLE_S,
     SocketcandHub,
     format_frame,
     parse_send,
 )
+from servobus.transport.can_bus import CanFrame
 
 pytestmark = pytest.mark.timeout(60)
 SERVER_S = 25.0

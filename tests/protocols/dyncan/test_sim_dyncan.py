@@ -8,8 +8,8 @@ from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, DriveStatus
 from servobus.protocols.dyncan import codec as c
-from servobus.protocols.dyncan.node import DynCanNetwork
-from servobus.sim.drive import CONTROL_HZ, VirtualDrive
+from servobus.protocols.dyncan.device import DynCanNetwork
+from servobus.sim.dmm.drive import CONTROL_HZ, VirtualDrive
 
 F = c.Function
 ERR = c.DriveErrorCode

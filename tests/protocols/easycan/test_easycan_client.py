@@ -15,16 +15,17 @@ from dataclasses import dataclass, field
 import pytest
 
 from servobus.errors import ArgumentRangeError, ConnectionLost, DriveError, DriveTimeout
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.protocols.easycan import codec
 from servobus.protocols.easycan import commands as cmds
 from servobus.protocols.easycan.axis import EasyCanAxis
 from servobus.protocols.easycan.client import AsyncEasyCanClient
 from servobus.protocols.easycan.commands import EasyCanCommand
+from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.messages import ReadReply, ReadRequest, WriteRequest
-from servobus.protocols.easycan.node import EasyCanNetwork, serve
+from servobus.protocols.easycan.server import serve
 from servobus.sim.realtime import RealtimeClock
-from servobus.sim.yzaim_motor import YzaimMotor
+from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.transport.base import Direction
 from servobus.transport.can_bus import AsyncCanBus, CanFrame, FrameTraceHook
 

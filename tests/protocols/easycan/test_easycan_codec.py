@@ -29,7 +29,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from servobus.errors import ArgumentRangeError, FramingError
-from servobus.families import yzaim
+from servobus.families.yzaim import registers as yzaim
 from servobus.protocols.easycan import api as E
 from servobus.protocols.easycan import codec
 from servobus.protocols.easycan.functions import SPECS, ErrorCode, Function

@@ -18,18 +18,19 @@ import pytest
 from sim_abuse_rig import can_session, readable
 
 from servobus.axis import connect
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.protocols.easycan import codec
+from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.messages import (
     ErrorReply,
     PositionReply,
     ReadReply,
     ReadRequest,
 )
-from servobus.protocols.easycan.node import EasyCanNetwork, serve
+from servobus.protocols.easycan.server import serve
 from servobus.sim.realtime import RealtimeClock
-from servobus.sim.yzaim_motor import YzaimMotor
-from servobus.transport.socketcand_hub import SocketcandHub
+from servobus.sim.socketcand_hub import SocketcandHub
+from servobus.sim.yzaim.motor import YzaimMotor
 
 pytestmark = pytest.mark.timeout(90)
 SERVER_S = 40.0

@@ -11,12 +11,13 @@ from contextlib import asynccontextmanager
 import pytest
 
 from servobus.errors import ArgumentRangeError
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.protocols.easycan.client import AsyncEasyCanClient
-from servobus.protocols.easycan.node import EasyCanNetwork, serve
+from servobus.protocols.easycan.device import EasyCanNetwork
+from servobus.protocols.easycan.server import serve
 from servobus.protocols.easycan.sync import SyncGroup
 from servobus.sim.realtime import RealtimeClock
-from servobus.sim.yzaim_motor import YzaimMotor
+from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.transport.can_bus import AsyncCanBus, BitTiming
 
 pytestmark = pytest.mark.timeout(60)

@@ -23,13 +23,14 @@ from servobus.errors import (
     DriveTimeout,
     EepromGuardError,
 )
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.link.eeprom_guard import EepromGuard
 from servobus.link.transaction import TransactionStats
 from servobus.protocols.dyncan import commands as dyncan_cmds
 from servobus.protocols.easycan import codec
 from servobus.protocols.easycan import commands as cmds
 from servobus.protocols.easycan.client import AsyncEasyCanClient
+from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.functions import ErrorCode, Function
 from servobus.protocols.easycan.messages import (
     ErrorReply,
@@ -40,8 +41,7 @@ from servobus.protocols.easycan.messages import (
     Request,
     WriteReply,
 )
-from servobus.protocols.easycan.node import EasyCanNetwork
-from servobus.sim.yzaim_motor import YzaimMotor
+from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.transport.base import Direction
 from servobus.transport.can_bus import CanFrame, FrameReceiver, FrameTraceHook
 

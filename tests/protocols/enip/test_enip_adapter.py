@@ -10,16 +10,19 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from servobus.families import dyn5
 from servobus.families.dmm import profile as PR
-from servobus.protocols.enip import epath
-from servobus.protocols.enip.adapter import Dyn5Adapter, Origin, Outcome
-from servobus.protocols.enip.cip import MessageRouterRequest, MessageRouterResponse
-from servobus.protocols.enip.connection_manager import ForwardOpenReply, UnconnectedSendRequest
-from servobus.protocols.enip.epath import PortSegment
-from servobus.protocols.enip.identity import IdentityReply
-from servobus.protocols.enip.io import IoFrame, OutputImage
-from servobus.sim.drive import VirtualDrive
+from servobus.families.dyn5 import params as dyn5
+from servobus.protocols.enip.codec import epath
+from servobus.protocols.enip.codec.cip import MessageRouterRequest, MessageRouterResponse
+from servobus.protocols.enip.codec.connection_manager import (
+    ForwardOpenReply,
+    UnconnectedSendRequest,
+)
+from servobus.protocols.enip.codec.epath import PortSegment
+from servobus.protocols.enip.codec.identity import IdentityReply
+from servobus.protocols.enip.codec.io import IoFrame, OutputImage
+from servobus.protocols.enip.device import Dyn5Adapter, Origin, Outcome
+from servobus.sim.dmm.drive import VirtualDrive
 
 ORIGIN = Origin("127.0.0.1")
 UNREADABLE = dyn5.encode_udint(0x12345)

@@ -13,10 +13,10 @@ from enip_rig import DOWNTIME_S, adapters, rig, url_of
 from servobus.axis import connect, connect_async
 from servobus.axis.base import AsyncAxis
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveTimeout, NotSupported
-from servobus.families import dyn5
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode
-from servobus.families.dyn5_family import DYN5
+from servobus.families.dyn5 import params as dyn5
+from servobus.families.dyn5.family import DYN5
 from servobus.protocols.enip.axis import EnipAxis
 from servobus.transport.base import Direction
 

@@ -14,11 +14,11 @@ import pytest
 from enip_rig import adapters
 
 from servobus.errors import ConnectionLost, DriveError, DriveTimeout, ProtocolError
-from servobus.families import dyn5
-from servobus.protocols.enip.cip import MessageRouterRequest, MessageRouterResponse
+from servobus.families.dyn5 import params as dyn5
 from servobus.protocols.enip.client import AsyncEnipClient
-from servobus.protocols.enip.cpf import RRData, UnconnectedMessage
-from servobus.protocols.enip.encap import Command, EncapFramer, EncapPacket
+from servobus.protocols.enip.codec.cip import MessageRouterRequest, MessageRouterResponse
+from servobus.protocols.enip.codec.cpf import RRData, UnconnectedMessage
+from servobus.protocols.enip.codec.encap import Command, EncapFramer, EncapPacket
 from servobus.transport.base import Direction
 
 pytestmark = pytest.mark.timeout(60)

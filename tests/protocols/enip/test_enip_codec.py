@@ -9,23 +9,23 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from servobus.errors import FramingError, ProtocolError
-from servobus.families import dyn5
-from servobus.protocols.enip import cpf, discovery, epath
-from servobus.protocols.enip import identity as ident
-from servobus.protocols.enip.cip import (
+from servobus.families.dyn5 import params as dyn5
+from servobus.protocols.enip.codec import cpf, discovery, epath
+from servobus.protocols.enip.codec import identity as ident
+from servobus.protocols.enip.codec.cip import (
     MessageRouterRequest,
     MessageRouterResponse,
     RequestTarget,
     request_target,
 )
-from servobus.protocols.enip.cpf import CpfItem, ItemType, RRData, SockaddrInfo
-from servobus.protocols.enip.encap import (
+from servobus.protocols.enip.codec.cpf import CpfItem, ItemType, RRData, SockaddrInfo
+from servobus.protocols.enip.codec.encap import (
     Command,
     EncapHeader,
     EncapPacket,
     RegisterSessionData,
 )
-from servobus.protocols.enip.epath import (
+from servobus.protocols.enip.codec.epath import (
     DataSegment,
     KeySegment,
     LogicalSegment,

@@ -11,9 +11,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from servobus.errors import FramingError, ProtocolError
-from servobus.protocols.enip import connection_manager as cm
-from servobus.protocols.enip import epath
-from servobus.protocols.enip.connection_manager import (
+from servobus.protocols.enip.codec import connection_manager as cm
+from servobus.protocols.enip.codec import epath
+from servobus.protocols.enip.codec.connection_manager import (
     ConnectionType,
     ExtendedStatus,
     ForwardCloseRequest,
@@ -24,9 +24,9 @@ from servobus.protocols.enip.connection_manager import (
     TransportTrigger,
     Triad,
 )
+from servobus.protocols.enip.codec.epath import KeySegment, PortSegment
+from servobus.protocols.enip.codec.io import IoFrame, OutputImage
 from servobus.protocols.enip.connections import ConnectionTable, Refused
-from servobus.protocols.enip.epath import KeySegment, PortSegment
-from servobus.protocols.enip.io import IoFrame, OutputImage
 
 TRIAD = Triad(0x1234, 0x4242, 0xCAFE)
 PATH = epath.decode_path(raw.DYN5_PATH)

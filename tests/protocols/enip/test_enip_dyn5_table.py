@@ -1,4 +1,4 @@
-"""The DYN5 device model (servobus.families.dyn5) against the manual's tables and examples."""
+"""The DYN5 device model (servobus.families.dyn5.params) against the manual's tables."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from servobus.errors import ArgumentRangeError
-from servobus.families import dyn5
 from servobus.families.dmm import params as P
-from servobus.families.dyn5 import Access
+from servobus.families.dyn5 import params as dyn5
+from servobus.families.dyn5.params import Access
 
 # (instance, access, minimum, maximum or choices) as section 4.3 lists them, with the
 # decisions of the module docstring applied (0x20 1..127, 0x22 = 34).

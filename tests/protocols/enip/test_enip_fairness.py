@@ -16,7 +16,7 @@ import pytest
 from conftest import wait_until_async
 from enip_rig import adapters
 
-from servobus.protocols.enip.encap import EncapPacket
+from servobus.protocols.enip.codec.encap import EncapPacket
 from servobus.protocols.enip.server import PACKETS_PER_TURN, EnipServer, _TcpClient
 
 pytestmark = pytest.mark.timeout(60)

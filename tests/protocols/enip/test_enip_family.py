@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import pytest
 
-from servobus.families import FAMILIES, dyn5, family
+from servobus.families import FAMILIES, family
 from servobus.families.base import Storage
 from servobus.families.dmm.family import DYN2
-from servobus.families.dyn5_family import DYN5, PARAM_INSTANCES, Dyn5Status, axis_status
+from servobus.families.dyn5 import params as dyn5
+from servobus.families.dyn5.family import DYN5, PARAM_INSTANCES, Dyn5Status, axis_status
 
 
 def test_registered_and_counts() -> None:

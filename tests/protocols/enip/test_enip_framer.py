@@ -7,7 +7,7 @@ import itertools
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from servobus.protocols.enip.encap import (
+from servobus.protocols.enip.codec.encap import (
     HEADER_SIZE,
     EncapFramer,
     EncapPacket,

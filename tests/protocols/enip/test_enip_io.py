@@ -10,8 +10,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from servobus.errors import FramingError, ProtocolError
-from servobus.protocols.enip import io
-from servobus.protocols.enip.io import InputImage, IoFrame, OutputImage
+from servobus.protocols.enip.codec import io
+from servobus.protocols.enip.codec.io import InputImage, IoFrame, OutputImage
 
 _i32 = st.integers(-(1 << 31), (1 << 31) - 1)
 

@@ -12,7 +12,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from servobus.errors import FramingError
-from servobus.protocols.enip import io
+from servobus.protocols.enip.codec import io
 from servobus.protocols.enip.production import EARLY_S, Producer, ProductionWheel
 
 

@@ -12,9 +12,9 @@ import pytest
 from enip_rig import DOWNTIME_S, rig
 
 from servobus.errors import ArgumentRangeError, ConnectionLost, DriveError
-from servobus.families import dyn5
-from servobus.protocols.enip import io as enip_io
-from servobus.protocols.enip.connection_manager import ExtendedStatus
+from servobus.families.dyn5 import params as dyn5
+from servobus.protocols.enip.codec import io as enip_io
+from servobus.protocols.enip.codec.connection_manager import ExtendedStatus
 from servobus.protocols.enip.scanner import CyclicIo, InputFrame
 
 pytestmark = pytest.mark.timeout(60)

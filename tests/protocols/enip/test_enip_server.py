@@ -12,7 +12,7 @@ from collections.abc import Iterator
 import enip_raw as raw
 import pytest
 
-from servobus.families import dyn5
+from servobus.families.dyn5 import params as dyn5
 from servobus.protocols.enip.server import BackgroundEnip, EnipServer
 
 pytestmark = pytest.mark.timeout(60)

@@ -10,8 +10,8 @@ import sys
 from hypothesis import given
 from hypothesis import strategies as st
 
-from servobus.protocols.enip import cpf
-from servobus.protocols.enip.encap import EncapPacket
+from servobus.protocols.enip.codec import cpf
+from servobus.protocols.enip.codec.encap import EncapPacket
 from servobus.protocols.enip.sniff import DECODER, EnipEvent
 from servobus.sniff import decode_stream, decoders
 

@@ -18,7 +18,7 @@ from servobus.errors import (
     DriveTimeout,
     NotSupported,
 )
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.protocols.modbus import codec as C
 from servobus.protocols.modbus.axis import ModbusAxis
 from servobus.protocols.modbus.inprocess import SimByteStream

@@ -17,7 +17,7 @@ from servobus.errors import (
     DriveError,
     DriveTimeout,
 )
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.protocols.modbus import codec as C
 from servobus.protocols.modbus.client import ModbusClient
 from servobus.protocols.modbus.policy import RtuPolicy

@@ -475,7 +475,7 @@ def test_describe_raises_typed_errors() -> None:
 ])
 def test_yzaim_parameters_through_the_family_table(name: str, value: int, easycan: str,
                                                    wire: str) -> None:
-    yzaim = pytest.importorskip("servobus.families.yzaim")
+    yzaim = pytest.importorskip("servobus.families.yzaim.registers")
     start, words_ = yzaim.encode_parameter(name, value)
     assert words_ == _easycan_words(easycan)  # the same words EasyCan sends little-endian
     request_: Request = (WriteSingleRequest(1, start, words_[0]) if len(words_) == 1

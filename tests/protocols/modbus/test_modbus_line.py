@@ -8,11 +8,11 @@ import time
 
 import pytest
 
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.protocols.modbus import codec as C
 from servobus.protocols.modbus.crc import with_crc
+from servobus.protocols.modbus.device import ModbusLine
 from servobus.protocols.modbus.inprocess import make_motors
-from servobus.protocols.modbus.line import ModbusLine
 from servobus.protocols.modbus.pacing import RX_BUFFER_BYTES, RtuLineRunner, whole_request
 from servobus.protocols.modbus.timing import char_time_s, inter_frame_gap_s
 from servobus.transport.base import Direction

@@ -12,7 +12,7 @@ from typing import Any
 
 import pytest
 
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 
 pymodbus = pytest.importorskip("pymodbus")
 from pymodbus import FramerType  # noqa: E402

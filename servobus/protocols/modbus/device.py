@@ -4,7 +4,7 @@ Pure-ish: no I/O and no clock. :meth:`ModbusLine.handle` takes one request frame
 checked (the runner's framer cut it from the byte stream) and returns the reply bytes,
 possibly none; pacing is :mod:`servobus.protocols.modbus.pacing`, sockets
 :mod:`servobus.protocols.modbus.server`. The registers, ranges and behaviour are the
-motor's (:class:`servobus.sim.yzaim_motor.YzaimMotor`); this module only maps frames.
+motor's (:class:`servobus.sim.yzaim.motor.YzaimMotor`); this module only maps frames.
 
 Decisions where spec 004 is silent about its serial side (docs/modbus.md; Modbus
 Application Protocol v1.1b3 sections 6.3, 6.6, 6.12, 7; Serial Line v1.02 2.1):
@@ -35,9 +35,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from servobus.errors import ProtocolError
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.protocols.modbus import codec as C
-from servobus.sim.yzaim_motor import MotorRefused, Refusal, YzaimMotor
+from servobus.sim.yzaim.motor import MotorRefused, Refusal, YzaimMotor
 
 E = C.ExceptionCode
 #: Motor refusals -> Modbus exception codes.

@@ -14,7 +14,7 @@ from typing import Any
 
 from servobus.errors import ArgumentRangeError
 from servobus.sim.control import COMMANDS, ControlError, DriveControl
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 
 #: Families whose virtual drives have the JP3 connector: the DMM drives (DYN2 manual 2.3,
 #: 4.1-4.6; the DYN5 keeps the base pulse/analog capability, DYN5 spec 1). YZ-AIM motors

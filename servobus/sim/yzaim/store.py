@@ -25,7 +25,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from servobus.families import yzaim
+from servobus.families.yzaim import registers as yzaim
 from servobus.sim.eeprom import StateFile, StateKind, checked_int, describe
 
 _FIELDS = frozenset({"registers", "position", "saves"})

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from servobus.families import yzaim
+from servobus.families.yzaim import registers as yzaim
 from servobus.sim.fleet import parse_ids
-from servobus.sim.yzaim_motor import YzaimMotor
-from servobus.sim.yzaim_store import YzaimStore
+from servobus.sim.yzaim.motor import YzaimMotor
+from servobus.sim.yzaim.store import YzaimStore
 
 FACTORY_ADDRESS = 1  # a motor's address when none is asked for (decision)
 _ADDRESS = yzaim.BY_NAME["device_address"]

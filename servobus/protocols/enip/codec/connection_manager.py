@@ -19,8 +19,8 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 from servobus.errors import FramingError
-from servobus.protocols.enip import epath
-from servobus.protocols.enip.epath import Segment
+from servobus.protocols.enip.codec import epath
+from servobus.protocols.enip.codec.epath import Segment
 
 CONNECTION_MANAGER_PATH = epath.request_path(0x06, 1)
 _OPEN = struct.Struct("<BBIIHHIB3xIHIHB")

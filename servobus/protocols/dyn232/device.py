@@ -48,8 +48,8 @@ from collections.abc import Callable, Iterator, Sequence
 
 from servobus.errors import ChecksumError, ProtocolError
 from servobus.protocols.dyn232 import codec as c
-from servobus.sim.dmm_actions import run_action
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.actions import run_action
+from servobus.sim.dmm.drive import VirtualDrive
 
 H = c.HostFunction
 GR = c.GeneralReadSelector

@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 
 from servobus.errors import FramingError
-from servobus.protocols.enip import epath
-from servobus.protocols.enip.epath import LogicalSegment, LogicalType, Segment
+from servobus.protocols.enip.codec import epath
+from servobus.protocols.enip.codec.epath import LogicalSegment, LogicalType, Segment
 
 REPLY_FLAG = 0x80
 

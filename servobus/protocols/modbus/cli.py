@@ -25,7 +25,7 @@ from servobus.cli.sim_cmd import (
     sim_banner,
     sim_options,
 )
-from servobus.families import yzaim as Y
+from servobus.families.yzaim import registers as Y
 from servobus.protocols.modbus.inprocess import FACTORY_ADDRESS, make_motors, parse_addresses
 from servobus.protocols.modbus.server import run_server
 from servobus.protocols.modbus.timing import DEFAULT_BAUD

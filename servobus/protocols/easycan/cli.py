@@ -24,15 +24,16 @@ from servobus.cli.sim_cmd import (
     sim_banner,
     sim_options,
 )
-from servobus.families import yzaim
+from servobus.families.yzaim import registers as yzaim
+from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.functions import BITRATE
-from servobus.protocols.easycan.node import EasyCanNetwork, serve
+from servobus.protocols.easycan.server import serve
 from servobus.sim.realtime import RealtimeClock
 from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS, fit_fd_limit, log_to_stderr
 from servobus.sim.socketcand_bus import socketcand_bus
-from servobus.sim.yzaim_fleet import make_motors, parse_addresses
-from servobus.sim.yzaim_motor import YzaimMotor
-from servobus.transport.socketcand_hub import parse_socketcand_address
+from servobus.sim.socketcand_hub import parse_socketcand_address
+from servobus.sim.yzaim.fleet import make_motors, parse_addresses
+from servobus.sim.yzaim.motor import YzaimMotor
 
 
 async def run_socketcand_motors(motors: Sequence[YzaimMotor], host: str, port: int, *,

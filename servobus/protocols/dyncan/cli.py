@@ -28,13 +28,14 @@ from servobus.cli.sim_cmd import (
 from servobus.cli.sim_control import control_option, start_control
 from servobus.families.dmm import units as U
 from servobus.protocols.dyncan import codec as c
-from servobus.protocols.dyncan.node import DynCanNetwork, serve
-from servobus.sim.drive import VirtualDrive
+from servobus.protocols.dyncan.device import DynCanNetwork
+from servobus.protocols.dyncan.server import serve
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.fleet import make_drives, parse_ids
 from servobus.sim.realtime import RealtimeClock
 from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS, fit_fd_limit, log_to_stderr
 from servobus.sim.socketcand_bus import socketcand_bus
-from servobus.transport.socketcand_hub import SocketcandHub, parse_socketcand_address
+from servobus.sim.socketcand_hub import SocketcandHub, parse_socketcand_address
 
 
 async def run_socketcand_nodes(drives: Sequence[VirtualDrive], host: str, port: int, *,

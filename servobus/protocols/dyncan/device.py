@@ -1,6 +1,6 @@
 """DYN CAN front end: virtual nodes on one CAN bus (DYN CAN specification section 6).
 
-Pure-ish like :mod:`servobus.protocols.dyn232.line`: ``DynCanNetwork.handle(frame)`` executes one
+Pure-ish like :mod:`servobus.protocols.dyn232.device`: ``DynCanNetwork.handle(frame)`` executes one
 host frame on every node it addresses and returns the frames the nodes send back; the
 caller advances the drives' time first. :func:`serve` runs a network on any FramePort
 (a python-can bus, the socketcand hub) in wall-clock time.
@@ -46,8 +46,6 @@ Decisions where the manual is silent (kept here, in one place):
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -56,10 +54,8 @@ from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import CONFIG_DEFINED_MASK, AlarmCode
 from servobus.families.dmm.vocabulary import GeneralReadSelector as GR
 from servobus.protocols.dyncan import codec as c
-from servobus.sim.dmm_actions import run_action
-from servobus.sim.drive import VirtualDrive
-from servobus.sim.realtime import RealtimeClock
-from servobus.transport.can_bus import FramePort
+from servobus.sim.dmm.actions import run_action
+from servobus.sim.dmm.drive import VirtualDrive
 
 F = c.Function
 _INVALID = c.DriveErrorCode.INVALID_DATA
@@ -360,46 +356,3 @@ def _build_handlers() -> dict[F, Handler]:
         if spec.fields:
             table[spec.function] = _set_group if spec.kind is c.Kind.SETTING else _read_group
     return table
-
-
-# ---------------------------------------------------------------------- serving
-async def serve(network: DynCanNetwork, port: FramePort, *,
-                clock: RealtimeClock | None = None,
-                stop: asyncio.Event | None = None) -> None:
-    """Answer host frames on ``port`` until ``stop`` is set or the port closes.
-
-    With a ``clock`` the drives run in wall-clock time (advanced before each frame and by
-    the clock's ticker); without one the caller steps them (tests). Alarm pushes queued by
-    the drives are sent as soon as they appear (checked after every frame and tick).
-    """
-    stop = stop or asyncio.Event()
-    if clock is not None:
-        clock.start()
-
-    async def pump_outbox() -> None:
-        while not stop.is_set():
-            for frame in network.take_outbox():
-                await port.send(*c.encode(frame))
-            await asyncio.sleep(clock.tick_s if clock is not None else 0.005)
-
-    pusher = asyncio.get_running_loop().create_task(pump_outbox())
-    try:
-        while not stop.is_set():
-            try:
-                raw = await port.recv(0.1)
-            except ConnectionError:
-                break
-            if raw is None or raw.is_extended_id:
-                continue
-            if clock is not None:
-                clock.sync()
-            for frame in network.handle_raw(raw.arbitration_id, raw.data):
-                await port.send(*c.encode(frame))
-            for frame in network.take_outbox():  # an alarm tripped while catching up
-                await port.send(*c.encode(frame))
-    finally:
-        pusher.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await pusher
-        if clock is not None:
-            await clock.stop()

@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from servobus.families.dmm.vocabulary import GeneralReadSelector as GR
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 
 ACTIONS: dict[GR, Callable[[VirtualDrive], object]] = {
     GR.RESET: VirtualDrive.reset,

@@ -3,7 +3,7 @@
 ``EasyCanNetwork.handle_raw(id, data)`` executes one host frame on the motor it addresses
 and returns the frames to send back; the caller advances the motors' time first.
 :func:`serve` runs a network on any FramePort (a python-can bus, the socketcand hub) in
-wall-clock time. The motors' behaviour is :mod:`servobus.sim.yzaim_motor`'s; this module only
+wall-clock time. The motors' behaviour is :mod:`servobus.sim.yzaim.motor`'s; this module only
 maps frames. Decisions where the manual is silent:
 
 * A frame that does not decode as a request (a reply on the host's identifier, an identifier
@@ -27,13 +27,11 @@ maps frames. Decisions where the manual is silent:
 
 from __future__ import annotations
 
-import asyncio
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 from servobus.errors import FramingError
-from servobus.families import yzaim
+from servobus.families.yzaim import registers as yzaim
 from servobus.protocols.easycan import codec
 from servobus.protocols.easycan.functions import (
     CACHE_ERROR_FUNCTION,
@@ -57,9 +55,7 @@ from servobus.protocols.easycan.messages import (
     WriteReply,
     WriteRequest,
 )
-from servobus.sim.realtime import RealtimeClock
-from servobus.sim.yzaim_motor import MotorRefused, Refusal, YzaimMotor
-from servobus.transport.can_bus import CanFrame, FramePort
+from servobus.sim.yzaim.motor import MotorRefused, Refusal, YzaimMotor
 
 _ABS_LOW = yzaim.PAIR_BY_NAME["absolute_position"].low
 _CODES: dict[Refusal, ErrorCode] = {
@@ -168,42 +164,3 @@ def _execute(motor: YzaimMotor, request: Request, at: float | None) -> Reply | N
             position = motor.write_position_cache(request.position, at=at)
             return PositionReply(position) if request.reply else None
     return None  # pragma: no cover
-
-
-def arrival(frame: CanFrame) -> float:
-    """The monotonic instant a frame reached the bus: the medium's own stamp (the socketcand
-    hub's, one per TCP read), else from its wall-clock timestamp (python-can stamps frames
-    on arrival; the node may handle them later)."""
-    if frame.arrived is not None:
-        return frame.arrived
-    now = time.monotonic()
-    if frame.timestamp <= 0:
-        return now
-    return min(now, now - (time.time() - frame.timestamp))
-
-
-async def serve(network: EasyCanNetwork, port: FramePort, *,
-                clock: RealtimeClock | None = None,
-                stop: asyncio.Event | None = None) -> None:
-    """Answer host frames on ``port`` until ``stop`` is set or the port closes.
-
-    With a ``clock`` the motors run in wall-clock time (the addressed one advanced before
-    each frame, all of them by the clock's ticker); without one the caller steps them.
-    """
-    stop = stop or asyncio.Event()
-    if clock is not None:
-        clock.start()
-    try:
-        while not stop.is_set():
-            try:
-                raw = await port.recv(0.1)
-            except ConnectionError:
-                break
-            if raw is None or raw.is_extended_id:
-                continue
-            now = None if clock is None else clock.sim_time(arrival(raw))
-            for arbitration_id, data in network.handle_raw(raw.arbitration_id, raw.data, now):
-                await port.send(arbitration_id, data)
-    finally:
-        if clock is not None:
-            await clock.stop()

@@ -21,8 +21,8 @@ Every number below that is not from those tables is a servobus decision (docs/yz
 
 from __future__ import annotations
 
-from servobus.families import yzaim
 from servobus.families.dmm import units as U
+from servobus.families.yzaim import registers as yzaim
 
 #: Counts of the shared engine (65,536 per rev) per YZ-AIM count (32,768 per rev).
 CORE_PER_COUNT = U.COUNTS_PER_REV / yzaim.COUNTS_PER_REV

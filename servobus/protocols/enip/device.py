@@ -28,13 +28,13 @@ import logging
 from dataclasses import dataclass
 
 from servobus.errors import FramingError
-from servobus.families import dyn5
 from servobus.families.dmm import units as U
-from servobus.families.dyn5 import Identity
-from servobus.protocols.enip import connection_manager as cm
-from servobus.protocols.enip import identity as ident
-from servobus.protocols.enip import io
-from servobus.protocols.enip.cip import (
+from servobus.families.dyn5 import params as dyn5
+from servobus.families.dyn5.params import Identity
+from servobus.protocols.enip.codec import connection_manager as cm
+from servobus.protocols.enip.codec import identity as ident
+from servobus.protocols.enip.codec import io
+from servobus.protocols.enip.codec.cip import (
     ClassCode,
     GeneralStatus,
     MessageRouterRequest,
@@ -44,6 +44,8 @@ from servobus.protocols.enip.cip import (
     error_response,
     request_target,
 )
+from servobus.protocols.enip.codec.cpf import SockaddrInfo
+from servobus.protocols.enip.codec.epath import PortSegment
 from servobus.protocols.enip.connections import (
     BACKPLANE_PORT,
     OWN_LINK,
@@ -52,15 +54,13 @@ from servobus.protocols.enip.connections import (
     IoConnection,
     Refused,
 )
-from servobus.protocols.enip.cpf import SockaddrInfo
-from servobus.protocols.enip.epath import PortSegment
 from servobus.protocols.enip.parameter_object import (
     Effect,
     ParameterObject,
     status_word,
     torque_readout,
 )
-from servobus.sim.drive import VirtualDrive
+from servobus.sim.dmm.drive import VirtualDrive
 
 log = logging.getLogger("servobus.enip")
 

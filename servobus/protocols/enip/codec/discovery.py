@@ -12,9 +12,9 @@ import struct
 from dataclasses import dataclass
 
 from servobus.errors import FramingError
-from servobus.protocols.enip import cpf
-from servobus.protocols.enip.cpf import CpfItem, ItemType, SockaddrInfo
-from servobus.protocols.enip.encap import PROTOCOL_VERSION
+from servobus.protocols.enip.codec import cpf
+from servobus.protocols.enip.codec.cpf import CpfItem, ItemType, SockaddrInfo
+from servobus.protocols.enip.codec.encap import PROTOCOL_VERSION
 
 _IDENTITY = struct.Struct("<HHHBBHI")
 _SERVICE = struct.Struct("<HH16s")

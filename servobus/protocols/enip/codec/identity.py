@@ -2,7 +2,7 @@
 
 Instance 1, attributes 1-7: vendor UINT, device type UINT, product code UINT, revision
 (major USINT, minor USINT), status WORD, serial UDINT, product name SHORT_STRING (decision
-in ``servobus.families.dyn5``). Get_Attributes_All returns the seven in order.
+in ``servobus.families.dyn5.params``). Get_Attributes_All returns the seven in order.
 
 Class level (instance 0; the manual says both services are implemented for the class but
 gives no attributes). Decision: the CIP common class attributes 1 revision (1), 2 max
@@ -16,8 +16,8 @@ import struct
 from dataclasses import dataclass
 
 from servobus.errors import FramingError
-from servobus.families.dyn5 import Identity
-from servobus.protocols.enip.discovery import decode_short_string, encode_short_string
+from servobus.families.dyn5.params import Identity
+from servobus.protocols.enip.codec.discovery import decode_short_string, encode_short_string
 
 INSTANCE_ATTRIBUTES = (1, 2, 3, 4, 5, 6, 7)
 CLASS_ATTRIBUTES = {1: 1, 2: 1, 3: 1, 6: 7, 7: 7}

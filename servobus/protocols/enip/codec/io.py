@@ -16,9 +16,9 @@ import struct
 from dataclasses import dataclass
 
 from servobus.errors import FramingError
-from servobus.families import dyn5
-from servobus.protocols.enip import cpf
-from servobus.protocols.enip.cpf import CpfItem, ItemType, SequencedAddress
+from servobus.families.dyn5 import params as dyn5
+from servobus.protocols.enip.codec import cpf
+from servobus.protocols.enip.codec.cpf import CpfItem, ItemType, SequencedAddress
 
 _INPUT = struct.Struct("<iiiI")
 _OUTPUT = struct.Struct("<II")  # run/idle header, command word

@@ -1,0 +1,208 @@
+"""Motor: the protocol-free servo motor on the engine, with no vendor's parameters or alarms.
+
+A family's virtual drive that keeps its own registers, units and protections sits on it
+(the YZ-AIM motor, :mod:`servobus.sim.yzaim.motor`); the DMM drive
+(:mod:`servobus.sim.dmm.drive`) drives the engine itself with its parameter table and alarms.
+Neither switches the other's features off: this core has none to switch.
+
+Units: counts of the engine (65,536 per revolution, :mod:`servobus.sim.core.constants`),
+rpm, amperes; gains and the torque limit on the engine's 1..127 scale; time in simulated
+seconds (``advance_to``), one control period (``CONTROL_HZ``) underneath. The servo runs in
+position mode when on; every motion command is ignored (False) while it is free.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+from servobus.families.dmm import units as U
+from servobus.sim.core import constants as K
+from servobus.sim.core.engine import Ref, Servo, ServoEngine
+
+#: Soft start of the engine's speed/torque servo (unused in position mode); the engine's
+#: own rise for its factory acceleration, set so that every coefficient is defined.
+SOFT_START_S = U.soft_start_rise_s(30)
+#: Engine gains at power-on (main, speed, integration, torque filter, torque limit): the
+#: engine's scale, a family's front end sets its own with :meth:`Motor.set_gains`.
+DEFAULT_GAINS = (40, 40, 20, 127, 127)
+
+
+class Motor:
+    """One simulated servo motor and its position loop. Not thread-safe."""
+
+    def __init__(self, model: U.MotorModel) -> None:
+        self.model = model
+        self.time = 0.0
+        self._engine = ServoEngine(model)
+        self._engine.set_protections(False)  # a family models its own protections
+        self._gains = DEFAULT_GAINS
+        self._profile = (1.0, 1.0)  # generator speed (rpm), acceleration (rpm/s)
+        self._free = False
+        #: Called after every control period when set (servobus.sim.capture).
+        self.period_observer: Callable[[Motor], None] | None = None
+        eng = self._engine
+        eng.power_on()
+        eng.servo = Servo.FREE
+        self._apply()
+        self._origin = eng.p
+        self._apply_servo()
+
+    # ---------------------------------------------------------------- settings
+    def _apply(self) -> None:
+        eng = self._engine
+        eng.set_gains(*self._gains)
+        eng.set_soft_start(SOFT_START_S)
+        speed, accel = self._profile
+        eng.set_profile(U.rpm_to_counts_per_s(speed), U.rpm_to_counts_per_s(accel))
+
+    def set_gains(self, main: int, speed: int, integ: int, trq: int, torque_limit: int) -> None:
+        """Loop gains and torque limit on the engine's 1..127 scale (127 = peak current)."""
+        self._gains = (main, speed, integ, trq, torque_limit)
+        self._apply()
+
+    @property
+    def gains(self) -> tuple[int, int, int, int, int]:
+        return self._gains
+
+    def set_profile(self, speed_rpm: float, accel_rpm_s: float) -> None:
+        """Cruise speed (rpm) and acceleration (rpm/s) of every generated motion."""
+        self._profile = (float(speed_rpm), float(accel_rpm_s))
+        self._apply()
+
+    # ---------------------------------------------------------------- servo
+    @property
+    def servo_free(self) -> bool:
+        return self._free
+
+    def enable(self) -> None:
+        """Servo on: the position loop holds where the shaft is."""
+        self._free = False
+        self._apply_servo()
+
+    def disable(self) -> None:
+        """Servo off: the motor coasts."""
+        self._free = True
+        self._apply_servo()
+
+    def _apply_servo(self) -> None:
+        eng = self._engine
+        mode = Servo.FREE if self._free else Servo.POSITION
+        if mode != eng.servo:
+            eng.servo = mode
+            eng.hold_here()
+            if mode == Servo.FREE:
+                eng.tq = eng.tq_cmd = 0.0
+            eng.speed_ref = 0.0
+        eng.wake()
+
+    # ---------------------------------------------------------------- motion
+    def move_to_counts(self, counts: float) -> bool:
+        """Absolute move to ``counts`` from the origin on the profile's trapezoid."""
+        if self._free:
+            return False
+        self._engine.go_to(self._origin + counts, 0.0)
+        return True
+
+    def halt(self) -> bool:
+        """Emergency stop: the reference stops where it is now (servo stays on)."""
+        if self._free:
+            return False
+        self._engine.freeze_reference()
+        return True
+
+    def follow_counts(self, counts: float, seconds: float) -> bool:
+        """Interpolated motion: the reference moves by ``counts`` evenly over ``seconds``,
+        no curve; adds to what is left of the last one."""
+        if self._free:
+            return False
+        self._engine.ext_move(counts, seconds)
+        return True
+
+    def run_speed(self, rpm: float) -> bool:
+        """Ramp at the profile's acceleration to ``rpm`` and hold it; 0 brakes and holds."""
+        if self._free:
+            return False
+        self._engine.run_speed(U.rpm_to_counts_per_s(rpm), 0.0)
+        return True
+
+    @property
+    def target_counts(self) -> float:
+        """Where the commanded motion ends (counts from the origin; the reference if none)."""
+        eng = self._engine
+        if eng.ref_mode == Ref.GEN and eng.path is None:
+            end = eng.gT
+        elif eng.ref_mode == Ref.EXT:
+            end = eng.ref + eng.ext_step * eng.ext_left
+        else:
+            end = eng.ref
+        return end - self._origin
+
+    # ---------------------------------------------------------------- world
+    def set_load(self, *, inertia: float | None = None, friction: float | None = None) -> None:
+        """Load reflected to the motor shaft: inertia (kg m^2), Coulomb friction (N m)."""
+        eng = self._engine
+        if inertia is not None:
+            eng.load_inertia = max(0.0, float(inertia))
+        if friction is not None:
+            eng.load_friction = max(0.0, float(friction))
+        self._apply()
+
+    def set_disturbance(self, torque_nm: float) -> None:
+        """External torque on the shaft, positive towards +."""
+        self._engine.disturbance = float(torque_nm)
+        self._engine.wake()
+
+    def set_blocked(self, blocked: bool) -> None:
+        """Mechanically block the shaft (it stops dead and cannot move)."""
+        self._engine.blocked = bool(blocked)
+        if blocked:
+            self._engine.w = 0.0
+        self._engine.wake()
+
+    # ---------------------------------------------------------------- readouts
+    @property
+    def position(self) -> int:
+        return round(self._engine.p - self._origin)
+
+    @property
+    def position_error(self) -> float:
+        """Commanded reference - actual position, counts."""
+        return self._engine.ref - self._engine.p
+
+    @property
+    def periods(self) -> int:
+        """Control periods run since creation."""
+        return self._engine.steps
+
+    @property
+    def speed_rpm(self) -> float:
+        return U.counts_per_s_to_rpm(self._engine.w)
+
+    @property
+    def current_a(self) -> float:
+        """Motor current (torque producing), A; positive = torque towards +."""
+        return self._engine.current_a
+
+    # ---------------------------------------------------------------- time
+    def advance(self, seconds: float) -> None:
+        self.advance_to(self.time + seconds)
+
+    def advance_to(self, t: float) -> None:
+        """Run every control period up to simulated time ``t``."""
+        if t <= self.time:
+            return
+        self.time = t
+        eng = self._engine
+        n = math.floor(t * K.CONTROL_HZ + 1e-6) - eng.steps
+        while n > 0:
+            before = eng.steps
+            observer = self.period_observer
+            if observer is None:
+                eng.run(n)
+            elif eng.run(1):
+                observer(self)
+            n -= eng.steps - before
+            if eng.steps == before:
+                break
+
