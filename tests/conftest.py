@@ -1,6 +1,7 @@
-"""Shared test helpers: async tests without a plugin, and waiting on a condition.
+"""Shared test helpers: waiting on a condition, and the session-end check for leftovers.
 
-* ``async def test_...`` functions run on a fresh event loop each (no pytest-asyncio needed).
+* ``async def test_...`` functions run on a fresh event loop each, by pytest-asyncio in auto
+  mode (pyproject ``asyncio_mode = "auto"``): no marker, no decorator.
 * ``wait_until(predicate, timeout=..., poll=...)`` polls until ``predicate()`` is true and
   fails the test with the last value when ``timeout`` passes - for conditions that have no
   event to wait on (simulated physics in wall-clock time). ``await wait_until_async(...)``
@@ -10,23 +11,11 @@
 from __future__ import annotations
 
 import asyncio
-import inspect
 import time
 from collections.abc import Awaitable, Callable
 from typing import Any
 
 import pytest
-
-
-@pytest.hookimpl(tryfirst=True)
-def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
-    """Run ``async def`` tests with asyncio.run (fixtures are passed as keyword arguments)."""
-    if not inspect.iscoroutinefunction(pyfuncitem.obj):
-        return None
-    names = pyfuncitem._fixtureinfo.argnames
-    kwargs = {name: pyfuncitem.funcargs[name] for name in names}
-    asyncio.run(pyfuncitem.obj(**kwargs))
-    return True
 
 
 def wait_until(predicate: Callable[[], Any], *, timeout: float = 5.0,

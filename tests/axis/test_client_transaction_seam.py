@@ -12,7 +12,7 @@ from __future__ import annotations
 import asyncio
 
 import pytest
-from dyn232_rig import arun, rig
+from dyn232_rig import rig
 
 from servobus.axis.transaction import TransactionStats
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveError
@@ -63,7 +63,6 @@ class ErrorPort:
             self._receiver(None)
 
 
-@arun
 async def test_both_clients_share_the_manager_and_its_stats() -> None:
     port = ErrorPort()
     can = AsyncDynCanClient(port)
@@ -78,7 +77,6 @@ async def test_both_clients_share_the_manager_and_its_stats() -> None:
     await can.close()
 
 
-@arun
 async def test_a_request_of_the_other_protocol_is_refused_before_sending() -> None:
     port = ErrorPort()
     can = AsyncDynCanClient(port)
@@ -92,7 +90,6 @@ async def test_a_request_of_the_other_protocol_is_refused_before_sending() -> No
     await can.close()
 
 
-@arun
 async def test_drive_error_in_flight_ends_the_read_without_a_resend() -> None:
     port = ErrorPort()
     client = AsyncDynCanClient(port, retries=2)
@@ -106,7 +103,6 @@ async def test_drive_error_in_flight_ends_the_read_without_a_resend() -> None:
     await client.close()
 
 
-@arun
 async def test_alarm_push_is_counted_and_raised_by_the_next_call() -> None:
     port = ErrorPort()
     client = AsyncDynCanClient(port)

@@ -15,7 +15,7 @@ from contextlib import AbstractAsyncContextManager
 from typing import Any
 
 import pytest
-from dyn232_rig import Rig, arun, rig
+from dyn232_rig import Rig, rig
 
 from servobus.axis.eeprom_guard import EepromGuard, EepromWearWarning
 from servobus.errors import (
@@ -48,7 +48,6 @@ def bench(ids: tuple[int, ...] = (0,), **client_kw: Any) -> AbstractAsyncContext
 
 
 # ---------------------------------------------------------------------- basic reads
-@arun
 async def test_reads_parse_every_register_and_parameter() -> None:
     async with bench((5,)) as b:
         ax = b.axis(5)
@@ -63,7 +62,6 @@ async def test_reads_parse_every_register_and_parameter() -> None:
         assert b.client.stats.timeouts == 0
 
 
-@arun
 async def test_move_with_wait_reaches_target_in_counts() -> None:
     async with bench((1,)) as b:
         ax = b.axis(1)
@@ -78,7 +76,6 @@ async def test_move_with_wait_reaches_target_in_counts() -> None:
         assert near(await ax.position(), 0)
 
 
-@arun
 async def test_turn_speed_and_stop() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
@@ -96,7 +93,6 @@ async def test_turn_speed_and_stop() -> None:
 
 
 # ---------------------------------------------------------------------- faults
-@arun
 async def test_corrupted_reply_is_counted_retried_and_never_returned() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
@@ -108,7 +104,6 @@ async def test_corrupted_reply_is_counted_retried_and_never_returned() -> None:
         assert any(isinstance(i, ChecksumError) for i in b.trace.items(Direction.RX))
 
 
-@arun
 async def test_every_reply_corrupt_raises_checksum_error_not_a_value() -> None:
     async with bench((0,), retries=2) as b:
         b.faults.corrupt_next(n=3, direction=Direction.RX)
@@ -118,7 +113,6 @@ async def test_every_reply_corrupt_raises_checksum_error_not_a_value() -> None:
         assert b.wire.tx == 3 * 4  # the read was sent three times
 
 
-@arun
 async def test_dropped_reply_is_retried() -> None:
     async with bench((0,)) as b:
         b.faults.drop_next(n=2, direction=Direction.RX)
@@ -126,7 +120,6 @@ async def test_dropped_reply_is_retried() -> None:
         assert b.client.stats.timeouts == 2 and b.client.stats.retries == 2
 
 
-@arun
 async def test_silent_drive_times_out_within_its_deadline() -> None:
     async with bench((0,), retries=2, turnaround_s=0.02) as b:
         b.faults.set_rate(Direction.RX, Fault.DROP, 1.0)
@@ -140,7 +133,6 @@ async def test_silent_drive_times_out_within_its_deadline() -> None:
         assert b.wire.tx == 3 * 4
 
 
-@arun
 async def test_absent_id_times_out_and_ping_is_false() -> None:
     async with bench((0,), retries=1) as b:
         ghost = b.axis(9)
@@ -150,7 +142,6 @@ async def test_absent_id_times_out_and_ping_is_false() -> None:
         assert await b.axis(0).ping(timeout=0.5) is True
 
 
-@arun
 async def test_motion_is_sent_exactly_once_on_a_faulty_line() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
@@ -168,7 +159,6 @@ async def test_motion_is_sent_exactly_once_on_a_faulty_line() -> None:
         assert b.client.stats.sent == 5  # the gear read and the four packets
 
 
-@arun
 async def test_stale_and_foreign_replies_do_not_answer_a_request() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
@@ -186,7 +176,6 @@ async def test_stale_and_foreign_replies_do_not_answer_a_request() -> None:
         assert b.client.stats.unmatched >= 1
 
 
-@arun
 async def test_split_duplicate_and_delayed_replies_still_parse() -> None:
     async with bench((0,), turnaround_s=0.2) as b:
         ax = b.axis(0)
@@ -199,7 +188,6 @@ async def test_split_duplicate_and_delayed_replies_still_parse() -> None:
 
 
 # ---------------------------------------------------------------------- argument checks
-@arun
 async def test_range_errors_raise_before_any_byte_is_written() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
@@ -222,7 +210,6 @@ async def test_range_errors_raise_before_any_byte_is_written() -> None:
 
 
 # ---------------------------------------------------------------------- EEPROM guard
-@arun
 async def test_eeprom_guard_warns_then_refuses_before_sending() -> None:
     now = [0.0]
     guard = EepromGuard(warn_per_window=3, max_per_window=5, window_s=10,
@@ -252,7 +239,6 @@ async def test_eeprom_guard_warns_then_refuses_before_sending() -> None:
 
 
 # ---------------------------------------------------------------------- id, config, params
-@arun
 async def test_assign_id_moves_the_axis_and_persists() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
@@ -265,7 +251,6 @@ async def test_assign_id_moves_the_axis_and_persists() -> None:
         assert b.client.guard.writes(12, "drive_id") == 1
 
 
-@arun
 async def test_params_backup_restore_round_trip() -> None:
     async with bench((2,)) as b:
         ax = b.axis(2)
@@ -277,7 +262,6 @@ async def test_params_backup_restore_round_trip() -> None:
         assert await ax.read_params() == backup
 
 
-@arun
 async def test_config_and_enable_disable() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
@@ -290,7 +274,6 @@ async def test_config_and_enable_disable() -> None:
         assert await ax.config() == cfg
 
 
-@arun
 async def test_wait_idle_raises_drive_alarm_and_reset_clears_it() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
@@ -302,7 +285,6 @@ async def test_wait_idle_raises_drive_alarm_and_reset_clears_it() -> None:
         assert (await ax.wait_idle(timeout=1, poll=0)).alarm_code == AlarmCode.NONE
 
 
-@arun
 async def test_checksum_notice_from_drive_is_not_an_alarm() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
@@ -314,7 +296,6 @@ async def test_checksum_notice_from_drive_is_not_an_alarm() -> None:
         assert near(await ax.position(), 0)
 
 
-@arun
 async def test_query_pacing_spaces_queries() -> None:
     """Measured where the bytes leave (the cable's TX trace, stamped in its write): the
     client's pacing clock is stamped after that write returned, so no CPU load can bring
@@ -363,7 +344,6 @@ class SlowWrites:
         self.inner.set_receiver(receiver)
 
 
-@arun
 async def test_query_pacing_holds_when_writes_take_time() -> None:
     """Regression (issue #9): a write that takes 15 ms before its bytes leave let the next
     query leave 5 ms after it while the pacing clock was stamped at the send decision."""
@@ -378,7 +358,6 @@ async def test_query_pacing_holds_when_writes_take_time() -> None:
         assert min(gaps) >= interval, gaps
 
 
-@arun
 async def test_trace_hook_sees_decoded_packets_both_ways() -> None:
     async with bench((0,)) as b:
         await b.axis(0).read_param("main_gain")
@@ -388,7 +367,6 @@ async def test_trace_hook_sees_decoded_packets_both_ways() -> None:
         assert isinstance(rx[0], c.Packet) and rx[0].function == c.DriveFunction.IS_MAIN_GAIN
 
 
-@arun
 async def test_lock_serialises_concurrent_transactions() -> None:
     async with bench((0, 1, 2)) as b:
         results = await asyncio.gather(*(b.axis(i % 3).read_id() for i in range(30)))
@@ -396,7 +374,6 @@ async def test_lock_serialises_concurrent_transactions() -> None:
         assert b.client.stats.timeouts == 0
 
 
-@arun
 async def test_broadcast_linear_line_moves_three_axes() -> None:
     async with bench((1, 2, 3)) as b:
         await b.client.linear_line(100, 200, 0, 3)

@@ -6,7 +6,7 @@ import asyncio
 import itertools
 
 import pytest
-from dyncan_rig import arun, harness
+from dyncan_rig import harness
 
 from servobus.axis.base import AsyncAxis
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveError, DriveTimeout
@@ -36,7 +36,6 @@ def test_parse_can_spec() -> None:
         parse_can_spec("socketcand:localhost")
 
 
-@arun
 async def test_axis_api_reads_and_writes() -> None:
     async with harness(1, 2) as h:
         ax = h.axis(1)
@@ -64,7 +63,6 @@ async def test_axis_api_reads_and_writes() -> None:
         assert h.network.node(2).drive.get_param("main_gain") != 55
 
 
-@arun
 async def test_range_checks_before_sending() -> None:
     async with harness(1) as h:
         ax = h.axis(1)
@@ -80,7 +78,6 @@ async def test_range_checks_before_sending() -> None:
         assert h.client.stats.sent == sent
 
 
-@arun
 async def test_motion_and_readouts_in_realtime() -> None:
     async with harness(1, realtime=True) as h:
         ax = h.axis(1)
@@ -104,7 +101,6 @@ async def test_motion_and_readouts_in_realtime() -> None:
         assert abs(await ax.position()) < 3000
 
 
-@arun
 async def test_assign_id_waits_and_readdresses() -> None:
     async with harness(1) as h:
         ax = h.axis(1)
@@ -116,7 +112,6 @@ async def test_assign_id_waits_and_readdresses() -> None:
         assert h.network.nodes[0].drive_id == 7
 
 
-@arun
 async def test_read_timeout_is_bounded_and_retried() -> None:
     async with harness(1, timeout=0.02, retries=2) as h:
         ax = h.axis(9)  # nobody
@@ -130,7 +125,6 @@ async def test_read_timeout_is_bounded_and_retried() -> None:
         assert await h.axis(1).ping()
 
 
-@arun
 async def test_drive_error_ff_fails_the_read_or_the_next_call() -> None:
     async with harness(1) as h:
         ax = h.axis(1)
@@ -145,7 +139,6 @@ async def test_drive_error_ff_fails_the_read_or_the_next_call() -> None:
         await ax.status()  # raised once
 
 
-@arun
 async def test_alarm_push_callback_and_next_call() -> None:
     seen: list[int] = []
     async with harness(1, 2, on_alarm=seen.append) as h:
@@ -167,7 +160,6 @@ async def test_alarm_push_callback_and_next_call() -> None:
         assert (await h.axis(2).status()).alarm_code == AlarmCode.NONE
 
 
-@arun
 async def test_sync_move_starts_axes_within_one_control_period() -> None:
     async with harness(1, 2, 3) as h:
         drives = h.network.drives
@@ -186,7 +178,6 @@ async def test_sync_move_starts_axes_within_one_control_period() -> None:
             round(U.command_to_counts(v, gear)) for v in (1000, -2000, 500)]
 
 
-@arun
 async def test_position_direct_stream_fixed_period() -> None:
     async with harness(1, 2) as h:
         loop = asyncio.get_running_loop()
@@ -204,7 +195,6 @@ async def test_position_direct_stream_fixed_period() -> None:
             await h.client.stream_position_direct({1: [10, 20_000]}, 0.001)
 
 
-@arun
 async def test_heartbeat_monitor() -> None:
     async with harness(1, timeout=0.02, retries=0) as h:
         lost: list[int] = []
@@ -223,7 +213,6 @@ async def test_heartbeat_monitor() -> None:
         assert lost and lost[0] == 1
 
 
-@arun
 async def test_trace_sees_frames() -> None:
     async with harness(1) as h:
         events: list[tuple[Direction, object]] = []
@@ -233,7 +222,6 @@ async def test_trace_sees_frames() -> None:
         assert events[1][0] is Direction.RX and isinstance(events[1][1], c.Frame)
 
 
-@arun
 async def test_open_can_axis_and_broadcast_id_zero() -> None:
     spec = f"virtual:servobus-dyncan-open-{next(_channels)}"
     network = DynCanNetwork([VirtualDrive(5)])
