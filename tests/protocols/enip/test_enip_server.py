@@ -239,7 +239,7 @@ def test_forward_open_reply_names_the_o_t_port(server: EnipServer, client: raw.R
     sc.close()
 
 
-def test_t_o_frames_at_the_rpi_with_monotonic_sequences(server: EnipServer,
+def test_t_o_frames_at_the_rpi_with_monotonic_sequences(sim: BackgroundEnip, server: EnipServer,
                                                         client: raw.RawClient) -> None:
     sc = Scanner(server, client, rpi_us=10_000)
     frames = sc.frames(60)
@@ -248,8 +248,14 @@ def test_t_o_frames_at_the_rpi_with_monotonic_sequences(server: EnipServer,
     assert seqs == list(range(seqs[0], seqs[0] + 60)) and seqs[0] >= 1
     assert counts == list(range(counts[0], counts[0] + 60))
     assert {f.connection_id for f in frames} == {sc.t_o_id}
-    span = frames[-1].arrival - frames[0].arrival
-    assert span / 59 == pytest.approx(0.010, rel=0.05)  # mean period = RPI
+    # The period this machine achieved is a benchmark figure (benchmarks/, docs/testing.md):
+    # under load it is anything. What the adapter decides is checked instead: it grants the
+    # RPI asked for (the reply's T->O API) and produces on that period; the production wheel
+    # keeps its grid on a fake clock in test_enip_production.py.
+    t_o_api_us = struct.unpack_from("<IIHHIII", sc.reply.data)[6]
+    assert t_o_api_us == 10_000
+    period = sim.call(lambda: server._producers[sc.o_t_id].tick.period_s)  # type: ignore[union-attr]
+    assert period == pytest.approx(0.010, abs=1e-9)
     sc.close()
 
 
