@@ -6,13 +6,16 @@
   fails the test with the last value when ``timeout`` passes - for conditions that have no
   event to wait on (simulated physics in wall-clock time). ``await wait_until_async(...)``
   does the same for coroutine predicates.
+* At the end of a run (of each xdist worker) ``no_child_left_behind`` fails if a process
+  started by a test is still running, naming it.
 """
 
 from __future__ import annotations
 
 import asyncio
+import os
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Iterator
 from typing import Any
 
 import pytest
@@ -42,3 +45,64 @@ async def wait_until_async(predicate: Callable[[], Awaitable[Any]], *, timeout: 
         if time.monotonic() >= deadline:
             pytest.fail(f"{what} not met within {timeout:g} s (last: {value!r})")
         await asyncio.sleep(poll)
+
+
+# ------------------------------------------------------------ no child left behind
+LEFTOVER_GRACE_S = 10.0  # a child being stopped may take this long to go away on a loaded machine
+
+
+def _children_of(pid: int) -> dict[int, int]:
+    """Every process on the machine -> its parent, read from /proc (Linux; {} elsewhere)."""
+    parents: dict[int, int] = {}
+    try:
+        entries = os.listdir("/proc")
+    except OSError:
+        return parents
+    for entry in entries:
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat", encoding="utf-8", errors="replace") as f:
+                stat = f.read()
+        except OSError:  # gone meanwhile
+            continue
+        # "pid (comm) state ppid ...": comm may hold spaces and parentheses
+        fields = stat[stat.rindex(")") + 2:].split()
+        if fields[0] != "Z":  # a zombie has exited; only running leftovers matter
+            parents[int(entry)] = int(fields[1])
+    return parents
+
+
+def leftover_processes() -> list[str]:
+    """The live descendants of this process, as "pid: command line"."""
+    parents = _children_of(os.getpid())
+    found: list[int] = []
+    todo = [os.getpid()]
+    while todo:
+        parent = todo.pop()
+        kids = [p for p, pp in parents.items() if pp == parent]
+        found += kids
+        todo += kids
+    out = []
+    for pid in sorted(found):
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                cmd = f.read().replace(b"\0", b" ").decode(errors="replace").strip()
+        except OSError:
+            continue
+        out.append(f"{pid}: {cmd}")
+    return out
+
+
+@pytest.fixture(scope="session", autouse=True)
+def no_child_left_behind() -> Iterator[None]:
+    """At the end of the session (of each xdist worker) no process started by a test is still
+    running: a server, simulator or browser left behind is a bug of the test that started it.
+    Fails the session's last teardown naming every leftover."""
+    yield
+    deadline = time.monotonic() + LEFTOVER_GRACE_S
+    while (left := leftover_processes()) and time.monotonic() < deadline:
+        time.sleep(0.1)  # polling /proc: a process ending has no event to wait on here
+    if left:
+        pytest.fail("processes left behind by the tests:\n  " + "\n  ".join(left),
+                    pytrace=False)

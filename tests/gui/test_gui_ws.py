@@ -14,6 +14,7 @@ from starlette.testclient import TestClient, WebSocketTestSession
 
 from servobus.gui import frames
 from servobus.gui.app import create_app
+from servobus.gui.scope_session import ACK_GIVE_UP_S, MAX_IN_FLIGHT
 
 pytestmark = pytest.mark.timeout(60)
 BASE = "http://127.0.0.1:8080"
@@ -205,9 +206,13 @@ def test_a_page_that_does_not_draw_gets_one_frame_a_second(client: TestClient) -
     with client.websocket_connect(WS) as ws:
         page = Page(ws, ack=False)
         scope(page)
-        t0 = time.monotonic()
-        page.until(lambda: time.monotonic() - t0 > 2.0, timeout=5)
-        assert 1 <= len(page.frames) <= 4  # 50/s when acked
+        page.until(lambda: len(page.frames) >= 5, timeout=30, what="five unacked frames")
+        # Counted on the server's own clock (each frame's ``sent``), not the test's: a frame
+        # leaves only once the one MAX_IN_FLIGHT before it is given up (50/s when acked).
+        sent = [f.sent for f in page.frames]
+        assert sent == sorted(sent)
+        gaps = [b - a for a, b in zip(sent, sent[MAX_IN_FLIGHT:], strict=False)]
+        assert min(gaps) > ACK_GIVE_UP_S, gaps
 
 
 def test_pause_csv_export_and_bad_settings(client: TestClient) -> None:
