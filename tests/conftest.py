@@ -13,7 +13,10 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import inspect
 import os
+import signal
 import time
 from collections.abc import Awaitable, Callable, Iterator
 from typing import Any
@@ -31,20 +34,24 @@ def wait_until(predicate: Callable[[], Any], *, timeout: float = 5.0,
             return value
         if time.monotonic() >= deadline:
             pytest.fail(f"{what} not met within {timeout:g} s (last: {value!r})")
-        time.sleep(poll)
+        time.sleep(poll)  # the polling helper's own short sleep
 
 
-async def wait_until_async(predicate: Callable[[], Awaitable[Any]], *, timeout: float = 5.0,
-                           poll: float = 0.01, what: str = "condition") -> Any:
-    """``wait_until`` for a coroutine predicate, without blocking the event loop."""
+async def wait_until_async(predicate: Callable[[], Awaitable[Any] | Any], *,
+                           timeout: float = 5.0, poll: float = 0.01,
+                           what: str = "condition") -> Any:
+    """``wait_until`` inside a running loop, without blocking it; ``predicate`` may be a
+    coroutine function or a plain one (a state that tasks on the loop change)."""
     deadline = time.monotonic() + timeout
     while True:
-        value = await predicate()
+        value = predicate()
+        if inspect.isawaitable(value):
+            value = await value
         if value:
             return value
         if time.monotonic() >= deadline:
             pytest.fail(f"{what} not met within {timeout:g} s (last: {value!r})")
-        await asyncio.sleep(poll)
+        await asyncio.sleep(poll)  # the polling helper's own short sleep
 
 
 # ------------------------------------------------------------ no child left behind
@@ -104,5 +111,8 @@ def no_child_left_behind() -> Iterator[None]:
     while (left := leftover_processes()) and time.monotonic() < deadline:
         time.sleep(0.1)  # polling /proc: a process ending has no event to wait on here
     if left:
+        for line in left:  # named below; stopped so that they do not outlive the run
+            with contextlib.suppress(OSError):
+                os.kill(int(line.split(":", 1)[0]), signal.SIGKILL)
         pytest.fail("processes left behind by the tests:\n  " + "\n  ".join(left),
                     pytrace=False)

@@ -16,6 +16,7 @@ from collections import deque
 from dataclasses import dataclass
 
 import pytest
+from conftest import wait_until_async
 
 from servobus.axis.eeprom_guard import EepromGuard
 from servobus.axis.transaction import TransactionManager, TransactionStats, check_call
@@ -59,7 +60,7 @@ class ScriptedMedium:
         if self.fail_write is not None:
             raise self.fail_write
         if self.write_s:
-            await asyncio.sleep(self.write_s.popleft())  # e.g. draining at wire speed
+            await asyncio.sleep(self.write_s.popleft())  # scripted: a write draining at wire speed
         self.left.append((time.monotonic(), key))
         answer = self.script.popleft() if self.script else Answer(self.value)
         if answer.delay is NEVER:
@@ -288,7 +289,7 @@ async def test_close_ends_waiting_and_later_calls() -> None:
     tm = manager(m)
     m.script.append(Answer(0, NEVER))
     task = asyncio.ensure_future(read(tm))
-    await asyncio.sleep(0.01)
+    await wait_until_async(lambda: m.left, what="the request sent")  # now waiting
     assert tm.close() is True and tm.close() is False and tm.closed
     with pytest.raises(ConnectionLost, match="client is closed"):
         await task

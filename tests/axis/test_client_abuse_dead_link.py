@@ -75,7 +75,7 @@ async def tcp_peer(*, reset: bool) -> AsyncIterator[int]:
     async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         with contextlib.suppress(ConnectionError):
             await reader.read(64)
-            await asyncio.sleep(0.05)
+            await asyncio.sleep(0.05)  # a scripted peer's pause: the client is waiting by then
             if reset:
                 sock = writer.get_extra_info("socket")
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
@@ -203,7 +203,7 @@ async def socketcand_peer() -> AsyncIterator[int]:
                 writer.write(b"< ok >")
                 await writer.drain()
             await reader.readuntil(b">")  # the first < send ... >
-            await asyncio.sleep(0.05)
+            await asyncio.sleep(0.05)  # a scripted peer's pause: the client is waiting by then
             writer.close()
 
     server = await asyncio.start_server(handle, "127.0.0.1", 0)

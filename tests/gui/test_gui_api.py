@@ -84,7 +84,7 @@ def test_bad_moves_are_refused_and_nothing_moves(client: TestClient,
     r = client.post("/api/axes/1/move", content=as_json(doc),
                     headers={"content-type": "application/json"})
     assert r.status_code == 400 and r.json()["error"]
-    time.sleep(0.1)
+    time.sleep(0.1)  # "nothing moves" has no event: give a wrong move 0.1 s to show
     assert status(client, 1)["position"] == 0
 
 

@@ -10,6 +10,7 @@ import socket
 import time
 
 import pytest
+from conftest import wait_until
 from sim_abuse_rig import (
     Flood,
     can_latencies,
@@ -26,7 +27,7 @@ from servobus.protocols.dyncan import codec as cc
 from servobus.transport.can_bus import CanFrame
 from servobus.transport.socketcand_hub import RX_FIFO_FRAMES, SocketcandHub, parse_send
 
-pytestmark = pytest.mark.timeout(90)
+pytestmark = [pytest.mark.timeout(120), pytest.mark.slow]
 BUS = ("dyncan", "--socketcand", "127.0.0.1:0", "--ids", "1,2")
 RSS_GROWTH_MIB = 16.0  # before the fix: +108 MiB in 6 s (paced flood)
 GOOD_DEADLINE_S = 0.5
@@ -108,7 +109,7 @@ def test_fast_greedy_client_does_not_starve_a_well_behaved_one() -> None:
     with sim(*BUS, "--fast") as p:
         port = p.port()
         with Flood(port, can_send(1) * 512, handshake=True):
-            time.sleep(0.3)
+            time.sleep(0.3)  # the flood under way (it has no end to wait for)
             times = can_latencies(port, 2, 40, GOOD_DEADLINE_S)
         assert max(times) < GOOD_DEADLINE_S, sorted(times)[-5:]
 
@@ -117,7 +118,7 @@ def test_paced_flood_keeps_memory_bounded_and_others_answered() -> None:
     """Before: +108 MiB in 6 s and no reply to anybody else."""
     with sim(*BUS) as p:
         port = p.port()
-        time.sleep(0.3)
+        time.sleep(0.3)  # the server's memory settles after start-up; nothing signals it
         before = p.rss_mib()
         with Flood(port, can_send(1) * 512, handshake=True):
             times = can_latencies(port, 2, 40, GOOD_DEADLINE_S)
@@ -133,14 +134,13 @@ def test_never_reading_client_is_dropped_with_one_log_line() -> None:
         port = p.port()
         deaf = can_session(port)
         deaf.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-        time.sleep(0.3)
+        time.sleep(0.3)  # the server's memory settles after start-up; nothing signals it
         before = p.rss_mib()
         try:
             with Flood(port, can_send(1) * 512, handshake=True):
-                deadline = time.monotonic() + 30
-                while "dropped client" not in p.stderr_so_far() \
-                        and time.monotonic() < deadline:
-                    time.sleep(0.2)
+                # Dropped once 1 MiB is queued for it: longer when the flood gets little CPU.
+                wait_until(lambda: "dropped client" in p.stderr_so_far(), timeout=60,
+                           poll=0.2, what="the deaf client dropped")
                 times = can_latencies(port, 2, 10, GOOD_DEADLINE_S)
                 grown = p.rss_mib() - before
         finally:
@@ -159,7 +159,7 @@ def test_garbage_is_survived() -> None:
     with sim(*BUS, "--fast") as p:
         port = p.port()
         with Flood(port, junk, handshake=True):
-            time.sleep(1.0)
+            time.sleep(1.0)  # a second of garbage first (a flood has no end to wait for)
             times = can_latencies(port, 2, 10, GOOD_DEADLINE_S)
         assert max(times) < GOOD_DEADLINE_S and p.alive()
     assert "Traceback" not in p.stderr
