@@ -107,7 +107,7 @@ async def test_trace_sees_each_chunk_with_wire_direction() -> None:
 async def test_close_wakes_reader_on_both_ends() -> None:
     host, device = open_pair()
     reader = asyncio.ensure_future(device.read())
-    await asyncio.sleep(0)
+    await asyncio.sleep(0)  # one loop pass (a yield, not a wait): the read is pending
     await host.close()
     with pytest.raises(ConnectionError):
         await reader

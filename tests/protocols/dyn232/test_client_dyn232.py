@@ -165,7 +165,7 @@ async def test_stale_and_foreign_replies_do_not_answer_a_request() -> None:
         # A late reply from drive 0 and a reply from another id arrive before our request.
         await b.device.write(c.encode_reply(0, c.DriveFunction.IS_ABS_POS32, 424242))
         await b.device.write(c.encode_reply(3, c.DriveFunction.IS_DRIVE_ID, 3) + b"\x85\x99")
-        await asyncio.sleep(0)
+        await asyncio.sleep(0)  # one loop pass (a yield, not a wait): the bytes are delivered
         assert await ax.position() == b.drives[0].position
         # Garbage and a foreign packet in the middle of the reply window: framer resyncs.
         b.faults.custom = lambda d, data: (
@@ -323,7 +323,7 @@ class SlowWrites:
 
     async def write(self, data: bytes) -> None:
         if self.delays:
-            await asyncio.sleep(self.delays.pop(0))
+            await asyncio.sleep(self.delays.pop(0))  # scripted: a write that takes this long
         self.left.append(time.monotonic())
         await self.inner.write(data)
 

@@ -96,7 +96,7 @@ async def test_stale_replies_before_the_request_are_skipped(path: str) -> None:
         # A late reply from drive 0 and one from another id arrive before our request.
         await r.device.write(c.encode_reply(0, D.IS_ABS_POS32, 424242))
         await r.device.write(c.encode_reply(3, D.IS_DRIVE_ID, 3) + b"\x85\x99")
-        await asyncio.sleep(0)
+        await asyncio.sleep(0)  # one loop pass (a yield, not a wait): the bytes are delivered
         assert await ax.position() == r.drives[0].position != 424242
 
 

@@ -190,11 +190,11 @@ async def _read_packets(reader: asyncio.StreamReader, n: int) -> list[c.Packet]:
     return out
 
 
-async def _until(condition: Callable[[], bool], timeout: float = 2.0) -> None:
+async def _until(condition: Callable[[], bool], timeout: float = 10.0) -> None:
     """Yield to the loop until ``condition`` holds (the server runs on this same loop)."""
     async with asyncio.timeout(timeout):
         while not condition():
-            await asyncio.sleep(0.001)
+            await asyncio.sleep(0.001)  # the polling helper's own short sleep
 
 
 def test_several_clients_each_get_their_own_replies_and_tap_sees_all() -> None:

@@ -11,6 +11,7 @@ from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 
 import pytest
+from conftest import wait_until_async
 from enip_rig import adapters
 
 from servobus.errors import ConnectionLost, DriveError, DriveTimeout, ProtocolError
@@ -40,8 +41,8 @@ async def test_register_read_write_and_unregister() -> None:
         assert client.stats.sent == 7 and client.stats.replies == 7  # + RegisterSession
         assert client.stats.retries == 0
         await client.close()
-        await asyncio.sleep(0.05)
-        assert server.session_count == 0  # UnregisterSession (or the close) ended it
+        await wait_until_async(lambda: server.session_count == 0,  # UnregisterSession (or the
+                               what="the session ended")  # close) ended it
         with pytest.raises(ConnectionLost):
             await client.get_attribute_single(PARAM, 0x01, 1)
 

@@ -63,7 +63,7 @@ def _until(check: Callable[[], Any], timeout: float = 10.0) -> Any:
         value = check()
         if value or time.monotonic() > deadline:
             return value
-        time.sleep(0.05)
+        time.sleep(0.05)  # the polling helper's own short sleep
 
 
 def test_the_whole_register_map_reads_big_endian(client: ModbusTcpClient) -> None:
