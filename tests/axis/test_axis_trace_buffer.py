@@ -46,11 +46,12 @@ async def test_trace_of_a_move_in_axis_units_with_continuous_times(url: str) -> 
             previous = chunks[-1] if chunks else first
             assert chunk.t0 == pytest.approx(previous.t0 + previous.count / 4000, abs=1e-9)
             if chunk.count:  # drive time on the host clock: its newest sample is from
-                # before the answer, and from about when it was asked. The drive's clock is
-                # synchronised to the host's a few ms behind; 1 s of slack (a loaded machine)
-                # still catches a trace on another time base (drive time starts near 0).
+                # about when the read was asked and answered. The drives follow the host's
+                # clock a few ms behind, or ahead by a frame's wire time (a bus model may
+                # advance them to a frame's arrival); 1 s of slack on the late side (a loaded
+                # machine) still catches a trace on another time base (drive time starts at 0).
                 newest = chunk.t0 + (chunk.count - 1) / 4000
-                assert t_asked - 1.0 <= newest <= t_got + 0.005
+                assert t_asked - 1.0 <= newest <= t_got + 0.05
             chunks.append(chunk)
         signals = {name: [v for c in chunks for v in c.signals[name]]
                    for name in ("position", "position_error", "status", "speed")}

@@ -210,6 +210,7 @@ def test_mistake_gives_one_line_and_its_exit_code(case: Case, fill: dict[str, st
     check(case, in_process([a.format(**fill) for a in case.args], dict(case.env)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", [BY_ID[i] for i in END_TO_END], ids=END_TO_END)
 def test_mistake_as_a_real_process(case: Case, fill: dict[str, str]) -> None:
     check(case, subprocess_run([a.format(**fill) for a in case.args], dict(case.env)))
@@ -234,6 +235,7 @@ def test_socketcand_with_nothing_listening_fails_fast(fill: dict[str, str], in_p
     assert opened == []
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("how", ["flag", "env"])
 def test_debug_adds_the_traceback(how: str) -> None:
     extra, env = (["--debug"], {}) if how == "flag" else ([], {DEBUG_ENV: "1"})

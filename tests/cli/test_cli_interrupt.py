@@ -20,6 +20,8 @@ from servobus.cli.failures import EXIT_INTERRUPTED, EXIT_USAGE
 from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
 
+pytestmark = pytest.mark.slow  # real processes or seconds of wall-clock motion
+
 SERVOBUS = [sys.executable, "-m", "servobus"]
 LONG_MOVE = "10000000"  # command units: 40,000,000 counts, ~610 rev, ~18 s at the default speed
 CRUISING_RPM = 500  # interrupt only once the motor is clearly moving

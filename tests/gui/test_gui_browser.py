@@ -45,7 +45,7 @@ _missing = [name for name, ok in (("chromium", CHROMIUM), ("chromedriver", DRIVE
 if _missing:  # one skip for the module, saying what to install
     pytest.skip("browser tests need " + ", ".join(_missing)
                 + " (Debian: apt-get install chromium chromium-driver)", allow_module_level=True)
-pytestmark = pytest.mark.timeout(90)
+pytestmark = [pytest.mark.timeout(90), pytest.mark.slow]
 ARTIFACTS = Path(__file__).parents[1] / "artifacts" / "gui"
 CHROME_ARGS = ("--headless=new", "--no-sandbox", "--disable-gpu",
                "--disable-background-networking", "--disable-component-update",

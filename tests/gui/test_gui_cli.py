@@ -16,7 +16,7 @@ from contextlib import contextmanager
 
 import pytest
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.timeout(60), pytest.mark.slow]
 
 
 @contextmanager

@@ -23,7 +23,7 @@ from servobus.protocols.dyn232 import codec as c
 from servobus.sim.control import ControlError
 from servobus.sim.control_client import ControlClient
 
-pytestmark = pytest.mark.timeout(90)
+pytestmark = [pytest.mark.timeout(90), pytest.mark.slow]
 H, GR = c.HostFunction, c.GeneralReadSelector
 SERVER_S = 600.0  # a safety net (the fixture stops it): a loaded module takes minutes
 

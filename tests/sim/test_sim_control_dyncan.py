@@ -19,7 +19,7 @@ from servobus.families.dmm.registers import ALARM_SHIFT, StatusBits
 from servobus.protocols.dyncan import codec as c
 from servobus.sim.control_client import ControlClient
 
-pytestmark = pytest.mark.timeout(90)
+pytestmark = [pytest.mark.timeout(90), pytest.mark.slow]
 F = c.Function
 CLI = [sys.executable, "-m", "servobus"]
 

@@ -21,7 +21,7 @@ from servobus.protocols.dyn232 import codec as c
 from servobus.sim.drive import VirtualDrive
 from servobus.sim.eeprom import EepromStore, StateFile, StateFileError, parse_state
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.timeout(60), pytest.mark.slow]
 H = c.HostFunction
 
 GOOD = {"1": {"drive_id": 1, "params": {"main_gain": 55}}}

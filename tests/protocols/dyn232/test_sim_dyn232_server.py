@@ -22,6 +22,8 @@ from servobus.protocols.dyn232.pacing import BYTE_TIME_S
 from servobus.protocols.dyn232.server import Dyn232Server, parse_listen_url
 from servobus.sim.drive import VirtualDrive
 
+pytestmark = pytest.mark.slow  # real processes or seconds of wall-clock motion
+
 H, D, GR = c.HostFunction, c.DriveFunction, c.GeneralReadSelector
 CLI = [sys.executable, "-c", "from servobus.cli.main import main; main()"]
 

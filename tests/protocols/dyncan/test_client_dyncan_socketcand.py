@@ -22,7 +22,7 @@ from servobus.transport.socketcand_hub import (
     parse_send,
 )
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.timeout(60), pytest.mark.slow]
 SERVER_S = 600.0  # a safety net (the fixture stops it): a loaded module takes minutes
 CLI = [sys.executable, "-c", "from servobus.cli.main import main; main()"]
 

@@ -18,7 +18,7 @@ from servobus.families import yzaim as Y
 from servobus.protocols.easycan import codec
 from servobus.protocols.easycan.messages import PositionReply, ReadReply, ReadRequest
 
-pytestmark = pytest.mark.timeout(90)
+pytestmark = [pytest.mark.timeout(90), pytest.mark.slow]
 SERVER_S = 600.0  # a safety net (the fixture stops it): a loaded module takes minutes
 SERVOBUS = [sys.executable, "-m", "servobus"]
 

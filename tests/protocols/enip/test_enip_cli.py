@@ -12,7 +12,7 @@ from collections.abc import Iterator
 
 import pytest
 
-pytestmark = pytest.mark.timeout(90)
+pytestmark = [pytest.mark.timeout(90), pytest.mark.slow]
 LISTENING = re.compile(r"listening on enip://([\d.]+):(\d+) \(UDP ListIdentity (\d+), "
                        r"Class 1 I/O (\d+)\)")
 

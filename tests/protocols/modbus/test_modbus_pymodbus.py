@@ -19,7 +19,7 @@ from pymodbus import FramerType  # noqa: E402
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient  # noqa: E402
 from pymodbus.exceptions import ModbusException  # noqa: E402
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.timeout(60), pytest.mark.slow]
 INT32 = ModbusTcpClient.DATATYPE.INT32
 R = Y.BY_NAME
 ABS = Y.PAIR_BY_NAME["absolute_position"].low
