@@ -16,7 +16,9 @@ import time
 import pytest
 from conftest import wait_until
 from sim_abuse_rig import (
+    ANSWER_S,
     Flood,
+    assert_served,
     dyn2_latencies,
     dyn2_status,
     need_descriptors,
@@ -33,7 +35,6 @@ from servobus.sim.server_limits import is_loopback
 pytestmark = [pytest.mark.timeout(120), pytest.mark.slow]
 LINE = ("dyn2", "--listen", "tcp://127.0.0.1:0", "--ids", "1,2")
 RSS_GROWTH_MIB = 16.0  # before the fix: +30 MiB/s (paced flood), unbounded (tap)
-GOOD_DEADLINE_S = 0.5  # the well-behaved client's deadline per reply, under attack
 
 
 def _open(port: int, count: int) -> list[socket.socket]:
@@ -116,9 +117,9 @@ def test_paced_flood_keeps_memory_bounded_and_others_answered() -> None:
         time.sleep(0.3)  # the server's memory settles after start-up; nothing signals it
         before = p.rss_mib()
         with Flood(port, dyn2_status(1) * 4096):
-            times = dyn2_latencies(port, 2, 40, GOOD_DEADLINE_S)
+            times = dyn2_latencies(port, 2, 40, ANSWER_S)
             grown = p.rss_mib() - before
-        assert max(times) < GOOD_DEADLINE_S, times
+        assert_served(times)
         assert grown < RSS_GROWTH_MIB
     assert "lost to full receive buffers" in p.stderr
 
@@ -129,8 +130,8 @@ def test_paced_burst_from_a_client_that_leaves_does_not_hold_the_line() -> None:
         port = p.port()
         with socket.create_connection(("127.0.0.1", port), timeout=5) as s:
             s.sendall((dyn2_status(1) * 16384)[:65536])
-        (first,) = dyn2_latencies(port, 2, 1, 5.0)
-        assert first < GOOD_DEADLINE_S
+        (first,) = dyn2_latencies(port, 2, 1, 30.0)
+        assert first < ANSWER_S  # before: 17 s of answering nobody
 
 
 def test_fast_greedy_clients_do_not_starve_a_well_behaved_one() -> None:
@@ -139,8 +140,8 @@ def test_fast_greedy_clients_do_not_starve_a_well_behaved_one() -> None:
         port = p.port()
         with Flood(port, dyn2_status(1) * 4096), Flood(port, dyn2_status(1) * 4096):
             time.sleep(0.3)  # the floods under way (they have no end to wait for)
-            times = dyn2_latencies(port, 2, 60, GOOD_DEADLINE_S)
-        assert max(times) < GOOD_DEADLINE_S, sorted(times)[-5:]
+            times = dyn2_latencies(port, 2, 60, ANSWER_S)
+        assert_served(times)
 
 
 def test_never_reading_client_and_tap_keep_memory_bounded() -> None:
@@ -160,9 +161,9 @@ def test_never_reading_client_and_tap_keep_memory_bounded() -> None:
                 # an idle machine, much longer when the floods get little CPU.
                 wait_until(lambda: "dropped client" in p.stderr_so_far(), timeout=60,
                            poll=0.2, what="the tap dropped")
-                times = dyn2_latencies(port, 2, 20, GOOD_DEADLINE_S)
+                times = dyn2_latencies(port, 2, 20, ANSWER_S)
                 grown = p.rss_mib() - before
-            assert max(times) < GOOD_DEADLINE_S
+            assert_served(times)
             assert grown < RSS_GROWTH_MIB
         finally:
             tap.close()
@@ -178,8 +179,8 @@ def test_garbage_is_survived_and_counted(mode: list[str]) -> None:
         port = p.port()
         with Flood(port, blob):
             time.sleep(1.0)  # a second of garbage first (a flood has no end to wait for)
-            times = dyn2_latencies(port, 2, 10, GOOD_DEADLINE_S)
-        assert max(times) < GOOD_DEADLINE_S
+            times = dyn2_latencies(port, 2, 10, ANSWER_S)
+        assert_served(times)
         assert p.alive()
     assert "Traceback" not in p.stderr
     assert " 0 framing error(s)" not in p.stderr
