@@ -24,6 +24,18 @@ from typing import Any
 import pytest
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """Ctrl-C reaches the processes the tests start.
+
+    A run launched in the background of a non-interactive shell (``cmd &`` in a script, CI
+    runners, nohup) has SIGINT ignored, and every child inherits that: the tests that press
+    Ctrl-C on the CLI or the GUI would see a process that shrugs it off. Python's own handler
+    (the interactive default) is put back; exec resets it to the default in each child.
+    """
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 def wait_until(predicate: Callable[[], Any], *, timeout: float = 5.0,
                poll: float = 0.01, what: str = "condition") -> Any:
     """Poll ``predicate`` until it returns something true; return it, or fail on timeout."""
