@@ -29,7 +29,7 @@ from servobus.protocols.dyncan.client import AsyncDynCanClient, DynCanAxis
 from servobus.transport.base import Direction
 from servobus.transport.can_bus import CanFrame, FrameReceiver, FrameTraceHook
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.timeout(60), pytest.mark.slow]
 READS = 40  # ~2 s per run; benchmarks.stale_reads runs the 885
 DEADLINE_S = 0.05
 LATE_S = 0.3
