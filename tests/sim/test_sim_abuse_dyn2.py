@@ -70,7 +70,9 @@ def test_2000_connections_are_held_and_the_line_still_answers(mode: list[str]) -
         port = p.port()
         socks = _open(port, 2000)
         try:
-            assert max(dyn2_latencies(port, 2, 5, 2.0)) < 2.0
+            # Answered at all (before the fix the server died at ~1,020): the first read may
+            # wait while the server accepts the 2,000 - seconds on a loaded machine.
+            assert max(dyn2_latencies(port, 2, 5, 30.0)) < 30.0
             assert not _closed_by_server(socks, 0.2)
             assert p.alive()
         finally:
