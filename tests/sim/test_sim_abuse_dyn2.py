@@ -199,7 +199,9 @@ def test_clients_that_reset_with_replies_pending_leave_no_log_flood(mode: list[s
             s.sendall(dyn2_status(1) * 64)
             s.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
             s.close()  # RST, replies still owed
-        assert max(dyn2_latencies(port, 2, 3, 2.0)) < 2.0
+        # Answered at all (the point is the log, below); a paced line may first finish the
+        # requests already on its wire, which takes longer on a loaded machine.
+        assert max(dyn2_latencies(port, 2, 3, 30.0)) < 30.0
     assert "socket.send() raised" not in p.stderr
     assert len(p.stderr.splitlines()) <= 3, p.stderr  # banner, stop summary
 
