@@ -33,7 +33,9 @@ async def bus(*addresses: int) -> AsyncIterator[tuple[EasyCanNetwork, AsyncEasyC
     stop = asyncio.Event()
     server = asyncio.create_task(serve(network, node_port, clock=RealtimeClock(network.motors),
                                        stop=stop))
-    client = AsyncEasyCanClient(await AsyncCanBus.open(spec))
+    # A roomy deadline: these tests are about synchronised motion, not deadlines, and a
+    # loaded machine answered a write after the default 50 ms.
+    client = AsyncEasyCanClient(await AsyncCanBus.open(spec), timeout=5.0)
     try:
         yield network, client
     finally:
