@@ -64,7 +64,7 @@ def test_interrupt_during_move_wait_stops_the_drive(
     url, _ = sim_url
     cli = start_move(url)
     try:
-        with connect(url) as watcher:
+        with connect(url, timeout=2.0) as watcher:  # roomy: a loaded machine
             wait_until_cruising(watcher, cli)
             cli.send_signal(sig)
             _, err = cli.communicate(timeout=10)
@@ -95,7 +95,7 @@ def test_simulator_killed_during_move_wait_is_one_line(
     url, sim = sim_url
     cli = start_move(url)
     try:
-        with connect(url) as watcher:
+        with connect(url, timeout=2.0) as watcher:  # roomy: a loaded machine
             wait_until_cruising(watcher, cli)
             sim.kill()
             sim.wait(10)

@@ -150,7 +150,9 @@ def test_rolling_scope_streams_the_4khz_trace_and_shows_a_move(client: TestClien
         scope(page, channels=[{"axis": 1, "signal": "position"},
                               {"axis": 1, "signal": "moving"},
                               {"axis": 2, "signal": "speed"}], window_s=2.0, width=400)
-        first = page.frame_after(0)
+        # The first frames may come before the trace's rate is known (no min/max pairs yet):
+        # wait for the grid the 4 kHz trace gets.
+        first = page.frame_after(0, frames.FLAG_PAIRS)
         assert first.rate_hz == 4000.0 and len(first.ys) == 3
         assert first.flags & frames.FLAG_PAIRS and len(first.x) == 2 * 400
         assert first.x[0] == pytest.approx(-2.0, abs=0.01) and first.x[-1] <= 0
