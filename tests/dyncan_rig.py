@@ -7,12 +7,10 @@ on the loop, in stepped time unless ``realtime=True``.
 from __future__ import annotations
 
 import asyncio
-import functools
 import itertools
-from collections.abc import AsyncIterator, Callable, Coroutine
+from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from dataclasses import dataclass
-from typing import Any
 
 from servobus.protocols.dyncan.axis import DynCanAxis
 from servobus.protocols.dyncan.client import AsyncDynCanClient, open_can_client
@@ -23,16 +21,6 @@ from servobus.sim.realtime import RealtimeClock
 from servobus.transport.can_bus import AsyncCanBus
 
 _channels = itertools.count()
-
-
-def arun(fn: Callable[..., Coroutine[Any, Any, None]]) -> Callable[..., None]:
-    """Run an async test on a fresh event loop (no pytest-asyncio in the venv)."""
-
-    @functools.wraps(fn)
-    def wrapper(*args: Any, **kwargs: Any) -> None:
-        asyncio.run(fn(*args, **kwargs))
-
-    return wrapper
 
 
 @dataclass

@@ -10,7 +10,7 @@ time) and on DYN CAN virtual nodes.
 from __future__ import annotations
 
 import pytest
-from dyn232_rig import arun, rig
+from dyn232_rig import rig
 from dyncan_rig import harness
 
 from servobus.errors import ArgumentRangeError, DriveTimeout
@@ -44,7 +44,6 @@ def record_host_writes(r: object) -> None:
                      if d is Direction.TX else None)
 
 
-@arun
 async def test_confirmed_moves_return_once_the_drive_moves() -> None:
     async with rig((1,)) as r:
         record_host_writes(r)
@@ -58,7 +57,6 @@ async def test_confirmed_moves_return_once_the_drive_moves() -> None:
         assert moves_sent(r) == 2
 
 
-@arun
 async def test_a_lost_move_raises_drive_timeout_and_is_not_resent() -> None:
     async with rig((1,)) as r:
         record_host_writes(r)
@@ -87,7 +85,6 @@ class FreezeAtTheMove:
         return [] if self.frozen else [data]
 
 
-@arun
 async def test_a_frozen_drive_fails_the_confirmation_without_a_resend() -> None:
     async with rig((1,), timeout=0.02, retries=0) as r:
         record_host_writes(r)
@@ -98,7 +95,6 @@ async def test_a_frozen_drive_fails_the_confirmation_without_a_resend() -> None:
         assert moves_sent(r) == 1
 
 
-@arun
 async def test_reads_before_the_send_fail_and_nothing_moves() -> None:
     async with rig((1,), timeout=0.02, retries=0) as r:
         record_host_writes(r)
@@ -108,7 +104,6 @@ async def test_reads_before_the_send_fail_and_nothing_moves() -> None:
         assert moves_sent(r) == 0
 
 
-@arun
 async def test_a_move_to_where_the_motor_is_counts_as_confirmed() -> None:
     async with rig((1,)) as r:
         record_host_writes(r)
@@ -117,7 +112,6 @@ async def test_a_move_to_where_the_motor_is_counts_as_confirmed() -> None:
         assert moves_sent(r) == 1
 
 
-@arun
 async def test_confirm_checks_its_arguments_first() -> None:
     async with rig((1,)) as r:
         ax = r.axis(1)
@@ -127,7 +121,6 @@ async def test_confirm_checks_its_arguments_first() -> None:
         assert r.wire.tx == 0  # not even the reads before the send
 
 
-@arun
 async def test_dyncan_confirmed_move_and_a_lost_one() -> None:
     async with harness(1, realtime=True) as h:  # the servo runs in wall-clock time
         ax = h.axis(1)

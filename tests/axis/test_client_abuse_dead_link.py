@@ -18,7 +18,7 @@ from contextlib import asynccontextmanager
 from typing import Any
 
 import pytest
-from dyn232_rig import PATHS, arun, rig
+from dyn232_rig import PATHS, rig
 from dyncan_rig import harness
 
 from servobus.axis import connect_async
@@ -60,7 +60,6 @@ def later(delay: float, action: Callable[[], Awaitable[Any]]) -> None:
 
 # ---------------------------------------------------------------------- DYN232M: the pair
 @pytest.mark.parametrize("path", PATHS)
-@arun
 async def test_pair_cable_pulled_while_waiting(path: str) -> None:
     async with rig((0,), push=PATHS[path], timeout=DEADLINE_S) as r:
         ax = r.axis(ABSENT_ID)
@@ -78,7 +77,7 @@ async def tcp_peer(*, reset: bool) -> AsyncIterator[int]:
     async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         with contextlib.suppress(ConnectionError):
             await reader.read(64)
-            await asyncio.sleep(0.05)
+            await asyncio.sleep(0.05)  # a scripted peer's pause: the client is waiting by then
             if reset:
                 sock = writer.get_extra_info("socket")
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
@@ -94,7 +93,6 @@ async def tcp_peer(*, reset: bool) -> AsyncIterator[int]:
 
 @pytest.mark.parametrize("transport", ["tcp", "pyserial"])
 @pytest.mark.parametrize("reset", [False, True], ids=["fin", "rst"])
-@arun
 async def test_tcp_peer_gone_while_waiting(transport: str, reset: bool) -> None:
     async with tcp_peer(reset=reset) as port:
         ax = await connect_async(f"socket://127.0.0.1:{port}", drive_id=1, timeout=DEADLINE_S,
@@ -107,7 +105,6 @@ async def test_tcp_peer_gone_while_waiting(transport: str, reset: bool) -> None:
 
 
 # ---------------------------------------------------------------------- DYN232M over sim://
-@arun
 async def test_sim_stream_closed_while_waiting() -> None:
     ax = await connect_async("sim://dyn2?fast=1&ids=0", drive_id=ABSENT_ID,
                              timeout=DEADLINE_S)
@@ -146,7 +143,6 @@ class BrokenStream:
 @pytest.mark.parametrize("error", [BrokenPipeError(32, "Broken pipe"),
                                    ConnectionResetError(104, "reset by peer"),
                                    OSError(5, "Input/output error")], ids=repr)
-@arun
 async def test_builtin_errors_of_a_foreign_stream_become_connection_lost(error: OSError
                                                                           ) -> None:
     ax = Dyn232Axis(AsyncDyn232Client(BrokenStream(error), timeout=DEADLINE_S), 1)
@@ -156,7 +152,6 @@ async def test_builtin_errors_of_a_foreign_stream_become_connection_lost(error: 
 
 
 # ---------------------------------------------------------------------- DYN CAN
-@arun
 async def test_can_bus_closed_while_waiting() -> None:
     async with harness(1, timeout=DEADLINE_S) as h:
         ax = h.axis(ABSENT_ID)
@@ -184,7 +179,6 @@ class BrokenCanPort:
         pass
 
 
-@arun
 async def test_builtin_errors_of_a_foreign_can_port_become_connection_lost() -> None:
     error = BrokenPipeError(32, "Broken pipe")
     client = AsyncDynCanClient(BrokenCanPort(error), timeout=DEADLINE_S)
@@ -211,7 +205,7 @@ async def socketcand_peer() -> AsyncIterator[int]:
                 writer.write(b"< ok >")
                 await writer.drain()
             await reader.readuntil(b">")  # the first < send ... >
-            await asyncio.sleep(0.05)
+            await asyncio.sleep(0.05)  # a scripted peer's pause: the client is waiting by then
             writer.close()
 
     server = await asyncio.start_server(handle, "127.0.0.1", 0)
@@ -222,7 +216,6 @@ async def socketcand_peer() -> AsyncIterator[int]:
         await server.wait_closed()
 
 
-@arun
 async def test_socketcand_daemon_gone_while_waiting() -> None:
     async with socketcand_peer() as port:
         ax = await open_can_axis(f"socketcand:127.0.0.1:{port}", drive_id=1,
@@ -234,7 +227,6 @@ async def test_socketcand_daemon_gone_while_waiting() -> None:
             await ax.close()
 
 
-@arun
 async def test_a_timeout_is_not_a_lost_connection() -> None:
     """The conversion keeps DriveTimeout (a TimeoutError, hence an OSError) as it is."""
     async with harness(1, timeout=0.02, retries=0) as h:

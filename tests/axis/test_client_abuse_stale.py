@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 import pytest
-from dyn232_rig import PATHS, arun, rig
+from dyn232_rig import PATHS, rig
 
 # benchmarks/ is a top-level package of the repository, not installed with servobus.
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root: benchmarks/
@@ -30,7 +30,7 @@ from servobus.protocols.dyncan.client import AsyncDynCanClient
 from servobus.transport.base import Direction
 from servobus.transport.can_bus import CanFrame, FrameReceiver, FrameTraceHook
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.timeout(60), pytest.mark.slow]
 READS = 40  # ~2 s per run; benchmarks.stale_reads runs the issue's 885
 DEADLINE_S = 0.05
 LATE_S = 0.3
@@ -44,7 +44,6 @@ def _profile_ran(count: StaleCount) -> None:
 
 # ---------------------------------------------------------------------- the issue's profile
 @pytest.mark.parametrize("path", PATHS)
-@arun
 async def test_dyn232_no_value_older_than_its_call(path: str) -> None:
     after = await dyn232_stale(READS, push=PATHS[path])
     _profile_ran(after)
@@ -53,14 +52,12 @@ async def test_dyn232_no_value_older_than_its_call(path: str) -> None:
 
 
 @pytest.mark.parametrize("path", PATHS)
-@arun
 async def test_dyn232_without_the_drain_the_profile_gives_stale_values(path: str) -> None:
     before = await dyn232_stale(READS, push=PATHS[path], late_reply_s=0.0)
     _profile_ran(before)
     assert before.stale > 0, before
 
 
-@arun
 async def test_dyncan_no_value_older_than_its_call() -> None:
     after = await dyncan_stale(READS)
     _profile_ran(after)
@@ -72,7 +69,6 @@ async def test_dyncan_no_value_older_than_its_call() -> None:
 
 # ---------------------------------------------------------------------- DYN232M drain rules
 @pytest.mark.parametrize("path", PATHS)
-@arun
 async def test_drain_ends_when_the_owed_reply_comes(path: str) -> None:
     async with rig((0,), push=PATHS[path], timeout=DEADLINE_S, retries=0,
                    late_reply_s=10.0) as r:
@@ -89,7 +85,6 @@ async def test_drain_ends_when_the_owed_reply_comes(path: str) -> None:
 
 
 @pytest.mark.parametrize("path", PATHS)
-@arun
 async def test_drain_waits_at_most_late_reply_s_for_a_lost_reply(path: str) -> None:
     async with rig((0,), push=PATHS[path], timeout=DEADLINE_S, retries=0,
                    late_reply_s=LATE_S) as r:
@@ -98,19 +93,17 @@ async def test_drain_waits_at_most_late_reply_s_for_a_lost_reply(path: str) -> N
         with pytest.raises(DriveTimeout):
             await ax.status()
         t_fail = time.monotonic()
-        await ax.position()  # another kind: no wait
-        assert time.monotonic() - t_fail < LATE_S - EARLY_S
+        await ax.position()  # another kind: no wait (the client counts every read that waits)
+        assert r.client.late_replies.drains == 0
         await ax.status()  # same kind: waits for the lost reply, then gives it up
         waited = time.monotonic() - t_fail
         assert LATE_S - EARLY_S <= waited <= LATE_S + DEADLINE_S + MARGIN_S
         assert r.client.late_replies.given_up == 1 and r.client.late_replies.drains == 1
-        t0 = time.monotonic()
         await ax.status()  # settled: no more waiting
-        assert time.monotonic() - t0 < LATE_S - EARLY_S
+        assert r.client.late_replies.drains == 1
 
 
 @pytest.mark.parametrize("path", PATHS)
-@arun
 async def test_old_debts_of_other_kinds_expire_by_themselves(path: str) -> None:
     """A scan leaves a debt per absent id; once their quiet time is over they are given up
     without anyone reading those ids again (the receive path is back to its fast form)."""
@@ -128,7 +121,6 @@ async def test_old_debts_of_other_kinds_expire_by_themselves(path: str) -> None:
         assert r.client.late_replies.given_up == 3
 
 
-@arun
 async def test_drain_fails_at_once_when_the_link_dies() -> None:
     async with rig((0,), push=True, timeout=DEADLINE_S, retries=0, late_reply_s=10.0) as r:
         ax = r.axis(0)
@@ -143,7 +135,6 @@ async def test_drain_fails_at_once_when_the_link_dies() -> None:
         assert time.monotonic() - t0 < 1.0
 
 
-@arun
 async def test_late_replies_and_retries_are_logged(caplog: pytest.LogCaptureFixture) -> None:
     caplog.set_level(logging.DEBUG, logger="servobus")
     async with rig((0,), push=True, timeout=DEADLINE_S, retries=1) as r:
@@ -199,7 +190,6 @@ class ScriptedCanPort:
             self._receiver(None)
 
 
-@arun
 async def test_dyncan_late_frame_is_dropped_and_the_drain_is_bounded() -> None:
     port = ScriptedCanPort()
     client = AsyncDynCanClient(port, timeout=DEADLINE_S, retries=0, late_reply_s=LATE_S)
@@ -215,8 +205,9 @@ async def test_dyncan_late_frame_is_dropped_and_the_drain_is_bounded() -> None:
         with pytest.raises(DriveTimeout):
             await ax.position()
         t_fail = time.monotonic()
-        await ax.speed()  # another identifier: no wait
-        assert time.monotonic() - t_fail < LATE_S - EARLY_S
+        drains = client.late_replies.drains
+        await ax.speed()  # another identifier: no wait (the client counts every read that waits)
+        assert client.late_replies.drains == drains
         start = port.received
         assert await ax.position() >= start
         waited = time.monotonic() - t_fail

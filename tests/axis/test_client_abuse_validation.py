@@ -13,7 +13,7 @@ from collections.abc import Callable, Coroutine
 from typing import Any
 
 import pytest
-from dyn232_rig import arun, rig
+from dyn232_rig import rig
 
 from servobus.axis import connect_async
 from servobus.axis.base import AsyncAxis
@@ -90,7 +90,6 @@ def all_calls() -> list[tuple[str, Call]]:
 
 
 # ---------------------------------------------------------------------- DYN232M
-@arun
 async def test_dyn232_axis_refuses_bad_arguments_before_sending() -> None:
     async with rig((1,)) as r:
         ax = r.axis(1)
@@ -101,7 +100,6 @@ async def test_dyn232_axis_refuses_bad_arguments_before_sending() -> None:
         assert await ax.read_id() == 1  # the line still works
 
 
-@arun
 async def test_dyn232_per_call_knobs_and_interpolation() -> None:
     async with rig((1,)) as r:
         ax = r.axis(1)
@@ -151,7 +149,6 @@ def test_dyn232_client_options_checked_at_construction(option: str) -> None:
 
 @pytest.mark.parametrize("options", [{"timeout": NAN}, {"timeout": 0}, {"retries": 1.5},
                                      {"retries": None}, {"late_reply_s": -1}])
-@arun
 async def test_connect_refuses_bad_options(options: dict[str, Any]) -> None:
     with pytest.raises(ArgumentRangeError):
         await connect_async("sim://dyn2?fast=1&ids=0", **options)
@@ -188,7 +185,6 @@ def can_only_calls(value: Any) -> list[tuple[str, Call]]:
     ]
 
 
-@arun
 async def test_dyncan_axis_refuses_bad_arguments_before_sending() -> None:
     port = CountingCanPort()
     client = AsyncDynCanClient(port, timeout=0.02, retries=0)
@@ -214,7 +210,6 @@ async def test_dyncan_axis_refuses_bad_arguments_before_sending() -> None:
     await client.close()
 
 
-@arun
 async def test_dyncan_move_none_sends_nothing() -> None:
     """The issue's case: DYN CAN move_to(None) used to send 0 and move the motor to 0."""
     port = CountingCanPort()
@@ -229,7 +224,6 @@ async def test_dyncan_move_none_sends_nothing() -> None:
 
 
 @pytest.mark.parametrize("option", ["timeout", "retries", "late_reply_s"])
-@arun
 async def test_dyncan_client_options_checked_at_construction(option: str) -> None:
     bad_values = BAD_COUNTS if option == "retries" else [b for b in BAD_SECONDS
                                                          if b is not None]

@@ -12,7 +12,7 @@ from __future__ import annotations
 import asyncio
 
 import pytest
-from dyn232_rig import arun, rig
+from dyn232_rig import rig
 
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveError
 from servobus.link.transaction import TransactionStats
@@ -64,7 +64,6 @@ class ErrorPort:
             self._receiver(None)
 
 
-@arun
 async def test_both_clients_share_the_manager_and_its_stats() -> None:
     port = ErrorPort()
     can = AsyncDynCanClient(port)
@@ -79,7 +78,6 @@ async def test_both_clients_share_the_manager_and_its_stats() -> None:
     await can.close()
 
 
-@arun
 async def test_a_request_of_the_other_protocol_is_refused_before_sending() -> None:
     port = ErrorPort()
     can = AsyncDynCanClient(port)
@@ -93,7 +91,6 @@ async def test_a_request_of_the_other_protocol_is_refused_before_sending() -> No
     await can.close()
 
 
-@arun
 async def test_drive_error_in_flight_ends_the_read_without_a_resend() -> None:
     port = ErrorPort()
     client = AsyncDynCanClient(port, retries=2)
@@ -107,7 +104,6 @@ async def test_drive_error_in_flight_ends_the_read_without_a_resend() -> None:
     await client.close()
 
 
-@arun
 async def test_alarm_push_is_counted_and_raised_by_the_next_call() -> None:
     port = ErrorPort()
     client = AsyncDynCanClient(port)

@@ -50,6 +50,7 @@ def run(*args: str, input: bytes | None = None) -> tuple[int, str]:
     return result.exit_code, result.stdout if result.exit_code != 2 else result.output
 
 
+@pytest.mark.slow  # a real process
 def test_decode_subprocess_example_4() -> None:
     proc = subprocess.run([*SERVOBUS, "decode", "03", "a3", "ff", "88", "ad"],
                           capture_output=True, text=True, timeout=30)
@@ -227,6 +228,7 @@ def test_sniff_without_source_is_a_usage_error() -> None:
     assert code == 2 and "--tap" in out
 
 
+@pytest.mark.slow  # a real process
 def test_sniff_live_tap_of_the_simulator() -> None:
     """End to end: `servobus sim dyn232 --tap`, a sniffer on the tap, a client on the line."""
     from servobus.axis import connect

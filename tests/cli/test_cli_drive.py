@@ -16,6 +16,8 @@ from servobus.cli.main import cli
 from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
 
+pytestmark = pytest.mark.slow  # real processes or seconds of wall-clock motion
+
 SERVOBUS = [sys.executable, "-m", "servobus"]  # the interpreter running the tests
 FAST = "sim://dyn2?fast=1"
 

@@ -214,6 +214,7 @@ def test_motion_guard_leaves_other_errors_alone() -> None:
 
 
 # ------------------------------------------------------------------ entry point
+@pytest.mark.slow  # a real process
 def test_no_arguments_prints_help_and_version_works() -> None:
     proc = subprocess.run([sys.executable, "-m", "servobus"], capture_output=True, text=True,
                           timeout=30)

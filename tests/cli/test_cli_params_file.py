@@ -82,6 +82,7 @@ def test_diff() -> None:
         ("main_gain", 40, 41)]
 
 
+@pytest.mark.slow  # a real process
 def test_cli_load_validates_before_connecting(tmp_path: Path) -> None:
     # --port points nowhere: the file error must come first, as a typed error, exit 2.
     path = write(tmp_path, good_doc() | {"params": {"gear_num": 20000}})
@@ -93,6 +94,7 @@ def test_cli_load_validates_before_connecting(tmp_path: Path) -> None:
     assert "cannot open" not in proc.stderr  # the file was refused before connecting
 
 
+@pytest.mark.slow  # a real process
 def test_cli_set_checks_range_before_connecting() -> None:
     proc = subprocess.run([*SERVOBUS, "--port", "socket://127.0.0.1:9", "set", "main_gain", "0"],
                           capture_output=True, text=True, timeout=30)

@@ -20,7 +20,7 @@ from subprocess_rig import read_line, stop_process
 
 from servobus.axis import connect
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.timeout(60), pytest.mark.slow]
 
 
 _readers: dict[int, threading.Thread] = {}

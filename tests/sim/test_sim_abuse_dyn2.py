@@ -14,8 +14,11 @@ import struct
 import time
 
 import pytest
+from conftest import wait_until
 from sim_abuse_rig import (
+    ANSWER_S,
     Flood,
+    assert_served,
     dyn2_latencies,
     dyn2_status,
     need_descriptors,
@@ -29,10 +32,9 @@ from servobus.protocols.dyn232.pacing import RX_BUFFER_BYTES, LineRunner
 from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.server_limits import is_loopback
 
-pytestmark = pytest.mark.timeout(90)
+pytestmark = [pytest.mark.timeout(120), pytest.mark.slow]
 LINE = ("dyn2", "--listen", "tcp://127.0.0.1:0", "--ids", "1,2")
 RSS_GROWTH_MIB = 16.0  # before the fix: +30 MiB/s (paced flood), unbounded (tap)
-GOOD_DEADLINE_S = 0.5  # the well-behaved client's deadline per reply, under attack
 
 
 def _open(port: int, count: int) -> list[socket.socket]:
@@ -68,7 +70,9 @@ def test_2000_connections_are_held_and_the_line_still_answers(mode: list[str]) -
         port = p.port()
         socks = _open(port, 2000)
         try:
-            assert max(dyn2_latencies(port, 2, 5, 2.0)) < 2.0
+            # Answered at all (before the fix the server died at ~1,020): the first read may
+            # wait while the server accepts the 2,000 - seconds on a loaded machine.
+            assert max(dyn2_latencies(port, 2, 5, 30.0)) < 30.0
             assert not _closed_by_server(socks, 0.2)
             assert p.alive()
         finally:
@@ -85,9 +89,11 @@ def test_connections_beyond_the_cap_are_closed_at_once_with_one_log_line() -> No
             refused = _closed_by_server(first, 1.0)
             assert len(refused) == 10
             held = [s for s in first if s not in refused]
+            open_before = p.connections()
             for s in held[:5]:
                 s.close()
-            time.sleep(0.3)  # the server reads the five EOFs (not observable from here)
+            wait_until(lambda: p.connections() <= open_before - 5, timeout=30,
+                       what="the server closed the five")
             second = _open(port, 10)
             refused_again = _closed_by_server(second, 1.0)
             assert len(refused_again) == 5  # 15 + 10 for 20 places
@@ -110,12 +116,12 @@ def test_paced_flood_keeps_memory_bounded_and_others_answered() -> None:
     """Before: +175 MiB in 6 s and no reply to anybody else (the queue was unbounded)."""
     with sim(*LINE) as p:
         port = p.port()
-        time.sleep(0.3)
+        time.sleep(0.3)  # the server's memory settles after start-up; nothing signals it
         before = p.rss_mib()
         with Flood(port, dyn2_status(1) * 4096):
-            times = dyn2_latencies(port, 2, 40, GOOD_DEADLINE_S)
+            times = dyn2_latencies(port, 2, 40, ANSWER_S)
             grown = p.rss_mib() - before
-        assert max(times) < GOOD_DEADLINE_S, times
+        assert_served(times)
         assert grown < RSS_GROWTH_MIB
     assert "lost to full receive buffers" in p.stderr
 
@@ -126,8 +132,8 @@ def test_paced_burst_from_a_client_that_leaves_does_not_hold_the_line() -> None:
         port = p.port()
         with socket.create_connection(("127.0.0.1", port), timeout=5) as s:
             s.sendall((dyn2_status(1) * 16384)[:65536])
-        (first,) = dyn2_latencies(port, 2, 1, 5.0)
-        assert first < GOOD_DEADLINE_S
+        (first,) = dyn2_latencies(port, 2, 1, 30.0)
+        assert first < ANSWER_S  # before: 17 s of answering nobody
 
 
 def test_fast_greedy_clients_do_not_starve_a_well_behaved_one() -> None:
@@ -135,9 +141,9 @@ def test_fast_greedy_clients_do_not_starve_a_well_behaved_one() -> None:
     with sim(*LINE, "--fast") as p:
         port = p.port()
         with Flood(port, dyn2_status(1) * 4096), Flood(port, dyn2_status(1) * 4096):
-            time.sleep(0.3)
-            times = dyn2_latencies(port, 2, 60, GOOD_DEADLINE_S)
-        assert max(times) < GOOD_DEADLINE_S, sorted(times)[-5:]
+            time.sleep(0.3)  # the floods under way (they have no end to wait for)
+            times = dyn2_latencies(port, 2, 60, ANSWER_S)
+        assert_served(times)
 
 
 def test_never_reading_client_and_tap_keep_memory_bounded() -> None:
@@ -148,17 +154,18 @@ def test_never_reading_client_and_tap_keep_memory_bounded() -> None:
         tap = socket.socket()
         tap.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
         tap.connect(("127.0.0.1", tap_port))
-        time.sleep(0.3)
+        time.sleep(0.3)  # the server's memory settles after start-up; nothing signals it
         before = p.rss_mib()
         try:
             with Flood(port, dyn2_status(1) * 4096, read=False), \
                     Flood(port, dyn2_status(1) * 4096):
-                deadline = time.monotonic() + 20
-                while "dropped client" not in p.stderr_so_far() and time.monotonic() < deadline:
-                    time.sleep(0.2)
-                times = dyn2_latencies(port, 2, 20, GOOD_DEADLINE_S)
+                # The tap is dropped once 1 MiB of line traffic is queued for it: seconds on
+                # an idle machine, much longer when the floods get little CPU.
+                wait_until(lambda: "dropped client" in p.stderr_so_far(), timeout=60,
+                           poll=0.2, what="the tap dropped")
+                times = dyn2_latencies(port, 2, 20, ANSWER_S)
                 grown = p.rss_mib() - before
-            assert max(times) < GOOD_DEADLINE_S
+            assert_served(times)
             assert grown < RSS_GROWTH_MIB
         finally:
             tap.close()
@@ -173,9 +180,9 @@ def test_garbage_is_survived_and_counted(mode: list[str]) -> None:
     with sim(*LINE, *mode) as p:
         port = p.port()
         with Flood(port, blob):
-            time.sleep(1.0)
-            times = dyn2_latencies(port, 2, 10, GOOD_DEADLINE_S)
-        assert max(times) < GOOD_DEADLINE_S
+            time.sleep(1.0)  # a second of garbage first (a flood has no end to wait for)
+            times = dyn2_latencies(port, 2, 10, ANSWER_S)
+        assert_served(times)
         assert p.alive()
     assert "Traceback" not in p.stderr
     assert " 0 framing error(s)" not in p.stderr
@@ -192,7 +199,9 @@ def test_clients_that_reset_with_replies_pending_leave_no_log_flood(mode: list[s
             s.sendall(dyn2_status(1) * 64)
             s.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
             s.close()  # RST, replies still owed
-        assert max(dyn2_latencies(port, 2, 3, 2.0)) < 2.0
+        # Answered at all (the point is the log, below); a paced line may first finish the
+        # requests already on its wire, which takes longer on a loaded machine.
+        assert max(dyn2_latencies(port, 2, 3, 30.0)) < 30.0
     assert "socket.send() raised" not in p.stderr
     assert len(p.stderr.splitlines()) <= 3, p.stderr  # banner, stop summary
 
@@ -262,7 +271,7 @@ def test_paced_receive_buffer_drops_beyond_its_size_and_a_gone_port_frees_its_re
         assert port.rx_dropped == 2 * len(burst) - RX_BUFFER_BYTES
         runner.close_port(port)
         assert port.pending == 0 and not runner.releases  # nothing left to release
-        await asyncio.sleep(0.05)
+        await asyncio.sleep(0.05)  # "no reply" has no event: 50 ms for a wrong one to come
         assert got == []
         await runner.close()
 

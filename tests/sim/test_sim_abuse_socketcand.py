@@ -10,8 +10,11 @@ import socket
 import time
 
 import pytest
+from conftest import wait_until
 from sim_abuse_rig import (
+    ANSWER_S,
     Flood,
+    assert_served,
     can_latencies,
     can_send,
     can_session,
@@ -26,10 +29,9 @@ from servobus.protocols.dyncan import codec as cc
 from servobus.sim.socketcand_hub import RX_FIFO_FRAMES, SocketcandHub, parse_send
 from servobus.transport.can_bus import CanFrame
 
-pytestmark = pytest.mark.timeout(90)
+pytestmark = [pytest.mark.timeout(120), pytest.mark.slow]
 BUS = ("dyncan", "--socketcand", "127.0.0.1:0", "--ids", "1,2")
 RSS_GROWTH_MIB = 16.0  # before the fix: +108 MiB in 6 s (paced flood)
-GOOD_DEADLINE_S = 0.5
 
 MALFORMED = [
     b"< send 12\xff 1 00 >",  # before: UnicodeEncodeError killed the session
@@ -127,21 +129,21 @@ def test_fast_greedy_client_does_not_starve_a_well_behaved_one() -> None:
     with sim(*BUS, "--fast") as p:
         port = p.port()
         with Flood(port, can_send(1) * 512, handshake=True):
-            time.sleep(0.3)
-            times = can_latencies(port, 2, 40, GOOD_DEADLINE_S)
-        assert max(times) < GOOD_DEADLINE_S, sorted(times)[-5:]
+            time.sleep(0.3)  # the flood under way (it has no end to wait for)
+            times = can_latencies(port, 2, 40, ANSWER_S)
+        assert_served(times)
 
 
 def test_paced_flood_keeps_memory_bounded_and_others_answered() -> None:
     """Before: +108 MiB in 6 s and no reply to anybody else."""
     with sim(*BUS) as p:
         port = p.port()
-        time.sleep(0.3)
+        time.sleep(0.3)  # the server's memory settles after start-up; nothing signals it
         before = p.rss_mib()
         with Flood(port, can_send(1) * 512, handshake=True):
-            times = can_latencies(port, 2, 40, GOOD_DEADLINE_S)
+            times = can_latencies(port, 2, 40, ANSWER_S)
             grown = p.rss_mib() - before
-        assert max(times) < GOOD_DEADLINE_S, sorted(times)[-5:]
+        assert_served(times)
         assert grown < RSS_GROWTH_MIB
     assert "lost to full receive FIFOs" in p.stderr
 
@@ -152,19 +154,18 @@ def test_never_reading_client_is_dropped_with_one_log_line() -> None:
         port = p.port()
         deaf = can_session(port)
         deaf.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-        time.sleep(0.3)
+        time.sleep(0.3)  # the server's memory settles after start-up; nothing signals it
         before = p.rss_mib()
         try:
             with Flood(port, can_send(1) * 512, handshake=True):
-                deadline = time.monotonic() + 30
-                while "dropped client" not in p.stderr_so_far() \
-                        and time.monotonic() < deadline:
-                    time.sleep(0.2)
-                times = can_latencies(port, 2, 10, GOOD_DEADLINE_S)
+                # Dropped once 1 MiB is queued for it: longer when the flood gets little CPU.
+                wait_until(lambda: "dropped client" in p.stderr_so_far(), timeout=60,
+                           poll=0.2, what="the deaf client dropped")
+                times = can_latencies(port, 2, 10, ANSWER_S)
                 grown = p.rss_mib() - before
         finally:
             deaf.close()
-        assert max(times) < GOOD_DEADLINE_S
+        assert_served(times)
         assert grown < RSS_GROWTH_MIB
     assert len([ln for ln in p.stderr.splitlines() if "dropped client" in ln]) == 1, p.stderr
 
@@ -178,9 +179,10 @@ def test_garbage_is_survived() -> None:
     with sim(*BUS, "--fast") as p:
         port = p.port()
         with Flood(port, junk, handshake=True):
-            time.sleep(1.0)
-            times = can_latencies(port, 2, 10, GOOD_DEADLINE_S)
-        assert max(times) < GOOD_DEADLINE_S and p.alive()
+            time.sleep(1.0)  # a second of garbage first (a flood has no end to wait for)
+            times = can_latencies(port, 2, 10, ANSWER_S)
+        assert_served(times)
+        assert p.alive()
     assert "Traceback" not in p.stderr
 
 
@@ -191,7 +193,9 @@ def test_2000_connections_are_held_and_the_bus_still_answers() -> None:
         port = p.port()
         socks = [socket.create_connection(("127.0.0.1", port), timeout=5) for _ in range(2000)]
         try:
-            assert max(can_latencies(port, 2, 5, 2.0)) < 2.0
+            # Answered at all: the first read may wait while the hub accepts the 2,000 -
+            # seconds on a loaded machine.
+            assert max(can_latencies(port, 2, 5, 30.0)) < 30.0
             assert p.alive()
         finally:
             for s in socks:

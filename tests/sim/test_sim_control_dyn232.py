@@ -23,9 +23,9 @@ from servobus.protocols.dyn232 import codec as c
 from servobus.sim.control import ControlError
 from servobus.sim.control_client import ControlClient
 
-pytestmark = pytest.mark.timeout(90)
+pytestmark = [pytest.mark.timeout(90), pytest.mark.slow]
 H, GR = c.HostFunction, c.GeneralReadSelector
-SERVER_S = 60.0
+SERVER_S = 600.0  # a safety net (the fixture stops it): a loaded module takes minutes
 
 
 class Bench:
@@ -136,7 +136,10 @@ def test_6_1_each_fault_trips_its_alarm_code_and_a_power_cycle_clears_it(
     assert bench.ask(1, H.READ_MAIN_GAIN) != 77
     bench.send(1, H.GENERAL_READ, GR.ENABLE)  # ENA / enable do not clear it
     assert bench.alarm_code() == code
-    time.sleep(0.5)  # the surge is over, the power stage has cooled below the trip level
+    # Until the cause is gone: the surge is over and the power stage has cooled below the
+    # trip level (the drive's own state says so).
+    wait_until(lambda: (st := bench.ctl("state"))["temperature_c"] < 85
+               and st["bus_voltage"] <= 80, timeout=30, what="the cause gone")
     bench.send(1, H.GENERAL_READ, GR.RESET)  # the power cycle of 6.1
     assert bench.alarm_code() == 0
     assert bench.status() & StatusBits.SERVO_FREE == 0
@@ -148,7 +151,7 @@ def test_6_1_an_overheated_drive_trips_again_until_it_has_cooled(bench: Bench) -
     assert bench.ctl("state")["temperature_c"] > 85
     bench.send(1, H.GENERAL_READ, GR.RESET)
     wait_until(lambda: bench.alarm_code() == 3, timeout=2, what="trips again while hot")
-    wait_until(lambda: bench.ctl("state")["temperature_c"] < 84, timeout=15, what="cooled")
+    wait_until(lambda: bench.ctl("state")["temperature_c"] < 84, timeout=30, what="cooled")
     bench.ctl("power_cycle")
     assert bench.alarm_code() == 0
 

@@ -19,7 +19,8 @@ from servobus.families.dmm.registers import ALARM_SHIFT, StatusBits
 from servobus.protocols.dyncan import codec as c
 from servobus.sim.control_client import ControlClient
 
-pytestmark = pytest.mark.timeout(90)
+pytestmark = [pytest.mark.timeout(90), pytest.mark.slow]
+SAFETY_NET_S = "600"  # --duration: the fixture stops it; a loaded module takes minutes
 F = c.Function
 CLI = [sys.executable, "-m", "servobus"]
 
@@ -28,7 +29,7 @@ CLI = [sys.executable, "-m", "servobus"]
 def sim() -> Iterator[tuple[int, str]]:
     proc = subprocess.Popen(
         [*CLI, "sim", "dyncan", "--socketcand", "127.0.0.1:0", "--ids", "1,2", "--fast",
-         "--control", "tcp://127.0.0.1:0", "--duration", "60"],
+         "--control", "tcp://127.0.0.1:0", "--duration", SAFETY_NET_S],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, bufsize=0)
     try:
         can_port = int(read_line(proc, "listening on socketcand 127.0.0.1:").rsplit(":", 1)[1])

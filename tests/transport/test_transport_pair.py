@@ -3,9 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import functools
-from collections.abc import Callable, Coroutine
-from typing import Any
 
 import pytest
 
@@ -16,16 +13,6 @@ from servobus.transport.trace import ByteCounter, TraceRecorder, format_event
 pytestmark = pytest.mark.timeout(10)
 
 
-def arun(fn: Callable[[], Coroutine[Any, Any, None]]) -> Callable[[], None]:
-    """Run an async test on a fresh event loop (no pytest-asyncio in the venv)."""
-
-    @functools.wraps(fn)
-    def wrapper() -> None:
-        asyncio.run(fn())
-
-    return wrapper
-
-
 async def read_exactly(stream: ByteStream, n: int, timeout: float = 1.0) -> bytes:
     out = b""
     async with asyncio.timeout(timeout):
@@ -34,7 +21,6 @@ async def read_exactly(stream: ByteStream, n: int, timeout: float = 1.0) -> byte
     return out
 
 
-@arun
 async def test_pair_is_a_bytestream_both_ways() -> None:
     host, device = open_pair()
     assert isinstance(host, ByteStream) and isinstance(device, ByteStream)
@@ -44,7 +30,6 @@ async def test_pair_is_a_bytestream_both_ways() -> None:
     assert await read_exactly(host, 1) == b"\x83"
 
 
-@arun
 async def test_drop_corrupt_duplicate_split_are_scripted_one_shots() -> None:
     m = Manipulator()
     host, device = open_pair(m)
@@ -62,7 +47,6 @@ async def test_drop_corrupt_duplicate_split_are_scripted_one_shots() -> None:
     assert m.counts[Fault.DUPLICATE] == m.counts[Fault.SPLIT] == 1
 
 
-@arun
 async def test_delay_keeps_wire_order() -> None:
     m = Manipulator()
     host, device = open_pair(m)
@@ -75,7 +59,6 @@ async def test_delay_keeps_wire_order() -> None:
     assert loop.time() - t0 >= 0.025
 
 
-@arun
 async def test_random_faults_are_reproducible_with_a_seed() -> None:
     async def run(seed: int) -> bytes:
         m = Manipulator(seed=seed)
@@ -95,7 +78,6 @@ async def test_random_faults_are_reproducible_with_a_seed() -> None:
     assert a == b and 0 < len(a) < 42
 
 
-@arun
 async def test_custom_hook_like_pymodbus_manipulator() -> None:
     seen: list[tuple[Direction, bytes]] = []
 
@@ -109,7 +91,6 @@ async def test_custom_hook_like_pymodbus_manipulator() -> None:
     assert seen == [(Direction.TX, b"abc")]
 
 
-@arun
 async def test_trace_sees_each_chunk_with_wire_direction() -> None:
     host, device = open_pair()
     rec, counter = TraceRecorder(), ByteCounter()
@@ -123,11 +104,10 @@ async def test_trace_sees_each_chunk_with_wire_direction() -> None:
     assert format_event(Direction.TX, b"\x01\x89").endswith("-> 01 89")
 
 
-@arun
 async def test_close_wakes_reader_on_both_ends() -> None:
     host, device = open_pair()
     reader = asyncio.ensure_future(device.read())
-    await asyncio.sleep(0)
+    await asyncio.sleep(0)  # one loop pass (a yield, not a wait): the read is pending
     await host.close()
     with pytest.raises(ConnectionError):
         await reader
@@ -136,7 +116,6 @@ async def test_close_wakes_reader_on_both_ends() -> None:
     await host.close()  # idempotent
 
 
-@arun
 async def test_discard_input_drops_buffered_bytes() -> None:
     host, device = open_pair()
     await device.write(b"stale")
@@ -145,7 +124,6 @@ async def test_discard_input_drops_buffered_bytes() -> None:
     assert await read_exactly(host, 3) == b"new"
 
 
-@arun
 async def test_pull_only_pair_has_no_push_capability() -> None:
     host, device = open_pair(push=False)
     assert not isinstance(host, PushByteStream) and not hasattr(host, "set_receiver")
@@ -154,7 +132,6 @@ async def test_pull_only_pair_has_no_push_capability() -> None:
     assert await read_exactly(host, 1) == b"\x01"
 
 
-@arun
 async def test_push_pair_pushes_keeps_earlier_bytes_and_hangs_up_once() -> None:
     host, device = open_pair()
     assert isinstance(host, PushByteStream)

@@ -15,7 +15,7 @@ from contextlib import AbstractAsyncContextManager
 from typing import Any
 
 import pytest
-from dyn232_rig import Rig, arun, rig
+from dyn232_rig import Rig, rig
 
 from servobus.errors import (
     ArgumentRangeError,
@@ -49,7 +49,6 @@ def bench(ids: tuple[int, ...] = (0,), **client_kw: Any) -> AbstractAsyncContext
 
 
 # ---------------------------------------------------------------------- basic reads
-@arun
 async def test_reads_parse_every_register_and_parameter() -> None:
     async with bench((5,)) as b:
         ax = b.axis(5)
@@ -64,7 +63,6 @@ async def test_reads_parse_every_register_and_parameter() -> None:
         assert b.client.stats.timeouts == 0
 
 
-@arun
 async def test_move_with_wait_reaches_target_in_counts() -> None:
     async with bench((1,)) as b:
         ax = b.axis(1)
@@ -79,7 +77,6 @@ async def test_move_with_wait_reaches_target_in_counts() -> None:
         assert near(await ax.position(), 0)
 
 
-@arun
 async def test_turn_speed_and_stop() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
@@ -97,7 +94,6 @@ async def test_turn_speed_and_stop() -> None:
 
 
 # ---------------------------------------------------------------------- faults
-@arun
 async def test_corrupted_reply_is_counted_retried_and_never_returned() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
@@ -109,7 +105,6 @@ async def test_corrupted_reply_is_counted_retried_and_never_returned() -> None:
         assert any(isinstance(i, ChecksumError) for i in b.trace.items(Direction.RX))
 
 
-@arun
 async def test_every_reply_corrupt_raises_checksum_error_not_a_value() -> None:
     async with bench((0,), retries=2) as b:
         b.faults.corrupt_next(n=3, direction=Direction.RX)
@@ -119,7 +114,6 @@ async def test_every_reply_corrupt_raises_checksum_error_not_a_value() -> None:
         assert b.wire.tx == 3 * 4  # the read was sent three times
 
 
-@arun
 async def test_dropped_reply_is_retried() -> None:
     async with bench((0,)) as b:
         b.faults.drop_next(n=2, direction=Direction.RX)
@@ -127,7 +121,6 @@ async def test_dropped_reply_is_retried() -> None:
         assert b.client.stats.timeouts == 2 and b.client.stats.retries == 2
 
 
-@arun
 async def test_silent_drive_times_out_within_its_deadline() -> None:
     async with bench((0,), retries=2, turnaround_s=0.02) as b:
         b.faults.set_rate(Direction.RX, Fault.DROP, 1.0)
@@ -141,7 +134,6 @@ async def test_silent_drive_times_out_within_its_deadline() -> None:
         assert b.wire.tx == 3 * 4
 
 
-@arun
 async def test_absent_id_times_out_and_ping_is_false() -> None:
     async with bench((0,), retries=1) as b:
         ghost = b.axis(9)
@@ -151,7 +143,6 @@ async def test_absent_id_times_out_and_ping_is_false() -> None:
         assert await b.axis(0).ping(timeout=0.5) is True
 
 
-@arun
 async def test_motion_is_sent_exactly_once_on_a_faulty_line() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
@@ -169,14 +160,13 @@ async def test_motion_is_sent_exactly_once_on_a_faulty_line() -> None:
         assert b.client.stats.sent == 5  # the gear read and the four packets
 
 
-@arun
 async def test_stale_and_foreign_replies_do_not_answer_a_request() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
         # A late reply from drive 0 and a reply from another id arrive before our request.
         await b.device.write(c.encode_reply(0, c.DriveFunction.IS_ABS_POS32, 424242))
         await b.device.write(c.encode_reply(3, c.DriveFunction.IS_DRIVE_ID, 3) + b"\x85\x99")
-        await asyncio.sleep(0)
+        await asyncio.sleep(0)  # one loop pass (a yield, not a wait): the bytes are delivered
         assert await ax.position() == b.drives[0].position
         # Garbage and a foreign packet in the middle of the reply window: framer resyncs.
         b.faults.custom = lambda d, data: (
@@ -187,7 +177,6 @@ async def test_stale_and_foreign_replies_do_not_answer_a_request() -> None:
         assert b.client.stats.unmatched >= 1
 
 
-@arun
 async def test_split_duplicate_and_delayed_replies_still_parse() -> None:
     async with bench((0,), turnaround_s=0.2) as b:
         ax = b.axis(0)
@@ -200,7 +189,6 @@ async def test_split_duplicate_and_delayed_replies_still_parse() -> None:
 
 
 # ---------------------------------------------------------------------- argument checks
-@arun
 async def test_range_errors_raise_before_any_byte_is_written() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
@@ -223,7 +211,6 @@ async def test_range_errors_raise_before_any_byte_is_written() -> None:
 
 
 # ---------------------------------------------------------------------- EEPROM guard
-@arun
 async def test_eeprom_guard_warns_then_refuses_before_sending() -> None:
     now = [0.0]
     guard = EepromGuard(warn_per_window=3, max_per_window=5, window_s=10,
@@ -253,7 +240,6 @@ async def test_eeprom_guard_warns_then_refuses_before_sending() -> None:
 
 
 # ---------------------------------------------------------------------- id, config, params
-@arun
 async def test_assign_id_moves_the_axis_and_persists() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
@@ -266,7 +252,6 @@ async def test_assign_id_moves_the_axis_and_persists() -> None:
         assert b.client.guard.writes(12, "drive_id") == 1
 
 
-@arun
 async def test_params_backup_restore_round_trip() -> None:
     async with bench((2,)) as b:
         ax = b.axis(2)
@@ -278,7 +263,6 @@ async def test_params_backup_restore_round_trip() -> None:
         assert await ax.read_params() == backup
 
 
-@arun
 async def test_config_and_enable_disable() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
@@ -291,7 +275,6 @@ async def test_config_and_enable_disable() -> None:
         assert await ax.config() == cfg
 
 
-@arun
 async def test_wait_idle_raises_drive_alarm_and_reset_clears_it() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
@@ -303,7 +286,6 @@ async def test_wait_idle_raises_drive_alarm_and_reset_clears_it() -> None:
         assert (await ax.wait_idle(timeout=1, poll=0)).alarm_code == AlarmCode.NONE
 
 
-@arun
 async def test_checksum_notice_from_drive_is_not_an_alarm() -> None:
     async with bench((0,)) as b:
         ax = b.axis(0)
@@ -315,7 +297,6 @@ async def test_checksum_notice_from_drive_is_not_an_alarm() -> None:
         assert near(await ax.position(), 0)
 
 
-@arun
 async def test_query_pacing_spaces_queries() -> None:
     """Measured where the bytes leave (the cable's TX trace, stamped in its write): the
     client's pacing clock is stamped after that write returned, so no CPU load can bring
@@ -343,7 +324,7 @@ class SlowWrites:
 
     async def write(self, data: bytes) -> None:
         if self.delays:
-            await asyncio.sleep(self.delays.pop(0))
+            await asyncio.sleep(self.delays.pop(0))  # scripted: a write that takes this long
         self.left.append(time.monotonic())
         await self.inner.write(data)
 
@@ -364,7 +345,6 @@ class SlowWrites:
         self.inner.set_receiver(receiver)
 
 
-@arun
 async def test_query_pacing_holds_when_writes_take_time() -> None:
     """Regression (issue #9): a write that takes 15 ms before its bytes leave let the next
     query leave 5 ms after it while the pacing clock was stamped at the send decision."""
@@ -379,7 +359,6 @@ async def test_query_pacing_holds_when_writes_take_time() -> None:
         assert min(gaps) >= interval, gaps
 
 
-@arun
 async def test_trace_hook_sees_decoded_packets_both_ways() -> None:
     async with bench((0,)) as b:
         await b.axis(0).read_param("main_gain")
@@ -389,7 +368,6 @@ async def test_trace_hook_sees_decoded_packets_both_ways() -> None:
         assert isinstance(rx[0], c.Packet) and rx[0].function == c.DriveFunction.IS_MAIN_GAIN
 
 
-@arun
 async def test_lock_serialises_concurrent_transactions() -> None:
     async with bench((0, 1, 2)) as b:
         results = await asyncio.gather(*(b.axis(i % 3).read_id() for i in range(30)))
@@ -397,7 +375,6 @@ async def test_lock_serialises_concurrent_transactions() -> None:
         assert b.client.stats.timeouts == 0
 
 
-@arun
 async def test_broadcast_linear_line_moves_three_axes() -> None:
     async with bench((1, 2, 3)) as b:
         await b.client.linear_line(100, 200, 0, 3)

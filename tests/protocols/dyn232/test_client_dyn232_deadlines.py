@@ -18,7 +18,7 @@ from __future__ import annotations
 import time
 
 import pytest
-from dyn232_rig import PATHS, REPEATS, arun, assert_gives_up_on_time, check_window, fail_late, rig
+from dyn232_rig import PATHS, REPEATS, assert_gives_up_on_time, check_window, fail_late, rig
 
 from servobus.axis import connect, connect_async
 from servobus.errors import DriveTimeout
@@ -67,7 +67,6 @@ def test_default_deadline_is_wire_time_of_request_and_longest_reply_plus_turnaro
 # ---------------------------------------------------------------------- deadlines kept
 @pytest.mark.parametrize("path", PATHS)
 @pytest.mark.parametrize("retries", [0, 2])
-@arun
 async def test_explicit_timeout_raises_on_time(path: str, retries: int) -> None:
     async with rig(push=PATHS[path], timeout=DEADLINE_S, retries=retries,
                    late_reply_s=NO_DRAIN) as r:
@@ -86,7 +85,6 @@ async def test_explicit_timeout_raises_on_time(path: str, retries: int) -> None:
 
 @pytest.mark.parametrize("path", PATHS)
 @pytest.mark.parametrize("baud", [9600, 38400])
-@arun
 async def test_default_deadline_from_baud_rate_raises_on_time(path: str, baud: int) -> None:
     async with rig(push=PATHS[path], baud=baud, retries=2, late_reply_s=NO_DRAIN) as r:
         r.faults.set_rate(Direction.RX, Fault.DROP, 1.0)
@@ -101,7 +99,6 @@ async def test_default_deadline_from_baud_rate_raises_on_time(path: str, baud: i
 
 
 @pytest.mark.parametrize("path", PATHS)
-@arun
 async def test_ping_timeout_is_one_attempt_on_time(path: str) -> None:
     async with rig(push=PATHS[path], retries=2, late_reply_s=NO_DRAIN) as r:  # no ping retry
         r.faults.set_rate(Direction.RX, Fault.DROP, 1.0)
@@ -114,7 +111,6 @@ async def test_ping_timeout_is_one_attempt_on_time(path: str) -> None:
 
 
 @pytest.mark.parametrize("retries", [0, 2])
-@arun
 async def test_connect_timeout_and_retries_options_on_time(retries: int) -> None:
     ax = await connect_async(SIM_ONE_DRIVE, drive_id=ABSENT_ID, timeout=DEADLINE_S,
                              retries=retries, late_reply_s=NO_DRAIN)

@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 import asyncio
-import functools
 import os
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Coroutine
 from typing import Any
 
 import pytest
@@ -32,14 +30,6 @@ TOLERANCE = round(U.onrange_to_counts(P.spec("on_range").default))
 
 def near(actual: int, target: int) -> bool:
     return abs(actual - target) <= TOLERANCE
-
-
-def arun(fn: Callable[..., Coroutine[Any, Any, None]]) -> Callable[..., None]:
-    @functools.wraps(fn)
-    def wrapper(*args: Any, **kwargs: Any) -> None:
-        asyncio.run(fn(*args, **kwargs))
-
-    return wrapper
 
 
 def test_default_connect_is_the_embedded_drive() -> None:
@@ -87,7 +77,6 @@ def test_sync_facade_and_async_core_give_the_same_results() -> None:
     assert all(isinstance(p, int) and near(p, 1200) for p in positions)
 
 
-@arun
 async def test_paced_round_trip_takes_the_wire_time() -> None:
     core = await connect_async("sim://dyn2")  # paced at 38400 8N1
     try:
@@ -99,7 +88,6 @@ async def test_paced_round_trip_takes_the_wire_time() -> None:
         await core.close()
 
 
-@arun
 async def test_absent_id_on_sim_times_out() -> None:
     core = await connect_async(FAST + "&ids=0", drive_id=7, retries=1, timeout=0.02)
     try:
@@ -133,7 +121,6 @@ async def _exercise(core: AsyncAxis, drives: list[VirtualDrive]) -> None:
 
 
 @pytest.mark.parametrize("transport", ["tcp", "pyserial"])
-@arun
 async def test_over_tcp_server(transport: str) -> None:
     server = Dyn232Server([VirtualDrive(3), VirtualDrive(4)], paced=False)
     host, port = await server.listen_tcp("127.0.0.1", 0)
@@ -151,7 +138,6 @@ async def test_over_tcp_server(transport: str) -> None:
 
 
 @pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a POSIX pty")
-@arun
 async def test_over_pty() -> None:
     server = Dyn232Server([VirtualDrive(0)], paced=False)
     path = server.open_pty()

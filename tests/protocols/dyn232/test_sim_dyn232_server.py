@@ -5,7 +5,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import socket
-import statistics
 import subprocess
 import sys
 import time
@@ -21,6 +20,8 @@ from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232.pacing import BYTE_TIME_S
 from servobus.protocols.dyn232.server import Dyn232Server, parse_listen_url
 from servobus.sim.dmm.drive import VirtualDrive
+
+pytestmark = pytest.mark.slow  # real processes or seconds of wall-clock motion
 
 H, D, GR = c.HostFunction, c.DriveFunction, c.GeneralReadSelector
 CLI = [sys.executable, "-c", "from servobus.cli.main import main; main()"]
@@ -109,19 +110,22 @@ def test_tcp_line_with_pyserial_socket_url() -> None:
 
 
 def test_paced_round_trip_takes_wire_time_and_fast_is_much_faster() -> None:
+    """Paced: no round trip is ever shorter than the wire allows. Fast: some round trip is
+    (a rate that is possible, not one this machine must keep: how much faster is a benchmark
+    figure); the fast run stops at the first such round trip, so idle it is one or two."""
     request = c.encode(0, H.READ_DRIVE_STATUS)
-    medians = {}
-    for mode in ("paced", "fast"):
-        args = ("--fast",) if mode == "fast" else ()
-        with sim(*args) as p:
-            port = p.tcp_port()
-            with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
-                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                times = [round_trip_s(sock, request, 4) for _ in range(15)]
-            if mode == "paced":
-                assert min(times) >= 8 * BYTE_TIME_S  # 4 + 4 bytes at 38400 8N1 >= 2.08 ms
-            medians[mode] = statistics.median(times)
-    assert medians["fast"] < medians["paced"] / 2, medians
+    wire_s = 8 * BYTE_TIME_S  # 4 + 4 bytes at 38400 8N1 = 2.08 ms
+    with sim() as p, socket.create_connection(("127.0.0.1", p.tcp_port()), timeout=5) as sock:
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        paced = [round_trip_s(sock, request, 4) for _ in range(15)]
+    assert min(paced) >= wire_s, paced
+    with sim("--fast") as p, \
+            socket.create_connection(("127.0.0.1", p.tcp_port()), timeout=5) as sock:
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        fast: list[float] = []
+        while not fast or min(fast) >= wire_s / 2:
+            assert len(fast) < 500, sorted(fast)[:5]
+            fast.append(round_trip_s(sock, request, 4))
 
 
 def test_pty_line_with_pyserial() -> None:
@@ -190,11 +194,11 @@ async def _read_packets(reader: asyncio.StreamReader, n: int) -> list[c.Packet]:
     return out
 
 
-async def _until(condition: Callable[[], bool], timeout: float = 2.0) -> None:
+async def _until(condition: Callable[[], bool], timeout: float = 10.0) -> None:
     """Yield to the loop until ``condition`` holds (the server runs on this same loop)."""
     async with asyncio.timeout(timeout):
         while not condition():
-            await asyncio.sleep(0.001)
+            await asyncio.sleep(0.001)  # the polling helper's own short sleep
 
 
 def test_several_clients_each_get_their_own_replies_and_tap_sees_all() -> None:

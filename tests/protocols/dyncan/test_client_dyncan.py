@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import asyncio
 import itertools
+from collections.abc import Awaitable
 
 import pytest
-from dyncan_rig import arun, harness
+from conftest import wait_until_async
+from dyncan_rig import harness
 
 from servobus.axis.base import AsyncAxis
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveError, DriveTimeout
@@ -37,7 +39,6 @@ def test_parse_can_spec() -> None:
         parse_can_spec("socketcand:localhost")
 
 
-@arun
 async def test_axis_api_reads_and_writes() -> None:
     async with harness(1, 2) as h:
         ax = h.axis(1)
@@ -65,7 +66,6 @@ async def test_axis_api_reads_and_writes() -> None:
         assert h.network.node(2).drive.get_param("main_gain") != 55
 
 
-@arun
 async def test_range_checks_before_sending() -> None:
     async with harness(1) as h:
         ax = h.axis(1)
@@ -81,7 +81,6 @@ async def test_range_checks_before_sending() -> None:
         assert h.client.stats.sent == sent
 
 
-@arun
 async def test_motion_and_readouts_in_realtime() -> None:
     async with harness(1, realtime=True) as h:
         ax = h.axis(1)
@@ -92,10 +91,12 @@ async def test_motion_and_readouts_in_realtime() -> None:
         await ax.move_to_command(1000, wait=True, timeout=5)  # raw command units
         assert abs(await ax.position() - U.command_to_counts(1000, gear)) <= window
         await ax.turn(300)
-        # Not an event to wait on: the servo loop runs in wall-clock time and overshoots a
-        # few rpm right after the ~16 ms ramp; 0.3 s lets it settle before the steady check.
-        await asyncio.sleep(0.3)
-        assert 250 <= await ax.speed() <= 300
+        # The servo loop runs in wall-clock time and overshoots a few rpm right after the
+        # ~16 ms ramp: wait for the steady range rather than for a fixed time.
+        async def steady() -> bool:
+            return 250 <= await ax.speed() <= 300
+
+        await wait_until_async(steady, timeout=10, what="steady at 300 rpm")
         raw = await ax.torque_raw()
         assert -700 <= raw <= 700
         peak = U.MODELS[U.DEFAULT_MODEL].peak_current_a
@@ -105,7 +106,6 @@ async def test_motion_and_readouts_in_realtime() -> None:
         assert abs(await ax.position()) < 3000
 
 
-@arun
 async def test_assign_id_waits_and_readdresses() -> None:
     async with harness(1) as h:
         ax = h.axis(1)
@@ -117,7 +117,6 @@ async def test_assign_id_waits_and_readdresses() -> None:
         assert h.network.nodes[0].drive_id == 7
 
 
-@arun
 async def test_read_timeout_is_bounded_and_retried() -> None:
     async with harness(1, timeout=0.02, retries=2) as h:
         ax = h.axis(9)  # nobody
@@ -131,22 +130,19 @@ async def test_read_timeout_is_bounded_and_retried() -> None:
         assert await h.axis(1).ping()
 
 
-@arun
 async def test_drive_error_ff_fails_the_read_or_the_next_call() -> None:
     async with harness(1) as h:
         ax = h.axis(1)
         # a foreign/corrupted request that skipped the client's checks
         await h.client.port.send((1 << 5) | c.Function.TURN_CONST_SPEED,
                                  (30_000).to_bytes(2, "big"))
-        with pytest.raises(DriveError) as info:
-            for _ in range(50):  # the error is raised by the next call once it has arrived
-                await ax.status()
-                await asyncio.sleep(0.005)
+        with pytest.raises(DriveError) as info:  # raised by the next call once it has arrived
+            await wait_until_async(lambda: _false(ax.status()), timeout=10,
+                                   what="the drive error")
         assert info.value.code == 0xFF and info.value.drive_id == 1
         await ax.status()  # raised once
 
 
-@arun
 async def test_alarm_push_callback_and_next_call() -> None:
     seen: list[int] = []
     async with harness(1, 2, on_alarm=seen.append) as h:
@@ -168,15 +164,13 @@ async def test_alarm_push_callback_and_next_call() -> None:
         assert (await h.axis(2).status()).alarm_code == AlarmCode.NONE
 
 
-@arun
 async def test_sync_move_starts_axes_within_one_control_period() -> None:
     async with harness(1, 2, 3) as h:
         drives = h.network.drives
         await h.client.sync_move({1: 1000, 2: -2000, 3: 500})
-        for _ in range(200):
-            if all(n.motion_started_at is not None for n in h.network.nodes):
-                break
-            await asyncio.sleep(0.002)
+        await wait_until_async(lambda: all(n.motion_started_at is not None
+                                           for n in h.network.nodes), poll=0.002,
+                               timeout=10, what="every axis started")
         starts = [n.motion_started_at for n in h.network.nodes]
         assert None not in starts
         assert max(starts) - min(starts) <= 1 / 4000  # type: ignore[type-var,operator]
@@ -187,7 +181,6 @@ async def test_sync_move_starts_axes_within_one_control_period() -> None:
             round(U.command_to_counts(v, gear)) for v in (1000, -2000, 500)]
 
 
-@arun
 async def test_position_direct_stream_fixed_period() -> None:
     async with harness(1, 2) as h:
         loop = asyncio.get_running_loop()
@@ -196,35 +189,25 @@ async def test_position_direct_stream_fixed_period() -> None:
         elapsed = loop.time() - t
         assert stats.ticks == 20 and stats.frames == 30
         assert elapsed >= 19 * 0.005
-        for _ in range(100):
-            if h.network.stats.frames >= 30:
-                break
-            await asyncio.sleep(0.002)
+        await wait_until_async(lambda: h.network.stats.frames >= 30, poll=0.002, timeout=10,
+                               what="30 frames at the nodes")
         assert h.network.stats.frames == 30
         with pytest.raises(ArgumentRangeError):
             await h.client.stream_position_direct({1: [10, 20_000]}, 0.001)
 
 
-@arun
 async def test_heartbeat_monitor() -> None:
     async with harness(1, timeout=0.02, retries=0) as h:
         lost: list[int] = []
         hb = h.client.start_heartbeat(1, 0.005, lambda i, e: lost.append(i))
-        for _ in range(200):
-            if hb.beats >= 5:
-                break
-            await asyncio.sleep(0.005)
+        await wait_until_async(lambda: hb.beats >= 5, poll=0.005, timeout=10, what="5 beats")
         assert hb.beats >= 5 and hb.gaps == 0 and not lost
         h.network.nodes[0].drive.assign_id(9)  # drive vanishes from id 1
-        for _ in range(200):
-            if lost:
-                break
-            await asyncio.sleep(0.005)
+        await wait_until_async(lambda: lost, poll=0.005, timeout=10, what="the loss reported")
         await hb.stop()
         assert lost and lost[0] == 1
 
 
-@arun
 async def test_trace_sees_frames() -> None:
     async with harness(1) as h:
         events: list[tuple[Direction, object]] = []
@@ -234,7 +217,6 @@ async def test_trace_sees_frames() -> None:
         assert events[1][0] is Direction.RX and isinstance(events[1][1], c.Frame)
 
 
-@arun
 async def test_open_can_axis_and_broadcast_id_zero() -> None:
     spec = f"virtual:servobus-dyncan-open-{next(_channels)}"
     network = DynCanNetwork([VirtualDrive(5)])
@@ -249,3 +231,9 @@ async def test_open_can_axis_and_broadcast_id_zero() -> None:
         stop.set()
         await server
         await node_port.close()
+
+
+async def _false(call: Awaitable[object]) -> bool:
+    """Await ``call`` and say "not yet" (for a wait that ends by the call raising)."""
+    await call
+    return False

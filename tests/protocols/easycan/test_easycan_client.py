@@ -11,8 +11,10 @@ import itertools
 from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
+from typing import Any
 
 import pytest
+from conftest import wait_until_async
 
 from servobus.errors import ArgumentRangeError, ConnectionLost, DriveError, DriveTimeout
 from servobus.families.yzaim import registers as Y
@@ -252,11 +254,11 @@ async def test_reset_clears_a_stall_alarm() -> None:
         await axis.write_param("standstill_max_output", 301)  # stall alarm after 1 s
         motor.set_blocked(True)
         await axis.move_by(Y.COUNTS_PER_REV)
-        for _ in range(300):
-            st = await axis.status()
-            if st.alarm:
-                break
-            await asyncio.sleep(0.01)
+        async def alarmed() -> Any:  # the stall alarm trips after 1 s of the motor's time
+            status = await axis.status()
+            return status if status.alarm else None
+
+        st = await wait_until_async(alarmed, timeout=20, what="the stall alarm")
         assert st.alarm_latched and st.alarm_code == 0x14 and "stall" in st.alarm_text
         motor.set_blocked(False)
         await axis.reset()

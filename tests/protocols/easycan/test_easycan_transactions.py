@@ -79,7 +79,7 @@ class Port:
 
     async def send(self, arbitration_id: int, data: bytes) -> None:
         if self.send_s:
-            await asyncio.sleep(self.send_s)
+            await asyncio.sleep(self.send_s)  # scripted: a send that takes this long
         self.sent.append(codec.decode_request(arbitration_id, data))
         loop = asyncio.get_running_loop()
         for frame in self.script(arbitration_id, bytes(data)):
@@ -102,7 +102,7 @@ class Port:
 
 async def until_sent(port: Port, n: int) -> None:
     while len(port.sent) < n:
-        await asyncio.sleep(0)
+        await asyncio.sleep(0)  # polling helper: yield to the tasks that send (no timer)
 
 
 # ------------------------------------------------------------------ the one manager
@@ -215,8 +215,8 @@ async def test_two_motors_wait_at_once_one_motor_one_request_at_a_time() -> None
     two = asyncio.create_task(client.read(cmds.make_read(2, "target_speed")))
     again = asyncio.create_task(client.read(cmds.make_read(1, "acceleration")))
     await until_sent(port, 2)
-    for _ in range(5):
-        await asyncio.sleep(0)
+    for _ in range(5):  # "not sent" has no event: five loop passes to send it wrongly
+        await asyncio.sleep(0)  # see above
     assert [r.slave for r in port.sent] == [1, 2]  # motor 1's second read waits its turn
     port.reply(ReadReply(2, 0x02, (222,)))  # answered in the other order
     port.reply(ReadReply(1, 0x02, (111,)))

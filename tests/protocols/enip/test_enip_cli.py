@@ -12,7 +12,8 @@ from collections.abc import Iterator
 
 import pytest
 
-pytestmark = pytest.mark.timeout(90)
+pytestmark = [pytest.mark.timeout(90), pytest.mark.slow]
+SAFETY_NET_S = "600"  # --duration: the fixture stops it; a loaded module takes minutes
 LISTENING = re.compile(r"listening on enip://([\d.]+):(\d+) \(UDP ListIdentity (\d+), "
                        r"Class 1 I/O (\d+)\)")
 
@@ -27,7 +28,7 @@ def adapters() -> Iterator[list[tuple[str, int, int]]]:
     """``servobus sim enip`` on two loopback addresses: (host, TCP port, UDP list port)."""
     proc = subprocess.Popen([sys.executable, "-m", "servobus", "sim", "enip", "--listen",
                              "127.0.0.1,127.0.0.2", "--tcp-port", "0", "--udp-port", "0",
-                             "--duration", "80"], stdout=subprocess.PIPE,
+                             "--duration", SAFETY_NET_S], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     assert proc.stdout is not None
     found = []

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import asyncio
 import itertools
-import statistics
 
 import pytest
+from conftest import wait_until_async
 from enip_rig import DOWNTIME_S, rig
 
 from servobus.errors import ArgumentRangeError, ConnectionLost, DriveError
@@ -40,16 +40,21 @@ async def test_frames_at_the_rpi_with_sequences_and_timestamps() -> None:
             frames = await collect(cyclic, 30)
         seqs = [f.sequence for f in frames]
         assert seqs == list(range(seqs[0], seqs[0] + 30))  # consecutive, none missed
-        intervals = [b.time - a.time for a, b in itertools.pairwise(frames)]
-        assert statistics.median(intervals) == pytest.approx(0.010, abs=0.002)
-        wire = [b.wire_time - a.wire_time for a, b in itertools.pairwise(frames)]
-        assert statistics.median(wire) == pytest.approx(0.010, abs=0.002)
-        # the socket's (kernel) receive time is never after the process saw the frame
-        assert all(-0.001 < f.time - f.wire_time < 0.5 for f in frames)
+        # The intervals this machine achieved are benchmark figures (bench_enip): here the
+        # RPI granted both ways and kept by the adapter's connection; the production wheel's
+        # grid is checked on a fake clock (test_enip_production.py).
+        assert cyclic.api_us == (10_000, 10_000) and cyclic.rpi_s == 0.010
+        assert conn.o_t_rpi_us == conn.t_o_rpi_us == 10_000  # what the adapter produces at
+        assert all(b.time >= a.time and b.wire_time >= a.wire_time
+                   for a, b in itertools.pairwise(frames))
+        # The socket's (kernel) receive time is never after the process saw the frame; how
+        # much later the process saw it is the machine's pace, so the upper bound only
+        # catches a timestamp on another clock (wall time vs monotonic: decades apart).
+        assert all(-0.001 < f.time - f.wire_time < 60 for f in frames)
         assert cyclic.stats.frames >= 30 and cyclic.stats.stale == 0
         assert cyclic.latest is not None and cyclic.latest.sequence >= seqs[-1]
-        await asyncio.sleep(0.05)
-        assert not server.adapter.connections.connections()  # Forward_Close on exit
+        await wait_until_async(lambda: not server.adapter.connections.connections(),
+                               what="Forward_Close on exit")
         assert server.stats.frames_in > 0  # O->T frames kept the watchdog fed
 
 
@@ -70,7 +75,7 @@ async def test_enable_and_disable_through_the_output_image() -> None:
     async with rig() as (fleet, axis):
         drive = fleet.servers[0].drive
         async with axis.io(rpi_ms=10) as cyclic:
-            await asyncio.sleep(0.05)
+            await asyncio.sleep(0.05)  # "nothing changed" has no event: 5 RPIs to do it wrong
             assert not drive.servo_free  # opening I/O (word 0) changed nothing
             await cyclic.disable(wait=True)
             assert drive.servo_free
@@ -126,8 +131,9 @@ async def test_refusals_and_arguments() -> None:
 async def test_a_frame_stream_drops_the_oldest_when_the_consumer_lags() -> None:
     async with rig() as (_fleet, axis), axis.io(rpi_ms=10, queue=3) as cyclic:
         stream = cyclic.frames()
-        await asyncio.sleep(0.12)  # ~12 frames arrive, 3 are kept
+        # Frames arrive while nobody reads: the oldest go, 3 are kept.
+        await wait_until_async(lambda: stream.dropped >= 5,  # type: ignore[attr-defined]
+                               timeout=10, what="frames dropped while the consumer lags")
         got = [await stream.__anext__() for _ in range(3)]
         assert [b.sequence - a.sequence for a, b in itertools.pairwise(got)] == [1, 1]
-        assert stream.dropped >= 5  # type: ignore[attr-defined]
     assert dyn5.MIN_RPI_US == 5_000

@@ -11,6 +11,7 @@ from collections.abc import Iterator
 
 import enip_raw as raw
 import pytest
+from conftest import wait_until
 
 from servobus.families.dyn5 import params as dyn5
 from servobus.protocols.enip.server import BackgroundEnip, EnipServer
@@ -109,9 +110,8 @@ def test_insufficient_memory_past_max_sessions(sim: BackgroundEnip, server: Enip
     assert head[3] == 0x0002
     clients[0].sock.sendall(raw.packet(0x66, session=clients[0].session))
     assert clients[0].sock.recv(10) == b""  # unregister closes the connection
-    deadline = time.monotonic() + 2
-    while sim.call(lambda: server.session_count) > 1 and time.monotonic() < deadline:
-        time.sleep(0.01)
+    wait_until(lambda: sim.call(lambda: server.session_count) <= 1, timeout=10,
+               what="the unregistered session gone")
     head, _ = extra.exchange(0x65, struct.pack("<HH", 1, 0))
     assert head[3] == 0 and head[2] != clients[1].session
     for c in (*clients, extra):
@@ -196,6 +196,9 @@ class Scanner:
 
     def __init__(self, server: EnipServer, client: raw.RawClient, rpi_us: int = 10_000,
                  **fo: int) -> None:
+        # The longest watchdog (RPI x 512) unless a test asks: these scanners send O->T data
+        # only now and then, and a loaded machine may take a while between two sends.
+        fo.setdefault("multiplier", 7)
         self.io = raw.IoSocket()
         self.server = server
         self.client = client
@@ -239,7 +242,7 @@ def test_forward_open_reply_names_the_o_t_port(server: EnipServer, client: raw.R
     sc.close()
 
 
-def test_t_o_frames_at_the_rpi_with_monotonic_sequences(server: EnipServer,
+def test_t_o_frames_at_the_rpi_with_monotonic_sequences(sim: BackgroundEnip, server: EnipServer,
                                                         client: raw.RawClient) -> None:
     sc = Scanner(server, client, rpi_us=10_000)
     frames = sc.frames(60)
@@ -248,15 +251,28 @@ def test_t_o_frames_at_the_rpi_with_monotonic_sequences(server: EnipServer,
     assert seqs == list(range(seqs[0], seqs[0] + 60)) and seqs[0] >= 1
     assert counts == list(range(counts[0], counts[0] + 60))
     assert {f.connection_id for f in frames} == {sc.t_o_id}
-    span = frames[-1].arrival - frames[0].arrival
-    assert span / 59 == pytest.approx(0.010, rel=0.05)  # mean period = RPI
+    # The period this machine achieved is a benchmark figure (benchmarks/, docs/testing.md):
+    # under load it is anything. What the adapter decides is checked instead: it grants the
+    # RPI asked for (the reply's T->O API) and produces on that period; the production wheel
+    # keeps its grid on a fake clock in test_enip_production.py.
+    t_o_api_us = struct.unpack_from("<IIHHIII", sc.reply.data)[6]
+    assert t_o_api_us == 10_000
+    period = sim.call(lambda: server._producers[sc.o_t_id].tick.period_s)  # type: ignore[union-attr]
+    assert period == pytest.approx(0.010, abs=1e-9)
     sc.close()
 
 
 def test_t_o_data_follows_the_drive(server: EnipServer, client: raw.RawClient) -> None:
-    sc = Scanner(server, client)
     write_param(client, 0x17, 2000)  # 8000 counts at GEAR_NUM 4096
-    time.sleep(0.4)
+    settled: list[tuple[int, int]] = []
+
+    def at_rest_at_8000() -> bool:  # the same position and 0x1F twice in a row, at 8000
+        settled.append((read_param(client, 0x1D), read_param(client, 0x1F)))
+        return len(settled) > 1 and settled[-1] == settled[-2] \
+            and abs(settled[-1][0] - 8000) <= 1
+
+    wait_until(at_rest_at_8000, timeout=10, poll=0.05, what="the move over")
+    sc = Scanner(server, client)  # opened once the drive is at rest
     sc.send(0xAAAA)
     last = sc.latest()
     assert last.values == (read_param(client, 0x1D), 0, read_param(client, 0x1F), 0)
@@ -286,20 +302,18 @@ def test_watchdog_expiry_closes_and_stops_the_drive(sim: BackgroundEnip, server:
                                                     client: raw.RawClient) -> None:
     write_param(client, 0x0E, 600)
     sc = Scanner(server, client, rpi_us=10_000, multiplier=1)  # watchdog 10 ms x 8 = 80 ms
+    # The watchdog the adapter armed (how soon this machine noticed is not a test figure).
+    timeout_s = sim.call(lambda: server._producers[sc.o_t_id].conn.timeout_s)
+    assert timeout_s == pytest.approx(0.080, abs=1e-9)
     for _ in range(5):
         sc.frames(1)
         sc.send(0)
-        last_sent = time.monotonic()
-    while True:
+    while True:  # frames stop once 80 ms pass without O->T data: 1 s of silence ends it
         try:
-            last = sc.io.receive(timeout=1.0)
+            sc.io.receive(timeout=1.0)
         except TimeoutError:
             break
-    silence = last.arrival - last_sent
-    assert 0.06 < silence < 0.3  # frames stop once 80 ms pass without O->T data
-    deadline = time.monotonic() + 3
-    while read_param(client, 0x0D) != 0xDEDE and time.monotonic() < deadline:
-        time.sleep(0.02)
+    wait_until(lambda: read_param(client, 0x0D) == 0xDEDE, timeout=10, what="servo freed")
     assert read_param(client, 0x0D) == 0xDEDE and abs(read_param(client, 0x14)) <= 5
     assert sim.call(lambda: server.stats.watchdog_expiries) == 1
     again = Scanner(server, client)  # the connection is gone: the same triad opens again
@@ -350,8 +364,13 @@ def test_reset_drops_everything_and_loses_ram(sim: BackgroundEnip, server: EnipS
     if time.monotonic() - t_reset < DOWNTIME_S - 0.05:  # still down: refused at once
         with pytest.raises((ConnectionError, OSError)):
             raw.RawClient(server.host, server.tcp_port)
-    time.sleep(max(0.0, DOWNTIME_S - (time.monotonic() - t_reset)) + 0.05)
-    fresh = raw.RawClient(server.host, server.tcp_port)
+    def back() -> raw.RawClient | None:  # the adapter listens again after its downtime
+        try:
+            return raw.RawClient(server.host, server.tcp_port)
+        except OSError:
+            return None
+
+    fresh = wait_until(back, timeout=10, poll=0.02, what="the adapter back after the reset")
     assert read_param(fresh, 0x01) == 0  # RAM settings lost
     assert read_param(fresh, 0x04) == sim.call(lambda: server.drive.eeprom.params["main_gain"])
     assert read_param(fresh, 0x0D) == dyn5.ENABLE

@@ -7,6 +7,7 @@ import struct
 import subprocess
 import sys
 
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -57,6 +58,7 @@ def test_garbage_never_raises(data: bytes) -> None:
         assert event.is_error or isinstance(event, EnipEvent)
 
 
+@pytest.mark.slow  # a real process
 def test_cli_decode_with_protocol_enip() -> None:
     done = subprocess.run([sys.executable, "-m", "servobus", "decode", "--protocol", "enip",
                            SPEED_500.hex()], capture_output=True, text=True, timeout=30,

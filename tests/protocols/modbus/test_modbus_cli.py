@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.timeout(120)
+pytestmark = [pytest.mark.timeout(120), pytest.mark.slow]
+SAFETY_NET_S = "600"  # --duration: the fixture stops it; a loaded module takes minutes
 
 
 def servobus(*args: str, timeout: float = 30) -> subprocess.CompletedProcess[str]:
@@ -24,7 +25,7 @@ def line() -> Iterator[tuple[str, str]]:
     """(drive URL, tap URL) of a virtual line with motors 1 and 2, unpaced."""
     proc = subprocess.Popen([sys.executable, "-m", "servobus", "sim", "modbus", "--fast",
                              "--ids", "1,2", "--listen", "tcp://127.0.0.1:0",
-                             "--tap", "tcp://127.0.0.1:0", "--duration", "110"],
+                             "--tap", "tcp://127.0.0.1:0", "--duration", SAFETY_NET_S],
                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
         assert proc.stdout is not None

@@ -138,6 +138,7 @@ def contains_frame(data: bytes, starts: int | None = None) -> bool:
 # -------------------------------------------------------------------------- GapFramer
 
 
+@pytest.mark.slow  # a property test: seconds of CPU
 @settings(deadline=None)
 @given(st.data())
 def test_gap_framer_random_chunking_with_silences(data: st.DataObject) -> None:
@@ -154,6 +155,7 @@ def test_gap_framer_random_chunking_with_silences(data: st.DataObject) -> None:
         (len(frames), 0, 0, 0)
 
 
+@pytest.mark.slow  # a property test: seconds of CPU
 @settings(deadline=None)
 @given(st.data())
 def test_gap_framer_frames_back_to_back_without_silence(data: st.DataObject) -> None:
@@ -166,6 +168,7 @@ def test_gap_framer_frames_back_to_back_without_silence(data: st.DataObject) -> 
     assert framer.discarded == 0
 
 
+@pytest.mark.slow  # a property test: seconds of CPU
 @settings(deadline=None)
 @given(st.data())
 def test_gap_framer_skips_garbage_between_silences(data: st.DataObject) -> None:
@@ -187,6 +190,7 @@ def test_gap_framer_skips_garbage_between_silences(data: st.DataObject) -> None:
     assert framer.crc_errors == sum(len(g) >= 4 for g in garbage)
 
 
+@pytest.mark.slow  # a property test: seconds of CPU
 @settings(deadline=None)
 @given(st.data())
 def test_gap_framer_resynchronises_on_garbage_without_silence(data: st.DataObject) -> None:
@@ -199,6 +203,7 @@ def test_gap_framer_resynchronises_on_garbage_without_silence(data: st.DataObjec
     assert framer.discarded == len(garbage)
 
 
+@pytest.mark.slow  # a property test: seconds of CPU
 @settings(deadline=None)
 @given(st.data())
 def test_gap_framer_drops_and_counts_a_bad_crc_frame(data: st.DataObject) -> None:
@@ -228,6 +233,7 @@ def test_gap_framer_counts_a_bad_crc_frame_followed_at_once_by_a_good_one() -> N
     assert (framer.crc_errors, framer.discarded) == (1, 8)
 
 
+@pytest.mark.slow  # a property test: seconds of CPU
 @settings(deadline=None)
 @given(st.data())
 def test_gap_framer_drops_a_truncated_frame(data: st.DataObject) -> None:
@@ -329,6 +335,7 @@ def test_gap_framer_two_readings_of_one_run_are_settled_by_what_follows() -> Non
     assert [f.raw for f in framer.feed(request[7:], 1.0)] == [request]
 
 
+@pytest.mark.slow  # a property test: seconds of CPU
 @settings(deadline=None)
 @given(st.lists(requests, min_size=1, max_size=6), st.data())
 def test_eager_request_framer_takes_each_request_with_its_last_byte(
@@ -354,6 +361,7 @@ def test_request_framer_drops_replies() -> None:
     assert framer.discarded == sum(map(len, replies))
 
 
+@pytest.mark.slow  # a property test: seconds of CPU
 @settings(deadline=None)
 @given(st.data())
 def test_eager_gap_framer_returns_each_frame_with_its_last_byte(data: st.DataObject) -> None:
@@ -374,6 +382,7 @@ def test_eager_gap_framer_returns_each_frame_with_its_last_byte(data: st.DataObj
     assert (framer.crc_errors, framer.discarded) == (0, 0)
 
 
+@pytest.mark.slow  # a property test: seconds of CPU
 @settings(deadline=None)
 @given(st.lists(st.tuples(st.binary(min_size=0, max_size=80), st.floats(0, 0.01)),
                 max_size=30), st.booleans())
@@ -407,6 +416,7 @@ def test_gap_framer_bounds_its_buffer_under_endless_babble() -> None:
 # ------------------------------------------------------------------------- ReplyFramer
 
 
+@pytest.mark.slow  # a property test: seconds of CPU
 @settings(deadline=None)
 @given(requests, st.data())
 def test_reply_framer_random_chunking(request: Request, data: st.DataObject) -> None:
@@ -421,6 +431,7 @@ def test_reply_framer_random_chunking(request: Request, data: st.DataObject) -> 
     assert (framer.crc_errors, framer.discarded, framer.unexpected) == (0, 0, 0)
 
 
+@pytest.mark.slow  # a property test: seconds of CPU
 @settings(deadline=None)
 @given(requests, st.data())
 def test_reply_framer_skips_garbage_and_bad_crc_before_the_reply(request: Request,
@@ -493,6 +504,7 @@ def test_reply_framer_refuses_a_broadcast() -> None:
         ReplyFramer(WriteSingleRequest(0, 1, 0))
 
 
+@pytest.mark.slow  # a property test: seconds of CPU
 @settings(deadline=None)
 @given(requests, st.lists(st.binary(max_size=40), max_size=10))
 def test_reply_framer_never_raises_on_any_bytes(request: Request, chunks: list[bytes]) -> None:

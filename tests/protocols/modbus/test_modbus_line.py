@@ -7,6 +7,7 @@ import asyncio
 import time
 
 import pytest
+from conftest import wait_until_async
 
 from servobus.families.yzaim import registers as Y
 from servobus.protocols.modbus import codec as C
@@ -168,7 +169,8 @@ async def test_bad_crc_is_ignored_and_garbage_and_split_frames_resynchronise(
     answer = C.encode_reply(C.ReadHoldingReply(1, (1000,)))
     try:
         runner.submit(host.port, read[:-1] + bytes((read[-1] ^ 0x40,)))  # bad CRC
-        await asyncio.sleep(0.03)  # silence: the run is closed and dropped
+        # Silence ends the run (t3.5); the line counts the bad CRC when it drops the frame.
+        await wait_until_async(lambda: line.crc_errors >= 1, what="the bad frame dropped")
         assert host.replies == [] and line.frames == 0 and line.crc_errors >= 1
         runner.submit(host.port, b"\xff\x00\x17" + read[:3])  # garbage, then half a frame
         assert await host.ask(read[3:]) == answer  # the other half: one reply
@@ -204,10 +206,11 @@ async def test_paced_request_to_reply_is_wire_time_plus_t35() -> None:
             t0 = time.monotonic()
             await host.ask(frame(C.ReadHoldingRequest(1, SPEED, 1)))
             times.append(host.replies[-1][0] - t0)
-            await asyncio.sleep(0.005)
+            await asyncio.sleep(0.005)  # a host's pause between requests (the line goes idle)
         expected = (8 + 7) * CHAR + GAP  # 9.64 ms
+        # Never sooner than the wire allows; how much later is this machine's pace (a
+        # benchmark figure: bench_modbus). The taps below give the wire times exactly.
         assert min(times) >= expected - 0.0002
-        assert sorted(times)[len(times) // 2] < expected + 0.005
         (d1, _, t1), (d2, _, t2) = taps[0], taps[1]
         assert (d1, d2) == (Direction.TX, Direction.RX)
         assert t2 - t1 == pytest.approx(GAP + 7 * CHAR, abs=1e-6)  # wire times, exact
@@ -232,7 +235,7 @@ async def test_a_closed_port_gets_no_pending_reply() -> None:
         runner.submit(host.port, frame(C.ReadHoldingRequest(1, SPEED, 1)))
         assert host.port.pending == 1
         runner.close_port(host.port)
-        await asyncio.sleep(0.03)
+        await asyncio.sleep(0.03)  # "no reply" has no event: 30 ms (> t3.5) for a wrong one
         assert host.replies == [] and len(runner.releases) == 0
     finally:
         await runner.close()

@@ -19,6 +19,7 @@ from servobus.transport.serial_stream import SerialStream
 from servobus.transport.tcp_stream import TcpStream
 
 pytestmark = pytest.mark.timeout(60)
+SAFETY_NET_S = "600"  # --duration: the fixture stops it; a loaded module takes minutes
 
 
 @pytest.mark.parametrize(("url", "port"), [
@@ -57,7 +58,7 @@ async def test_a_missing_port_is_a_servobus_error() -> None:
 @pytest.fixture(scope="module")
 def line() -> Iterator[str]:
     proc = subprocess.Popen([sys.executable, "-m", "servobus", "sim", "modbus", "--ids", "1,5",
-                             "--listen", "tcp://127.0.0.1:0", "--duration", "55"],
+                             "--listen", "tcp://127.0.0.1:0", "--duration", SAFETY_NET_S],
                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
         assert proc.stdout is not None

@@ -19,7 +19,7 @@ from pymodbus import FramerType  # noqa: E402
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient  # noqa: E402
 from pymodbus.exceptions import ModbusException  # noqa: E402
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.timeout(60), pytest.mark.slow]
 INT32 = ModbusTcpClient.DATATYPE.INT32
 R = Y.BY_NAME
 ABS = Y.PAIR_BY_NAME["absolute_position"].low
@@ -63,7 +63,7 @@ def _until(check: Callable[[], Any], timeout: float = 10.0) -> Any:
         value = check()
         if value or time.monotonic() > deadline:
             return value
-        time.sleep(0.05)
+        time.sleep(0.05)  # the polling helper's own short sleep
 
 
 def test_the_whole_register_map_reads_big_endian(client: ModbusTcpClient) -> None:
