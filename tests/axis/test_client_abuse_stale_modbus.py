@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from dyn232_rig import PATHS, arun
+from dyn232_rig import PATHS
 
 # benchmarks/ is a top-level package of the repository, not installed with servobus.
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root: benchmarks/
@@ -71,7 +71,6 @@ CASES = [("modbus", "caller timeout"), ("modbus", "client deadline"),
 
 @pytest.mark.parametrize("path", PATHS)
 @pytest.mark.parametrize(("protocol", "how"), CASES)
-@arun
 async def test_a_late_reply_never_answers_the_next_read(protocol: str, how: str,
                                                         path: str) -> None:
     """Before (caller timeout): every round returned the previous read's value."""
@@ -105,7 +104,6 @@ async def test_a_late_reply_never_answers_the_next_read(protocol: str, how: str,
         await server
 
 
-@arun
 async def test_modbus_random_profile_gives_no_stale_value() -> None:
     after = await modbus_stale(READS)
     assert after.ok >= READS // 2 and after.late > 0, after
@@ -114,7 +112,6 @@ async def test_modbus_random_profile_gives_no_stale_value() -> None:
     assert before.stale > 0, before
 
 
-@arun
 async def test_easycan_random_profile_gives_no_stale_value() -> None:
     after = await easycan_stale(READS)
     assert after.ok >= READS // 2 and after.late > 0, after
