@@ -142,7 +142,7 @@ async def test_over_pty() -> None:
     server = Dyn232Server([VirtualDrive(0)], paced=False)
     path = server.open_pty()
     try:
-        core = await connect_async(path, query_interval_s=0.0)
+        core = await connect_async(path, query_interval_s=0.0, timeout=2.0)  # roomy: load
         try:
             await _exercise(core, server.drives)
         finally:

@@ -99,9 +99,9 @@ def test_connect_url_moves_one_motor_of_two(server: int) -> None:
 def test_cli_status_set_move_and_scan(server: int) -> None:
     url = f"easycan+socketcand://127.0.0.1:{server}"
 
-    def run(*args: str) -> subprocess.CompletedProcess[str]:
-        return subprocess.run([*SERVOBUS, "--url", url, *args], capture_output=True,
-                              text=True, timeout=60)
+    def run(*args: str) -> subprocess.CompletedProcess[str]:  # roomy read deadline: load
+        return subprocess.run([*SERVOBUS, "--timeout", "2", "--url", url, *args],
+                              capture_output=True, text=True, timeout=60)
 
     out = run("--id", "1", "status", "--json")
     assert out.returncode == 0, out.stderr

@@ -74,7 +74,9 @@ async def test_the_input_image_follows_the_drive() -> None:
 async def test_enable_and_disable_through_the_output_image() -> None:
     async with rig() as (fleet, axis):
         drive = fleet.servers[0].drive
-        async with axis.io(rpi_ms=10) as cyclic:
+        # The longest watchdog (10 ms x 512): an O->T frame late by 40 ms on a loaded machine
+        # expired the default one, and an expiry frees the servo (tested on its own).
+        async with axis.io(rpi_ms=10, multiplier=7) as cyclic:
             await asyncio.sleep(0.05)  # "nothing changed" has no event: 5 RPIs to do it wrong
             assert not drive.servo_free  # opening I/O (word 0) changed nothing
             await cyclic.disable(wait=True)

@@ -16,8 +16,11 @@ SAFETY_NET_S = "600"  # --duration: the fixture stops it; a loaded module takes 
 
 
 def servobus(*args: str, timeout: float = 30) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "servobus", *args], capture_output=True,
-                          text=True, timeout=timeout)
+    # Reads get a roomy 2 s deadline unless the test sets one: the default (three attempts
+    # of ~60 ms at 19200 baud) ran out beside two CPU hogs; deadlines are tested elsewhere.
+    roomy = () if "--timeout" in args else ("--timeout", "2")
+    return subprocess.run([sys.executable, "-m", "servobus", *roomy, *args],
+                          capture_output=True, text=True, timeout=timeout)
 
 
 @pytest.fixture(scope="module")
