@@ -140,7 +140,7 @@ def test_axes_are_grouped_by_link() -> None:
 
 
 async def _true(value: bool) -> bool:
-    await asyncio.sleep(0)
+    await asyncio.sleep(0)  # a coroutine predicate for wait_until_async: one yield, no wait
     return value
 
 

@@ -137,7 +137,7 @@ async def test_a_wrong_password_gets_no_session(gateway: RunningGateway) -> None
 
 
 async def _true(value: bool) -> bool:
-    await asyncio.sleep(0)
+    await asyncio.sleep(0)  # a coroutine predicate for wait_until_async: one yield, no wait
     return value
 
 

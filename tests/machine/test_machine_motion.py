@@ -226,7 +226,7 @@ async def test_retry_starts_offline_and_comes_online(tmp_path: Path) -> None:
 
 
 async def _online(axis: object) -> bool:
-    await asyncio.sleep(0)
+    await asyncio.sleep(0)  # a coroutine predicate for wait_until_async: one yield, no wait
     return bool(getattr(axis, "online", False))
 
 

@@ -218,7 +218,7 @@ def cache_pairs(sock: socket.socket, pairs: int = 20) -> tuple[int, int]:
             # at most 2 ms after it arrived); the motor's cycle runs on the server's clock
             # and no frame tells when its tick has run, so wait it out (a longer wait only
             # makes the next pair later, which the count does not depend on).
-            time.sleep(0.0025)
+            time.sleep(0.0025)  # no event: the tick is the server's (comment above)
     finally:
         sock.sendall(b"< send 001 6 FF 06 1C 01 00 00 >")  # sync off again
         replies(sock, 1)
