@@ -117,8 +117,13 @@ class Sampler:
     async def _read(self, axis: MachineAxis) -> Sample:
         if not axis.online:
             return Sample(axis.name, time.time(), False, OFFLINE)
-        position, speed, status, current = await asyncio.gather(
-            axis.position(), axis.speed(), axis.status(), self._current(axis))
+        readings = getattr(axis, "readings", None)  # one request fewer where it exists
+        if readings is not None:
+            (position, speed, status), current = await asyncio.gather(
+                readings(), self._current(axis))
+        else:
+            position, speed, status, current = await asyncio.gather(
+                axis.position(), axis.speed(), axis.status(), self._current(axis))
         return Sample(axis.name, time.time(), True, "", position, speed, current, status)
 
     async def _current(self, axis: MachineAxis) -> float | None:
