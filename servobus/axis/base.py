@@ -136,6 +136,14 @@ class AsyncAxis(ABC):
     async def current(self) -> float:
         """Torque-producing motor current, A (positive = towards increasing position)."""
 
+    async def readings(self) -> tuple[int, float, AxisStatus]:
+        """Position (counts), speed (rpm) and status in one go, for a sampler polling many
+        axes: an Axis whose :meth:`status` reads the speed itself overrides this to ask the
+        drive once for the speed instead of twice."""
+        position, speed, status = await asyncio.gather(self.position(), self.speed(),
+                                                       self.status())
+        return position, speed, status
+
     @abstractmethod
     def parameters(self) -> tuple[ParamInfo, ...]:
         """The family's parameters this protocol reaches (what ``params``/``set`` offer)."""

@@ -24,6 +24,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import contextvars
+import datetime
 import ipaddress
 import logging
 import math
@@ -140,7 +141,7 @@ class OpcUaGateway:
         self.axes: dict[str, AxisNodes] = {}
         self._pending: dict[str, Sample] = {}
         self._wake = asyncio.Event()
-        self._last: dict[Any, tuple[Any, bool]] = {}
+        self._last: dict[tuple[str, str], tuple[Any, bool]] = {}
         self._alarm: dict[str, int] = {}
         self._events: dict[str, Any] = {}
         self.notifications = 0  # value writes that changed something (for the benchmark)
@@ -261,13 +262,15 @@ class OpcUaGateway:
                           AlarmCode=st.alarm_code, AlarmText=st.alarm_text)
         for name, node in nodes.variables.items():
             if name in values or not sample.ok:
-                await self._write(node, values.get(name), sample)
+                await self._write((sample.axis, name), node, values.get(name), sample)
         if sample.ok and st is not None and self._alarm.get(sample.axis, 0) != st.alarm_code:
             self._alarm[sample.axis] = st.alarm_code
             await self._raise_event(sample.axis, st.alarm_code, st.alarm_text)
 
-    async def _write(self, node: Any, value: object, sample: Sample) -> None:
-        key = node.nodeid
+    async def _write(self, key: tuple[str, str], node: Any, value: object, sample: Sample
+                     ) -> None:
+        """Write when the value or its Good/Bad changed; ``key`` (axis, variable) names the
+        node cheaply (hashing asyncua's NodeId per value and sample cost more)."""
         state = (value, sample.ok)
         if self._last.get(key) == state:
             return
@@ -282,7 +285,7 @@ class OpcUaGateway:
             dv = ua.DataValue(StatusCode=ua.StatusCode(ua.StatusCodes.BadCommunicationError),
                               SourceTimestamp=_utc(sample.time))
         self.notifications += 1
-        await self.server.write_attribute_value(key, dv)
+        await self.server.write_attribute_value(node.nodeid, dv)
 
     async def _raise_event(self, axis: str, code: int, text: str) -> None:
         gen = self._events[axis]
@@ -306,7 +309,5 @@ def _variant_type(value: object) -> ua.VariantType:
     return ua.VariantType.Double
 
 
-def _utc(t: float) -> Any:
-    import datetime
-
+def _utc(t: float) -> datetime.datetime:
     return datetime.datetime.fromtimestamp(t, datetime.UTC)

@@ -6,7 +6,8 @@ loop; a round asks every axis of the link for its four readings at once and lets
 link's transaction layer queue them (a serial line carries them one after the other, a
 CAN bus overlaps the drives' answers); every axis gets one sample per round, so each has
 the same share. Then the loop waits: a round starts every ``1 / rate`` seconds, but never
-sooner than the last round's own duration times ``(1 - duty) / duty`` after it ended.
+sooner than the last round's own duration (or the running average of the last rounds'
+durations when smaller, :func:`typical_round`) times ``(1 - duty) / duty`` after it ended.
 With the default duty of 0.5, sampling takes at most half of what a link can carry and
 the other half stays free for commands. The per-axis rate is therefore
 ``min(rate, duty / time of one round)`` - measured, not configured, so a 38,400 baud line
@@ -44,6 +45,8 @@ READ_DEADLINE_S = 2.0
 #: Rounds in a row that must fail before an axis's values turn Bad.
 BAD_AFTER = 3
 OFFLINE = "axis offline"
+#: Weight of the newest round in the running average of round durations (typical_round).
+ROUND_WEIGHT = 0.2
 
 
 @dataclass(frozen=True)
@@ -63,11 +66,26 @@ class Sample:
 Listener = Callable[[Sample], None]
 
 
-def pause_after(period: float, started: float, ended: float, duty: float) -> float:
+def pause_after(period: float, started: float, ended: float, duty: float,
+                took: float | None = None) -> float:
     """Seconds to wait after a round: to the next period, and at least so long that the
-    round took no more than ``duty`` of the time (the rest is left for commands)."""
-    took = ended - started
+    round took no more than ``duty`` of the time (the rest is left for commands).
+    ``took`` is the round's duration to count (by default ``ended - started``)."""
+    if took is None:
+        took = ended - started
     return max(started + period - ended, took * (1 - duty) / duty)
+
+
+def typical_round(took: float, average: float | None) -> tuple[float, float]:
+    """(duration the duty counts, new running average) for a round that took ``took``.
+
+    The duty counts the smaller of this round and the running average (weight
+    :data:`ROUND_WEIGHT` per round): a steadily slow link settles exactly as before, but
+    one round stretched by a busy event loop or a command in between does not hold back
+    the next round by its whole length (that stretched the delay of a change to 100-200 ms
+    with 32 axes at 50 Hz)."""
+    average = took if average is None else average + ROUND_WEIGHT * (took - average)
+    return min(took, average), average
 
 
 def check_rate(rate_hz: float) -> float:
@@ -117,8 +135,13 @@ class Sampler:
     async def _read(self, axis: MachineAxis) -> Sample:
         if not axis.online:
             return Sample(axis.name, time.time(), False, OFFLINE)
-        position, speed, status, current = await asyncio.gather(
-            axis.position(), axis.speed(), axis.status(), self._current(axis))
+        readings = getattr(axis, "readings", None)  # one request fewer where it exists
+        if readings is not None:
+            (position, speed, status), current = await asyncio.gather(
+                readings(), self._current(axis))
+        else:
+            position, speed, status, current = await asyncio.gather(
+                axis.position(), axis.speed(), axis.status(), self._current(axis))
         return Sample(axis.name, time.time(), True, "", position, speed, current, status)
 
     async def _current(self, axis: MachineAxis) -> float | None:
@@ -157,6 +180,7 @@ class Sampler:
         period = 1.0 / self.rate_hz
         loop = asyncio.get_running_loop()
         rounds, since = 0, loop.time()
+        average: float | None = None
         while True:
             start = loop.time()
             for sample in await asyncio.gather(*(self.sample_once(a) for a in axes)):
@@ -166,7 +190,8 @@ class Sampler:
                 self._first_pending.discard(url)
                 if not self._first_pending:
                     self.first_round.set()
-            rest = pause_after(period, start, end, self.duty)
+            took, average = typical_round(end - start, average)
+            rest = pause_after(period, start, end, self.duty, took)
             rounds += 1
             if end - since >= 2.0:
                 if not self.achieved_hz[url]:

@@ -147,6 +147,11 @@ class AsyncMachineAxis:
     async def status(self) -> AxisStatus:
         return await self.core().status()
 
+    async def readings(self) -> tuple[float, float, AxisStatus]:
+        """Position and speed in user units and the status (see ``AsyncAxis.readings``)."""
+        position, speed, status = await self.core().readings()
+        return self.to_user(position), self.scale.from_rpm(speed), status
+
     # ------------------------------------------------------------- motion
     async def move_to(self, target: float, *, wait: bool = False,
                       timeout: float | None = None) -> None:

@@ -14,6 +14,7 @@ Transports move frames only: this module knows nothing about DYN CAN function co
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
 import socket
 import time
@@ -223,6 +224,51 @@ class _QueueListener:
         pass
 
 
+class _BatchingListener:
+    """python-can listener (duck-typed) called on the Notifier's thread: frames are queued
+    and the loop is woken once per burst, not once per frame.
+
+    For buses the Notifier serves from a thread (socketcand: no file descriptor to watch
+    on the loop): with ``loop=`` python-can calls ``call_soon_threadsafe`` for every frame,
+    a self-pipe write and an event-loop wake each - with 16 drives answering at 50 Hz that
+    was a large share of the gateway's CPU. An error still ends the Notifier's thread, as
+    it does with ``loop=``.
+    """
+
+    def __init__(self, port: AsyncCanBus) -> None:
+        self._port = port
+        self._frames: collections.deque[Any] = collections.deque()
+        self._woken = False
+
+    def __call__(self, msg: Any) -> None:
+        self._frames.append(msg)
+        if not self._woken:
+            self._woken = True
+            with contextlib.suppress(RuntimeError):  # the loop is already closed
+                self._port._loop.call_soon_threadsafe(self._drain)
+
+    def _drain(self) -> None:
+        self._woken = False  # before reading: a frame appended from now on wakes again
+        frames = self._frames
+        while frames:
+            self._port._deliver(frames.popleft())
+
+    def on_error(self, exc: Exception) -> None:
+        self._port._fail_threadsafe(exc)
+        raise NotImplementedError  # "not handled": the Notifier's thread ends, as with loop=
+
+    def stop(self) -> None:
+        pass
+
+
+def _threaded(bus: Any) -> bool:
+    """Whether python-can's Notifier would serve ``bus`` from a thread even with a loop."""
+    try:
+        return bool(bus.fileno() < 0)
+    except (NotImplementedError, AttributeError, OSError, ValueError):
+        return True
+
+
 class AsyncCanBus:
     """A python-can bus as a :class:`FramePort`.
 
@@ -244,8 +290,12 @@ class AsyncCanBus:
         self._receiver: FrameReceiver | None = None
         self.pacer = BusPacer(timing) if timing is not None else None
         self._loop = loop = asyncio.get_running_loop()
-        self._notifier = can.Notifier(bus, [_QueueListener(self)], timeout=NOTIFIER_POLL_S,
-                                      loop=loop)
+        if _threaded(bus):
+            self._notifier = can.Notifier(bus, [_BatchingListener(self)],
+                                          timeout=NOTIFIER_POLL_S)
+        else:
+            self._notifier = can.Notifier(bus, [_QueueListener(self)],
+                                          timeout=NOTIFIER_POLL_S, loop=loop)
         _watch_socketcand_eof(bus, self._fail_threadsafe)
 
     @classmethod

@@ -15,7 +15,14 @@ from gateway_rig import axes_of, names, parameter
 
 from servobus.gateway.commands import Command, Commander, Refused
 from servobus.gateway.opcua_server import OpcUaOptions
-from servobus.gateway.sampler import BAD_AFTER, OFFLINE, Sample, Sampler, pause_after
+from servobus.gateway.sampler import (
+    BAD_AFTER,
+    OFFLINE,
+    Sample,
+    Sampler,
+    pause_after,
+    typical_round,
+)
 from servobus.gateway.serve import GatewayOptions, serve_machine
 
 OPTIONS = GatewayOptions(OpcUaOptions("opc.tcp://127.0.0.1:0"), rate_hz=50)
@@ -127,6 +134,20 @@ def test_sampling_leaves_half_of_a_slow_link_for_commands() -> None:
     # a slow link: a round of 0.1 s is followed by 0.1 s free (duty 0.5)
     assert pause_after(0.02, 10.0, 10.1, 0.5) == pytest.approx(0.1)
     assert pause_after(0.02, 10.0, 10.1, 0.25) == pytest.approx(0.3)
+
+
+def test_one_stretched_round_does_not_hold_the_next_back_by_its_length() -> None:
+    average = None
+    for _ in range(20):  # a fast link: rounds of 5 ms
+        took, average = typical_round(0.005, average)
+    took, average = typical_round(0.080, average)  # one round stretched to 80 ms
+    assert took == pytest.approx(0.005 + 0.2 * 0.075)
+    assert pause_after(0.02, 10.0, 10.08, 0.5, took) == pytest.approx(took)
+    for _ in range(40):  # a steadily slow line settles on its own duration, as before
+        took, average = typical_round(0.1, average)
+    assert took == pytest.approx(0.1, rel=1e-3)
+    took, _ = typical_round(0.002, average)  # a short round counts as itself
+    assert took == 0.002
 
 
 def test_axes_are_grouped_by_link() -> None:
