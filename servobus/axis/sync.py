@@ -279,6 +279,10 @@ class Axis:
         """Counts within which the drive reports "in position"."""
         return self._call(self._core.position_window)
 
+    def readings(self) -> tuple[int, float, AxisStatus]:
+        """Position (counts), speed (rpm) and status together, the speed read once."""
+        return self._call(self._core.readings)
+
     def ping_deadline(self) -> float:
         """Seconds a ping waits for an absent drive (what ``scan`` waits per id)."""
         return self._core.ping_deadline()
