@@ -52,6 +52,8 @@ DEFAULT_WAIT_TIMEOUT_S = 30.0
 #: Default deadline of a confirmed move: a drive starts a profile within one servo cycle, so
 #: half a second covers the status reads and their retries on a slow or paced link.
 DEFAULT_CONFIRM_TIMEOUT_S = 0.5
+#: How long ``wait_idle`` wants idle to hold (two reads at least) before it returns.
+SETTLE_S = 0.02
 DEFAULT_POLL_S = 0.02
 #: ping_deadline where a protocol states none (a network drive: no wire time to add).
 DEFAULT_PING_S = 0.05
@@ -388,20 +390,35 @@ class AsyncAxis(ABC):
 
     async def wait_idle(self, timeout: float = DEFAULT_WAIT_TIMEOUT_S,
                         poll: float = DEFAULT_POLL_S) -> AxisStatus:
-        """Poll status until motion is done and the motor is on position.
+        """Poll status until motion is done and the motor is on position, and stays so.
 
+        Decision: a servo rings around its target after a move; a status read at a zero
+        crossing of that ring says idle while the next one still says moving. So ``idle``
+        must hold on two reads at least ``SETTLE_S`` apart (every read between them idle
+        too) before this returns - a status read right after it says idle as well.
         Raises DriveAlarm as soon as a latched alarm shows, DriveTimeout when ``timeout``
         passes. ``timeout`` must be finite and > 0, ``poll`` finite and >= 0.
         """
         timeout_s = checks.seconds("timeout", timeout)
         poll_s = checks.non_negative_seconds("poll", poll)
         deadline = time.monotonic() + timeout_s
+        idle_since: float | None = None
         while True:
             st = await self.status()
             self._raise_alarm(st)
-            if st.idle:
+            now = time.monotonic()
+            if not st.idle:
+                idle_since = None
+            elif idle_since is None:
+                idle_since = now
+            elif now - idle_since >= SETTLE_S:
                 return st
             remaining = deadline - time.monotonic()
+            if idle_since is not None:  # settling: the next read after the window
+                await asyncio.sleep(max(0.0, min(SETTLE_S - (now - idle_since), remaining)))
+                if remaining <= 0:
+                    return st  # idle at the deadline: not a timeout
+                continue
             if remaining <= 0:
                 raise DriveTimeout(
                     f"drive {self.drive_id} still moving after {timeout_s:g} s "
