@@ -28,7 +28,38 @@ SOFT_START_S = U.soft_start_rise_s(30)
 DEFAULT_GAINS = (40, 40, 20, 127, 127)
 
 
-class Motor:
+class EngineReadouts:
+    """What every simulated motor reads off its servo engine (the DMM drive and the YZ-AIM
+    motor alike): position from the origin, following error, periods, speed, current."""
+
+    _engine: ServoEngine
+    _origin: float
+
+    @property
+    def position(self) -> int:
+        return round(self._engine.p - self._origin)
+
+    @property
+    def position_error(self) -> float:
+        """Commanded reference - actual position, counts (what a drive's trace shows)."""
+        return self._engine.ref - self._engine.p
+
+    @property
+    def periods(self) -> int:
+        """Control periods run since creation (period ``k`` ends at ``k / CONTROL_HZ`` s)."""
+        return self._engine.steps
+
+    @property
+    def speed_rpm(self) -> float:
+        return U.counts_per_s_to_rpm(self._engine.w)
+
+    @property
+    def current_a(self) -> float:
+        """Motor current (torque producing), A; positive = torque towards + (CW)."""
+        return self._engine.current_a
+
+
+class Motor(EngineReadouts):
     """One simulated servo motor and its position loop. Not thread-safe."""
 
     def __init__(self, model: U.MotorModel) -> None:
@@ -160,29 +191,6 @@ class Motor:
             self._engine.w = 0.0
         self._engine.wake()
 
-    # ---------------------------------------------------------------- readouts
-    @property
-    def position(self) -> int:
-        return round(self._engine.p - self._origin)
-
-    @property
-    def position_error(self) -> float:
-        """Commanded reference - actual position, counts."""
-        return self._engine.ref - self._engine.p
-
-    @property
-    def periods(self) -> int:
-        """Control periods run since creation."""
-        return self._engine.steps
-
-    @property
-    def speed_rpm(self) -> float:
-        return U.counts_per_s_to_rpm(self._engine.w)
-
-    @property
-    def current_a(self) -> float:
-        """Motor current (torque producing), A; positive = torque towards +."""
-        return self._engine.current_a
 
     # ---------------------------------------------------------------- time
     def advance(self, seconds: float) -> None:

@@ -83,6 +83,7 @@ from servobus.sim.core import constants as K
 from servobus.sim.core import interp
 from servobus.sim.core.engine import Gen, Ref, Servo, ServoEngine
 from servobus.sim.core.io import PulseDecoder, PulseFormat, pulse_period
+from servobus.sim.core.motor import EngineReadouts
 from servobus.sim.eeprom import EepromStore
 
 AlarmListener = Callable[["VirtualDrive", AlarmCode], None]
@@ -94,7 +95,7 @@ DEFAULT_AXIS_IDS = (1, 2, 3)  # drive ids of X, Y, Z for broadcast interpolation
 _GAIN_PARAMS = ("main_gain", "speed_gain", "int_gain", "trq_cons", "torque_limit")
 
 
-class VirtualDrive:
+class VirtualDrive(EngineReadouts):
     """One simulated DYN2-class drive + motor. Not thread-safe: one event loop owns it."""
 
     def __init__(
@@ -805,29 +806,7 @@ class VirtualDrive:
         elif self._encoder_fault:
             self.trip(AlarmCode.LOST_PHASE)
 
-    # ---------------------------------------------------------------- readouts
-    @property
-    def position(self) -> int:
-        return round(self._engine.p - self._origin)
-
-    @property
-    def position_error(self) -> float:
-        """Commanded reference - actual position, counts (what a drive's trace shows)."""
-        return self._engine.ref - self._engine.p
-
-    @property
-    def periods(self) -> int:
-        """Control periods run since creation (period ``k`` ends at ``k / CONTROL_HZ`` s)."""
-        return self._engine.steps
-
-    @property
-    def speed_rpm(self) -> float:
-        return U.counts_per_s_to_rpm(self._engine.w)
-
-    @property
-    def current_a(self) -> float:
-        """Motor current (torque producing), A; positive = torque towards + (CW)."""
-        return self._engine.current_a
+    # ---------------------------------------------------------------- readouts (EngineReadouts)
 
     @property
     def torque_current(self) -> int:
