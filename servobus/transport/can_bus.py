@@ -16,8 +16,12 @@ from __future__ import annotations
 import asyncio
 import collections
 import contextlib
+import os
+import queue
 import socket
+import threading
 import time
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
@@ -261,6 +265,104 @@ class _BatchingListener:
         pass
 
 
+class _LoopQueue(queue.Queue[Any]):
+    """The receive queue of one python-can ``virtual`` bus, pushing to the loop directly.
+
+    python-can's virtual bus hands a sent frame to every other bus on the channel with
+    ``queue.put``; with a Notifier a thread of ours would block in ``get``, wake per frame
+    and wake the loop in turn. Put in the bus's place, this queue wakes the loop itself
+    from the sender's thread, once per burst: one thread hand-off less per frame. The wake
+    is an eventfd the loop watches (Linux; elsewhere ``call_soon_threadsafe``, whose
+    self-pipe costs a socket send and receive per wake), and ``call_soon`` when the sender
+    is the loop's own thread (a client and a virtual drive on one loop): no system call.
+    Same capacity as the queue it replaces.
+    """
+
+    def __init__(self, maxsize: int, loop: asyncio.AbstractEventLoop,
+                 deliver: Callable[[Any], None]) -> None:
+        super().__init__(maxsize)
+        self._loop = loop
+        self._loop_thread = threading.get_ident()
+        self._deliver = deliver
+        self._woken = False
+        self._efd = -1
+        if hasattr(os, "eventfd"):
+            efd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
+            self._release = weakref.finalize(self, os.close, efd)  # once, even if leaked
+            try:
+                loop.add_reader(efd, self._on_wake)
+                self._efd = efd
+            except (NotImplementedError, RuntimeError):  # a loop without fd watching
+                self._release()
+
+    def _put(self, item: Any) -> None:  # called by put() under the queue's mutex
+        super()._put(item)
+        if self._woken:
+            return
+        self._woken = True
+        if threading.get_ident() == self._loop_thread:
+            self._loop.call_soon(self._drain)
+        elif self._efd >= 0:
+            with contextlib.suppress(OSError):  # closed: nobody listens any more
+                os.eventfd_write(self._efd, 1)
+        else:
+            with contextlib.suppress(RuntimeError):  # the loop is already closed
+                self._loop.call_soon_threadsafe(self._drain)
+
+    def _on_wake(self) -> None:
+        with contextlib.suppress(BlockingIOError):
+            os.eventfd_read(self._efd)
+        self._drain()
+
+    def _drain(self) -> None:
+        self._woken = False  # before taking: a frame put from now on wakes again
+        with self.mutex:  # the whole burst at once (get_nowait per frame costs twice)
+            msgs = list(self.queue)
+            self.queue.clear()
+            if msgs and self.maxsize > 0:
+                self.not_full.notify_all()
+        for msg in msgs:
+            self._deliver(msg)
+
+    def close(self) -> None:
+        """Stop watching the eventfd and close it (on the loop's thread); idempotent."""
+        efd, self._efd = self._efd, -1
+        self._woken = True  # frames put from now on wake nobody
+        if efd >= 0:
+            with contextlib.suppress(RuntimeError, ValueError, OSError):
+                self._loop.remove_reader(efd)
+            self._release()
+
+
+def _take_virtual_queue(bus: Any, port: AsyncCanBus) -> _LoopQueue | None:
+    """Put a :class:`_LoopQueue` in place of a python-can ``virtual`` bus's receive queue.
+
+    Uses the bus's ``queue`` and ``channel`` attributes (python-can 4); on another shape
+    nothing changes (None) and the caller runs a Notifier as for any bus.
+    """
+    try:
+        from can.interfaces import virtual
+    except ImportError:
+        return None
+    if type(bus) is not virtual.VirtualBus:
+        return None
+    old = getattr(bus, "queue", None)
+    channel = getattr(bus, "channel", None)
+    if not isinstance(old, queue.Queue) or not isinstance(channel, list):
+        return None
+    new = _LoopQueue(old.maxsize, port._loop, port._deliver)
+    with virtual.channels_lock:
+        if not any(q is old for q in channel):
+            new.close()
+            return None
+        channel[:] = [new if q is old else q for q in channel]
+        bus.queue = new
+    with contextlib.suppress(queue.Empty):
+        while True:
+            new.put_nowait(old.get_nowait())
+    return new
+
+
 def _threaded(bus: Any) -> bool:
     """Whether python-can's Notifier would serve ``bus`` from a thread even with a loop."""
     try:
@@ -290,7 +392,12 @@ class AsyncCanBus:
         self._receiver: FrameReceiver | None = None
         self.pacer = BusPacer(timing) if timing is not None else None
         self._loop = loop = asyncio.get_running_loop()
-        if _threaded(bus):
+        self._notifier: Any = None
+        # python-can's virtual bus: frames come straight from the senders' put, no thread
+        self._direct = _take_virtual_queue(bus, self)
+        if self._direct is not None:
+            pass
+        elif _threaded(bus):
             self._notifier = can.Notifier(bus, [_BatchingListener(self)],
                                           timeout=NOTIFIER_POLL_S)
         else:
@@ -311,11 +418,12 @@ class AsyncCanBus:
             return
         frame = CanFrame(msg.arbitration_id, bytes(msg.data), msg.timestamp,
                          msg.is_extended_id)
-        now = time.monotonic()
-        if self.pacer is not None:
-            self.pacer.occupy(len(frame.data), now)
-        for hook in self._traces:
-            hook(Direction.RX, frame, now)
+        if self.pacer is not None or self._traces:
+            now = time.monotonic()
+            if self.pacer is not None:
+                self.pacer.occupy(len(frame.data), now)
+            for hook in self._traces:
+                hook(Direction.RX, frame, now)
         if self._receiver is not None:
             self._receiver(frame)
         else:
@@ -400,7 +508,10 @@ class AsyncCanBus:
         self._queue.put_nowait(ConnectionLost("CAN bus is closed"))  # wake a waiting recv
         if self._receiver is not None:
             self._receiver(None)
-        await asyncio.to_thread(self._notifier.stop, NOTIFIER_POLL_S * 3)
+        if self._direct is not None:
+            self._direct.close()
+        if self._notifier is not None:
+            await asyncio.to_thread(self._notifier.stop, NOTIFIER_POLL_S * 3)
         if self._owns_bus:
             await asyncio.to_thread(self.bus.shutdown)
 

@@ -57,6 +57,17 @@ class DriveStatus:
 
     @classmethod
     def from_byte(cls, value: int) -> DriveStatus:
+        """The status a byte reads as; one shared (frozen) instance per byte value: the
+        decoding (five IntFlag operations) was a tenth of a CAN status read's CPU."""
+        status = _STATUS_BY_BYTE.get(value)
+        if status is None:
+            status = cls._decode(value)
+            if 0 <= value <= 0xFF:
+                _STATUS_BY_BYTE[value] = status
+        return status
+
+    @classmethod
+    def _decode(cls, value: int) -> DriveStatus:
         code = (value & StatusBits.ALARM_MASK) >> ALARM_SHIFT
         try:
             alarm = AlarmCode(code)
@@ -79,6 +90,9 @@ class DriveStatus:
             "motion_busy": self.motion_busy,
             "jp3_pin2": self.jp3_pin2,
         }
+
+
+_STATUS_BY_BYTE: dict[int, DriveStatus] = {}
 
 
 class ConfigBits(IntFlag):
