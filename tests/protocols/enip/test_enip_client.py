@@ -18,7 +18,13 @@ from servobus.errors import ConnectionLost, DriveError, DriveTimeout, ProtocolEr
 from servobus.families.dyn5 import params as dyn5
 from servobus.protocols.enip.client import AsyncEnipClient
 from servobus.protocols.enip.codec.cip import MessageRouterRequest, MessageRouterResponse
-from servobus.protocols.enip.codec.cpf import RRData, UnconnectedMessage
+from servobus.protocols.enip.codec.cpf import (
+    CpfItem,
+    ItemType,
+    RRData,
+    SockaddrInfo,
+    UnconnectedMessage,
+)
 from servobus.protocols.enip.codec.encap import Command, EncapFramer, EncapPacket
 from servobus.transport.base import Direction
 
@@ -228,3 +234,42 @@ async def test_pipelined_requests_leave_together_and_each_gets_its_reply() -> No
         await client.close()
     with pytest.raises(ValueError):
         await AsyncEnipClient.connect("127.0.0.1", 1, max_in_flight=0)
+
+
+def _reply_with(pkt: EncapPacket, response: MessageRouterResponse, *,
+                items_extra: tuple[CpfItem, ...] = ()) -> bytes:
+    items = (*UnconnectedMessage(response.encode()).items(), *items_extra)
+    return pkt.reply(RRData(items).encode()).encode()
+
+
+@pytest.mark.parametrize(("response", "extra", "expect"), [
+    # the plain shape, read at fixed offsets
+    (MessageRouterResponse(0x0E, data=b"\x01\x02\x03\x04"), (), b"\x01\x02\x03\x04"),
+    # additional status words on a success: the data follows them
+    (MessageRouterResponse(0x0E, additional_status=(0x1234,), data=b"\x05\x06"), (),
+     b"\x05\x06"),
+    # a sockaddr item after the data item: the general decoder reads it
+    (MessageRouterResponse(0x0E, data=b"\x07"),
+     (SockaddrInfo(2222, "127.0.0.1").item(ItemType.SOCKADDR_T_O),), b"\x07"),
+    (MessageRouterResponse(0x10, data=b"\x00"), (), ProtocolError),  # another service's
+    (MessageRouterResponse(0x0E, general_status=0x05), (), DriveError),  # refused
+])
+async def test_a_read_reply_reads_as_the_general_decoder_says(
+        response: MessageRouterResponse, extra: tuple[CpfItem, ...],
+        expect: bytes | type[Exception]) -> None:
+    """Reads take a fast path for the plain reply shape (issue 22): every other shape and
+    every error still goes through the full decoder with its checks."""
+    def behave(pkt: EncapPacket, transport: asyncio.Transport, n: int) -> None:
+        transport.write(_reply_with(pkt, response, items_extra=extra))
+
+    async with fake(behave) as (client, log):
+        for _ in range(2):  # the second read reuses the packet parts built by the first
+            if isinstance(expect, bytes):
+                assert await client.get_attribute_single(PARAM, 0x1D, 1) == expect
+            else:
+                with pytest.raises(expect):
+                    await client.get_attribute_single(PARAM, 0x1D, 1)
+        assert len(log) == 2 and log[0].context != log[1].context
+        assert all(p.session == 0x1234 for p in log)
+        assert [RRData.decode(p.data).items for p in log] == [
+            RRData.decode(log[0].data).items] * 2  # the same request, byte for byte

@@ -151,6 +151,12 @@ class EncapFramer:
         return len(self._buf)
 
     def feed(self, chunk: bytes) -> list[EncapPacket | EncapReject]:
+        if not self._buf and not self._skip and len(chunk) >= HEADER_SIZE:
+            # the common case, one whole packet in one read: no buffering
+            command, length, session, status, context, options = HEADER.unpack_from(chunk)
+            if len(chunk) == HEADER_SIZE + length and length <= self.max_data:
+                return [EncapPacket(command, bytes(chunk[HEADER_SIZE:]), session, status,
+                                    context, options)]
         out: list[EncapPacket | EncapReject] = []
         view = memoryview(chunk)
         if self._skip:
