@@ -215,7 +215,10 @@ class TransactionManager(Generic[K, P, V]):
         lock = self._lanes.get(lane)
         if lock is None:
             lock = self.lane(lane)
-        async with lock:  # the attempts run inline: one coroutine frame less per call
+        # acquire/release rather than ``async with``: two coroutine frames less per call
+        # (the attempts run inline for the same reason: this is every transaction's path)
+        await lock.acquire()
+        try:
             n_retries = (self.retries if retries is None else retries) if retry_safe else 0
             late = self.late_replies
             if late:
@@ -244,6 +247,8 @@ class TransactionManager(Generic[K, P, V]):
                     continue
                 self.stats.replies += 1
                 return reply
+        finally:
+            lock.release()
         if isinstance(last, DriveTimeout):
             raise DriveTimeout(f"no reply from {self._describe_request(payload)} after "
                                f"{n_retries + 1} attempt(s) of {deadline_s * 1000:.1f} ms")
