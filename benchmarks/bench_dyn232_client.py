@@ -32,7 +32,8 @@ from servobus.transport.trace import ByteCounter
 
 POLL_SECONDS = 2.0
 PARAM_READS = 20
-TCP_ROUND_TRIPS = 3000
+TCP_ROUND_TRIPS = 2000
+TCP_ROUNDS = 3
 
 _ECHO_SERVER = """
 import asyncio, sys
@@ -231,12 +232,16 @@ def bench_tcp_round_trips() -> float:
     reply_len = len(c.encode_reply(0, c.DriveFunction.IS_STATUS, 0))
     reply = c.encode_reply(0, c.DriveFunction.IS_STATUS, 0)
     canned = [sys.executable, "-c", _REPLY_SERVER, "900", reply.hex()]
-    with _server(echo) as (host, port):
-        raw = _raw_echo_rate(host, port, request, reply_len)
     runs = loops()
-    with _server(sim) as (host, port):
-        rates = {name: run_on(factory, _client_rate(host, port, "tcp"))
-                 for name, factory in runs}
+    raw = 0.0
+    rates = dict.fromkeys((name for name, _ in runs), 0.0)
+    # best of TCP_ROUNDS interleaved rounds per figure, as the other client benchmarks: a
+    # single round put a passing burst of other work on one side of the ratio only
+    with _server(echo) as (echo_host, echo_port), _server(sim) as (host, port):
+        for _ in range(TCP_ROUNDS):
+            raw = max(raw, _raw_echo_rate(echo_host, echo_port, request, reply_len))
+            for name, factory in runs:
+                rates[name] = max(rates[name], run_on(factory, _client_rate(host, port, "tcp")))
         via_pyserial = asyncio.run(_client_rate(host, port, "pyserial"))
         floor = asyncio.run(_asyncio_floor_rate(host, port, request))
         profiles = [run_on(factory, _client_breakdown(host, port, f"{name} drive_status()"))

@@ -21,6 +21,7 @@ from contextlib import contextmanager
 import can
 
 from benchmarks.breakdown import Breakdown, loops, print_all, profile_async, profile_sync, run_on
+from benchmarks.can_floor import floor_round_trips
 from benchmarks.verdict import mark, percent, summary
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan.axis import DynCanAxis
@@ -151,17 +152,20 @@ def raw_breakdown(channel: str) -> Breakdown:
         bus.shutdown()
 
 
-def bench_transactions() -> tuple[float, float, float]:
-    """Best of ROUNDS interleaved rounds per method: the machine is shared and noisy."""
+def bench_transactions() -> tuple[float, float, float, float]:
+    """Best of ROUNDS interleaved rounds per method: the machine is shared and noisy.
+    (raw, python-can asyncio, asyncio floor, servobus)."""
     channel = "servobus-bench-dyncan-rt"
-    raw = aio = ours = 0.0
+    raw = aio = floor = ours = 0.0
     n = ROUND_TRIPS // ROUNDS
+    ident, data = c.encode(c.request(1, c.Function.READ_DRIVE_STATUS))
     with node_thread(channel, (1,)):
         for _ in range(ROUNDS):
             raw = max(raw, raw_round_trips(channel, n))
             aio = max(aio, asyncio.run(python_can_asyncio_round_trips(channel, n)))
+            floor = max(floor, asyncio.run(floor_round_trips(channel, ident, data, n)))
             ours = max(ours, asyncio.run(client_round_trips(channel, n)))
-    return raw, aio, ours
+    return raw, aio, floor, ours
 
 
 async def _stream(channel: str) -> tuple[float, int, int]:
@@ -200,7 +204,7 @@ def bench_stream_load() -> None:
 
 
 def main() -> None:
-    raw, aio, ours = bench_transactions()
+    raw, aio, floor, ours = bench_transactions()
     channel = "servobus-bench-dyncan-uv"
     with node_thread(channel, (1,)):
         fast = {name: max(run_on(factory, client_round_trips(channel, ROUND_TRIPS // ROUNDS))
@@ -212,11 +216,14 @@ def main() -> None:
           f"{ROUND_TRIPS // ROUNDS}, same node):")
     print(f"  python-can raw send+recv (blocking):   {raw:8.0f} transactions/s")
     print(f"  python-can asyncio (Notifier+reader):  {aio:8.0f} transactions/s")
+    print(f"  asyncio floor (a future per frame):    {floor:8.0f} transactions/s  "
+          f"= {floor / raw * 100:.0f} % of raw (no protocol, no transaction rules)")
     verdict = mark("dyncan: client transactions vs python-can raw", ours / raw, at_least=0.8,
                    show=percent)
     print(f"  servobus client (asyncio, full rules): {ours:8.0f} transactions/s  "
           f"= {ours / raw * 100:.0f} % of raw {verdict}, "
-          f"{ours / aio * 100:.0f} % of python-can asyncio")
+          f"{ours / aio * 100:.0f} % of python-can asyncio, {ours / floor * 100:.0f} % of the "
+          "floor")
     for name, rate in fast.items():
         verdict = mark(f"dyncan: client transactions vs python-can raw ({name})", rate / raw,
                        at_least=0.8, show=percent)
