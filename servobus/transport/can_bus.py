@@ -5,8 +5,10 @@
 "slcan:/dev/ttyACM0", "virtual:bus0"). For socketcand the channel part is "HOST:PORT"
 (the daemon's address) and the CAN channel served there defaults to "can0" (override
 with ``channel=``). Frames are received through python-can's own ``can.Notifier`` running
-its listeners on the event loop; sending calls ``bus.send`` directly (every python-can
-backend's send returns quickly: it queues the frame in the adapter or the socket).
+its listeners on the event loop - except on python-can's ``virtual`` bus, where the
+senders' ``put`` wakes the loop directly (:class:`_LoopQueue`, docs/performance.md);
+sending calls ``bus.send`` directly (every python-can backend's send returns quickly: it
+queues the frame in the adapter or the socket).
 
 Transports move frames only: this module knows nothing about DYN CAN function codes.
 """
