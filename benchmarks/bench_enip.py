@@ -444,6 +444,9 @@ def implicit_case(count: int, realtime: bool, hogs: int, seconds: float,
     if not realtime and worst > 1.0:
         print("  -> without real-time scheduling this host cannot hold 1 ms: see docs/enip.md "
               "(run as root or grant CAP_SYS_NICE / RLIMIT_RTPRIO)")
+    if not clock_rt and ours and p99(ours) > 1.0:
+        print("  -> O->T beyond 1 ms: the scanner's clock thread runs at the default scheduler "
+              "(SERVOBUS_CLOCK_REALTIME=1 where permitted; docs/enip.md, Class 1 timing)")
 
 
 def bench_implicit() -> None:
