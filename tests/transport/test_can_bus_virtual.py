@@ -33,21 +33,26 @@ async def _receive(port: AsyncCanBus, n: int) -> list[int]:
     return got
 
 
+async def _open() -> tuple[str, AsyncCanBus, _LoopQueue]:
+    """A port on a fresh channel, and the queue it put in the virtual bus's place."""
+    channel = f"servobus-can-virtual-{next(_channels)}"
+    port = await AsyncCanBus.open(f"virtual:{channel}")
+    direct = port.bus.queue
+    assert isinstance(direct, _LoopQueue)
+    return channel, port, direct
+
+
 async def test_no_notifier_thread_and_the_bus_queue_is_ours() -> None:
-    port = await AsyncCanBus.open(f"virtual:servobus-can-virtual-{next(_channels)}")
+    _, port, direct = await _open()
     try:
         assert port._notifier is None
-        assert isinstance(port.bus.queue, _LoopQueue)
-        assert any(q is port.bus.queue for q in port.bus.channel)
+        assert any(q is direct for q in port.bus.channel)
     finally:
         await port.close()
 
 
 async def test_a_burst_from_another_thread_arrives_in_order_with_fewer_wakes() -> None:
-    channel = f"servobus-can-virtual-{next(_channels)}"
-    port = await AsyncCanBus.open(f"virtual:{channel}")
-    direct = port.bus.queue
-    assert isinstance(direct, _LoopQueue)
+    channel, port, direct = await _open()
     drains = 0
     drain = direct._drain
 
@@ -138,10 +143,7 @@ async def test_a_bounded_queue_keeps_its_size_and_unblocks_a_waiting_sender() ->
 
 
 async def test_close_releases_the_wake_up_and_the_channel() -> None:
-    channel = f"servobus-can-virtual-{next(_channels)}"
-    port = await AsyncCanBus.open(f"virtual:{channel}")
-    direct = port.bus.queue
-    assert isinstance(direct, _LoopQueue)
+    channel, port, direct = await _open()
     assert direct._efd >= 0 and direct._release.alive
     await port.close()
     assert direct._efd == -1
