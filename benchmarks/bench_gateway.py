@@ -197,8 +197,10 @@ async def run(mqtt_port: int | None, folder: Path, urls: list[str]) -> dict[str,
 
         mqtt = MqttOptions(f"mqtt://127.0.0.1:{mqtt_port}", rate_hz=MQTT_HZ) \
             if mqtt_port else None
+        # own_process as ``servobus serve`` sets it: this process is the gateway's
         gateway = Gateway(machine, GatewayOptions(OpcUaOptions("opc.tcp://127.0.0.1:0"),
-                                                  mqtt=mqtt, rate_hz=RATE_HZ))
+                                                  mqtt=mqtt, rate_hz=RATE_HZ,
+                                                  own_process=True))
         await gateway.start()
         ctx = multiprocessing.get_context("spawn")
         out, ready = ctx.Queue(), ctx.Event()
