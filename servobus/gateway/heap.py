@@ -3,20 +3,21 @@
 Why (measured, docs/gateway.md "Garbage collection"): a started gateway holds about half
 a million objects the cyclic garbage collector tracks, nearly all of them asyncua's
 address space (the standard nodeset) built once at start and never freed. CPython's
-full (generation 2) collection walks every one of them: 120-240 ms on the benchmark's
+full (generation 2) collection walks every one of them: 170-265 ms on the benchmark's
 2-core machine, during which the event loop stands still - no sample, no OPC UA publish,
 no command. One such collection in a 10 s run was the benchmark's single slow move
-(a step seen after 190-240 ms instead of 35 ms) and set its p99.
+(a step seen after 190-285 ms instead of 35 ms) and set its p99.
 
 Decision: when the gateway owns its process (``servobus serve``), it collects once after
 start-up and then freezes everything that is left (:func:`gc.freeze`): those objects move
 to the permanent generation, which no collection scans. Later collections see only what
 was made after start-up (sessions, subscriptions, samples in flight): the longest full
-collection falls to a few milliseconds. Cost: a reference cycle made of start-up objects
+collection falls to about 3 ms. Cost: a reference cycle made of start-up objects
 that becomes garbage later is never collected (the address space is never torn down while
 the gateway runs, so that is none in practice); objects freed by their reference count go
 as before. The collector's thresholds stay CPython's: generation 0 and 1 collections take
-about 1-4 ms here, and a higher threshold would trade them for fewer, longer pauses.
+about 1 ms after the freeze, and a higher threshold would trade them for fewer, longer
+pauses.
 
 A gateway inside someone else's process (tests, an application that embeds
 :class:`servobus.gateway.serve.Gateway`) leaves the collector alone: its heap is not the

@@ -6,7 +6,7 @@ retried by the machine), start sampling, start the OPC UA server, then MQTT; pri
 ``servobus serve: ...`` line per front end and ``ready``. When the gateway owns its process
 (``own_process``, as ``servobus serve`` runs it) the start-up heap is frozen out of the
 garbage collector's scans before "ready" (servobus.gateway.heap: a full collection over
-asyncua's address space stalled the loop for 120-240 ms). On SIGINT/SIGTERM (or when a part
+asyncua's address space stalled the loop for 170-265 ms). On SIGINT/SIGTERM (or when a part
 fails) every axis is stopped first (``AsyncMachine.stop_all``, the shared halt), then the
 front ends and the links close; the MQTT status becomes "offline".
 """
