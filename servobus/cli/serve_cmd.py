@@ -94,7 +94,7 @@ def serve(ctx: CliContext, machine_path: Path | None, endpoint: str, users_path:
                            commands=mqtt_commands, rate_hz=mqtt_rate, ca=mqtt_ca,
                            cert=mqtt_cert, key=mqtt_key)
     options = GatewayOptions(opcua=opcua, mqtt=mqtt, rate_hz=rate,
-                             gui_port=gui_port if gui else None)
+                             gui_port=gui_port if gui else None, own_process=True)
     _log_events()
     name = asyncio.run(open_and_serve(
         machine_path, options, lambda line: click.echo(line, err=line.startswith("warning:"))))
