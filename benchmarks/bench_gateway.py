@@ -232,7 +232,9 @@ async def run(mqtt_port: int | None, folder: Path, urls: list[str]) -> dict[str,
             await asyncio.sleep(0.05)
         cpu = (time.process_time() - c0) / (time.monotonic() - w0)
         result: dict[str, Any] = await loop.run_in_executor(None, out.get, True, 30)
-        observer.join(10)
+        # joined off the loop: the observer closes its OPC UA session with this gateway,
+        # which must keep serving until then (a blocking join held it to asyncua's timeout)
+        await loop.run_in_executor(None, observer.join, 10)
         rates = dict(gateway.sampler.achieved_hz)
         await gateway.close()
     finally:
