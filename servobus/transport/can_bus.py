@@ -305,15 +305,20 @@ class _LoopQueue(queue.Queue[Any]):
         if threading.get_ident() == self._loop_thread:
             self._loop.call_soon(self._drain)
         elif self._efd >= 0:
-            with contextlib.suppress(OSError):  # closed: nobody listens any more
+            # try, not contextlib.suppress: this is every frame's path
+            try:  # noqa: SIM105
                 os.eventfd_write(self._efd, 1)
+            except OSError:  # closed: nobody listens any more
+                pass
         else:
             with contextlib.suppress(RuntimeError):  # the loop is already closed
                 self._loop.call_soon_threadsafe(self._drain)
 
     def _on_wake(self) -> None:
-        with contextlib.suppress(BlockingIOError):
+        try:  # noqa: SIM105  (as in _put)
             os.eventfd_read(self._efd)
+        except BlockingIOError:  # a drain already took what woke it
+            pass
         self._drain()
 
     def _drain(self) -> None:
