@@ -148,7 +148,8 @@ class GapFramer:
         """Close the pending run if the line has been silent for t3.5 at ``now``; with
         ``now=None`` close it unconditionally (end of stream)."""
         out: list[TimedFrame] = []
-        if self._buf and (now is None or now - self._last_t >= self.gap_s):
+        # the same sum as :attr:`deadline` (``now - last >= gap`` missed it by rounding)
+        if self._buf and (now is None or now >= self._last_t + self.gap_s):
             self._split(True, out)
         return out
 

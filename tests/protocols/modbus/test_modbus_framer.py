@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from servobus.errors import ArgumentRangeError
 from servobus.protocols.modbus.codec import (
     MAX_FRAME,
+    MIN_FRAME,
     ExceptionReply,
     ReadHoldingReply,
     ReadHoldingRequest,
@@ -28,7 +29,7 @@ from servobus.protocols.modbus.codec import (
     encode_request,
 )
 from servobus.protocols.modbus.crc import crc_bytes, crc_ok, good_lengths, with_crc
-from servobus.protocols.modbus.framer import GapFramer, ReplyFramer
+from servobus.protocols.modbus.framer import GapFramer, ReplyFramer, TimedFrame
 from servobus.protocols.modbus.timing import (
     DEFAULT_BAUD,
     char_time_s,
@@ -366,6 +367,12 @@ def test_request_framer_drops_replies() -> None:
 @given(st.data())
 def test_eager_gap_framer_returns_each_frame_with_its_last_byte(data: st.DataObject) -> None:
     frames = line_frames(data.draw)
+    # A frame one of whose prefixes also passes the CRC reads as two frames of different
+    # lengths: the eager framer waits for the silence then (pinned below), and one cut at
+    # the shorter length is the limitation GapFramer's docstring states (a read request at
+    # 0x02xx whose CRC ends in 0x00 reads as a one-register reply one byte short; YZ-AIM's
+    # registers are 0x00-0x1D). Found by this test: f5 03 02 7d 00 28 c1 00.
+    assume(not any(reads_shorter(frame) for frame in frames))
     framer = GapFramer(eager=True)
     t = 0.0
     for frame in frames:
@@ -379,6 +386,22 @@ def test_eager_gap_framer_returns_each_frame_with_its_last_byte(data: st.DataObj
                 assert [(f.raw, f.time) for f in got] == [(frame, t)]
         t += 2 * GAP
     assert framer.flush() == []
+    assert (framer.crc_errors, framer.discarded) == (0, 0)
+
+
+def reads_shorter(frame: bytes) -> bool:
+    """A proper prefix of ``frame`` (MIN_FRAME bytes or more) passes the CRC."""
+    return bool(good_lengths(frame, 0, MIN_FRAME, len(frame) - 1))
+
+
+def test_eager_gap_framer_waits_for_the_silence_on_a_frame_that_reads_two_ways() -> None:
+    frame = H("f5 03 02 7d 00 28 c1 00")  # a read request; its first 7 bytes pass too
+    assert crc_ok(frame) and reads_shorter(frame)
+    framer = GapFramer(eager=True)
+    t = len(frame) * CHAR
+    assert framer.feed(frame, t) == []  # two readings: the silence decides
+    assert framer.deadline is not None
+    assert framer.flush(framer.deadline) == [TimedFrame(frame, t)]  # the one it ends
     assert (framer.crc_errors, framer.discarded) == (0, 0)
 
 
