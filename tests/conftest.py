@@ -26,7 +26,11 @@ from hypothesis import settings
 
 # Hypothesis's per-example deadline (200 ms) is a wall-clock assertion: a loaded machine
 # failed a 0.03 ms codec example at 624 ms. Examples are still bounded by pytest's timeout.
-settings.register_profile("servobus", deadline=None)
+# The examples are the same in every run (derandomize): a rare input drawn by chance once
+# turned an unrelated change's run red (the eager Modbus framer's two-way frame, issue 22).
+# SERVOBUS_HYPOTHESIS_EXPLORE=1 draws new ones, to search.
+settings.register_profile("servobus", deadline=None,
+                          derandomize=not os.environ.get("SERVOBUS_HYPOTHESIS_EXPLORE"))
 settings.load_profile("servobus")
 
 
