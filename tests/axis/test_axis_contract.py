@@ -122,8 +122,10 @@ def test_moving_and_in_position_mean_the_same_everywhere(axis: Axis) -> None:
     """moving: the motor turns or a profile runs; in_position: on target and still
     (docs/axis.md "Moving and in position"): at rest, in constant speed, during a move."""
     def at_rest() -> None:
-        wait_until(lambda: axis.status().idle, timeout=5, what="at rest")  # settled
-        st = axis.status()  # and it stays so
+        # wait_idle: idle that holds (a single idle read can be a zero crossing of the
+        # servo's ring after a stop, docs/axis.md); then a read of its own says so too
+        axis.wait_idle(timeout=5)
+        st = axis.status()
         assert not st.moving and st.in_position and st.idle, st
 
     at_rest()
@@ -132,7 +134,6 @@ def test_moving_and_in_position_mean_the_same_everywhere(axis: Axis) -> None:
     st = axis.status()
     assert st.moving and not st.in_position and not st.idle, st
     axis.stop()
-    wait_until(lambda: axis.status().idle, timeout=5, what="at rest after the stop")
     at_rest()
 
     target = axis.position() + axis.revs(40)

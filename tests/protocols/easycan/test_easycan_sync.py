@@ -117,12 +117,14 @@ async def test_streamed_positions_follow_at_600_rpm() -> None:
         assert stats.cycles + stats.skipped == n and stats.frames == 2 * stats.cycles
         # How many 2 ms slots this machine kept (stats.skipped, network.stats.cache_dropped) is
         # a benchmark figure (benchmarks/bench_easycan.py, bench_stream): a loaded machine
-        # skips slots by design instead of bursting. A skipped slot does not change the speed:
-        # the next one carries the position planned for its own time.
-        if dropped[0] == dropped[1]:  # every position of the window reached the motors
-            assert abs(speeds[0] - 600) < 30 and abs(speeds[1] + 600) < 30
-        else:  # a loaded host delivered some too late: the motors lag, never run ahead
-            assert 300 < speeds[0] < 630 and -630 < speeds[1] < -300, (speeds, dropped)
+        # skips slots by design instead of bursting. After a skipped slot the next one
+        # carries the position planned for its own time, but the motors held the last one
+        # meanwhile: a window ending in a run of skipped slots measures them behind (561 rpm
+        # beside two CPU hogs with no frame refused), never ahead.
+        if dropped[0] == dropped[1] and not stats.skipped:  # every slot reached the motors
+            assert abs(speeds[0] - 600) < 30 and abs(speeds[1] + 600) < 30, (speeds, stats)
+        else:  # a loaded host skipped slots or delivered some too late: the motors lag
+            assert 300 < speeds[0] < 630 and -630 < speeds[1] < -300, (speeds, dropped, stats)
         await settle(network, plan[-1])
         await group.stop()
 
