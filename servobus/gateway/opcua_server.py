@@ -25,7 +25,6 @@ import asyncio
 import contextlib
 import contextvars
 import datetime
-import ipaddress
 import logging
 import math
 import socket
@@ -45,6 +44,7 @@ from servobus.gateway.opcua_model import SERVOBUS_URI, AxisNodes, build_model
 from servobus.gateway.sampler import Sample
 from servobus.gateway.source import Machine
 from servobus.gateway.users import Users
+from servobus.transport.address import is_loopback
 
 log = logging.getLogger(__name__)
 
@@ -90,15 +90,6 @@ class FileUsers(UserManager):  # type: ignore[misc]
             return User(role=UserRole.User, name=username)
         log.warning("OPC UA login refused for user %r", username)
         return None
-
-
-def is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host.strip("[]")).is_loopback
-    except ValueError:
-        return False
 
 
 def parse_endpoint(url: str) -> tuple[str, int]:

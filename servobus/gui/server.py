@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import ipaddress
 import secrets
 import signal
 import socket
@@ -30,18 +29,10 @@ from servobus.gui.app import create_app
 from servobus.gui.fleet import DEFAULT_URL, Fleet
 from servobus.gui.limits import UVICORN_LIMITS
 from servobus.gui.state import GuiState
+from servobus.transport.address import is_loopback
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8080
-
-
-def is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host.strip("[]")).is_loopback
-    except ValueError:
-        return False
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import asyncio
 import errno
-import ipaddress
 import logging
 import os
 import sys
@@ -29,6 +28,7 @@ except ImportError:  # pragma: no cover - not on Windows
     resource = None  # type: ignore[assignment]
 
 from servobus.errors import ServobusError
+from servobus.transport.address import is_loopback
 
 logger = logging.getLogger("servobus.sim")
 
@@ -49,17 +49,6 @@ def listen_error(what: str, url: str, exc: OSError) -> ListenError:
     hint = ("another program listens there: stop it or pick another port (0 = any free port)"
             if exc.errno == errno.EADDRINUSE else "check the address")
     return ListenError(f"cannot serve {what} on {url} - {reason}; {hint}")
-
-
-def is_loopback(host: str) -> bool:
-    """True for 127.0.0.0/8, ::1 and ``localhost``; anything else reaches beyond the machine."""
-    name = host.strip("[]").lower()
-    if name == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(name).is_loopback
-    except ValueError:
-        return False  # a host name: it may resolve to a public address
 
 
 MOVES_MOTORS = "can move the motors"

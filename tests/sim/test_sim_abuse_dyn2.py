@@ -30,7 +30,7 @@ from sim_abuse_rig import (
 from servobus.protocols.dyn232.device import Dyn232Line
 from servobus.protocols.dyn232.pacing import RX_BUFFER_BYTES, LineRunner
 from servobus.sim.dmm.drive import VirtualDrive
-from servobus.sim.server_limits import is_loopback
+from servobus.transport.address import is_loopback
 
 pytestmark = [pytest.mark.timeout(120), pytest.mark.slow]
 LINE = ("dyn2", "--listen", "tcp://127.0.0.1:0", "--ids", "1,2")
