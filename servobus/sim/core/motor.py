@@ -28,12 +28,41 @@ SOFT_START_S = U.soft_start_rise_s(30)
 DEFAULT_GAINS = (40, 40, 20, 127, 127)
 
 
-class EngineReadouts:
-    """What every simulated motor reads off its servo engine (the DMM drive and the YZ-AIM
-    motor alike): position from the origin, following error, periods, speed, current."""
+class EngineShaft:
+    """What every simulated motor shares of its servo engine (the DMM drive and the YZ-AIM
+    motor alike): the readouts - position from the origin, following error, periods, speed,
+    current - and the world's hold on the shaft (load, disturbance, a blocked shaft).
+    A subclass re-applies its parameters in :meth:`_apply_load` after a load change."""
 
     _engine: ServoEngine
     _origin: float
+
+    def _apply_load(self) -> None:
+        raise NotImplementedError
+
+    # ---------------------------------------------------------------- world
+    def set_load(self, *, inertia: float | None = None, friction: float | None = None) -> None:
+        """Load reflected to the motor shaft: inertia (kg m^2), Coulomb friction (N m)."""
+        eng = self._engine
+        if inertia is not None:
+            eng.load_inertia = max(0.0, float(inertia))
+        if friction is not None:
+            eng.load_friction = max(0.0, float(friction))
+        self._apply_load()
+
+    def set_disturbance(self, torque_nm: float) -> None:
+        """External torque on the shaft, positive towards + (CW)."""
+        self._engine.disturbance = float(torque_nm)
+        self._engine.wake()
+
+    def set_blocked(self, blocked: bool) -> None:
+        """Mechanically block the shaft (it stops dead and cannot move)."""
+        self._engine.blocked = bool(blocked)
+        if blocked:
+            self._engine.w = 0.0
+        self._engine.wake()
+
+    # ---------------------------------------------------------------- readouts
 
     @property
     def position(self) -> int:
@@ -59,7 +88,7 @@ class EngineReadouts:
         return self._engine.current_a
 
 
-class Motor(EngineReadouts):
+class Motor(EngineShaft):
     """One simulated servo motor and its position loop. Not thread-safe."""
 
     def __init__(self, model: U.MotorModel) -> None:
@@ -80,6 +109,9 @@ class Motor(EngineReadouts):
         self._apply_servo()
 
     # ---------------------------------------------------------------- settings
+    def _apply_load(self) -> None:
+        self._apply()
+
     def _apply(self) -> None:
         eng = self._engine
         eng.set_gains(*self._gains)
@@ -168,28 +200,6 @@ class Motor(EngineReadouts):
         else:
             end = eng.ref
         return end - self._origin
-
-    # ---------------------------------------------------------------- world
-    def set_load(self, *, inertia: float | None = None, friction: float | None = None) -> None:
-        """Load reflected to the motor shaft: inertia (kg m^2), Coulomb friction (N m)."""
-        eng = self._engine
-        if inertia is not None:
-            eng.load_inertia = max(0.0, float(inertia))
-        if friction is not None:
-            eng.load_friction = max(0.0, float(friction))
-        self._apply()
-
-    def set_disturbance(self, torque_nm: float) -> None:
-        """External torque on the shaft, positive towards +."""
-        self._engine.disturbance = float(torque_nm)
-        self._engine.wake()
-
-    def set_blocked(self, blocked: bool) -> None:
-        """Mechanically block the shaft (it stops dead and cannot move)."""
-        self._engine.blocked = bool(blocked)
-        if blocked:
-            self._engine.w = 0.0
-        self._engine.wake()
 
 
     # ---------------------------------------------------------------- time

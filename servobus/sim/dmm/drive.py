@@ -83,7 +83,7 @@ from servobus.sim.core import constants as K
 from servobus.sim.core import interp
 from servobus.sim.core.engine import Gen, Ref, Servo, ServoEngine
 from servobus.sim.core.io import PulseDecoder, PulseFormat, pulse_period
-from servobus.sim.core.motor import EngineReadouts
+from servobus.sim.core.motor import EngineShaft
 from servobus.sim.eeprom import EepromStore
 
 AlarmListener = Callable[["VirtualDrive", AlarmCode], None]
@@ -95,7 +95,7 @@ DEFAULT_AXIS_IDS = (1, 2, 3)  # drive ids of X, Y, Z for broadcast interpolation
 _GAIN_PARAMS = ("main_gain", "speed_gain", "int_gain", "trq_cons", "torque_limit")
 
 
-class VirtualDrive(EngineReadouts):
+class VirtualDrive(EngineShaft):
     """One simulated DYN2-class drive + motor. Not thread-safe: one event loop owns it."""
 
     def __init__(
@@ -751,26 +751,9 @@ class VirtualDrive(EngineReadouts):
         return min(a, U.COUNTS_PER_REV - a) <= K.ZRI_HALF_WIDTH_COUNTS
 
     # ---------------------------------------------------------------- world (simulator)
-    def set_load(self, *, inertia: float | None = None, friction: float | None = None) -> None:
-        """Load reflected to the motor shaft: inertia (kg m^2), Coulomb friction (N m)."""
-        eng = self._engine
-        if inertia is not None:
-            eng.load_inertia = max(0.0, float(inertia))
-        if friction is not None:
-            eng.load_friction = max(0.0, float(friction))
+    # set_load, set_disturbance, set_blocked: EngineShaft
+    def _apply_load(self) -> None:
         self._apply_params()
-
-    def set_disturbance(self, torque_nm: float) -> None:
-        """External torque on the shaft, positive towards + (CW)."""
-        self._engine.disturbance = float(torque_nm)
-        self._engine.wake()
-
-    def set_blocked(self, blocked: bool) -> None:
-        """Mechanically block the shaft (it stops dead and cannot move)."""
-        self._engine.blocked = bool(blocked)
-        if blocked:
-            self._engine.w = 0.0
-        self._engine.wake()
 
     def world(self) -> dict[str, float | bool]:
         """The simulated world around the drive as set by set_load, set_disturbance,
@@ -806,7 +789,7 @@ class VirtualDrive(EngineReadouts):
         elif self._encoder_fault:
             self.trip(AlarmCode.LOST_PHASE)
 
-    # ---------------------------------------------------------------- readouts (EngineReadouts)
+    # ---------------------------------------------------------------- readouts (EngineShaft)
 
     @property
     def torque_current(self) -> int:
