@@ -287,6 +287,7 @@ class _LoopQueue(queue.Queue[Any]):
         self._loop_thread = threading.get_ident()
         self._deliver = deliver
         self._woken = False
+        self.replaced: queue.Queue[Any] | None = None  # the bus's own queue, taken over
         self._efd = -1
         if hasattr(os, "eventfd"):
             efd = os.eventfd(0, os.EFD_NONBLOCK | os.EFD_CLOEXEC)
@@ -342,7 +343,8 @@ class _LoopQueue(queue.Queue[Any]):
 
 
 def _take_virtual_queue(bus: Any, port: AsyncCanBus) -> _LoopQueue | None:
-    """Put a :class:`_LoopQueue` in place of a python-can ``virtual`` bus's receive queue.
+    """Put a :class:`_LoopQueue` in place of a python-can ``virtual`` bus's receive queue
+    (``replaced`` keeps the old one, given back on close when the port does not own the bus).
 
     Uses the bus's ``queue`` and ``channel`` attributes (python-can 4); on another shape
     nothing changes (None) and the caller runs a Notifier as for any bus.
@@ -354,20 +356,31 @@ def _take_virtual_queue(bus: Any, port: AsyncCanBus) -> _LoopQueue | None:
     if type(bus) is not virtual.VirtualBus:
         return None
     old = getattr(bus, "queue", None)
-    channel = getattr(bus, "channel", None)
-    if not isinstance(old, queue.Queue) or not isinstance(channel, list):
+    if not isinstance(old, queue.Queue) or not isinstance(getattr(bus, "channel", None), list):
         return None
     new = _LoopQueue(old.maxsize, port._loop, port._deliver)
+    new.replaced = old
+    if not _swap_queue(bus, old, new):
+        new.close()
+        return None
+    return new
+
+
+def _swap_queue(bus: Any, old: queue.Queue[Any], new: queue.Queue[Any]) -> bool:
+    """Put ``new`` where ``old`` receives on a virtual bus's channel, with the frames that
+    wait in ``old`` (up to ``new``'s capacity); False if ``old`` no longer receives there."""
+    from can.interfaces import virtual
+
     with virtual.channels_lock:
+        channel = bus.channel
         if not any(q is old for q in channel):
-            new.close()
-            return None
+            return False
         channel[:] = [new if q is old else q for q in channel]
         bus.queue = new
-    with contextlib.suppress(queue.Empty):
+    with contextlib.suppress(queue.Empty, queue.Full):
         while True:
             new.put_nowait(old.get_nowait())
-    return new
+    return True
 
 
 def _threaded(bus: Any) -> bool:
@@ -517,6 +530,8 @@ class AsyncCanBus:
             self._receiver(None)
         if self._direct is not None:
             self._direct.close()
+            if not self._owns_bus and self._direct.replaced is not None:
+                _swap_queue(self.bus, self._direct, self._direct.replaced)  # the user's again
         if self._notifier is not None:
             await asyncio.to_thread(self._notifier.stop, NOTIFIER_POLL_S * 3)
         if self._owns_bus:

@@ -149,3 +149,21 @@ async def test_close_releases_the_wake_up_and_the_channel() -> None:
     assert direct._efd == -1
     assert not direct._release.alive  # os.close ran, once
     assert channel not in channels
+
+
+async def test_a_bus_the_port_does_not_own_gets_its_own_queue_back_on_close() -> None:
+    channel = f"servobus-can-virtual-{next(_channels)}"
+    bus = can.Bus(interface="virtual", channel=channel)
+    own_queue = bus.queue
+    sender = can.Bus(interface="virtual", channel=channel)
+    try:
+        port = AsyncCanBus(bus, owns_bus=False)
+        assert bus.queue is not own_queue
+        await port.close()
+        assert bus.queue is own_queue and any(q is own_queue for q in bus.channel)
+        sender.send(_message(7))
+        msg = bus.recv(5)  # the user's bus works as python-can made it
+        assert msg is not None and msg.data[0] == 7
+    finally:
+        sender.shutdown()
+        bus.shutdown()
