@@ -6,7 +6,9 @@
    the wire time of the same bytes is printed beside it.
 3. Unpaced round trips/s over TCP to ``servobus sim dyn232 --fast`` (own process) vs a raw
    socket echo server (own process, same event-loop type) answering the same byte counts.
-   Target >= 80 %.
+   Target >= 80 %. Beside it, in the same rounds, the ceilings that bound it: a raw blocking
+   client against the simulator (no client work at all) and a protocol-free asyncio client
+   against the echo and the simulator (what asyncio alone leaves).
 
 Run: ``python -m benchmarks`` (all) or ``python -m benchmarks.bench_dyn232_client``.
 """
@@ -149,18 +151,24 @@ def _server(args: list[str]) -> Iterator[tuple[str, int]]:
 
 
 def _raw_echo_rate(host: str, port: int, request: bytes, reply_len: int) -> float:
+    payload = request + b"\x00" * (reply_len - len(request)) if reply_len > len(request) \
+        else request
+    return _raw_rate(host, port, payload, len(payload))
+
+
+def _raw_rate(host: str, port: int, request: bytes, reply_len: int) -> float:
+    """Blocking socket, prebuilt request, the reply's bytes counted and not parsed: round
+    trips/s with no client work at all (against the echo: the target's denominator;
+    against the simulator: the ceiling for any client of it)."""
     with socket.create_connection((host, port)) as sock:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        payload = request + b"\x00" * (reply_len - len(request)) if reply_len > len(request) \
-            else request
-        for _ in range(100):
-            sock.sendall(payload)
-            sock.recv(64)
-        t0 = time.perf_counter()
-        for _ in range(TCP_ROUND_TRIPS):
-            sock.sendall(payload)
+        t0 = 0.0
+        for i in range(100 + TCP_ROUND_TRIPS):
+            if i == 100:
+                t0 = time.perf_counter()
+            sock.sendall(request)
             got = 0
-            while got < len(payload):
+            while got < reply_len:
                 got += len(sock.recv(64))
         return TCP_ROUND_TRIPS / (time.perf_counter() - t0)
 
@@ -233,13 +241,14 @@ def bench_tcp_round_trips() -> float:
     reply = c.encode_reply(0, c.DriveFunction.IS_STATUS, 0)
     canned = [sys.executable, "-c", _REPLY_SERVER, "900", reply.hex()]
     runs = loops()
-    raw = floor = echo_floor = 0.0
+    raw = floor = echo_floor = raw_sim = 0.0
     rates = dict.fromkeys((name for name, _ in runs), 0.0)
     # best of TCP_ROUNDS interleaved rounds per figure, as the other client benchmarks: a
     # single round put a passing burst of other work on one side of the ratio only
     with _server(echo) as (echo_host, echo_port), _server(sim) as (host, port):
         for _ in range(TCP_ROUNDS):
             raw = max(raw, _raw_echo_rate(echo_host, echo_port, request, reply_len))
+            raw_sim = max(raw_sim, _raw_rate(host, port, request, reply_len))
             echo_floor = max(echo_floor, asyncio.run(
                 _asyncio_floor_rate(echo_host, echo_port, request)))
             floor = max(floor, asyncio.run(_asyncio_floor_rate(host, port, request)))
@@ -261,6 +270,8 @@ def bench_tcp_round_trips() -> float:
     print(f"  same client, pyserial socket:// {via_pyserial:7.0f}/s = {via_pyserial / raw:6.1%}; "
           f"same client vs a canned-reply server {client_only:7.0f}/s = {client_only / raw:6.1%} "
           f"(client cost alone)")
+    print(f"  raw blocking client + simulator (no client work: the ceiling for any client) "
+          f"{raw_sim:7.0f}/s = {raw_sim / raw:6.1%}; this client = {ours / raw_sim:6.1%} of it")
     print(f"  protocol-free asyncio client + simulator (ceiling for any asyncio client) "
           f"{floor:7.0f}/s = {floor / raw:6.1%}; this client = {ours / floor:6.1%} of it")
     print(f"  protocol-free asyncio client + the same echo server {echo_floor:7.0f}/s = "

@@ -251,6 +251,9 @@ def bench_explicit() -> None:
                        show="{:g}x".format)
         print(f"one at a time: {name} / pycomm3 = {one:.2f}x  {verdict}; / asyncio floor "
               f"= {floor:.0%}")
+    print(f"one at a time: asyncio floor / pycomm3 = "
+          f"{best['asyncio floor'] / best['pycomm3']:.2f}x (the most any client on asyncio's "
+          "loop can reach; below 1 the target is out of reach on this loop)")
     print(f"one at a time: servobus sync facade / pycomm3 = "
           f"{best['servobus sync'] / best['pycomm3']:.2f}x (a call hops to the facade's "
           "loop thread and back)")
