@@ -298,6 +298,15 @@ def test_identity_attributes_and_list_identity_item_share_one_layout() -> None:
     assert discovery.IdentityItem.decode(raw) == item
 
 
+def test_identity_field_out_of_range_is_a_framing_error() -> None:
+    with pytest.raises(FramingError):
+        ident.all_attributes(dyn5.Identity(serial_number=1 << 32))
+    with pytest.raises(FramingError):
+        discovery.IdentityItem(SockaddrInfo(1, "10.0.0.9"), 0x10000, 0, 0, (1, 1), 0, 0,
+                               "X", 3).encode()
+    with pytest.raises(FramingError):
+        ident.all_attributes(dyn5.Identity(product_name="é"))
+
 @given(st.builds(discovery.IdentityItem, st.builds(SockaddrInfo, st.integers(0, 0xFFFF),
                                                      st.ip_addresses(v=4).map(str)),
                  st.integers(0, 0xFFFF), st.integers(0, 0xFFFF), st.integers(0, 0xFFFF),
