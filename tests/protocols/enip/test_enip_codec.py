@@ -274,6 +274,39 @@ def test_identity_attributes() -> None:
     assert ident.class_attribute(4) is None
 
 
+
+def test_identity_attributes_and_list_identity_item_share_one_layout() -> None:
+    """Every field a different value, so a swapped or resized field shows; the expected
+    bytes are written out by hand (CIP Vol. 1 5A-2, Vol. 2 2-4), not derived from the codec."""
+    i = dyn5.Identity(vendor_id=0x1234, device_type=0x0056, product_code=0x789A,
+                      revision=(2, 7), status=0x0BCD, serial_number=0x01020304,
+                      product_name="AB", state=5)
+    singles = {1: "3412", 2: "5600", 3: "9a78", 4: "0207", 5: "cd0b", 6: "04030201",
+               7: "02 4142"}
+    for attribute, expected in singles.items():
+        assert ident.instance_attribute(i, attribute) == bytes.fromhex(expected)
+    assert ident.instance_attribute(i, 0) is None
+    attributes = bytes.fromhex("3412 5600 9a78 0207 cd0b 04030201 02 4142")
+    assert ident.all_attributes(i) == attributes
+    reply = ident.IdentityReply(0x1234, 0x56, 0x789A, (2, 7), 0x0BCD, 0x01020304, "AB")
+    assert ident.IdentityReply.decode(attributes) == reply
+    item = discovery.IdentityItem(SockaddrInfo(2222, "10.0.0.9"), i.vendor_id, i.device_type,
+                                  i.product_code, i.revision, i.status, i.serial_number,
+                                  i.product_name, i.state)
+    raw = bytes.fromhex("0100 0002 08ae 0a000009") + bytes(8) + attributes + b"\x05"
+    assert item.encode() == raw
+    assert discovery.IdentityItem.decode(raw) == item
+
+
+def test_identity_field_out_of_range_is_a_framing_error() -> None:
+    with pytest.raises(FramingError):
+        ident.all_attributes(dyn5.Identity(serial_number=1 << 32))
+    with pytest.raises(FramingError):
+        discovery.IdentityItem(SockaddrInfo(1, "10.0.0.9"), 0x10000, 0, 0, (1, 1), 0, 0,
+                               "X", 3).encode()
+    with pytest.raises(FramingError):
+        ident.all_attributes(dyn5.Identity(product_name="é"))
+
 @given(st.builds(discovery.IdentityItem, st.builds(SockaddrInfo, st.integers(0, 0xFFFF),
                                                      st.ip_addresses(v=4).map(str)),
                  st.integers(0, 0xFFFF), st.integers(0, 0xFFFF), st.integers(0, 0xFFFF),

@@ -1,8 +1,9 @@
 """ListIdentity / ListServices / ListInterfaces reply items (CIP Vol. 2 2-4). Pure.
 
 ListIdentity item 0x000C: encapsulation version UINT, socket address (sockaddr, big-endian),
-vendor UINT, device type UINT, product code UINT, revision (major, minor USINT), status
-WORD, serial UDINT, product name SHORT_STRING, state USINT.
+the Identity object's attributes 1-7 as Get_Attributes_All lays them out (vendor, device
+type, product code, revision, status, serial, product name: ``identity`` owns that layout),
+state USINT.
 ListServices item 0x0100: version UINT, capability flags UINT, name (16 bytes, NUL padded).
 """
 
@@ -12,11 +13,13 @@ import struct
 from dataclasses import dataclass
 
 from servobus.errors import FramingError
-from servobus.protocols.enip.codec import cpf
+from servobus.protocols.enip.codec import cpf, identity
 from servobus.protocols.enip.codec.cpf import CpfItem, ItemType, SockaddrInfo
 from servobus.protocols.enip.codec.encap import PROTOCOL_VERSION
+from servobus.protocols.enip.codec.identity import IdentityAttributes
 
-_IDENTITY = struct.Struct("<HHHBBHI")
+#: Encapsulation version UINT and socket address before the Identity attributes.
+_HEAD = 2 + 16
 _SERVICE = struct.Struct("<HH16s")
 #: ListServices capability flags: bit 5 CIP encapsulation over TCP, bit 8 Class 0/1 over UDP.
 CAPABILITY_TCP = 0x0020
@@ -24,63 +27,37 @@ CAPABILITY_UDP_IO = 0x0100
 SERVICE_NAME = "Communications"
 
 
-def encode_short_string(text: str) -> bytes:
-    try:
-        raw = text.encode("ascii")
-    except UnicodeEncodeError:
-        raise FramingError(f"{text!r} is not ASCII") from None
-    if len(raw) > 0xFF:
-        raise FramingError(f"{text!r} is longer than 255 characters")
-    return bytes((len(raw),)) + raw
-
-
-def decode_short_string(raw: bytes, pos: int) -> tuple[str, int]:
-    if pos >= len(raw):
-        raise FramingError("SHORT_STRING length byte missing")
-    n = raw[pos]
-    if pos + 1 + n > len(raw):
-        raise FramingError("SHORT_STRING truncated")
-    return raw[pos + 1:pos + 1 + n].decode("ascii", errors="replace"), pos + 1 + n
+@dataclass(frozen=True)
+class _Socket:
+    socket: SockaddrInfo
 
 
 @dataclass(frozen=True)
-class IdentityItem:
-    socket: SockaddrInfo
-    vendor_id: int
-    device_type: int
-    product_code: int
-    revision: tuple[int, int]
-    status: int
-    serial_number: int
-    product_name: str
+class IdentityItem(IdentityAttributes, _Socket):
+    """Fields: socket (from _Socket: a dataclass takes its bases' fields in reverse MRO
+    order), the Identity attributes 1-7 (``identity.IdentityAttributes``), state, version."""
+
     state: int
     version: int = PROTOCOL_VERSION
 
     def encode(self) -> bytes:
         try:
-            body = _IDENTITY.pack(self.vendor_id, self.device_type, self.product_code,
-                                  self.revision[0], self.revision[1], self.status,
-                                  self.serial_number)
             head = struct.pack("<H", self.version)
             tail = bytes((self.state,))
         except (struct.error, ValueError) as exc:
             raise FramingError(f"identity field out of range: {exc}") from None
-        return (head + self.socket.encode() + body
-                + encode_short_string(self.product_name) + tail)
+        return head + self.socket.encode() + identity.all_attributes(self) + tail
 
     @classmethod
     def decode(cls, raw: bytes) -> IdentityItem:
-        fixed = 2 + 16 + _IDENTITY.size
-        if len(raw) < fixed + 2:
+        if len(raw) < _HEAD + identity.FIXED.size + 2:
             raise FramingError(f"ListIdentity item too short ({len(raw)} bytes)")
         (version,) = struct.unpack_from("<H", raw)
-        sock = SockaddrInfo.decode(raw[2:18])
-        vendor, dev, prod, major, minor, status, serial = _IDENTITY.unpack_from(raw, 18)
-        name, pos = decode_short_string(raw, fixed)
+        sock = SockaddrInfo.decode(raw[2:_HEAD])
+        values, pos = identity.decode_attributes(raw, _HEAD)
         if pos + 1 != len(raw):
             raise FramingError("ListIdentity item: state byte missing or trailing bytes")
-        return cls(sock, vendor, dev, prod, (major, minor), status, serial, name, raw[pos],
-                   version)
+        return cls(sock, *values, raw[pos], version)
 
     def item(self) -> CpfItem:
         return CpfItem(ItemType.LIST_IDENTITY, self.encode())

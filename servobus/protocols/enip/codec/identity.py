@@ -1,8 +1,10 @@
-"""Identity object (class 0x01) attribute encoding (DYN5 manual 4.2; CIP Vol. 1 5A-2). Pure.
+"""Identity object (class 0x01) attributes (DYN5 manual 4.2; CIP Vol. 1 5A-2). Pure.
 
 Instance 1, attributes 1-7: vendor UINT, device type UINT, product code UINT, revision
 (major USINT, minor USINT), status WORD, serial UDINT, product name SHORT_STRING (decision
-in ``servobus.families.dyn5.params``). Get_Attributes_All returns the seven in order.
+in ``servobus.families.dyn5.params``). Get_Attributes_All returns the seven in order, and
+the ListIdentity item (``discovery``) carries the same bytes: this module owns their layout
+(:data:`FIXED`, :class:`IdentityAttributes`, the SHORT_STRING codec) for both.
 
 Class level (instance 0; the manual says both services are implemented for the class but
 gives no attributes). Decision: the CIP common class attributes 1 revision (1), 2 max
@@ -17,29 +19,94 @@ from dataclasses import dataclass
 
 from servobus.errors import FramingError
 from servobus.families.dyn5.params import Identity
-from servobus.protocols.enip.codec.discovery import decode_short_string, encode_short_string
 
-INSTANCE_ATTRIBUTES = (1, 2, 3, 4, 5, 6, 7)
+#: Wire formats of instance attributes 1-6 in order (4: revision major, minor); attribute 7,
+#: the product name, follows them as a SHORT_STRING.
+_FORMATS = ("H", "H", "H", "BB", "H", "I")
+FIXED = struct.Struct("<" + "".join(_FORMATS))
+NAME_ATTRIBUTE = len(_FORMATS) + 1
+INSTANCE_ATTRIBUTES = tuple(range(1, NAME_ATTRIBUTE + 1))
 CLASS_ATTRIBUTES = {1: 1, 2: 1, 3: 1, 6: 7, 7: 7}
-_FIXED = struct.Struct("<HHHBBHI")
+#: The seven attribute values in order, as :class:`IdentityAttributes` takes them.
+Values = tuple[int, int, int, tuple[int, int], int, int, str]
 
 
-def instance_attribute(identity: Identity, attribute: int) -> bytes | None:
+@dataclass(frozen=True)
+class IdentityAttributes:
+    """Instance attributes 1-7 in wire order: what a Get_Attributes_All reply and a
+    ListIdentity item share (both derive from this class)."""
+
+    vendor_id: int
+    device_type: int
+    product_code: int
+    revision: tuple[int, int]
+    status: int
+    serial_number: int
+    product_name: str
+
+
+def encode_short_string(text: str) -> bytes:
+    try:
+        raw = text.encode("ascii")
+    except UnicodeEncodeError:
+        raise FramingError(f"{text!r} is not ASCII") from None
+    if len(raw) > 0xFF:
+        raise FramingError(f"{text!r} is longer than 255 characters")
+    return bytes((len(raw),)) + raw
+
+
+def decode_short_string(raw: bytes, pos: int) -> tuple[str, int]:
+    if pos >= len(raw):
+        raise FramingError("SHORT_STRING length byte missing")
+    n = raw[pos]
+    if pos + 1 + n > len(raw):
+        raise FramingError("SHORT_STRING truncated")
+    return raw[pos + 1:pos + 1 + n].decode("ascii", errors="replace"), pos + 1 + n
+
+
+def _spans() -> dict[int, tuple[int, int]]:
+    """Attribute id -> (start, end) of its bytes within FIXED."""
+    spans, start = {}, 0
+    for attribute, fmt in enumerate(_FORMATS, start=1):
+        end = start + struct.calcsize("<" + fmt)
+        spans[attribute] = (start, end)
+        start = end
+    return spans
+
+
+_SPANS = _spans()
+
+
+def _fixed(identity: Identity | IdentityAttributes) -> bytes:
+    """Attributes 1-6 packed; FramingError when a value does not fit its field."""
+    try:
+        return FIXED.pack(identity.vendor_id, identity.device_type, identity.product_code,
+                          identity.revision[0], identity.revision[1], identity.status,
+                          identity.serial_number)
+    except struct.error as exc:
+        raise FramingError(f"identity field out of range: {exc}") from None
+
+
+def all_attributes(identity: Identity | IdentityAttributes) -> bytes:
+    """Attributes 1-7 as Get_Attributes_All and the ListIdentity item lay them out."""
+    return _fixed(identity) + encode_short_string(identity.product_name)
+
+
+def decode_attributes(raw: bytes, pos: int) -> tuple[Values, int]:
+    """Attributes 1-7 from ``raw[pos:]``, and the offset after the product name."""
+    if len(raw) < pos + FIXED.size:
+        raise FramingError(f"Identity attributes need {FIXED.size + 1} bytes")
+    vendor, dev, prod, major, minor, status, serial = FIXED.unpack_from(raw, pos)
+    name, end = decode_short_string(raw, pos + FIXED.size)
+    return (vendor, dev, prod, (major, minor), status, serial, name), end
+
+
+def instance_attribute(identity: Identity | IdentityAttributes, attribute: int) -> bytes | None:
     """Bytes of one instance attribute; None when the attribute does not exist."""
-    values: dict[int, bytes] = {
-        1: struct.pack("<H", identity.vendor_id),
-        2: struct.pack("<H", identity.device_type),
-        3: struct.pack("<H", identity.product_code),
-        4: bytes(identity.revision),
-        5: struct.pack("<H", identity.status),
-        6: struct.pack("<I", identity.serial_number),
-        7: encode_short_string(identity.product_name),
-    }
-    return values.get(attribute)
-
-
-def all_attributes(identity: Identity) -> bytes:
-    return b"".join(instance_attribute(identity, a) or b"" for a in INSTANCE_ATTRIBUTES)
+    if attribute == NAME_ATTRIBUTE:
+        return encode_short_string(identity.product_name)
+    span = _SPANS.get(attribute)
+    return None if span is None else _fixed(identity)[span[0]:span[1]]
 
 
 def class_attribute(attribute: int) -> bytes | None:
@@ -52,23 +119,14 @@ def class_all_attributes() -> bytes:
 
 
 @dataclass(frozen=True)
-class IdentityReply:
+class IdentityReply(IdentityAttributes):
     """Decoded Get_Attributes_All reply of instance 1 (for clients and tests)."""
-
-    vendor_id: int
-    device_type: int
-    product_code: int
-    revision: tuple[int, int]
-    status: int
-    serial_number: int
-    product_name: str
 
     @classmethod
     def decode(cls, raw: bytes) -> IdentityReply:
-        if len(raw) < _FIXED.size + 1:
-            raise FramingError(f"Identity attributes need {_FIXED.size + 1} bytes")
-        vendor, dev, prod, major, minor, status, serial = _FIXED.unpack_from(raw)
-        name, end = decode_short_string(raw, _FIXED.size)
+        if len(raw) < FIXED.size + 1:
+            raise FramingError(f"Identity attributes need {FIXED.size + 1} bytes")
+        values, end = decode_attributes(raw, 0)
         if end != len(raw):
             raise FramingError("trailing bytes after the Identity product name")
-        return cls(vendor, dev, prod, (major, minor), status, serial, name)
+        return cls(*values)
