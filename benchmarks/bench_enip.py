@@ -3,7 +3,8 @@
 1. Explicit messaging: Get_Attribute_Single round trips/s (Parameter 0x1D, motor position)
    against the same virtual DYN5 (``servobus sim enip`` in its own process), one request at
    a time: the servobus client on asyncio's loop and on uvloop (when installed), the sync
-   Axis facade, pycomm3's ``CIPDriver.generic_message`` (unconnected, ``route_path=False``)
+   Axis facade (its calls on the caller's thread, and on a loop thread as before),
+   pycomm3's ``CIPDriver.generic_message`` (unconnected, ``route_path=False``)
    and a raw blocking socket with a prebuilt request (the ceiling: no client work at all).
    Rounds alternate; the best round of each counts. Targets: one at a time >= 1.0 x pycomm3
    (per loop), 8 in flight >= 1.5 x pycomm3. Then the per-transaction breakdown
@@ -39,7 +40,7 @@ from dataclasses import dataclass, field
 
 from benchmarks.breakdown import Breakdown, loops, print_all, profile_async, profile_sync, run_on
 from benchmarks.verdict import mark, percent, summary
-from servobus.axis import connect, connect_async
+from servobus.axis import connect, connect_async, inline
 from servobus.fastloop import fast_available
 from servobus.protocols.enip.axis import EnipAxis
 from servobus.protocols.enip.client import AsyncEnipClient
@@ -217,7 +218,7 @@ def raw_rate(host: str, port: int, seconds: float) -> float:
 def bench_explicit() -> None:
     runs = [(f"servobus {name}", factory) for name, factory in loops()]
     names = ("raw socket", "asyncio floor", "pycomm3", *(n for n, _ in runs),
-             "servobus sync", f"servobus x{IN_FLIGHT}")
+             "servobus sync", "sync, loop thread", f"servobus x{IN_FLIGHT}")
     best = dict.fromkeys(names, 0.0)
     with adapters(1, ROUNDS * len(names) * (ROUND_S + 1) + 60) as (_, [(host, port)]):
         for _ in range(ROUNDS):
@@ -227,6 +228,7 @@ def bench_explicit() -> None:
             rates += [run_on(factory, servobus_rate(host, port, ROUND_S))
                       for _, factory in runs]
             rates += [sync_rate(host, port, ROUND_S),
+                      sync_rate(host, port, ROUND_S, thread=True),
                       asyncio.run(servobus_rate(host, port, ROUND_S, IN_FLIGHT))]
             for name, rate in zip(names, rates, strict=True):
                 best[name] = max(best[name], rate)
@@ -237,7 +239,8 @@ def bench_explicit() -> None:
              "pycomm3": "CIPDriver.generic_message, one at a time",
              "servobus asyncio": "AsyncEnipClient on asyncio's loop, one at a time",
              "servobus uvloop": "AsyncEnipClient on uvloop, one at a time",
-             "servobus sync": f"sync Axis.position() (facade loop: {_facade_loop()})",
+             "servobus sync": "sync Axis.position(), inline: on the calling thread",
+             "sync, loop thread": f"the same with SERVOBUS_SYNC=thread ({_facade_loop()})",
              f"servobus x{IN_FLIGHT}": f"{IN_FLIGHT} tasks, max_in_flight={IN_FLIGHT}, one "
                                       "session"}
     for name, rate in best.items():
@@ -255,8 +258,9 @@ def bench_explicit() -> None:
           f"{best['asyncio floor'] / best['pycomm3']:.2f}x (the most any client on asyncio's "
           "loop can reach; below 1 the target is out of reach on this loop)")
     print(f"one at a time: servobus sync facade / pycomm3 = "
-          f"{best['servobus sync'] / best['pycomm3']:.2f}x (a call hops to the facade's "
-          "loop thread and back)")
+          f"{best['servobus sync'] / best['pycomm3']:.2f}x on the calling thread, "
+          f"{best['sync, loop thread'] / best['pycomm3']:.2f}x with a hop to a loop thread "
+          "and back")
     ratio = best[f"servobus x{IN_FLIGHT}"] / best["pycomm3"]
     verdict = mark(f"enip: servobus ({IN_FLIGHT} in flight) vs pycomm3 round trips", ratio,
                    at_least=1.5, show="{:g}x".format)
@@ -267,9 +271,24 @@ def _facade_loop() -> str:
     return "uvloop" if fast_available() else "asyncio"
 
 
-def sync_rate(host: str, port: int, seconds: float) -> float:
-    """The sync Axis facade (what a script calls): ``position()`` one at a time."""
-    with connect(f"enip://{host}:{port}") as axis:
+@contextmanager
+def _sync_mode(thread: bool) -> Iterator[None]:
+    """``SERVOBUS_SYNC=thread`` (``thread``) or unset while a facade is opened."""
+    old = os.environ.get(inline.ENV)
+    os.environ[inline.ENV] = "thread" if thread else ""
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop(inline.ENV, None)
+        else:
+            os.environ[inline.ENV] = old
+
+
+def sync_rate(host: str, port: int, seconds: float, *, thread: bool = False) -> float:
+    """The sync Axis facade (what a script calls): ``position()`` one at a time; ``thread``:
+    on a loop thread (``SERVOBUS_SYNC=thread``) instead of the caller's."""
+    with _sync_mode(thread), connect(f"enip://{host}:{port}") as axis:
         for _ in range(200):
             axis.position()
         n, t0 = 0, time.perf_counter()
@@ -295,9 +314,11 @@ def explicit_breakdowns(host: str, port: int,
 
     for name, factory in runs:
         out.append(run_on(factory, client(f"{name} get_attribute_single")))
-    with connect(f"enip://{host}:{port}") as axis:
-        out.append(profile_sync(f"servobus sync Axis.position() ({_facade_loop()})",
-                                axis.position))
+    for thread in (False, True):
+        where = f"loop thread, {_facade_loop()}" if thread else "inline"
+        with _sync_mode(thread), connect(f"enip://{host}:{port}") as axis:
+            out.append(profile_sync(f"servobus sync Axis.position() ({where})",
+                                    axis.position))
     from pycomm3 import DINT, CIPDriver
     with CIPDriver(f"{host}:{port}") as plc:
         out.append(profile_sync("pycomm3 generic_message", lambda: plc.generic_message(

@@ -1,11 +1,12 @@
 """The event loop for the loops servobus owns: uvloop when installed, asyncio's otherwise.
 
 Decision (issue 22): ``pip install servobus[fast]`` adds uvloop (Linux, macOS). servobus
-then uses it for the loops it creates itself - the sync Axis facade's loop thread (so the
-``servobus`` CLI too), the GUI server, ``servobus enip discover`` - and never for a loop a
-user runs: ``connect_async`` and every async client work on whatever loop they are awaited
-on. The paced simulators keep :func:`servobus.sim.fine_selector.fine_event_loop`: libuv's
-timers have millisecond resolution, and a paced line needs microseconds. Measured on the
+then uses it for the loops it creates itself - the sync Axis facade's loop thread, where it
+has one (so the ``servobus`` CLI too), the GUI server, ``servobus enip discover`` - and never
+for a loop a user runs: ``connect_async`` and every async client work on whatever loop they
+are awaited on. The paced simulators keep
+:func:`servobus.sim.fine_selector.fine_event_loop`: libuv's timers have millisecond
+resolution, and a paced line needs microseconds. Measured on the
 benchmarks (docs/performance.md): uvloop cuts the CPU time of an explicit EtherNet/IP or
 a DYN232M round trip by about a third, and the loop's share of it by more.
 

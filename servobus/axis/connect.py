@@ -12,9 +12,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from servobus.axis import registry
+from servobus.axis import inline, registry
 from servobus.axis.base import AsyncAxis
-from servobus.axis.sync import Axis, LoopThread
+from servobus.axis.sync import Axis, LoopThread, Runner
 from servobus.axis.url import parse_url
 
 DEFAULT_URL = "sim://dyn232"
@@ -33,8 +33,12 @@ async def connect_async(url: str | None = None, *, drive_id: int | None = None,
 
 
 def connect(url: str | None = None, *, drive_id: int | None = None, **options: Any) -> Axis:
-    """Synchronous :func:`connect_async`: the Axis runs on a private event-loop thread."""
-    runner = LoopThread()
+    """Synchronous :func:`connect_async`: the Axis runs on a private event loop - on the
+    caller's thread where the protocol says its link needs no loop between calls
+    (:mod:`servobus.axis.inline`), on a loop thread of its own otherwise."""
+    parsed = parse_url(DEFAULT_URL if url is None else url)
+    runner: Runner = (inline.InlineRunner() if inline.available() and registry.runs_inline(parsed)
+                      else LoopThread())
     try:
         core = runner.run(connect_async(url, drive_id=drive_id, **options))
     except BaseException:

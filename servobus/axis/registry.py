@@ -168,6 +168,16 @@ def lookup(url: DriveUrl) -> Opener:
     return cast(Opener, load(target))
 
 
+def runs_inline(url: DriveUrl) -> bool:
+    """The protocol serving ``url`` lists its scheme in ``inline_schemes``: its axes need no
+    event loop between calls (the sync facade may run them on the caller's thread)."""
+    if url.transport:
+        return False
+    name = protocol_of(url)
+    spec = specs().get(name) if name is not None else None
+    return spec is not None and url.scheme in spec.inline_schemes
+
+
 def protocol_of(url: DriveUrl) -> str | None:
     """The protocol package serving ``url`` (``dyn232`` for ``/dev/ttyUSB0``), if any.
 

@@ -1,16 +1,19 @@
-"""The synchronous Axis: a private event loop on a daemon thread runs the async core.
+"""The synchronous Axis: the one async core, run for a caller that blocks on each result.
 
-The sync ``Axis`` submits each coroutine to this loop and blocks on the result, so the one
-async core does all the work. Hooks registered through the facade run on the loop thread.
+A *runner* runs the core's coroutines: :class:`LoopThread`, a private event loop on a daemon
+thread that each call hops to and back, or - for a link that needs no loop between calls -
+:class:`servobus.axis.inline.InlineRunner`, which runs the call on the caller's own thread
+(issue 22; :func:`servobus.axis.connect.connect` chooses). Hooks registered through the
+facade run where the loop runs: on the loop thread, or on the calling thread during a call.
 
 Decision (issue 19): the facade is an explicit typed class, one method per method of
 :class:`~servobus.axis.base.AsyncAxis` with the same parameters and the coroutine's result
 as a plain return type, so a checker sees ``connect(...).position()`` as ``int`` and flags
 ``axis.move_too(5)``. tests/axis/test_axis_sync_facade.py fails when the two drift. Every
-call goes through :meth:`Axis._call`, the one place where a blocking fast path for
-synchronous callers (issue 22) would plug in: one facade, not two. What a protocol has
+call goes through :meth:`Axis._call` and the axis's runner: the fast path for synchronous
+callers (issue 22) is a runner, not a second facade. What a protocol has
 beyond the Axis API is reached through ``axis.extra`` (typed ``Any`` on purpose: it
-depends on the protocol) or, asynchronously on the loop thread, ``axis.core``.
+depends on the protocol) or, asynchronously where the loop runs, ``axis.core``.
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ import threading
 import warnings
 from collections.abc import Callable, Coroutine, Iterable, Mapping, Sequence
 from types import TracebackType
-from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
+from typing import TYPE_CHECKING, Any, ParamSpec, Protocol, TypeVar
 
 from servobus import fastloop
 from servobus.axis.base import DEFAULT_POLL_S, DEFAULT_WAIT_TIMEOUT_S
@@ -39,11 +42,33 @@ T = TypeVar("T")
 P = ParamSpec("P")
 
 
-class LoopThread:
-    """Owns an asyncio loop running on its own daemon thread until :meth:`stop`."""
+class Runner(Protocol):
+    """What the facade needs of a runner: run one coroutine for a blocking caller."""
 
-    def __init__(self, name: str = "servobus-loop") -> None:
-        self.loop = fastloop.new_event_loop()  # uvloop with servobus[fast] (issue 22)
+    def run(self, coro: Coroutine[Any, Any, T], timeout: float | None = None) -> T:
+        """The coroutine's result (its exception propagates); ``timeout`` is a safety net."""
+        ...
+
+    def stop(self) -> None:
+        """Release the loop (and its thread); idempotent."""
+        ...
+
+    @property
+    def stopped(self) -> bool:
+        ...
+
+
+class LoopThread:
+    """Owns an asyncio loop running on its own daemon thread until :meth:`stop`.
+
+    ``loop``: run this (not running) loop instead of a new one - how an
+    :class:`~servobus.axis.inline.InlineRunner` hands its loop over.
+    """
+
+    def __init__(self, name: str = "servobus-loop",
+                 loop: asyncio.AbstractEventLoop | None = None) -> None:
+        # uvloop with servobus[fast] (issue 22)
+        self.loop = fastloop.new_event_loop() if loop is None else loop
         self._started = threading.Event()
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
@@ -138,14 +163,14 @@ class _Call:
 
 
 class Axis:
-    """Synchronous facade over any AsyncAxis: the same methods, run on the facade's loop thread.
+    """Synchronous facade over any AsyncAxis: the same methods, run by the facade's runner.
 
     Each method has the AsyncAxis method's parameters and returns what its coroutine returns
     (module docstring). ``sibling`` returns an Axis sharing the connection. Hooks registered
-    through the facade run on the loop thread. A protocol's own methods: ``axis.extra``.
+    through the facade run where the loop runs. A protocol's own methods: ``axis.extra``.
     """
 
-    def __init__(self, core: AsyncAxis, runner: LoopThread, *, owns_runner: bool = True,
+    def __init__(self, core: AsyncAxis, runner: Runner, *, owns_runner: bool = True,
                  call_timeout: float | None = None) -> None:
         self._core = core
         self._runner = runner
@@ -161,7 +186,8 @@ class Axis:
     # ------------------------------------------------------------- beyond the Axis API
     @property
     def core(self) -> AsyncAxis:
-        """The async core (for use on the facade's loop thread only)."""
+        """The async core (for use where the facade's loop runs only: its coroutines are bound
+        to that loop)."""
         return self._core
 
     @property
@@ -343,7 +369,7 @@ class Axis:
 
     # ------------------------------------------------------------- connection
     def add_trace(self, hook: AxisTraceHook) -> None:
-        """``hook(direction, item, t)``; it runs on the facade's loop thread."""
+        """``hook(direction, item, t)``; it runs where the loop runs (module docstring)."""
         return self._call(self._core.add_trace, hook)
 
     def sync_group(self) -> object | None:

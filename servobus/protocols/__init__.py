@@ -43,6 +43,10 @@ class ProtocolSpec:
     params: str | None = None
     #: CLI shortcuts: option name -> URL template (``("can", "dyncan+{interface}://{channel}")``).
     shortcuts: tuple[tuple[str, str], ...] = ()
+    #: Schemes (of ``schemes`` or ``serial_schemes``) whose axes need no event loop between
+    #: calls - one connection that speaks only when asked, no task left running - so the
+    #: sync facade may run their calls on the caller's thread (servobus.axis.inline).
+    inline_schemes: tuple[str, ...] = ()
 
     @classmethod
     def conventional(cls, name: str, family: str, **fields: Any) -> ProtocolSpec:

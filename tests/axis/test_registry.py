@@ -15,6 +15,7 @@ import pytest
 
 from servobus import families
 from servobus.axis import registry
+from servobus.axis.url import parse_url
 from servobus.protocols import ProtocolSpec
 
 PACKAGES = sorted(p.name for p in Path(registry.importlib.import_module(
@@ -85,3 +86,14 @@ def test_a_protocol_package_loads_no_codec_or_client() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, timeout=60).stdout
     assert ast.literal_eval(out) == [f"servobus.protocols.{name}" for name in PACKAGES]
+
+
+@pytest.mark.parametrize(("url", "inline"), [
+    ("enip://192.168.50.18", True), ("socket://127.0.0.1:4001", True),
+    ("tcp://127.0.0.1:4001", True), ("sim://dyn232", False), ("sim://enip", False),
+    ("/dev/ttyUSB0", False), ("dyn232+socket://127.0.0.1:4001", False),
+    ("dyncan+virtual://bus", False), ("easycan+virtual://bus", False),
+    ("modbus:///dev/ttyUSB0", False)])
+def test_which_links_run_inline(url: str, inline: bool) -> None:
+    """Issue 22: the protocols name the schemes whose axes need no loop between calls."""
+    assert registry.runs_inline(parse_url(url)) is inline

@@ -1,5 +1,6 @@
-"""The sync facade's hop to its loop thread (issue 22: a bare lock per call, not a
-concurrent Future): results, errors, and a give-up that cancels the coroutine on the loop."""
+"""The sync facade's runners (issue 22): the hop to a loop thread (a bare lock per call, not
+a concurrent Future) and the inline runner (the call on the caller's own thread) give the
+same results and errors, and a give-up that cancels the coroutine on the loop."""
 
 from __future__ import annotations
 
@@ -8,18 +9,19 @@ import threading
 
 import pytest
 
-from servobus.axis.sync import LoopThread
+from servobus.axis.inline import InlineRunner
+from servobus.axis.sync import LoopThread, Runner
 from servobus.errors import DriveTimeout
 
 
-@pytest.fixture
-def runner():  # type: ignore[no-untyped-def]
-    r = LoopThread()
+@pytest.fixture(params=["thread", "inline"])
+def runner(request: pytest.FixtureRequest):  # type: ignore[no-untyped-def]
+    r = LoopThread() if request.param == "thread" else InlineRunner()
     yield r
     r.stop()
 
 
-def test_result_and_error_cross_the_hop(runner: LoopThread) -> None:
+def test_result_and_error_cross_the_hop(runner: Runner) -> None:
     async def answer() -> int:
         return 42
 
@@ -31,7 +33,7 @@ def test_result_and_error_cross_the_hop(runner: LoopThread) -> None:
         runner.run(fail())
 
 
-def test_timeout_cancels_the_coroutine_on_the_loop(runner: LoopThread) -> None:
+def test_timeout_cancels_the_coroutine_on_the_loop(runner: Runner) -> None:
     cancelled = threading.Event()
     started = threading.Event()
 
@@ -54,7 +56,7 @@ def test_timeout_cancels_the_coroutine_on_the_loop(runner: LoopThread) -> None:
     assert runner.run(after()) == "next call runs"
 
 
-def test_refused_from_its_own_loop_thread(runner: LoopThread) -> None:
+def test_refused_from_its_own_loop_thread(runner: Runner) -> None:
     async def inner() -> None:
         return None
 
@@ -69,7 +71,7 @@ def test_refused_from_its_own_loop_thread(runner: LoopThread) -> None:
     assert "own loop thread" in runner.run(outer())
 
 
-def test_closed_runner_refuses(runner: LoopThread) -> None:
+def test_closed_runner_refuses(runner: Runner) -> None:
     runner.stop()
 
     async def nothing() -> None:

@@ -10,5 +10,8 @@ from servobus.protocols import ProtocolSpec
 #: pyserial's URL handlers (serial.serial_for_url) are bare serial ports: DYN232M.
 PYSERIAL_SCHEMES = ("socket", "tcp", "loop", "rfc2217", "spy", "alt", "hwgrep", "cp2110")
 
+#: A serial-to-Ethernet bridge: one TCP connection, a drive that speaks only when asked
+#: (issue 22: the sync facade runs these calls on the caller's thread).
 SPEC = ProtocolSpec.conventional("dyn232", "dmm-dyn2", sim_aliases=("dyn2", "dc2", "dyn4"),
-                                  serial_schemes=("", *PYSERIAL_SCHEMES))
+                                  serial_schemes=("", *PYSERIAL_SCHEMES),
+                                  inline_schemes=("socket", "tcp"))

@@ -9,5 +9,8 @@ Identity values, quirks) is ``servobus.families.dyn5.params``.
 
 from servobus.protocols import ProtocolSpec
 
+#: Explicit messaging speaks only when asked (Class 1 I/O runs inside ``monitor_io``'s call,
+#: or on an AsyncAxis): the sync facade runs ``enip://`` calls on the caller's thread.
 SPEC = ProtocolSpec.conventional("enip", "dmm-dyn5",
-                                  params="servobus.families.dyn5.family:PARAM_NAMES")
+                                  params="servobus.families.dyn5.family:PARAM_NAMES",
+                                  inline_schemes=("enip",))

@@ -1,0 +1,201 @@
+"""The sync facade on the caller's own thread, for a link that needs no loop between calls.
+
+Decision (issue 22, the fast path for synchronous callers): a sync call over a link that
+speaks only when asked - a DYN5 over EtherNet/IP, a DYN232M behind a serial-to-Ethernet
+bridge: the schemes a protocol lists in its spec's ``inline_schemes`` - runs the same async
+core on the calling thread. The call's coroutine becomes a task of a private asyncio loop,
+and the call turns that loop (``_run_once``: wait on the sockets up to the next timer, run
+what is ready) until the task is done. Between calls nothing runs, and nothing needs to:
+what arrives meanwhile (a late reply) waits in the kernel and is read first by the next
+call, by the same rules. So there is no thread hop per call, and no second transaction
+path: deadlines, retries, late replies and checksums are the core's, as on the loop thread.
+Measured (benchmarks/bench_enip.py, "servobus sync"): about 1.3x the reads/s of the loop
+thread hop, on par with or above pycomm3.
+
+The runner hands its loop to a :class:`~servobus.axis.sync.LoopThread` for good - the facade
+then works exactly as without it - as soon as something needs the loop between calls or
+from elsewhere: a task the core left running after a call (or callbacks still pending), a
+call from a second thread, a call from a thread that runs an event loop of its own (a
+notebook). ``timeout`` and Ctrl-C cancel the call's task and let it unwind by its own rules
+(its reply, if it comes, is owed and dropped), as the loop thread does.
+
+``_run_once`` is asyncio's per-pass method (``BaseEventLoop``, CPython 3.4 onwards), not a
+public API: :func:`available` checks for it, and the loop thread is used where it is
+missing, on Windows, and with ``SERVOBUS_SYNC=thread`` in the environment (to compare, or
+to debug). The loop is asyncio's selector loop, not uvloop: no loop runs between calls, and
+a call costs less than uvloop's thread hop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import sys
+import threading
+from asyncio import events
+from collections.abc import Coroutine
+from typing import Any, TypeVar
+
+from servobus.axis.sync import LoopThread
+
+T = TypeVar("T")
+
+#: Environment variable: ``thread`` keeps every sync Axis on a loop thread.
+ENV = "SERVOBUS_SYNC"
+#: How long a cancelled call may take to unwind (its ``finally`` blocks) before the caller
+#: gets its exception anyway; the task then finishes on the loop thread.
+CANCEL_GRACE_S = 2.0
+#: Passes run after a call while callbacks are still ready (a future's done callbacks).
+_SETTLE_PASSES = 3
+
+
+def available() -> bool:
+    """The inline runner can run here (module docstring)."""
+    return (sys.platform != "win32" and callable(getattr(asyncio.BaseEventLoop, "_run_once", None))
+            and os.environ.get(ENV, "").strip().lower() != "thread")
+
+
+def _noop() -> None:
+    return None
+
+
+class InlineRunner:
+    """Runs each call on the calling thread until it hands the loop to a LoopThread."""
+
+    def __init__(self, name: str = "servobus-loop") -> None:
+        self.loop = asyncio.SelectorEventLoop()
+        self.loop.set_task_factory(self._task)
+        self._name = name
+        self._spawned: list[asyncio.Task[Any]] = []  # tasks the core created
+        self._lock = threading.Lock()  # held by the call in progress
+        self._owner = threading.get_ident()  # the thread that may call inline
+        self._thread: LoopThread | None = None
+        self._stopped = False
+
+    @property
+    def inline(self) -> bool:
+        """Calls still run on the calling thread (False once handed to a loop thread)."""
+        return self._thread is None and not self._stopped
+
+    @property
+    def stopped(self) -> bool:
+        return self._stopped
+
+    def _task(self, loop: asyncio.AbstractEventLoop, coro: Any,
+              **kwargs: Any) -> asyncio.Task[Any]:
+        task: asyncio.Task[Any] = asyncio.Task(coro, loop=loop, **kwargs)
+        self._spawned.append(task)
+        return task
+
+    def run(self, coro: Coroutine[Any, Any, T], timeout: float | None = None) -> T:
+        """Run ``coro`` to its result (exceptions propagate), on this thread while it can.
+
+        ``timeout`` (a safety net: the core enforces the deadlines) raises TimeoutError after
+        cancelling the coroutine, as :meth:`LoopThread.run` does.
+        """
+        thread = self._thread
+        if thread is not None:
+            return thread.run(coro, timeout)
+        if self._stopped:
+            coro.close()
+            raise RuntimeError("the connection is closed")
+        running = events._get_running_loop()
+        if running is self.loop:  # a hook or callback of this loop calling the facade
+            coro.close()
+            raise RuntimeError("sync facade called from its own loop thread (use the async API)")
+        if (running is not None or threading.get_ident() != self._owner
+                or not self._lock.acquire(blocking=False)):
+            return self._hand_over().run(coro, timeout)
+        try:
+            return self._drive(coro, timeout)
+        finally:
+            try:
+                if self._busy():
+                    self._start_thread()
+            finally:
+                self._lock.release()
+
+    def _drive(self, coro: Coroutine[Any, Any, T], timeout: float | None) -> T:
+        loop = self.loop
+        task: asyncio.Task[T] = asyncio.Task(coro, loop=loop)  # the call: not "spawned"
+        events._set_running_loop(loop)
+        try:
+            try:
+                if timeout is None:
+                    while not task.done():
+                        loop._run_once()  # type: ignore[attr-defined]
+                else:
+                    self._turn_until(task, loop.time() + timeout)
+                    if not task.done():
+                        raise TimeoutError(f"no result within {timeout} s")
+            except BaseException:
+                # the timeout above, or Ctrl-C in the selector wait or in a callback:
+                # cancel the call's task and let it unwind by its own rules
+                task.cancel()
+                self._turn_until(task, loop.time() + CANCEL_GRACE_S)
+                if task.done() and not task.cancelled():
+                    task.exception()  # retrieved: asyncio logs no "never retrieved"
+                elif not task.done():
+                    self._spawned.append(task)  # finishes on the loop thread
+                raise
+            n = 0
+            while loop._ready and n < _SETTLE_PASSES:  # type: ignore[attr-defined]
+                loop._run_once()  # type: ignore[attr-defined]
+                n += 1
+        finally:
+            events._set_running_loop(None)
+        return task.result()
+
+    def _turn_until(self, task: asyncio.Task[Any], end: float) -> None:
+        loop = self.loop
+        guard = loop.call_at(end, _noop)  # bounds the selector wait
+        try:
+            while not task.done() and loop.time() < end:
+                loop._run_once()  # type: ignore[attr-defined]
+        finally:
+            guard.cancel()
+
+    def _busy(self) -> bool:
+        """Something needs the loop between calls: a task still running, or callbacks."""
+        spawned = self._spawned
+        if spawned:
+            spawned[:] = [t for t in spawned if not t.done()]
+        return bool(spawned) or bool(self.loop._ready)  # type: ignore[attr-defined]
+
+    def _start_thread(self) -> LoopThread:
+        """Hand the loop to a LoopThread, for good (with the lock held, or stopped)."""
+        thread = self._thread
+        if thread is None:
+            self.loop.set_task_factory(None)
+            self._spawned.clear()
+            thread = self._thread = LoopThread(self._name, loop=self.loop)
+        return thread
+
+    def _hand_over(self) -> LoopThread:
+        """From another thread, or a caller with a loop of its own: wait for the call in
+        progress, then hand the loop over."""
+        with self._lock:
+            if self._stopped:
+                raise RuntimeError("the connection is closed")
+            return self._start_thread()
+
+    def stop(self) -> None:
+        """Close the loop (stop the loop thread, if it has one); idempotent."""
+        with self._lock:
+            if self._stopped:
+                return
+            self._stopped = True
+            thread = self._thread
+            if thread is not None:
+                thread.stop()
+                return
+            loop = self.loop
+            events._set_running_loop(loop)
+            try:
+                n = 0
+                while loop._ready and n < _SETTLE_PASSES:  # type: ignore[attr-defined]
+                    loop._run_once()  # type: ignore[attr-defined]
+                    n += 1
+            finally:
+                events._set_running_loop(None)
+            loop.close()

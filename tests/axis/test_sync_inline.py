@@ -1,0 +1,146 @@
+"""The inline runner (issue 22): a sync call on the caller's own thread, and the hand-over of
+its loop to a loop thread, for good, as soon as something needs the loop between calls or
+from elsewhere. tests/axis/test_sync_hop.py holds what it shares with the loop thread."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from collections.abc import Iterator
+
+import pytest
+
+from servobus.axis import inline
+from servobus.axis.inline import InlineRunner
+
+pytestmark = pytest.mark.timeout(60)
+WAIT_S = 10.0  # generous: only a hang or a lost hand-over reaches it
+
+
+@pytest.fixture
+def runner() -> Iterator[InlineRunner]:
+    r = InlineRunner()
+    yield r
+    r.stop()
+
+
+async def _here() -> int:
+    return threading.get_ident()
+
+
+def test_a_call_runs_on_the_calling_thread_and_starts_none(runner: InlineRunner) -> None:
+    threads = threading.active_count()
+    for _ in range(3):
+        assert runner.run(_here()) == threading.get_ident()
+    assert runner.inline and threading.active_count() == threads
+
+
+def test_timers_and_sockets_are_served_during_a_call(runner: InlineRunner) -> None:
+    async def round_trip() -> bytes:
+        server = await asyncio.start_server(_echo, "127.0.0.1", 0)
+        port = server.sockets[0].getsockname()[1]
+        try:
+            reader, writer = await asyncio.open_connection("127.0.0.1", port)
+            writer.write(b"ping")
+            await asyncio.sleep(0.01)  # a timer of the call's own (what a deadline is)
+            data = await reader.readexactly(4)
+            writer.close()
+            await writer.wait_closed()
+            return data
+        finally:
+            server.close()
+            await server.wait_closed()
+
+    assert runner.run(round_trip()) == b"ping"
+    assert runner.inline
+
+
+async def _echo(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+    writer.write(await reader.readexactly(4))
+    await writer.drain()
+    writer.close()
+
+
+def test_a_task_left_running_hands_the_loop_over(runner: InlineRunner) -> None:
+    """Background work the core starts goes on between calls, without another call."""
+    done = threading.Event()
+    go = threading.Event()
+
+    async def background() -> None:
+        while not go.is_set():
+            await asyncio.sleep(0.005)  # polls a threading.Event: the loop thread runs it
+        done.set()
+
+    async def start() -> None:
+        asyncio.get_running_loop().create_task(background())
+
+    runner.run(start())
+    assert not runner.inline
+    go.set()
+    assert done.wait(WAIT_S)
+    assert runner.run(_here()) != threading.get_ident()  # on the loop thread now
+
+
+def test_a_task_that_ends_within_the_call_keeps_it_inline(runner: InlineRunner) -> None:
+    async def helper() -> int:
+        return 7
+
+    async def call() -> int:
+        return await asyncio.get_running_loop().create_task(helper())
+
+    assert runner.run(call()) == 7
+    assert runner.inline
+
+
+def test_a_second_thread_hands_the_loop_over(runner: InlineRunner) -> None:
+    assert runner.run(_here()) == threading.get_ident()
+    result: list[int] = []
+    other = threading.Thread(target=lambda: result.append(runner.run(_here())))
+    other.start()
+    other.join(WAIT_S)
+    assert result and not runner.inline
+    assert result[0] not in (threading.get_ident(), other.ident)  # the loop thread's
+    assert runner.run(_here()) == result[0]  # the first thread's calls follow
+
+
+def test_a_caller_with_a_loop_of_its_own_hands_the_loop_over(runner: InlineRunner) -> None:
+    async def notebook_cell() -> int:  # Jupyter runs cells on a running loop
+        return runner.run(_here())
+
+    assert asyncio.run(notebook_cell()) != threading.get_ident()
+    assert not runner.inline
+
+
+def test_ctrl_c_in_a_wait_cancels_the_call_and_unwinds_it(runner: InlineRunner) -> None:
+    unwound = threading.Event()
+
+    def interrupt() -> None:
+        raise KeyboardInterrupt  # what the signal handler raises while the selector waits
+
+    async def wait_for_reply() -> None:
+        asyncio.get_running_loop().call_later(0.01, interrupt)
+        try:
+            await asyncio.Event().wait()
+        except asyncio.CancelledError:
+            unwound.set()  # the transaction's own cleanup (the reply is owed) runs here
+            raise
+
+    with pytest.raises(KeyboardInterrupt):
+        runner.run(wait_for_reply())
+    assert unwound.is_set()
+    assert runner.run(_here()) == threading.get_ident()  # the next call runs as before
+
+
+def test_stop_closes_the_loop_and_refuses_calls(runner: InlineRunner) -> None:
+    runner.run(_here())
+    runner.stop()
+    assert runner.loop.is_closed() and runner.stopped
+    coro = _here()
+    with pytest.raises(RuntimeError, match="closed"):
+        runner.run(coro)
+
+
+def test_servobus_sync_thread_turns_it_off(monkeypatch: pytest.MonkeyPatch) -> None:
+    assert inline.available()  # Linux, CPython: asyncio's loop has _run_once
+    monkeypatch.setenv(inline.ENV, "thread")
+    assert not inline.available()
