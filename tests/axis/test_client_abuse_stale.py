@@ -108,8 +108,10 @@ async def test_old_debts_of_other_kinds_expire_by_themselves(path: str) -> None:
     """A scan leaves a debt per absent id; once their quiet time is over they are given up
     without anyone reading those ids again (the receive path is back to its fast form)."""
     # The pings make the debts with their own 10 ms deadline; drive 0's reads get a roomy
-    # one, so a scheduling hiccup on a loaded machine cannot fail the read under test.
-    async with rig((0,), push=PATHS[path], timeout=0.25, retries=0,
+    # one, so a scheduling hiccup on a loaded machine cannot fail the read under test (250 ms
+    # did once, in a full run of the suite on 2 cores). The bound below: given up within a
+    # second of their quiet time (a stall of that loaded run's size must not fail it).
+    async with rig((0,), push=PATHS[path], timeout=1.0, retries=0,
                    late_reply_s=LATE_S / 3) as r:
         for drive_id in (5, 6, 7):
             assert not await r.axis(drive_id).ping(timeout=0.01)
@@ -117,7 +119,7 @@ async def test_old_debts_of_other_kinds_expire_by_themselves(path: str) -> None:
         t0 = time.monotonic()
         while r.client.late_replies:
             await r.axis(0).position()  # another kind: never waits
-            assert time.monotonic() - t0 < LATE_S + MARGIN_S
+            assert time.monotonic() - t0 < LATE_S + 1.0
         assert r.client.late_replies.given_up == 3
 
 
