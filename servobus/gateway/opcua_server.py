@@ -43,7 +43,7 @@ from servobus.gateway.commands import Command, Commander, Refused
 from servobus.gateway.opcua_model import SERVOBUS_URI, AxisNodes, build_model
 from servobus.gateway.sampler import Sample
 from servobus.gateway.source import Machine
-from servobus.gateway.users import Users
+from servobus.gateway.users import LoginBudget, Users
 from servobus.transport.address import is_loopback
 
 log = logging.getLogger(__name__)
@@ -77,16 +77,24 @@ class GatewayRules:
 
 
 class FileUsers(UserManager):  # type: ignore[misc]
-    """Anonymous sessions are read-only users; a name and password must be in the file."""
+    """Anonymous sessions are read-only users; a name and password must be in the file.
 
-    def __init__(self, users: Users) -> None:
+    asyncua calls :meth:`get_user` on the event loop and waits for it, so each password check
+    (a scrypt hash) stalls the loop: ``budget`` refuses logins beyond its rate unhashed."""
+
+    def __init__(self, users: Users, budget: LoginBudget | None = None) -> None:
         self.users = users
+        self.budget = LoginBudget() if budget is None else budget
 
     def get_user(self, iserver: Any, username: str | None = None, password: str | None = None,
                  certificate: Any = None) -> User | None:
         if username is None:  # certificate tokens are not offered: anonymous
             return User(role=UserRole.Anonymous)
-        if username is not None and self.users.verify(username, password):
+        if not self.budget.take():
+            log.warning("OPC UA login refused for user %r: more than %g password checks a "
+                        "second", username, self.budget.per_second)
+            return None
+        if self.users.verify(username, password):
             return User(role=UserRole.User, name=username)
         log.warning("OPC UA login refused for user %r", username)
         return None

@@ -5,7 +5,8 @@ Decisions: JSON (one object per user, readable and diffable), scrypt (hashlib, n
 package) with n=2**14, r=8, p=1 and a 16-byte random salt per user; the file is written
 atomically with mode 0600 (it is not a secret, but nobody else needs to read it).
 Passwords are compared in constant time; an unknown name costs the same hash as a known one,
-so a probe cannot tell the names apart by timing.
+so a probe cannot tell the names apart by timing. A :class:`LoginBudget` bounds how many
+password checks run per second where they run on an event loop (asyncua's logins do).
 """
 
 from __future__ import annotations
@@ -17,6 +18,8 @@ import os
 import re
 import secrets
 import tempfile
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,6 +33,36 @@ MAX_FILE_BYTES = 1 << 20
 NAME = re.compile(r"[A-Za-z0-9_.@-]{1,64}")
 MIN_PASSWORD = 8
 MAX_PASSWORD = 1024
+
+
+#: Password checks per second, and in one burst, that a LoginBudget allows (decision, issue 22
+#: follow-up of the gateway's known limit): one check is a scrypt hash, 30-50 ms of CPU on the
+#: project's machine, and asyncua runs it on the gateway's event loop. 4 a second keep a flood
+#: of logins to a fifth of the loop's time; 8 at once cover a plant's clients reconnecting.
+LOGINS_PER_S = 4.0
+LOGIN_BURST = 8
+
+
+class LoginBudget:
+    """A token bucket of password checks: :meth:`take` is False when the budget is spent,
+    and the login is then refused without hashing (``clock`` for tests)."""
+
+    def __init__(self, per_second: float = LOGINS_PER_S, burst: int = LOGIN_BURST,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.per_second = per_second
+        self._burst = float(burst)
+        self._clock = clock
+        self._tokens = self._burst
+        self._at = clock()
+
+    def take(self) -> bool:
+        now = self._clock()
+        self._tokens = min(self._burst, self._tokens + (now - self._at) * self.per_second)
+        self._at = now
+        if self._tokens < 1.0:
+            return False
+        self._tokens -= 1.0
+        return True
 
 
 class UsersFileError(ServobusError):

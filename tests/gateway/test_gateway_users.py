@@ -5,11 +5,14 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 
 from servobus.cli.failures import describe
 from servobus.cli.main import cli
-from servobus.gateway.users import Users
+from servobus.gateway import users as users_module
+from servobus.gateway.opcua_server import FileUsers
+from servobus.gateway.users import LoginBudget, Users
 
 
 def run(*args: str, stdin: str | None = None) -> tuple[int, str]:
@@ -57,3 +60,27 @@ def test_bad_names_passwords_and_files_are_refused(tmp_path: Path) -> None:
     assert code == 2 and "not a servobus users file" in out
     code, _ = run("users", "remove", "ghost", "--file", str(tmp_path / "none.json"))
     assert code == 2
+
+
+def test_logins_beyond_the_budget_are_refused_without_hashing(
+        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    """A flood of OPC UA logins costs the gateway's loop at most the budget's scrypt hashes."""
+    users = Users()
+    users.add("op", "correct horse")
+    hashes: list[str] = []
+    real = users_module._hash
+    monkeypatch.setattr(users_module, "_hash",
+                        lambda *a: (hashes.append("h"), real(*a))[1])
+    now = [100.0]
+    manager = FileUsers(users, LoginBudget(per_second=2.0, burst=2, clock=lambda: now[0]))
+    assert manager.get_user(None, "op", "correct horse") is not None
+    assert manager.get_user(None, "op", "wrong password") is None
+    assert len(hashes) == 2
+    with caplog.at_level("WARNING", logger="servobus.gateway.opcua_server"):
+        assert manager.get_user(None, "op", "correct horse") is None  # spent: not hashed
+    assert len(hashes) == 2 and "password checks a second" in caplog.text
+    assert manager.get_user(None) is not None  # anonymous (read-only) costs nothing
+    now[0] += 0.5  # one check earned back
+    assert manager.get_user(None, "op", "correct horse") is not None
+    assert manager.get_user(None, "op", "correct horse") is None
+    assert len(hashes) == 3
