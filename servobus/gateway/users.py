@@ -35,8 +35,8 @@ MIN_PASSWORD = 8
 MAX_PASSWORD = 1024
 
 
-#: Password checks per second, and in one burst, that a LoginBudget allows (decision, issue 22
-#: follow-up of the gateway's known limit): one check is a scrypt hash, 30-50 ms of CPU on the
+#: Password checks per second, and in one burst, that a LoginBudget allows (decision; it was
+#: a known limit of the gateway, issue 21): one check is a scrypt hash, 30-50 ms of CPU on the
 #: project's machine, and asyncua runs it on the gateway's event loop. 4 a second keep a flood
 #: of logins to a fifth of the loop's time; 8 at once cover a plant's clients reconnecting.
 LOGINS_PER_S = 4.0
