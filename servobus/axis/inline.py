@@ -16,8 +16,10 @@ The runner hands its loop to a :class:`~servobus.axis.sync.LoopThread` for good 
 then works exactly as without it - as soon as something needs the loop between calls or
 from elsewhere: a task the core left running after a call (or callbacks still pending), a
 call from a second thread, a call from a thread that runs an event loop of its own (a
-notebook). ``timeout`` and Ctrl-C cancel the call's task and let it unwind by its own rules
-(its reply, if it comes, is owed and dropped), as the loop thread does.
+notebook). A second thread never waits for a call in progress (a ``stop()`` during a long
+``wait_idle``): that call lets go of the loop at once and finishes on the loop thread.
+``timeout`` and Ctrl-C cancel the call's task and let it unwind by its own rules (its
+reply, if it comes, is owed and dropped), as the loop thread does.
 
 ``_run_once`` is asyncio's per-pass method (``BaseEventLoop``, CPython 3.4 onwards), not a
 public API: :func:`available` checks for it, and the loop thread is used where it is
@@ -29,6 +31,7 @@ a call costs less than uvloop's thread hop.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import os
 import sys
 import threading
@@ -70,6 +73,7 @@ class InlineRunner:
         self._lock = threading.Lock()  # held by the call in progress
         self._owner = threading.get_ident()  # the thread that may call inline
         self._thread: LoopThread | None = None
+        self._wanted = False  # another thread waits for the loop: the owner lets go of it
         self._stopped = False
 
     @property
@@ -106,54 +110,86 @@ class InlineRunner:
         if (running is not None or threading.get_ident() != self._owner
                 or not self._lock.acquire(blocking=False)):
             return self._hand_over().run(coro, timeout)
-        try:
-            return self._drive(coro, timeout)
-        finally:
-            try:
-                if self._busy():
-                    self._start_thread()
-            finally:
-                self._lock.release()
+        return self._drive(coro, timeout)  # releases the lock
 
     def _drive(self, coro: Coroutine[Any, Any, T], timeout: float | None) -> T:
+        """The call on this thread, the lock held (released here: at the end, or as soon as
+        another thread wants the loop - the call then finishes on the loop thread)."""
         loop = self.loop
         task: asyncio.Task[T] = asyncio.Task(coro, loop=loop)  # the call: not "spawned"
+        end = None if timeout is None else loop.time() + timeout
+        locked = True
         events._set_running_loop(loop)
         try:
             try:
-                if timeout is None:
-                    while not task.done():
-                        loop._run_once()  # type: ignore[attr-defined]
-                else:
-                    self._turn_until(task, loop.time() + timeout)
-                    if not task.done():
+                self._turn(task, end)
+                if not task.done():
+                    if end is not None and loop.time() >= end:
                         raise TimeoutError(f"no result within {timeout} s")
+                    # another thread calls (self._wanted): it must not wait for this call
+                    thread = self._start_thread()
+                    events._set_running_loop(None)
+                    self._lock.release()
+                    locked = False
+                    return self._finish(thread, task, end, timeout)
             except BaseException:
-                # the timeout above, or Ctrl-C in the selector wait or in a callback:
-                # cancel the call's task and let it unwind by its own rules
-                task.cancel()
-                self._turn_until(task, loop.time() + CANCEL_GRACE_S)
-                if task.done() and not task.cancelled():
-                    task.exception()  # retrieved: asyncio logs no "never retrieved"
-                elif not task.done():
-                    self._spawned.append(task)  # finishes on the loop thread
+                if locked:
+                    # the timeout above, or Ctrl-C in the selector wait or in a callback:
+                    # cancel the call's task and let it unwind by its own rules
+                    task.cancel()
+                    self._turn(task, loop.time() + CANCEL_GRACE_S, whole=True)
+                    if task.done() and not task.cancelled():
+                        task.exception()  # retrieved: asyncio logs no "never retrieved"
+                    elif not task.done():
+                        self._spawned.append(task)  # finishes on the loop thread
                 raise
             n = 0
             while loop._ready and n < _SETTLE_PASSES:  # type: ignore[attr-defined]
                 loop._run_once()  # type: ignore[attr-defined]
                 n += 1
         finally:
-            events._set_running_loop(None)
+            if locked:
+                events._set_running_loop(None)
+                try:
+                    if self._busy():
+                        self._start_thread()
+                finally:
+                    self._lock.release()
         return task.result()
 
-    def _turn_until(self, task: asyncio.Task[Any], end: float) -> None:
+    def _turn(self, task: asyncio.Task[Any], end: float | None, *, whole: bool = False
+              ) -> None:
+        """Turn the loop until ``task`` is done, ``end`` (loop time) passed, or - unless
+        ``whole`` - another thread wants the loop."""
         loop = self.loop
-        guard = loop.call_at(end, _noop)  # bounds the selector wait
+        guard = None if end is None else loop.call_at(end, _noop)  # bounds the selector wait
         try:
-            while not task.done() and loop.time() < end:
+            while not task.done() and (whole or not self._wanted):
+                if end is not None and loop.time() >= end:
+                    return
                 loop._run_once()  # type: ignore[attr-defined]
         finally:
-            guard.cancel()
+            if guard is not None:
+                guard.cancel()
+
+    def _finish(self, thread: LoopThread, task: asyncio.Task[T], end: float | None,
+                timeout: float | None) -> T:
+        """Wait for the call's task, now on the loop thread (a handover in mid-call)."""
+        done = threading.Event()
+
+        def watch() -> None:
+            task.add_done_callback(lambda _task: done.set())
+
+        self.loop.call_soon_threadsafe(watch)
+        try:
+            left = None if end is None else max(0.0, end - self.loop.time())
+            if not done.wait(left):
+                raise TimeoutError(f"no result within {timeout} s")
+        except BaseException:  # the timeout above, or Ctrl-C while waiting
+            with contextlib.suppress(RuntimeError):
+                self.loop.call_soon_threadsafe(task.cancel)
+            raise
+        return task.result()
 
     def _busy(self) -> bool:
         """Something needs the loop between calls: a task still running, or callbacks."""
@@ -172,16 +208,32 @@ class InlineRunner:
         return thread
 
     def _hand_over(self) -> LoopThread:
-        """From another thread, or a caller with a loop of its own: wait for the call in
-        progress, then hand the loop over."""
-        with self._lock:
-            if self._stopped:
+        """From another thread, or a caller with a loop of its own: the loop goes to a loop
+        thread now - a call in progress on the owner's thread is asked to let go of it (it
+        finishes on the loop thread) rather than waited for."""
+        if not self._lock.acquire(blocking=False):
+            self._wanted = True
+            with contextlib.suppress(RuntimeError):  # closed meanwhile: said below
+                self.loop.call_soon_threadsafe(_noop)  # wakes the owner's selector wait
+            self._lock.acquire()
+        try:
+            if self._thread is None and self._stopped:
                 raise RuntimeError("the connection is closed")
             return self._start_thread()
+        finally:
+            self._lock.release()
 
     def stop(self) -> None:
-        """Close the loop (stop the loop thread, if it has one); idempotent."""
-        with self._lock:
+        """Close the loop (stop the loop thread, if it has one); idempotent. A call in
+        progress on the owner's thread lets go of the loop first, as for another thread."""
+        if events._get_running_loop() is self.loop:
+            raise RuntimeError("sync facade stopped from its own loop thread (use the async API)")
+        if not self._lock.acquire(blocking=False):
+            self._wanted = True
+            with contextlib.suppress(RuntimeError):
+                self.loop.call_soon_threadsafe(_noop)
+            self._lock.acquire()
+        try:
             if self._stopped:
                 return
             self._stopped = True
@@ -199,3 +251,5 @@ class InlineRunner:
             finally:
                 events._set_running_loop(None)
             loop.close()
+        finally:
+            self._lock.release()

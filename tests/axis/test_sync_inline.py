@@ -103,6 +103,64 @@ def test_a_second_thread_hands_the_loop_over(runner: InlineRunner) -> None:
     assert runner.run(_here()) == result[0]  # the first thread's calls follow
 
 
+def test_a_second_thread_does_not_wait_for_a_call_in_progress(runner: InlineRunner) -> None:
+    """A long call (a wait_idle, a monitor) on the owner's thread lets go of the loop when
+    another thread calls (a stop!): the other call runs now, the long one finishes after."""
+    waiting = threading.Event()
+    box: list[asyncio.Event] = []
+
+    async def long_call() -> str:
+        box.append(asyncio.Event())
+        waiting.set()
+        await box[0].wait()
+        return "released by the other thread's call"
+
+    async def release() -> int:
+        box[0].set()
+        return threading.get_ident()
+
+    result: list[int] = []
+
+    def other() -> None:
+        assert waiting.wait(WAIT_S)
+        result.append(runner.run(release()))
+
+    helper = threading.Thread(target=other)
+    helper.start()
+    try:
+        assert runner.run(long_call()) == "released by the other thread's call"
+    finally:
+        helper.join(WAIT_S)
+    assert result and not runner.inline
+    assert runner.run(_here()) == result[0]  # both on the loop thread from now on
+
+
+def test_a_timeout_holds_after_a_hand_over_in_mid_call(runner: InlineRunner) -> None:
+    waiting = threading.Event()
+    cancelled = threading.Event()
+
+    async def hang() -> None:
+        waiting.set()
+        try:
+            await asyncio.Event().wait()
+        except asyncio.CancelledError:
+            cancelled.set()
+            raise
+
+    def other() -> None:
+        assert waiting.wait(WAIT_S)
+        runner.run(_here())  # takes the loop to a loop thread while hang() waits
+
+    helper = threading.Thread(target=other)
+    helper.start()
+    try:
+        with pytest.raises(TimeoutError):
+            runner.run(hang(), timeout=1.0)
+    finally:
+        helper.join(WAIT_S)
+    assert not runner.inline and cancelled.wait(WAIT_S)
+
+
 def test_a_caller_with_a_loop_of_its_own_hands_the_loop_over(runner: InlineRunner) -> None:
     async def notebook_cell() -> int:  # Jupyter runs cells on a running loop
         return runner.run(_here())
