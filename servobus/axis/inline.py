@@ -162,6 +162,10 @@ class InlineRunner:
         """Turn the loop until ``task`` is done, ``end`` (loop time) passed, or - unless
         ``whole`` - another thread wants the loop."""
         loop = self.loop
+        if end is None and not whole:  # every call without a safety-net timeout
+            while not task.done() and not self._wanted:
+                loop._run_once()  # type: ignore[attr-defined]
+            return
         guard = None if end is None else loop.call_at(end, _noop)  # bounds the selector wait
         try:
             while not task.done() and (whole or not self._wanted):
