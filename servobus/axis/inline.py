@@ -50,6 +50,8 @@ ENV = "SERVOBUS_SYNC"
 CANCEL_GRACE_S = 2.0
 #: Passes run after a call while callbacks are still ready (a future's done callbacks).
 _SETTLE_PASSES = 3
+#: A call that finishes on the loop thread checks this often whether the runner was stopped.
+_STOP_CHECK_S = 0.25
 
 
 def available() -> bool:
@@ -110,6 +112,9 @@ class InlineRunner:
         if (running is not None or threading.get_ident() != self._owner
                 or not self._lock.acquire(blocking=False)):
             return self._hand_over().run(coro, timeout)
+        if self._thread is not None or self._stopped:  # handed over or stopped meanwhile
+            self._lock.release()
+            return self.run(coro, timeout)
         return self._drive(coro, timeout)  # releases the lock
 
     def _drive(self, coro: Coroutine[Any, Any, T], timeout: float | None) -> T:
@@ -186,9 +191,13 @@ class InlineRunner:
 
         self.loop.call_soon_threadsafe(watch)
         try:
-            left = None if end is None else max(0.0, end - self.loop.time())
-            if not done.wait(left):
-                raise TimeoutError(f"no result within {timeout} s")
+            # in slices: a stop() meanwhile (the loop thread gone) must not leave this hanging
+            while not done.wait(_STOP_CHECK_S if end is None
+                                else min(_STOP_CHECK_S, max(0.0, end - self.loop.time()))):
+                if self._stopped:
+                    raise RuntimeError("the connection was closed during the call")
+                if end is not None and self.loop.time() >= end:
+                    raise TimeoutError(f"no result within {timeout} s")
         except BaseException:  # the timeout above, or Ctrl-C while waiting
             with contextlib.suppress(RuntimeError):
                 self.loop.call_soon_threadsafe(task.cancel)

@@ -161,6 +161,28 @@ def test_a_timeout_holds_after_a_hand_over_in_mid_call(runner: InlineRunner) -> 
     assert not runner.inline and cancelled.wait(WAIT_S)
 
 
+def test_a_stop_from_another_thread_ends_a_call_in_progress(runner: InlineRunner) -> None:
+    """A call is not left waiting on a loop that another thread stopped under it."""
+    waiting = threading.Event()
+
+    async def forever() -> None:
+        waiting.set()
+        await asyncio.Event().wait()
+
+    def other() -> None:
+        assert waiting.wait(WAIT_S)
+        runner.stop()
+
+    helper = threading.Thread(target=other)
+    helper.start()
+    try:
+        with pytest.raises(RuntimeError, match="closed"):
+            runner.run(forever())
+    finally:
+        helper.join(WAIT_S)
+    assert runner.stopped
+
+
 def test_a_caller_with_a_loop_of_its_own_hands_the_loop_over(runner: InlineRunner) -> None:
     async def notebook_cell() -> int:  # Jupyter runs cells on a running loop
         return runner.run(_here())
