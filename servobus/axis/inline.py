@@ -132,11 +132,11 @@ class InlineRunner:
                     if end is not None and loop.time() >= end:
                         raise TimeoutError(f"no result within {timeout} s")
                     # another thread calls (self._wanted): it must not wait for this call
-                    thread = self._start_thread()
+                    self._start_thread()
                     events._set_running_loop(None)
                     self._lock.release()
                     locked = False
-                    return self._finish(thread, task, end, timeout)
+                    return self._finish(task, end, timeout)
             except BaseException:
                 if locked:
                     # the timeout above, or Ctrl-C in the selector wait or in a callback:
@@ -148,10 +148,7 @@ class InlineRunner:
                     elif not task.done():
                         self._spawned.append(task)  # finishes on the loop thread
                 raise
-            n = 0
-            while loop._ready and n < _SETTLE_PASSES:  # type: ignore[attr-defined]
-                loop._run_once()  # type: ignore[attr-defined]
-                n += 1
+            self._settle()
         finally:
             if locked:
                 events._set_running_loop(None)
@@ -181,8 +178,7 @@ class InlineRunner:
             if guard is not None:
                 guard.cancel()
 
-    def _finish(self, thread: LoopThread, task: asyncio.Task[T], end: float | None,
-                timeout: float | None) -> T:
+    def _finish(self, task: asyncio.Task[T], end: float | None, timeout: float | None) -> T:
         """Wait for the call's task, now on the loop thread (a handover in mid-call)."""
         done = threading.Event()
 
@@ -220,15 +216,27 @@ class InlineRunner:
             thread = self._thread = LoopThread(self._name, loop=self.loop)
         return thread
 
-    def _hand_over(self) -> LoopThread:
-        """From another thread, or a caller with a loop of its own: the loop goes to a loop
-        thread now - a call in progress on the owner's thread is asked to let go of it (it
-        finishes on the loop thread) rather than waited for."""
+    def _settle(self) -> None:
+        """Run the callbacks still ready after a call (a few passes at most)."""
+        loop = self.loop
+        n = 0
+        while loop._ready and n < _SETTLE_PASSES:  # type: ignore[attr-defined]
+            loop._run_once()  # type: ignore[attr-defined]
+            n += 1
+
+    def _take_lock(self) -> None:
+        """Take the lock from another thread: a call in progress on the owner's thread is
+        asked to let go of the loop (it finishes on the loop thread), not waited for."""
         if not self._lock.acquire(blocking=False):
             self._wanted = True
-            with contextlib.suppress(RuntimeError):  # closed meanwhile: said below
+            with contextlib.suppress(RuntimeError):  # closed meanwhile: the caller says so
                 self.loop.call_soon_threadsafe(_noop)  # wakes the owner's selector wait
             self._lock.acquire()
+
+    def _hand_over(self) -> LoopThread:
+        """From another thread, or a caller with a loop of its own: the loop goes to a loop
+        thread now."""
+        self._take_lock()
         try:
             if self._thread is None and self._stopped:
                 raise RuntimeError("the connection is closed")
@@ -241,11 +249,7 @@ class InlineRunner:
         progress on the owner's thread lets go of the loop first, as for another thread."""
         if events._get_running_loop() is self.loop:
             raise RuntimeError("sync facade stopped from its own loop thread (use the async API)")
-        if not self._lock.acquire(blocking=False):
-            self._wanted = True
-            with contextlib.suppress(RuntimeError):
-                self.loop.call_soon_threadsafe(_noop)
-            self._lock.acquire()
+        self._take_lock()
         try:
             if self._stopped:
                 return
@@ -257,10 +261,7 @@ class InlineRunner:
             loop = self.loop
             events._set_running_loop(loop)
             try:
-                n = 0
-                while loop._ready and n < _SETTLE_PASSES:  # type: ignore[attr-defined]
-                    loop._run_once()  # type: ignore[attr-defined]
-                    n += 1
+                self._settle()
             finally:
                 events._set_running_loop(None)
             loop.close()

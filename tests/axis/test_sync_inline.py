@@ -64,19 +64,19 @@ async def _echo(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> N
 def test_a_task_left_running_hands_the_loop_over(runner: InlineRunner) -> None:
     """Background work the core starts goes on between calls, without another call."""
     done = threading.Event()
-    go = threading.Event()
+    go: list[asyncio.Event] = []
 
     async def background() -> None:
-        while not go.is_set():
-            await asyncio.sleep(0.005)  # polls a threading.Event: the loop thread runs it
+        await go[0].wait()
         done.set()
 
     async def start() -> None:
+        go.append(asyncio.Event())
         asyncio.get_running_loop().create_task(background())
 
     runner.run(start())
     assert not runner.inline
-    go.set()
+    runner.loop.call_soon_threadsafe(go[0].set)  # runs only if a thread turns the loop now
     assert done.wait(WAIT_S)
     assert runner.run(_here()) != threading.get_ident()  # on the loop thread now
 
