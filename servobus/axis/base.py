@@ -69,6 +69,11 @@ def check_int(name: str, value: object) -> int:
 class AsyncAxis(ABC):
     """One drive on one connection. Every I/O method is a coroutine."""
 
+    #: The axis may turn for ever (a spindle, a conveyor): ``?continuous=1`` on its URL or
+    #: ``continuous = true`` in a machine file. Only then is open-ended motion (constant
+    #: speed, a speed-mode register write) allowed without a lease (docs/safety.md).
+    continuous: bool = False
+
     # ------------------------------------------------------------- identity
     @property
     @abstractmethod

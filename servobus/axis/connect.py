@@ -10,12 +10,15 @@ protocol. ``url=None`` opens the built-in virtual drive, :data:`DEFAULT_URL`.
 
 from __future__ import annotations
 
+import dataclasses
+from types import MappingProxyType
 from typing import Any
 
 from servobus.axis import inline, registry
 from servobus.axis.base import AsyncAxis
 from servobus.axis.sync import Axis, LoopThread, Runner
-from servobus.axis.url import parse_url
+from servobus.axis.url import DriveUrl, parse_url
+from servobus.errors import ArgumentRangeError
 
 DEFAULT_URL = "sim://dyn232"
 
@@ -28,8 +31,30 @@ async def connect_async(url: str | None = None, *, drive_id: int | None = None,
     docs/axis.md has the table. Every argument is checked before anything is opened.
     """
     parsed = parse_url(DEFAULT_URL if url is None else url)
+    parsed, continuous = _continuous(parsed, options)
     opener = registry.lookup(parsed)
-    return await opener(parsed, drive_id=drive_id, **options)
+    axis = await opener(parsed, drive_id=drive_id, **options)
+    axis.continuous = continuous
+    return axis
+
+
+def _continuous(parsed: DriveUrl, options: dict[str, Any]) -> tuple[DriveUrl, bool]:
+    """Take ``continuous`` out of the options (keyword or ``?continuous=``, the keyword
+    wins): it is the Axis's, not the protocol's. ``1``/``true``/``yes`` or ``0``/``false``/
+    ``no``."""
+    query = dict(parsed.options)
+    raw: object = query.pop("continuous", False)
+    raw = options.pop("continuous", raw)
+    if len(query) != len(parsed.options):
+        parsed = dataclasses.replace(parsed, options=MappingProxyType(query))
+    if isinstance(raw, bool):
+        return parsed, raw
+    text = str(raw).strip().lower()
+    if text in ("1", "true", "yes"):
+        return parsed, True
+    if text in ("0", "false", "no"):
+        return parsed, False
+    raise ArgumentRangeError(f"continuous must be 1 or 0 (true or false), got {raw!r}")
 
 
 def connect(url: str | None = None, *, drive_id: int | None = None, **options: Any) -> Axis:

@@ -233,6 +233,11 @@ class Axis:
         return self._core.counts_per_rev
 
     @property
+    def continuous(self) -> bool:
+        """The axis may turn for ever (``?continuous=1``; docs/safety.md)."""
+        return self._core.continuous
+
+    @property
     def id_address(self) -> str | None:
         """The network address the drive id selected (DYN5), None where the id is a bus address."""
         return self._core.id_address

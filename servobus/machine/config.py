@@ -26,7 +26,7 @@ DEFAULT_PER_REV: Mapping[str, float] = {"deg": 360.0, "rev": 1.0}
 ORIGINS = ("none", "set", "home")
 NAME = re.compile(r"^[A-Za-z0-9_-]+$")
 AXIS_KEYS = frozenset({"url", "id", "unit", "per_rev", "gear", "direction", "limits", "speed",
-                       "accel", "origin", "label"})
+                       "accel", "origin", "label", "continuous"})
 TOP_KEYS = frozenset({"name", "axes"})
 
 
@@ -46,6 +46,9 @@ class AxisSpec:
     accel: float | None = None  # user units per second squared (documented, see docs)
     origin: str = "none"  # "none" | "set" | "home"
     label: str = ""  # free text for people (GUI tooltip)
+    #: The axis may turn for ever (a spindle, a conveyor): only then is constant speed
+    #: open-ended (docs/safety.md). Allowed only on an axis without limits.
+    continuous: bool = False
 
 
 @dataclass(frozen=True)
@@ -178,9 +181,15 @@ def _axis(where: _Where, name: str, table: object) -> AxisSpec:
     label = table.get("label", "")
     if not isinstance(label, str):
         raise where.error("label", f"must be a string, got {label!r}")
+    continuous = table.get("continuous", False)
+    if not isinstance(continuous, bool):
+        raise where.error("continuous", f"must be true or false, got {continuous!r}")
+    if continuous and limits is not None:
+        raise where.error("continuous", "an axis that turns for ever has no soft limits; "
+                          "remove limits or continuous")
     return AxisSpec(name=name, url=url.strip(), drive_id=drive_id, unit=unit, per_rev=per_rev,
                     gear=gear, direction=int(direction), limits=limits, speed=speed,
-                    accel=accel, origin=origin, label=label)
+                    accel=accel, origin=origin, label=label, continuous=continuous)
 
 
 def _limits(where: _Where, value: object) -> tuple[float, float] | None:

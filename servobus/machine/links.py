@@ -71,6 +71,7 @@ class Link:
             raise
         self.owner = owner
         for axis, core in zip(self.axes, opened, strict=True):
+            core.continuous = axis.spec.continuous
             axis.axis = core
             axis.last_error = None
 

@@ -54,6 +54,10 @@ def test_the_facade_has_the_same_signature(name: str) -> None:
         assert isinstance(facade, property), name
         assert shape(facade.fget) == shape(core.fget)
         return
+    if isinstance(core, bool):  # a plain attribute of the core (continuous): a read property
+        assert isinstance(facade, property), name
+        assert shape(facade.fget)[1] == "bool", name
+        return
     assert callable(core) and callable(facade), name
     assert not inspect.iscoroutinefunction(facade), f"Axis.{name} must block, not be async"
     if name in ASYNC_TO_SYNC:  # __enter__/__exit__: the same result, their own parameters
