@@ -44,6 +44,15 @@ class LimitError(ArgumentRangeError):
     """A motion would cross a machine axis's soft limit; nothing was sent."""
 
 
+class OwnerError(ServobusError):
+    """Another owner (a page, a session, a program) holds this axis's open-ended motion;
+    ``owner`` names it. Nothing was sent. Stop and STOP ALL always win (docs/safety.md)."""
+
+    def __init__(self, message: str, owner: str = "") -> None:
+        super().__init__(message)
+        self.owner = owner
+
+
 class MachineFileError(ArgumentRangeError):
     """A mistake in a machine file (servobus.machine): one line naming file, axis and key."""
 

@@ -40,7 +40,7 @@ from servobus.axis import checks
 from servobus.axis.capture import Capture, CaptureSource
 from servobus.axis.virtual_io import VirtualIo, VirtualIoSource
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveTimeout, NotSupported
-from servobus.families.base import AxisStatus, Family, ParamInfo
+from servobus.families.base import AxisStatus, Family, ParamInfo, StreamProfile
 from servobus.transport.base import Direction
 
 log = logging.getLogger(__name__)
@@ -194,6 +194,21 @@ class AsyncAxis(ABC):
         self.family.require(feature)  # raises when the family lacks it
         return NotSupported(f"{self.family.title} over {self.protocol} has no "
                             f"{feature.replace('_', ' ')}", family=self.family.name)
+
+    async def stream_profile(self) -> StreamProfile:
+        """The profile a streamed position target runs at (:meth:`stream_to`; reads the
+        drive's parameters). NotSupported where the family streams no targets."""
+        raise self.unsupported("streamed position targets")
+
+    async def stream_to(self, position: int, rpm: float) -> None:
+        """Move the drive's running target to ``position`` counts, a target update the drive
+        follows with its own profile, never re-sent: the primitive of a lease
+        (servobus.machine.lease, docs/safety.md). When no update follows, the motor comes
+        to rest at the last target by itself. ``rpm`` is the speed the updates advance at;
+        a family whose position moves take a cruise speed (YZ-AIM) runs them at it."""
+        counts = self._check_move(position, relative=False)
+        checks.positive("rpm", abs(rpm) if isinstance(rpm, int | float) else rpm, "rpm")
+        await self._send_move_to(counts)
 
     async def square_wave(self, amplitude: int) -> None:
         """Drive-generated square-wave test motion (families with "waves")."""

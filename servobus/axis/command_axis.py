@@ -22,7 +22,7 @@ from servobus.axis import checks
 from servobus.axis.base import DEFAULT_WAIT_TIMEOUT_S, AxisTraceHook, check_int
 from servobus.axis.client_axis import ClientAxis
 from servobus.errors import DriveTimeout, ProtocolError
-from servobus.families.base import AxisStatus, Family, ParamInfo
+from servobus.families.base import AxisStatus, Family, ParamInfo, StreamProfile
 from servobus.families.dmm import units as U
 from servobus.families.dmm import vocabulary as V
 from servobus.families.dmm.family import DYN2, axis_status, command_to_counts, counts_to_command
@@ -170,6 +170,13 @@ class CommandAxis(ClientAxis[CommandClient]):
     async def move_range(self, *, relative: bool = False) -> tuple[int, int] | None:
         await self.gear_num()
         return self._move_limits(relative)
+
+    async def stream_profile(self) -> StreamProfile:
+        """Max Speed and Max Accel at GEAR_NUM: a target update (DTPU) runs the
+        point-to-point profile; never written per motion (EEPROM, docs/safety.md)."""
+        return StreamProfile(*U.stream_profile(await self.read_param("max_speed"),
+                                               await self.read_param("max_accel"),
+                                               await self.gear_num()))
 
     async def move_to_command(self, command: int, *, wait: bool = False,
                               timeout: float | None = None) -> None:

@@ -32,6 +32,7 @@ YZ-AIM registers lives here once (YZ-AIM manual sections; docs/easycan.md, docs/
 
 from __future__ import annotations
 
+import math
 from abc import abstractmethod
 from functools import cache
 from typing import ClassVar, TypeVar
@@ -40,7 +41,7 @@ from servobus.axis import checks
 from servobus.axis.base import check_int
 from servobus.axis.client_axis import ClientAxis, LinkClient
 from servobus.errors import ArgumentRangeError, DriveError, DriveTimeout, ProtocolError
-from servobus.families.base import AxisStatus, Family, ParamInfo
+from servobus.families.base import AxisStatus, Family, ParamInfo, StreamProfile
 from servobus.families.yzaim import registers as Y
 from servobus.families.yzaim.family import YZAIM, axis_status
 
@@ -76,6 +77,7 @@ class RegisterAxis(ClientAxis[C]):
         self._target: int | None = None  # last commanded absolute target, counts
         self._speed_mode: bool | None = None  # None: unknown (another host may have set it)
         self._cruise_rpm: int | None = None  # target_speed replaced by turn()
+        self._stream_rpm: int | None = None  # target_speed a lease wrote (stream_to)
 
     # ------------------------------------------------------------- primitives
     @abstractmethod
@@ -158,7 +160,33 @@ class RegisterAxis(ClientAxis[C]):
         origin = base if base is not None else start
         self._target = None if origin is None else origin + distance
 
+    async def stream_profile(self) -> StreamProfile:
+        """Cruise speeds up to 0x02's maximum; the acceleration of 0x03 (at 60000 and above
+        the motor runs no curve of its own: taken as 60000 rpm/s for the lead)."""
+        accel = await self._read("acceleration")
+        return StreamProfile(float(_SPEED.maximum), float(min(max(1, accel), Y.NO_PROFILE_ACCEL)))
+
+    async def stream_to(self, position: int, rpm: float) -> None:
+        """The absolute position at cruise speed ``rpm`` (0x02, rounded up, written when it
+        changes). The cruise speed it replaced is written back on the next return to
+        position mode after a stop, as after :meth:`turn`."""
+        counts = self._check_move(position, relative=False)
+        cruise = checks.positive("rpm", abs(rpm) if isinstance(rpm, int | float) else rpm,
+                                 "rpm")
+        wanted = min(_SPEED.maximum, max(1, math.ceil(cruise)))
+        await self._position_mode()
+        if self._stream_rpm != wanted:
+            if self._cruise_rpm is None:
+                self._cruise_rpm = await self.read_param("target_speed")
+            self._stream_rpm = None
+            await self._write("target_speed", wanted)
+            self._stream_rpm = wanted
+        self._target = None
+        await self._write("absolute_position", _ORIGIN_TARGET if counts == 0 else counts)
+        self._target = counts
+
     async def turn(self, rpm: int) -> None:
+        self._stream_rpm = None
         rpm = check_int("rpm", rpm)
         if abs(rpm) > _SPEED.maximum:
             raise ArgumentRangeError(f"rpm={rpm} is outside -{_SPEED.maximum}.."
@@ -231,6 +259,8 @@ class RegisterAxis(ClientAxis[C]):
     async def write_param(self, name: str, value: int) -> None:
         checked = self._check_param(name, value)
         await self._write(name, checked)
+        if name == "target_speed":
+            self._stream_rpm = None
         if name == "target_speed" and self._speed_mode:
             self._cruise_rpm = None  # the user's value is the speed from now on
         if name == "special_function":

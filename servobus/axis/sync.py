@@ -36,7 +36,7 @@ if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis, AxisTraceHook
     from servobus.axis.capture import Capture
     from servobus.axis.virtual_io import VirtualIo
-    from servobus.families.base import AxisStatus, Family, ParamInfo
+    from servobus.families.base import AxisStatus, Family, ParamInfo, StreamProfile
 
 T = TypeVar("T")
 P = ParamSpec("P")
@@ -254,6 +254,15 @@ class Axis:
         """Relative move by ``distance`` counts (:meth:`AsyncAxis.move_by`; never re-sent)."""
         return self._call(self._core.move_by, distance, wait=wait, timeout=timeout,
                           confirm=confirm, confirm_timeout=confirm_timeout)
+
+    def stream_profile(self) -> StreamProfile:
+        """The profile a streamed position target runs at (reads the drive)."""
+        return self._call(self._core.stream_profile)
+
+    def stream_to(self, position: int, rpm: float) -> None:
+        """Move the drive's running target to ``position`` counts (a lease's primitive;
+        docs/safety.md)."""
+        return self._call(self._core.stream_to, position, rpm)
 
     def turn(self, rpm: int) -> None:
         """Constant speed in rpm (0 ramps down and holds)."""

@@ -246,7 +246,7 @@ def speed(ctx: CliContext, value: float) -> None:
 
 def _starting(axis: MachineAxis) -> bool:
     """The limit watcher still runs (the drive may not show speed yet)."""
-    return axis.core.watching
+    return axis.core.lease is not None
 
 
 def stop(ctx: CliContext) -> None:

@@ -66,6 +66,17 @@ def motion_state(profile_running: bool, on_target: bool,
 
 
 @dataclass(frozen=True)
+class StreamProfile:
+    """How a drive runs a streamed position target (a lease, docs/safety.md): its own
+    profile's top speed and acceleration, motor rpm and rpm/s. A lease's lead (how far the
+    target runs ahead of the motor) is the stopping distance from the asked speed at
+    ``accel_rpm_s`` plus one renewal period's travel."""
+
+    max_rpm: float
+    accel_rpm_s: float
+
+
+@dataclass(frozen=True)
 class AxisStatus:
     """One status for every family; ``vendor`` keeps the family's own decoded value.
 

@@ -5,8 +5,19 @@
 """
 
 from servobus.machine.axis import AsyncMachineAxis
-from servobus.machine.config import AxisSpec, MachineSpec, load_machine_file, parse_machine
-from servobus.machine.machine import AsyncMachine, TogetherReport, open_machine_async
+from servobus.machine.config import (
+    AxisSpec,
+    MachineSpec,
+    load_machine_file,
+    parse_machine,
+    url_spec,
+)
+from servobus.machine.machine import (
+    AsyncMachine,
+    TogetherReport,
+    open_machine_async,
+    open_url_machine_async,
+)
 from servobus.machine.sync import Machine, MachineAxis, open_machine
 from servobus.machine.units import Scale, parse_quantity
 
@@ -22,6 +33,8 @@ __all__ = [
     "load_machine_file",
     "open_machine",
     "open_machine_async",
+    "open_url_machine_async",
     "parse_machine",
     "parse_quantity",
+    "url_spec",
 ]

@@ -6,11 +6,11 @@ Every motion is checked against the limits before anything reaches the wire
 * ``move_to`` needs no read: the target is checked and converted, then sent. ``move_by``
   reads the position first (a read, no motion) unless the distance alone is longer than the
   travel; a refused relative move sends no motion command.
-* ``turn(v)`` (constant speed, user units per second) is refused when the axis already
-  stands at or past the limit it heads for; otherwise a watcher polls the position every
-  :data:`WATCH_S` and stops the axis when it reaches the limit. The drive then ramps down
-  at its own deceleration: it coasts ``v x (WATCH_S + one read) + v^2 / (2 a)`` past the
-  limit (docs/machine.md has figures).
+* ``jog(v)`` and ``turn(v)`` (constant speed, user units per second) are leases
+  (servobus.machine.lease): position targets streamed a bounded lead ahead of the motor,
+  never past the limit they head for, ending by themselves ``ttl`` seconds after the last
+  call. At or past that limit they are refused ("at soft limit"). Only a ``continuous``
+  axis (no limits) turns open-ended. docs/safety.md.
 * Limits count from the drive's origin: before an origin is set (``origin = "set"`` in the
   file, or ``set_origin()``) they are relative to wherever the drive counts from (power-on
   position, or a multi-turn encoder's zero).
@@ -24,10 +24,18 @@ import asyncio
 import contextlib
 import logging
 import math
+import time
 from typing import TYPE_CHECKING
 
-from servobus.errors import ArgumentRangeError, LimitError, MachineLinkError, NotSupported
+from servobus.errors import (
+    ArgumentRangeError,
+    LimitError,
+    MachineLinkError,
+    NotSupported,
+    OwnerError,
+)
 from servobus.machine.config import AxisSpec
+from servobus.machine.lease import DEFAULT_TTL_S, Lease, check_speed, check_ttl, stream
 from servobus.machine.units import Scale
 
 if TYPE_CHECKING:
@@ -36,8 +44,6 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-#: Period of the limit watcher of an unbounded motion (turn, and the guard of the GUI).
-WATCH_S = 0.01
 UNITS_PER_S = {"mm": "mm/s", "deg": "deg/s", "rev": "rev/s", "counts": "counts/s"}
 
 
@@ -49,7 +55,7 @@ class AsyncMachineAxis:
         self.source = source  # the file, for messages
         self.axis: AsyncAxis | None = None  # the underlying Axis; None while offline
         self.last_error: BaseException | None = None
-        self._watcher: asyncio.Task[None] | None = None
+        self._lease: Lease | None = None
 
     # ------------------------------------------------------------- identity
     @property
@@ -95,9 +101,9 @@ class AsyncMachineAxis:
         return self.spec.speed
 
     @property
-    def watching(self) -> bool:
-        """A limit watcher of a ``turn`` runs (it ends when it stopped the axis)."""
-        return self._watcher is not None and not self._watcher.done()
+    def continuous(self) -> bool:
+        """The axis may turn for ever (``continuous = true``): constant speed is open-ended."""
+        return self.spec.continuous
 
     def core(self) -> AsyncAxis:
         """The underlying Axis, or MachineLinkError naming the axis and its URL."""
@@ -158,7 +164,7 @@ class AsyncMachineAxis:
         """Absolute move to ``target`` user units (checked against the limits first)."""
         self.check_target(target)
         counts = self.to_counts(target)
-        await self._cancel_watcher()
+        await self._end_lease("replaced by a move")
         await self.core().move_to(counts, wait=wait, timeout=timeout)
 
     async def move_by(self, distance: float, *, wait: bool = False,
@@ -175,13 +181,66 @@ class AsyncMachineAxis:
                                  f"the travel [{low:g}, {high:g}]; nothing was sent")
             self.check_target(await self.position() + distance)
         counts = self.to_counts(distance)
-        await self._cancel_watcher()
+        await self._end_lease("replaced by a move")
         await self.core().move_by(counts, wait=wait, timeout=timeout)
 
-    async def turn(self, speed: float | None = None) -> None:
+    async def turn(self, speed: float | None = None, *, owner: str = "api",
+                   ttl: float = DEFAULT_TTL_S) -> None:
         """Constant speed in user units per second (None: the file's ``speed``; 0 stops).
 
-        Refused at or past the limit it heads for; a watcher stops it at the limit."""
+        On a ``continuous`` axis an open-ended speed command. On any other axis a lease
+        (:meth:`jog`): it ends ``ttl`` seconds after the last call unless called again."""
+        if self.spec.continuous or self.core().continuous:
+            speed = self._checked_speed(speed)
+            rpm = round(self.scale.to_rpm(speed))
+            await self._end_lease("replaced by an open-ended speed")
+            await self.core().turn(rpm)
+            return
+        await self.jog(speed, owner=owner, ttl=ttl)
+
+    async def jog(self, speed: float | None = None, *, owner: str = "api",
+                  ttl: float = DEFAULT_TTL_S) -> None:
+        """Start or renew a leased motion at ``speed`` user units per second, held by
+        ``owner`` (a page, a session, a program), ending ``ttl`` seconds (at most 1) after
+        the last call (servobus.machine.lease, docs/safety.md). 0 releases it.
+
+        Refused (nothing sent): heading out at or past a soft limit (LimitError "at soft
+        limit"), above the drive's own top speed, or while another owner holds the axis
+        (OwnerError). The target never passes the limit it heads for."""
+        speed = self._checked_speed(speed)
+        ttl = check_ttl(ttl)
+        lease = self._lease if self._lease is not None and self._lease.alive else None
+        if lease is not None and lease.owner != owner:
+            raise OwnerError(f"axis {self.name} is held by {lease.owner}; stop it first "
+                             "(Stop and STOP ALL always win)", owner=lease.owner)
+        if speed == 0:
+            if lease is not None:
+                await self.stop()
+            return
+        heading = 1 if speed > 0 else -1
+        if lease is not None and lease.heading == heading:
+            lease.speed = speed  # the streamer picks the new speed up at its next update
+            lease.renew(ttl)
+            return
+        core = self.core()
+        rpm = self.scale.to_rpm(speed)
+        profile = await core.stream_profile()
+        check_speed(self.name, speed, rpm, profile, self.speed_unit, self.scale.from_rpm)
+        limit = None
+        if self.limits is not None:
+            position = await self.position()
+            limit = self.limits[1] if heading > 0 else self.limits[0]
+            if heading * (position - limit) >= -self._at_limit_tolerance():
+                raise LimitError(f"axis {self.name} is at {position:g} {self.unit}, at soft "
+                                 f"limit {limit:g} {self.unit}; moving further out is "
+                                 "refused, nothing was sent")
+        await self._end_lease("reversed")
+        accel = abs(self.scale.from_rpm(profile.accel_rpm_s))
+        new = Lease(owner, speed, accel, limit, time.monotonic() + ttl)
+        new.task = asyncio.create_task(self._stream(new), name=f"lease {self.name}")
+        self._lease = new
+
+    def _checked_speed(self, speed: float | None) -> float:
         if speed is None:
             speed = self.spec.speed
             if speed is None:
@@ -192,47 +251,41 @@ class AsyncMachineAxis:
                 or not math.isfinite(speed):
             raise ArgumentRangeError(f"axis {self.name}: a speed must be a finite number "
                                      f"of {self.speed_unit}, got {speed!r}")
-        rpm = round(self.scale.to_rpm(speed))
-        if rpm == 0:
+        return float(speed)
+
+    def _at_limit_tolerance(self) -> float:
+        """How near a limit counts as at it: 1/1024 rev of the motor in user units."""
+        return abs(self.to_user(self.core().counts_per_rev / 1024))
+
+    async def _stream(self, lease: Lease) -> None:
+        core = self.core()
+        rpm = abs(self.scale.to_rpm(lease.speed))
+
+        async def read() -> float:
+            return self.to_user(await core.position())
+
+        async def send(target: float) -> None:
+            await core.stream_to(self.to_counts(target), abs(self.scale.to_rpm(lease.speed))
+                                 or rpm)
+
+        await stream(lease, self.name, read, send, core.stop)
+
+    @property
+    def lease(self) -> Lease | None:
+        """The leased motion that runs now (its owner, speed, ``at_limit``), or None."""
+        lease = self._lease
+        return lease if lease is not None and lease.alive else None
+
+    async def release(self, owner: str) -> None:
+        """``owner`` lets go (a page left, a session closed): its motion stops."""
+        lease = self.lease
+        if lease is not None and lease.owner == owner:
             await self.stop()
-            return
-        heading = 1 if speed > 0 else -1
-        if self.limits is not None:
-            position = await self.position()
-            if self._beyond(position, heading):
-                raise LimitError(f"axis {self.name} is at {position:g} {self.unit}, at or past "
-                                 f"its {'high' if heading > 0 else 'low'} limit; turning "
-                                 "that way is refused, nothing was sent")
-        await self._cancel_watcher()
-        await self.core().turn(rpm)
-        if self.limits is not None:
-            self._watcher = asyncio.create_task(self._watch(heading, WATCH_S),
-                                                name=f"limit-watch-{self.name}")
 
     def _beyond(self, position: float, heading: int) -> bool:
         assert self.limits is not None
         low, high = self.limits
         return position >= high if heading > 0 else position <= low
-
-    async def _watch(self, heading: int, period: float) -> None:
-        """Stop the axis when it reaches the limit it heads for (module docstring)."""
-        core = self.core()
-        try:
-            while True:
-                position = self.to_user(await core.position())
-                if self._beyond(position, heading):
-                    await core.stop()
-                    log.warning("axis %s reached its soft limit at %g %s: stopped", self.name,
-                                position, self.unit)
-                    return
-                await asyncio.sleep(period)
-        except asyncio.CancelledError:
-            raise
-        except Exception as exc:  # the link failed: stop if we can, say so once
-            self.last_error = exc
-            log.error("axis %s: limit watcher failed (%s); stopping the axis", self.name, exc)
-            with contextlib.suppress(Exception):
-                await core.stop()
 
     async def guard(self, period: float = 0.05) -> None:
         """Watch for any motion (GUI jog, waves) beyond the limits and stop it; runs until
@@ -256,15 +309,17 @@ class AsyncMachineAxis:
             await asyncio.sleep(period)
 
     async def stop(self) -> None:
-        await self._cancel_watcher()
+        """Stop whatever runs (a lease of any owner too: Stop always wins)."""
+        await self._end_lease("stopped")
         await self.core().stop()
 
-    async def _cancel_watcher(self) -> None:
-        task, self._watcher = self._watcher, None
-        if task is not None and not task.done():
-            task.cancel()
+    async def _end_lease(self, why: str) -> None:
+        lease, self._lease = self._lease, None
+        if lease is not None and lease.task is not None and not lease.task.done():
+            lease.ended = why
+            lease.task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
-                await task
+                await lease.task
 
     async def enable(self) -> None:
         await self.core().enable()
@@ -298,8 +353,8 @@ class AsyncMachineAxis:
             await home()
 
     async def _closed(self) -> None:
-        """The machine closes: stop watching (the Axis is closed by its link)."""
-        await self._cancel_watcher()
+        """The machine closes: the lease ends (the machine stops the axes first)."""
+        await self._end_lease("closed")
 
     def __repr__(self) -> str:
         state = "" if self.online else " offline"

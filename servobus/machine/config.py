@@ -14,11 +14,12 @@ from __future__ import annotations
 import math
 import re
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from servobus.errors import MachineFileError
+from servobus.axis.url import parse_url
+from servobus.errors import ArgumentRangeError, MachineFileError
 
 UNITS = ("mm", "deg", "rev", "counts")
 #: per_rev when the file gives none: a degree axis turns 360 deg per revolution, ...
@@ -184,12 +185,36 @@ def _axis(where: _Where, name: str, table: object) -> AxisSpec:
     continuous = table.get("continuous", False)
     if not isinstance(continuous, bool):
         raise where.error("continuous", f"must be true or false, got {continuous!r}")
+    continuous = continuous or url_continuous(url)
     if continuous and limits is not None:
         raise where.error("continuous", "an axis that turns for ever has no soft limits; "
                           "remove limits or continuous")
     return AxisSpec(name=name, url=url.strip(), drive_id=drive_id, unit=unit, per_rev=per_rev,
                     gear=gear, direction=int(direction), limits=limits, speed=speed,
                     accel=accel, origin=origin, label=label, continuous=continuous)
+
+
+def url_continuous(url: str) -> bool:
+    """``?continuous=1`` (or true/yes) on a drive URL; a malformed URL is the opener's to
+    report, so it reads as not continuous here."""
+    try:
+        raw = parse_url(url).option("continuous", "0") or "0"
+    except ArgumentRangeError:
+        return False
+    return raw.strip().lower() in ("1", "true", "yes")
+
+
+def url_spec(url: str, drive_ids: Sequence[int | None] = (None,), *,
+             name: str = "drive") -> MachineSpec:
+    """A bare drive URL as a machine (issue 27: one path for motion, limits and leases):
+    one axis per id, named by its id (``axis`` for the protocol's default id), in counts,
+    without limits; ``continuous`` as the URL's ``?continuous=`` says."""
+    axes = tuple(AxisSpec(name="axis" if i is None else str(i), url=url, drive_id=i,
+                          unit="counts", per_rev=None, continuous=url_continuous(url))
+                 for i in drive_ids)
+    if not axes:
+        raise ArgumentRangeError("a drive URL as a machine needs at least one id")
+    return MachineSpec(name=name, path=None, axes=axes)
 
 
 def _limits(where: _Where, value: object) -> tuple[float, float] | None:

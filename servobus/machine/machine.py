@@ -16,7 +16,7 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import Collection, Iterator, Mapping
+from collections.abc import Collection, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType, TracebackType
@@ -26,7 +26,7 @@ from servobus.axis.halt import halt
 from servobus.errors import ArgumentRangeError, LimitError
 from servobus.machine.axis import AsyncMachineAxis
 from servobus.machine.builtin import BUILTIN_SOURCE, builtin_spec
-from servobus.machine.config import MachineSpec, load_machine_file
+from servobus.machine.config import MachineSpec, load_machine_file, url_spec
 from servobus.machine.links import Link, group_links
 
 log = logging.getLogger(__name__)
@@ -153,7 +153,7 @@ class AsyncMachine:
         """Stop every online axis at once (servobus.axis.halt.halt); None per stopped axis,
         the error otherwise (offline axes: their MachineLinkError). Never raises per axis."""
         for axis in self._axes.values():
-            await axis._cancel_watcher()
+            await axis._end_lease("stopped")
         out: dict[str, BaseException | None] = dict(await halt(self.online_cores()))
         for name, axis in self._axes.items():
             if name not in out:
@@ -191,7 +191,7 @@ class AsyncMachine:
                 singles.append(members[0])
         synced = [m for m in groups.values() if len(m) > 1]
         for axis in axes:
-            await axis._cancel_watcher()
+            await axis._end_lease("stopped")
 
         async def start_group(members: list[AsyncMachineAxis]) -> float:
             lead = members[0].core()
@@ -234,6 +234,8 @@ class AsyncMachine:
         if self._closed:
             return
         self._closed = True
+        for axis in self._axes.values():  # no target update may follow the stop
+            await axis._end_lease("closed")
         try:
             if stop:
                 await halt(self.online_cores())
@@ -277,4 +279,14 @@ async def open_machine_async(path: str | Path | None = None, *, retry: bool = Fa
         source = str(path)
     machine = AsyncMachine(spec, source=source)
     await machine._open(retry, only)
+    return machine
+
+
+async def open_url_machine_async(url: str, drive_ids: Sequence[int | None] = (None,), *,
+                                 retry: bool = False) -> AsyncMachine:
+    """A bare drive URL as a machine of one axis per id (config.url_spec): the GUI, the CLI
+    and the gateway run motion, limits and leases through the one machine path."""
+    spec = url_spec(url, drive_ids)
+    machine = AsyncMachine(spec, source=url)
+    await machine._open(retry, None)
     return machine

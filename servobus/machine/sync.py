@@ -12,6 +12,7 @@ from types import MappingProxyType, TracebackType
 from typing import TYPE_CHECKING
 
 from servobus.axis.sync import Axis, LoopThread
+from servobus.machine.lease import DEFAULT_TTL_S, Lease
 from servobus.machine.machine import AsyncMachine, TogetherReport, open_machine_async
 
 if TYPE_CHECKING:
@@ -105,8 +106,27 @@ class MachineAxis:
                 timeout: float | None = None) -> None:
         self._runner.run(self._core.move_by(distance, wait=wait, timeout=timeout))
 
-    def turn(self, speed: float | None = None) -> None:
-        self._runner.run(self._core.turn(speed))
+    def turn(self, speed: float | None = None, *, owner: str = "api",
+             ttl: float = DEFAULT_TTL_S) -> None:
+        """Constant speed; a lease ending ``ttl`` s after the last call unless the axis is
+        ``continuous`` (AsyncMachineAxis.turn)."""
+        self._runner.run(self._core.turn(speed, owner=owner, ttl=ttl))
+
+    def jog(self, speed: float | None = None, *, owner: str = "api",
+            ttl: float = DEFAULT_TTL_S) -> None:
+        """Start or renew a leased motion (AsyncMachineAxis.jog)."""
+        self._runner.run(self._core.jog(speed, owner=owner, ttl=ttl))
+
+    def release(self, owner: str) -> None:
+        self._runner.run(self._core.release(owner))
+
+    @property
+    def lease(self) -> Lease | None:
+        return self._core.lease
+
+    @property
+    def continuous(self) -> bool:
+        return self._core.continuous
 
     def stop(self) -> None:
         self._runner.run(self._core.stop())

@@ -93,20 +93,38 @@ async def test_limits_are_refused_before_the_wire(tmp_path: Path) -> None:
 
 
 async def test_relative_moves_and_turns_stop_at_the_limit(tmp_path: Path) -> None:
+    """A turn is a lease whose target never passes the limit: the motor rests at it, and a
+    further turn that way is refused with nothing sent (issue 27)."""
     async with await open_mixed(tmp_path) as m:
         c = m["c"]
         await c.move_to(700.0, wait=True, timeout=10)
         with pytest.raises(LimitError, match="outside the soft limits"):
             await c.move_by(30.0)
-        await c.turn(720.0)  # 2 rev/s towards +720
-        await wait_until_async(lambda: _stopped_past(c, 720.0), timeout=10,
-                               what="the watcher stops c at its limit")
+        await c.turn(720.0, ttl=1.0)  # 2 rev/s towards +720
+        await wait_until_async(lambda: _stopped_near(c, 720.0), timeout=10,
+                               what="the lease brings c to rest at its limit")
+        assert c.lease is None or c.lease.at_limit
         position = await c.position()
-        assert 720.0 <= position < 760.0
-        with pytest.raises(LimitError, match="at or past its high limit"):
+        assert 719.5 <= position <= 720.0 + 0.1, position  # at the limit, not past it
+        sent: list[object] = []
+        await c.core().add_trace(lambda d, data, t: sent.append(data)
+                                 if d is Direction.TX else None)
+        await c.stop()
+        sent.clear()
+        with pytest.raises(LimitError, match="at soft limit"):
             await c.turn(10.0)
+        assert all(type(x).__name__ == "ReadRequest" for x in sent), \
+            f"a refused jog at the limit only reads: {sent}"
+        assert abs(await c.position() - position) < 0.1  # it moved 0 counts
         await c.turn(-10.0)  # away from the limit is allowed
         await c.stop()
+
+
+async def _stopped_near(axis: object, limit: float) -> bool:
+    from servobus.machine import AsyncMachineAxis
+
+    assert isinstance(axis, AsyncMachineAxis)
+    return abs(await axis.position() - limit) < 0.5 and abs(await axis.speed()) < 1.0
 
 
 async def _stopped_past(axis: object, limit: float) -> bool:
@@ -129,9 +147,9 @@ async def test_axes_on_one_url_share_one_link(tmp_path: Path) -> None:
 
 async def test_stop_all_stops_every_axis(tmp_path: Path) -> None:
     async with await open_mixed(tmp_path) as m:
-        await m["x"].turn(20.0)
-        await m["y"].turn(-20.0)
-        await m["c"].turn(90.0)
+        await m["x"].turn(20.0, ttl=1.0)
+        await m["y"].turn(-20.0, ttl=1.0)
+        await m["c"].turn(90.0, ttl=1.0)
         await wait_until_async(lambda: _all_moving(m), timeout=10, what="all moving")
         assert await m.stop_all() == {"x": None, "y": None, "c": None}
         await wait_until_async(lambda: _all_still(m), timeout=10, what="all stopped")

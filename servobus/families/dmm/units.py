@@ -37,6 +37,12 @@ def profile_accel_rpm_s(max_accel: int, gear_num: int = GEAR_BASE) -> float:
     return max_accel * ACCEL_FACTOR_RPM_S * gear_ratio(gear_num)
 
 
+def stream_profile(max_speed: int, max_accel: int, gear_num: int) -> tuple[float, float]:
+    """A position target's motor speed and acceleration, (rpm, rpm/s): the point-to-point
+    profile (7.4.1) a target update (DTPU) runs at; both are EEPROM parameters."""
+    return profile_speed_rpm(max_speed, gear_num), profile_accel_rpm_s(max_accel, gear_num)
+
+
 def command_to_counts(command: float, gear_num: int = GEAR_BASE) -> float:
     """Motor movement for a point-to-point command: command x ratio x 4 counts."""
     return command * gear_ratio(gear_num) * 4

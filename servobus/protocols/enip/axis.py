@@ -46,7 +46,7 @@ from servobus.errors import (
     FramingError,
     ProtocolError,
 )
-from servobus.families.base import AxisStatus, Family, ParamInfo
+from servobus.families.base import AxisStatus, Family, ParamInfo, StreamProfile
 from servobus.families.dmm import units as U
 from servobus.families.dmm.family import command_to_counts, counts_to_command
 from servobus.families.dyn5 import params as dyn5
@@ -258,6 +258,13 @@ class EnipAxis(AsyncAxis):
     async def move_range(self, *, relative: bool = False) -> tuple[int, int] | None:
         await self.gear_num()
         return self._move_limits(relative)
+
+    async def stream_profile(self) -> StreamProfile:
+        """High Speed and High Accel at GEAR_NUM: Go_Absolute_Pos over explicit messaging
+        retargets the running profile (DTPU); never written per motion (EEPROM)."""
+        return StreamProfile(*U.stream_profile(await self.read_param("max_speed"),
+                                               await self.read_param("max_accel"),
+                                               await self.gear_num()))
 
     async def move_to_command(self, command: int, *, wait: bool = False,
                               timeout: float | None = None) -> None:
