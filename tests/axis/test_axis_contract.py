@@ -67,6 +67,22 @@ def test_speed_in_rpm_then_stop(axis: Axis) -> None:
     wait_until(lambda: abs(axis.speed()) <= 5, timeout=5, what="standstill")
 
 
+def test_a_streamed_target_retargets_and_the_drive_rests_at_the_last(axis: Axis) -> None:
+    """A lease's primitive (issue 27): each stream_to moves the running target; with no
+    update after the last, the drive comes to rest there by itself."""
+    profile = axis.stream_profile()
+    assert profile.max_rpm > 0 and profile.accel_rpm_s > 0
+    start = axis.position()
+    window = axis.position_window()
+    step = axis.revs(0.1)
+    for k in range(1, 4):
+        axis.stream_to(start + k * step, 120)
+    wait_until(lambda: axis.status().idle, timeout=10, what="at rest at the last target")
+    assert abs(axis.position() - (start + 3 * step)) <= window
+    with pytest.raises(ArgumentRangeError):
+        axis.stream_to(start, 0)
+
+
 def test_parameters_read_write_and_range(axis: Axis) -> None:
     params = axis.parameters()
     assert params
