@@ -5,9 +5,10 @@ one RS-485 line, a YZ-AIM motor on CAN), or on ``--machine FILE`` (the steps act
 ``--axis``, else the file's first axis), or on one drive (``--url``/``--port``/``--can``).
 Because it moves motors, running it on a real drive needs ``--yes``. Steps: status (one table
 of every axis on a machine), parameters, a 10-revolution point-to-point move with live
-position (in the axis's unit on a machine), constant speed (a lease the demo renews, servobus.cli.hold) then stop, a Max Speed change
-(the same distance back is visibly slower), the original value restored, on a machine every
-axis moved together (with the measured start skew), and a one-line final status per axis.
+position (in the axis's unit on a machine), constant speed (a lease the demo renews,
+servobus.cli.hold) then stop, a Max Speed change (the same distance back is visibly
+slower), the original value restored, on a machine every axis moved together (with the
+measured start skew), and a one-line final status per axis.
 
 Live readouts poll status + position every 0.1 s (20 queries/s), below the ~50 queries/s a
 real drive is known to drop silently (docs/dyn232.md).
