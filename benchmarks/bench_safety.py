@@ -5,7 +5,7 @@ real wire) and an *owner*: a small Python process that holds a constant speed th
 machine API over the drive's URL (a lease renewed every 0.2 s, ttl 0.5 s; the CLI's
 ``servobus speed`` does the same). Once the motor cruises, the owner is killed with SIGKILL
 at a random phase of its renewals; this process, a separate client of the drive, reads the
-position right after the death and polls until the motor rests. Figures per protocol:
+position just before the kill and polls until the motor rests. Figures per protocol:
 time from the death to standstill and distance run after it, p50 / p99 over the runs,
 against the documented bound ``lead + v x STREAM_S`` (lead = v^2/(2a) + v x STREAM_S at the
 drive's own profile acceleration ``a``; docs/safety.md).
@@ -78,7 +78,7 @@ LOST: dict[str, list[str]] = {}
 @dataclass
 class Run:
     seconds: float  # from the death to the first sample of the final rest
-    counts: int  # distance from the first read after the death to the rest
+    counts: int  # distance from the last read before the death to the rest
 
 
 @contextmanager
@@ -128,11 +128,11 @@ def one_run(protocol: str, url: str, drive: int | None, watcher: Axis) -> Run | 
         if owner.poll() is not None:
             LOST.setdefault(protocol, []).append(owner.communicate()[0].strip()[-200:])
             return None
+        first = watcher.position()  # the last position read while the owner lives
         owner.send_signal(signal.SIGKILL)
         dead = time.monotonic()
         owner.wait(10)
-        first = watcher.position()
-        samples = [(time.monotonic(), first)]
+        samples = [(time.monotonic(), watcher.position())]
         while len(samples) < 4 or len({p for _, p in samples[-4:]}) > 1:
             time.sleep(0.01)  # polling the drive: nothing reports the rest
             samples.append((time.monotonic(), watcher.position()))
@@ -193,7 +193,10 @@ def main(argv: list[str] | None = None) -> None:
           "to standstill (p50 / p99) against lead + v x STREAM_S")
     with cpu_hogs(hogs):
         for protocol in SIMS:
-            measure(protocol, options.runs, hogs)
+            try:
+                measure(protocol, options.runs, hogs)
+            except Exception as exc:  # one protocol that cannot run; the others still do
+                print(f"  {protocol:8s} ERROR {type(exc).__name__}: {str(exc)[-300:]}")
 
 
 if __name__ == "__main__":
