@@ -158,8 +158,9 @@ class JogControl:
             return {"open_ended": False}
         if held is not None and (held.lease is None or not held.lease.alive) and not start:
             why = held.lease.ended if held.lease is not None else ""
+            again = "release and press again" if held.kind == "jog" else "press Run again"
             raise MotionEnded(f"the {held.kind} of axis {axis_id} ended"
-                              f"{f' ({why})' if why else ''}; release and press again")
+                              f"{f' ({why})' if why else ''}; {again}")
         if held is None and start is False:
             raise MotionEnded(f"no {kind} of this page on axis {axis_id} to renew; "
                               "press Run again")
