@@ -96,8 +96,10 @@ def position(client: TestClient, axis: int) -> float:
     return float(client.get("/api/axes").json()[axis - 1]["status"].get("position", math.nan))
 
 
-def test_jog_while_held_then_released(client: TestClient) -> None:
-    with client.websocket_connect(WS) as ws:
+def test_jog_while_held_then_released() -> None:
+    # the longest lease (1 s): a loaded machine's late renewal must not end the jog
+    with TestClient(create_app(jog_lease_s=1.0), base_url=BASE) as client, \
+            client.websocket_connect(WS) as ws:
         page = Page(ws)
         start = position(client, 1)
         deadline = time.monotonic() + 15

@@ -69,9 +69,9 @@ def test_stop_all_stops_every_axis_of_every_link(client: TestClient) -> None:
             r = client.post(f"/api/axes/{axis}/turn", json={"rpm": 60, "page": page})
             assert r.status_code == 200 and r.json()["open_ended"] is False, r.text
 
-        def turning() -> bool:
+        def turning() -> bool:  # Run again renews (and restarts one a slow poll let lapse)
             for axis in (1, 2, 3):
-                ws.send_text(json.dumps({"type": "turn", "axis": axis, "rpm": 60}))
+                client.post(f"/api/axes/{axis}/turn", json={"rpm": 60, "page": page})
             return all(abs(status(client, a)["position"] - start[a]) > 20000 for a in (1, 2, 3))
 
         wait_until(turning, timeout=10, what="all turning")
