@@ -212,7 +212,7 @@ async def _mqtt_lease(machine: AsyncMachine, client: aiomqtt.Client) -> None:
         await client.publish(f"{topic}/cmd", json.dumps({"id": ident, "ts": time.time(),
                                                          **body}), qos=1)
         async for message in client.messages:
-            reply = json.loads(message.payload)  # type: ignore[arg-type]
+            reply = json.loads(message.payload if isinstance(message.payload, bytes) else b"")
             replies[reply["id"]] = reply
             if ident in replies:
                 return replies[ident]
