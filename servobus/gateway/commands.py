@@ -153,7 +153,8 @@ class Commander:
             if lease is None or lease.owner != owner:
                 continue
             try:
-                await axis.release(owner)
+                async with asyncio.timeout(COMMAND_DEADLINE_S):
+                    await axis.release(owner)
             except Exception as exc:
                 log.warning("%s: %s left; stopping axis %s failed: %s", via, owner, axis.name,
                             exc)
