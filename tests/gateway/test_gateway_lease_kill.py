@@ -102,7 +102,7 @@ async def _kill_while_turning(proc: subprocess.Popen[bytes], endpoint: str,
         await set_speed()
         for name, speed in SPEEDS.items():  # cruising at the asked speed: renew once more
             axis = watcher.axes[name]
-            await wait_until_async(lambda a=axis, v=speed: _near(a.speed(), v), timeout=10,
+            await wait_until_async(lambda a=axis, v=speed: _near(a.speed(), v), timeout=30,
                                    what=f"{name} cruising at {speed:g}")
         await set_speed()
         proc.send_signal(signal.SIGKILL)  # the gateway dies; the session with it
@@ -110,7 +110,7 @@ async def _kill_while_turning(proc: subprocess.Popen[bytes], endpoint: str,
             *(watcher.axes[name].position() for name in SPEEDS)), strict=True))
         for name in SPEEDS:
             axis = watcher.axes[name]
-            await wait_until_async(lambda a=axis: _at_rest(a), timeout=20,
+            await wait_until_async(lambda a=axis: _at_rest(a), timeout=30,
                                    what=f"{name} at rest after the kill")
     for name, speed in SPEEDS.items():
         axis = watcher.axes[name]
