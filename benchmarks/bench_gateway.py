@@ -75,12 +75,15 @@ def drive_servers() -> Any:
 
 
 def machine_toml(urls: list[str]) -> str:
+    """The benchmark's machine: its axes are ``continuous`` (issue 27), so that the turning
+    ones keep the load up for the whole measurement without a client renewing a lease."""
     lines = ['name = "bench-32"']
     for i in range(AXES):
         _, _, unit, per_rev = LINKS[i % len(LINKS)]
         url = urls[i % len(LINKS)]
         lines += [f"[axes.a{i:02d}]", f'url = "{url}"', f"id = {i // len(LINKS) + 1}",
-                  f'unit = "{unit}"'] + ([f"per_rev = {per_rev}"] if per_rev else [])
+                  f'unit = "{unit}"', "continuous = true"] \
+            + ([f"per_rev = {per_rev}"] if per_rev else [])
     return "\n".join(lines) + "\n"
 
 

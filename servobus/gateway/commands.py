@@ -11,7 +11,13 @@ Decisions (docs/gateway.md "Commands"):
 * values are in the axis's unit, finite; MoveAbsolute is checked against the axis limits
   here, MoveRelative by the machine (it knows the position), both as BadOutOfRange;
 * an offline axis answers BadCommunicationError at once; a command never waits longer than
-  :data:`COMMAND_DEADLINE_S` and is never re-sent.
+  :data:`COMMAND_DEADLINE_S` and is never re-sent;
+* ``set_speed`` is a lease of the axis (servobus.machine.lease, docs/safety.md) held by the
+  command's *owner* (an OPC UA session, an MQTT client) for ``ttl`` seconds (above 0, at
+  most 1: BadOutOfRange beyond) after each call; calling again renews it. Another owner's
+  live lease answers BadLocked naming the holder. On a ``continuous`` axis the speed is
+  open-ended and the ttl is only checked. :meth:`Commander.release` lets an owner's leases
+  go (a closed session).
 """
 
 from __future__ import annotations
@@ -29,9 +35,11 @@ from servobus.errors import (
     DriveError,
     DriveTimeout,
     NotSupported,
+    OwnerError,
     ServobusError,
 )
 from servobus.gateway.source import Machine, MachineAxis
+from servobus.machine.lease import DEFAULT_TTL_S, MAX_TTL_S
 
 log = logging.getLogger(__name__)
 
@@ -67,6 +75,8 @@ def status_name(exc: BaseException) -> str:
         return "BadCommunicationError"
     if isinstance(exc, NotSupported):
         return "BadNotSupported"
+    if isinstance(exc, OwnerError):  # "locked by a different application" (Part 4)
+        return "BadLocked"
     if isinstance(exc, DriveError | ServobusError):
         return "BadDeviceFailure"
     return "BadInternalError"
@@ -77,6 +87,7 @@ class Command:
     axis: str  # "" for stop_all
     name: str
     value: float | None = None
+    ttl: float | None = None  # set_speed only: the lease's time to live (None: DEFAULT_TTL_S)
 
 
 class Commander:
@@ -108,18 +119,22 @@ class Commander:
                     raise Refused("BadOutOfRange",
                                   f"target {value:g} {axis.unit} is outside the limits "
                                   f"{low:g}..{high:g} {axis.unit} of axis {axis.name}")
+        check_ttl(command)
         if not axis.online:
             raise Refused("BadCommunicationError", f"axis {axis.name} is offline")
         return axis
 
-    async def run(self, user: str | None, command: Command, via: str) -> None:
-        """Check and carry out ``command``; Refused on any failure (logged in one line)."""
-        what = command.name + ("" if command.value is None else f" {command.value:g}")
+    async def run(self, user: str | None, command: Command, via: str,
+                  owner: str | None = None) -> None:
+        """Check and carry out ``command``; Refused on any failure (logged in one line).
+        ``owner`` holds a ``set_speed`` lease (default ``via:user``)."""
+        what = command.name + ("" if command.value is None else f" {command.value:g}") \
+            + ("" if command.ttl is None else f" ttl {command.ttl:g} s")
         target = command.axis or self.machine.name
         try:
             axis = self.check(user, command)
             async with asyncio.timeout(COMMAND_DEADLINE_S):
-                await self._call(axis, command)
+                await self._call(axis, command, owner or f"{via}:{user}")
         except Refused as exc:
             log.warning("%s %s: %s %s refused (%s): %s", via, user or "anonymous", target, what,
                         exc.code, exc.message)
@@ -130,7 +145,23 @@ class Commander:
             raise Refused(code, f"{type(exc).__name__}: {exc}") from None
         log.info("%s %s: %s %s", via, user, target, what)
 
-    async def _call(self, axis: MachineAxis | None, command: Command) -> None:
+    async def release(self, owner: str, via: str) -> None:
+        """``owner`` is gone (a closed session): its leases end and their axes stop.
+        Never raises: one log line per axis it held, or per failure."""
+        for axis in self.machine.axes.values():
+            lease = axis.lease
+            if lease is None or lease.owner != owner:
+                continue
+            try:
+                async with asyncio.timeout(COMMAND_DEADLINE_S):
+                    await axis.release(owner)
+            except Exception as exc:
+                log.warning("%s: %s left; stopping axis %s failed: %s", via, owner, axis.name,
+                            exc)
+            else:
+                log.info("%s: %s left; its motion of axis %s stopped", via, owner, axis.name)
+
+    async def _call(self, axis: MachineAxis | None, command: Command, owner: str) -> None:
         if axis is None:
             await self.machine.stop_all()
             return
@@ -147,4 +178,19 @@ class Commander:
         elif command.name == "move_relative":
             await axis.move_by(value)
         else:
-            await axis.turn(value)
+            ttl = DEFAULT_TTL_S if command.ttl is None else command.ttl
+            await axis.turn(value, owner=owner, ttl=ttl)
+
+
+def check_ttl(command: Command) -> None:
+    """A ttl only on set_speed, a finite number of seconds in (0, MAX_TTL_S]."""
+    ttl = command.ttl
+    if ttl is None:
+        return
+    if command.name != "set_speed":
+        raise Refused("BadInvalidArgument", f"{command.name} takes no ttl (set_speed does)")
+    if isinstance(ttl, bool) or not isinstance(ttl, int | float) or not math.isfinite(ttl):
+        raise Refused("BadInvalidArgument", "ttl is a finite number of seconds")
+    if not 0 < ttl <= MAX_TTL_S:
+        raise Refused("BadOutOfRange", f"ttl {ttl:g} s: a speed holds above 0 and at most "
+                      f"{MAX_TTL_S:g} s after each call; call again to renew it")

@@ -256,7 +256,8 @@ class MqttGateway:
         try:
             accepted = self.gate.admit(axis, payload, retained)
             ident = accepted.id
-            await self.commander.run(f"mqtt:{self.username}", accepted.command, "mqtt")
+            await self.commander.run(f"mqtt:{self.username}", accepted.command, "mqtt",
+                                     accepted.owner)
             reply: dict[str, object] = {"id": ident, "ok": True, "code": "Good"}
         except Refused as exc:
             if ident is None:

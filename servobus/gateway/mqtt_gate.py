@@ -13,6 +13,14 @@ out. Refused, never run, and answered on ``.../reply``:
 * ``ts`` older than ``max_age`` (default 5 s) or more than :data:`MAX_FUTURE_S` ahead of
   this computer's clock (the sender's clock must be synchronised, NTP);
 * a payload that is not such an object, or larger than :data:`MAX_PAYLOAD` bytes.
+
+``set_speed`` is a lease (docs/gateway.md "MQTT commands"): it takes ``ttl`` (seconds,
+default 0.5, above 0 and at most 1; BadOutOfRange beyond, checked with the OPC UA
+arguments in servobus.gateway.commands) and ends that long after the last ``set_speed``
+unless another one (a new ``id``, a fresh ``ts``) renews it. The lease's owner: MQTT does
+not tell a subscriber who published, so a command may name its sender in ``client``
+(1-64 characters); the owner is ``mqtt:<client>``, or ``mqtt`` for commands without one
+(all such senders share one owner: they renew each other's motion).
 """
 
 from __future__ import annotations
@@ -24,17 +32,20 @@ from collections import OrderedDict
 from dataclasses import dataclass
 
 from servobus.gateway.commands import AXIS_COMMANDS, MOTION, Command, Refused
+from servobus.machine.lease import DEFAULT_TTL_S
 
 MAX_PAYLOAD = 4096
 MAX_IDS = 10_000
 MAX_FUTURE_S = 2.0
 DEFAULT_MAX_AGE_S = 5.0
+MAX_CLIENT = 64
 
 
 @dataclass(frozen=True)
 class Accepted:
     command: Command
     id: str | None
+    owner: str = "mqtt"  # who holds a set_speed lease: mqtt:<client>, or mqtt
 
 
 class CommandGate:
@@ -77,6 +88,16 @@ class CommandGate:
         value = data.get("value")
         if AXIS_COMMANDS[name] and (isinstance(value, bool) or not isinstance(value, int | float)):
             raise Refused("BadInvalidArgument", f"{name} needs a number value")
+        ttl = data.get("ttl")
+        if ttl is not None and (isinstance(ttl, bool) or not isinstance(ttl, int | float)):
+            raise Refused("BadInvalidArgument", "ttl is a number of seconds")
+        if ttl is None and name == "set_speed":
+            ttl = DEFAULT_TTL_S
+        client = data.get("client")
+        if client is not None and (not isinstance(client, str)
+                                   or not 1 <= len(client) <= MAX_CLIENT):
+            raise Refused("BadInvalidArgument",
+                          f"client is a string of 1..{MAX_CLIENT} characters")
         if ident is not None:
             self._expire(now)
             if ident in self._seen:
@@ -84,7 +105,9 @@ class CommandGate:
             if len(self._seen) >= MAX_IDS:
                 raise Refused("BadTooManyOperations", "too many commands: try again later")
             self._seen[ident] = now
-        return Accepted(Command(axis, name, None if value is None else float(value)), ident)
+        command = Command(axis, name, None if value is None else float(value),
+                          None if ttl is None else float(ttl))
+        return Accepted(command, ident, "mqtt" if client is None else f"mqtt:{client}")
 
     def _expire(self, now: float) -> None:
         horizon = now - 2 * self.max_age_s

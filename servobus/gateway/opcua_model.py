@@ -20,8 +20,8 @@ the standard names finds what it expects::
                     Online, LastError   (servobus)
                   Identification        (DI)         Manufacturer, Model (family), Protocol,
                                                      DeviceAddress (link and drive id)
-                  MoveAbsolute(Double), MoveRelative(Double), SetSpeed(Double), Stop(),
-                  Enable(), Disable(), ResetAlarm()  (servobus)
+                  MoveAbsolute(Double), MoveRelative(Double), SetSpeed(Double, Ttl
+                  Double), Stop(), Enable(), Disable(), ResetAlarm()  (servobus)
               StopAll()                 (servobus)
 
 Node ids are strings in the servobus namespace (``<machine>.<axis>.ActualPosition``), so
@@ -56,18 +56,26 @@ STATE_VARIABLES: dict[str, tuple[ua.VariantType, object]] = {
     "AlarmText": (ua.VariantType.String, ""),
 }
 
-#: OPC UA method name -> (command name, takes a Double argument, its description).
-AXIS_METHODS: dict[str, tuple[str, bool, str]] = {
-    "MoveAbsolute": ("move_absolute", True, "target position in the axis unit"),
-    "MoveRelative": ("move_relative", True, "distance in the axis unit"),
-    "SetSpeed": ("set_speed", True, "constant speed in the axis unit per second (0 stops)"),
-    "Stop": ("stop", False, ""),
-    "Enable": ("enable", False, ""),
-    "Disable": ("disable", False, ""),
-    "ResetAlarm": ("reset_alarm", False, ""),
+#: SetSpeed's description: a lease, renewed by calling again (docs/gateway.md "SetSpeed").
+SET_SPEED_HELP = ("constant speed in the axis unit per second (0 stops); it ends Ttl seconds "
+                  "after the last call unless called again (renew it), and when the session "
+                  "closes; on a continuous axis it is open-ended (Ttl is checked, not used)")
+TTL_HELP = ("seconds the speed holds after this call, above 0 and at most 1; call again "
+            "before it runs out to keep the axis turning")
+
+#: OPC UA method name -> (command name, its Double input arguments as (name, description)).
+AXIS_METHODS: dict[str, tuple[str, tuple[tuple[str, str], ...]]] = {
+    "MoveAbsolute": ("move_absolute", (("Value", "target position in the axis unit"),)),
+    "MoveRelative": ("move_relative", (("Value", "distance in the axis unit"),)),
+    "SetSpeed": ("set_speed", (("Value", SET_SPEED_HELP), ("Ttl", TTL_HELP))),
+    "Stop": ("stop", ()),
+    "Enable": ("enable", ()),
+    "Disable": ("disable", ()),
+    "ResetAlarm": ("reset_alarm", ()),
 }
 
-MethodHandler = Callable[[str, str, float | None], Awaitable[ua.StatusCode]]
+#: ``handler(axis, command, arguments)``: the method's Double arguments in order.
+MethodHandler = Callable[[str, str, tuple[float, ...]], Awaitable[ua.StatusCode]]
 
 
 @dataclass
@@ -129,7 +137,7 @@ async def add_analog(parent: Node, ns_name: int, ns_id: int, nid: str, name: str
 
 async def build_model(server: Server, machine: Machine, source: str,
                       handler: MethodHandler) -> tuple[Node, dict[str, AxisNodes]]:
-    """Add the machine's nodes; methods call ``handler(axis, command, value)``."""
+    """Add the machine's nodes; methods call ``handler(axis, command, arguments)``."""
     ns = await register_namespaces(server)
     m = machine.name
     objects = server.nodes.objects
@@ -147,7 +155,7 @@ async def build_model(server: Server, machine: Machine, source: str,
                                           qn(ns.robotics, "Axes"))
 
     async def stop_all(parent: ua.NodeId) -> ua.StatusCode:
-        return await handler("", "stop_all", None)
+        return await handler("", "stop_all", ())
 
     await device.add_method(ua.NodeId(f"{m}.StopAll", ns.servobus), qn(ns.servobus, "StopAll"),
                             stop_all, [], [])
@@ -181,23 +189,25 @@ async def _add_axis(folder: Node, ns: Namespaces, m: str, axis: MachineAxis,
             var = await params.add_variable(ua.NodeId(f"{a}.{name}", ns.servobus),
                                             qn(ns.servobus, name), initial, vtype)
         out.variables[name] = var
-    for method, (command, takes_value, description) in AXIS_METHODS.items():
-        inputs = [method_argument("Value", description)] if takes_value else []
+    for method, (command, arguments) in AXIS_METHODS.items():
+        inputs = [method_argument(name, description) for name, description in arguments]
         await obj.add_method(ua.NodeId(f"{a}.{method}", ns.servobus), qn(ns.servobus, method),
-                             _method(handler, axis.name, command, takes_value), inputs, [])
+                             _method(handler, axis.name, command, len(arguments)), inputs, [])
     return out
 
 
 def _method(handler: MethodHandler, axis: str, command: str,
-            takes_value: bool) -> Callable[..., Awaitable[ua.StatusCode]]:
+            count: int) -> Callable[..., Awaitable[ua.StatusCode]]:
+    """asyncua does not check a call's arguments against the method's: check them here."""
     async def call(parent: ua.NodeId, *args: ua.Variant) -> ua.StatusCode:
-        value: float | None = None
-        if takes_value:
-            if len(args) != 1 or not isinstance(args[0].Value, float | int) \
-                    or isinstance(args[0].Value, bool):
-                return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
-            value = float(args[0].Value)
-        elif args:
+        if len(args) < count:
+            return ua.StatusCode(ua.StatusCodes.BadArgumentsMissing)
+        if len(args) > count:
             return ua.StatusCode(ua.StatusCodes.BadTooManyArguments)
-        return await handler(axis, command, value)
+        values = []
+        for arg in args:
+            if not isinstance(arg.Value, float | int) or isinstance(arg.Value, bool):
+                return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
+            values.append(float(arg.Value))
+        return await handler(axis, command, tuple(values))
     return call

@@ -13,10 +13,14 @@ Security (decision, docs/gateway.md "Security"):
   file (``--users``), on loopback too; without one it answers BadUserAccessDenied. The
   address space itself cannot be changed by any client (no writable node, no AddNodes).
 
-How the caller is known: asyncua tells a method callback nothing about the session, but
-it asks the permission ruleset about every request before serving it, in the same task.
-:class:`GatewayRules` keeps the session's user in a context variable there, and the method
-callback reads it.
+Who calls (decision): asyncua tells a method callback nothing about the session. The
+gateway's internal server (:class:`GatewayServer`, handed to asyncua's ``Server``) makes
+every client session a :class:`GatewaySession`, which names itself to the method callbacks
+of its Call requests (a context variable, set in the same task) and, when it closes, lets
+go of the leases it holds. A session closes on CloseSession, on a lost connection (asyncua
+keeps a session with subscriptions open for the client to come back, until the session
+timeout) and on its timeout; a half-open connection closes nothing, so a SetSpeed's own
+``Ttl`` (at most 1 s) is what ends the motion of a client that went silent.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ import datetime
 import logging
 import math
 import socket
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -36,6 +41,8 @@ from urllib.parse import urlparse
 from asyncua import Server, ua
 from asyncua.common.connection import TransportLimits
 from asyncua.crypto.permission_rules import User, UserRole
+from asyncua.server.internal_server import InternalServer
+from asyncua.server.internal_session import InternalSession, SessionState
 from asyncua.server.user_managers import UserManager
 
 from servobus.errors import ArgumentRangeError
@@ -56,8 +63,8 @@ BUFFER_BYTES = 65_535
 PENDING_ACTIVATION_S = 10.0
 MAX_SUBSCRIPTIONS = 200
 MAX_ITEM_QUEUE = 1_000
-_caller: contextvars.ContextVar[User | None] = contextvars.ContextVar("opcua_caller",
-                                                                      default=None)
+_caller: contextvars.ContextVar[GatewaySession | None] = contextvars.ContextVar(
+    "opcua_caller", default=None)
 ADMIN_REQUESTS = {ua.NodeId(i) for i in (
     ua.ObjectIds.AddNodesRequest_Encoding_DefaultBinary,
     ua.ObjectIds.DeleteNodesRequest_Encoding_DefaultBinary,
@@ -69,11 +76,55 @@ ADMIN_REQUESTS = {ua.NodeId(i) for i in (
 
 
 class GatewayRules:
-    """asyncua permission ruleset: no client changes the address space; remember the user."""
+    """asyncua permission ruleset: no client changes the address space."""
 
     def check_validity(self, user: User, action_type_id: ua.NodeId, body: Any) -> bool:
-        _caller.set(user)
         return action_type_id not in ADMIN_REQUESTS
+
+
+SessionGone = Callable[[str], Awaitable[None]]
+
+
+class GatewaySession(InternalSession):  # type: ignore[misc]
+    """A client's session: the owner of the leases its SetSpeed calls hold."""
+
+    on_close: SessionGone | None = None
+    _owner: str | None = None
+
+    @property
+    def owner(self) -> str:
+        """Fixed at the first call: the session's number and its user."""
+        if self._owner is None:
+            who = self.user.name if self.user.role == UserRole.User else "anonymous"
+            self._owner = f"opcua session {self.session_id.Identifier} ({who})"
+        return self._owner
+
+    async def call(self, params: list[ua.CallMethodRequest]) -> list[ua.CallMethodResult]:
+        _caller.set(self)
+        results: list[ua.CallMethodResult] = await super().call(params)
+        return results
+
+    async def close_session(self, delete_subs: bool = True) -> None:
+        closed = self.state == SessionState.Closed
+        await super().close_session(delete_subs)
+        if not closed and self._owner is not None and self.on_close is not None:
+            await self.on_close(self._owner)
+
+
+class GatewayServer(InternalServer):  # type: ignore[misc]
+    """asyncua's internal server whose client sessions are GatewaySessions."""
+
+    def __init__(self, user_manager: UserManager, on_close: SessionGone) -> None:
+        super().__init__(user_manager=user_manager)
+        self.on_session_close = on_close
+
+    def create_session(self, name: str, user: User | None = None,
+                       external: bool = False) -> InternalSession:
+        session = GatewaySession(self, self.aspace, self.subscription_service, name,
+                                 user=User(role=UserRole.Anonymous) if user is None else user,
+                                 external=external)
+        session.on_close = self.on_session_close
+        return session
 
 
 class FileUsers(UserManager):  # type: ignore[misc]
@@ -136,7 +187,8 @@ class OpcUaGateway:
         self.source = source
         self.host, self.port = parse_endpoint(options.endpoint)
         self.loopback = is_loopback(self.host)
-        self.server = Server(user_manager=FileUsers(options.users or Users()))
+        self.server = Server(iserver=GatewayServer(FileUsers(options.users or Users()),
+                                                   self._session_closed))
         self.axes: dict[str, AxisNodes] = {}
         self._pending: dict[str, Sample] = {}
         self._wake = asyncio.Event()
@@ -221,14 +273,21 @@ class OpcUaGateway:
         await self.server.stop()
 
     # ---------------------------------------------------------------- methods
-    async def _call(self, axis: str, command: str, value: float | None) -> ua.StatusCode:
-        user = _caller.get()
+    async def _call(self, axis: str, command: str, arguments: tuple[float, ...]
+                    ) -> ua.StatusCode:
+        session = _caller.get()
+        user = session.user if session is not None else None
         name = user.name if user is not None and user.role == UserRole.User else None
+        value, ttl = (*arguments, None, None)[:2]
+        owner = session.owner if session is not None else None
         try:
-            await self.commander.run(name, Command(axis, command, value), "opcua")
+            await self.commander.run(name, Command(axis, command, value, ttl), "opcua", owner)
         except Refused as exc:
             return _status(exc.code)
         return ua.StatusCode(ua.StatusCodes.Good)
+
+    async def _session_closed(self, owner: str) -> None:
+        await self.commander.release(owner, "opcua")
 
     # ---------------------------------------------------------------- values
     def on_sample(self, sample: Sample) -> None:

@@ -52,10 +52,15 @@ class FakeAxis:
     async def move_by(self, distance: float, /) -> None:
         await self.move_to(self.pos + distance)
 
-    async def turn(self, speed: float, /) -> None:
+    lease = None  # the fake axis takes no leases (tests/gateway/test_gateway_lease.py does)
+
+    async def turn(self, speed: float, /, *, owner: str = "api", ttl: float = 0.5) -> None:
         self._link()
         self.log.append(f"{self.name} turn {speed:g}")
         self.velocity = speed
+
+    async def release(self, owner: str, /) -> None:
+        self.log.append(f"{self.name} release {owner}")
 
     async def stop(self) -> None:
         self.log.append(f"{self.name} stop")

@@ -147,3 +147,53 @@ async def test_a_killed_gateway_leaves_its_last_will(broker: int, tmp_path: Path
     finally:
         running.stop()
     assert statuses[-1] == b"offline"
+
+
+async def test_set_speed_ends_by_itself_when_its_sender_stops_sending(
+        broker: int, gateway: RunningGateway) -> None:
+    """Issue 27: set_speed is a lease of its sender, renewed by sending it again with a new
+    id; when the sender goes silent the axis comes to rest within the ttl (plus the ramp
+    down and the state's period; a loaded machine is given more)."""
+    ttl, late_s, rest_s = 0.4, 2.0, 0.5
+    replies: list[dict[str, Any]] = []
+    states: list[tuple[float, dict[str, Any]]] = []  # (arrival, state)
+    async with mqtt_client(broker) as client:
+        await client.subscribe(f"{TOPIC}/y/reply", qos=1)
+        await client.subscribe(f"{TOPIC}/y/state")
+
+        async def until(what: Any) -> None:
+            def check(topic: str, payload: bytes, _: bool) -> bool:
+                if topic.endswith("/reply"):
+                    replies.append(json.loads(payload))
+                elif payload:
+                    states.append((time.monotonic(), json.loads(payload)))
+                return bool(what())
+            await collect(client, check)
+
+        async def set_speed() -> float:
+            sent = time.monotonic()
+            body = {"id": uuid.uuid4().hex, "ts": time.time(), "cmd": "set_speed",
+                    "value": 10.0, "ttl": ttl, "client": "test-line"}
+            count = len(replies)
+            await client.publish(f"{TOPIC}/y/cmd", json.dumps(body), qos=1)
+            await until(lambda: len(replies) > count)
+            assert replies[-1] == {"id": body["id"], "ok": True, "code": "Good"}
+            return sent
+
+        def at_rest_since() -> float | None:
+            """When the last run of standstill states began, if it spans rest_s (a late
+            target update on a loaded machine may halt the motor for a moment)."""
+            run = 0
+            while run < len(states) and states[-1 - run][1]["speed"] == 0.0 \
+                    and not states[-1 - run][1]["moving"]:
+                run += 1
+            if not run or states[-1][0] - states[-run][0] < rest_s:
+                return None
+            return states[-run][0]
+
+        await set_speed()
+        await until(lambda: states and states[-1][1]["speed"] > 5.0)  # turning
+        last = await set_speed()  # renewed: then silent
+        await until(lambda: at_rest_since() is not None and at_rest_since() > last)
+        stopped = at_rest_since()
+        assert stopped is not None and stopped - last <= ttl + late_s

@@ -138,3 +138,33 @@ def test_serve_refuses_half_given_options() -> None:
     assert result.exit_code == 2 and "--mqtt-commands needs --mqtt" in result.output
     result = CliRunner().invoke(cli, ["serve", "--opcua", "http://x:1"])
     assert result.exit_code != 0
+
+
+async def test_set_speed_is_a_lease_of_its_client_with_a_checked_ttl() -> None:
+    gate = CommandGate(max_age_s=5)
+    plain = gate.admit("x", msg(id="s1", ts=NOW, cmd="set_speed", value=3), False, NOW)
+    assert (plain.command.ttl, plain.owner) == (0.5, "mqtt")  # the default ttl and owner
+    named = gate.admit("x", msg(id="s2", ts=NOW, cmd="set_speed", value=3, ttl=0.2,
+                                client="line-3"), False, NOW)
+    assert (named.command.ttl, named.owner) == (0.2, "mqtt:line-3")
+    for bad in (msg(id="s3", ts=NOW, cmd="set_speed", value=3, ttl="0.2"),
+                msg(id="s4", ts=NOW, cmd="set_speed", value=3, ttl=True),
+                msg(id="s5", ts=NOW, cmd="set_speed", value=3, client=""),
+                msg(id="s6", ts=NOW, cmd="set_speed", value=3, client="c" * 65)):
+        assert refused(gate, bad) == "BadInvalidArgument"
+    # the range is the commander's, as for OPC UA's Ttl; nothing reaches an axis
+    machine = FakeMachine()
+    commander = Commander(machine)  # type: ignore[arg-type]
+    for payload, code in ((msg(id="s7", ts=NOW, cmd="set_speed", value=3, ttl=1.01),
+                           "BadOutOfRange"),
+                          (msg(id="s8", ts=NOW, cmd="set_speed", value=3, ttl=0),
+                           "BadOutOfRange"),
+                          (msg(id="s9", ts=NOW, cmd="set_speed", value=3, ttl=float("nan")),
+                           "BadInvalidArgument"),
+                          (msg(id="s10", ts=NOW, cmd="move_relative", value=3, ttl=0.5),
+                           "BadInvalidArgument")):
+        accepted = gate.admit("a0", payload, False, NOW)
+        with pytest.raises(Refused) as exc:
+            await commander.run("mqtt:gateway", accepted.command, "mqtt", accepted.owner)
+        assert exc.value.code == code, payload
+    assert machine.log == []

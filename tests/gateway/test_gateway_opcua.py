@@ -79,8 +79,10 @@ async def test_anonymous_is_read_only(gateway: RunningGateway) -> None:
     async with Client(gateway.endpoint) as client:
         n = await names(client)
         axes = await axes_of(client, MACHINE)
+        # SetSpeed takes (Value, Ttl) since issue 27: a call must be well formed to be
+        # refused for its user (one argument is BadArgumentsMissing before that)
         for method, args in (("MoveRelative", (1.0,)), ("MoveAbsolute", (1.0,)),
-                             ("SetSpeed", (5.0,)), ("Stop", ()), ("Enable", ())):
+                             ("SetSpeed", (5.0, 0.5)), ("Stop", ()), ("Enable", ())):
             with pytest.raises(UaStatusCodeError) as refused:
                 await axes["x"].call_method(f"{n.servobus}:{method}", *args)
             assert refused.value.code == ua.StatusCodes.BadUserAccessDenied, method
