@@ -15,6 +15,12 @@ Decisions:
   motor moving, as on a single drive); Ctrl-C/SIGTERM stop the axis (motion_guard).
 * ``--axis`` without ``--machine`` and without a drive URL uses the built-in virtual
   machine (servobus.machine.builtin), announced on stderr.
+* ``origin = "set"`` / ``"home"`` is not applied by these one-shot commands, and a note on
+  stderr says so (issue 28): a command cannot know whether the drive was power-cycled since
+  the last one, and applying it at every command zeroed the axis again where it stood (two
+  ``move 90deg`` turned 180 deg, ``position`` read 0 after each; a DYN5 resets its servo
+  control when its origin is set). The drive keeps the origin it has until a power cycle;
+  ``servobus gui --machine FILE``, ``servobus serve`` or a script applies the rule once.
 """
 
 from __future__ import annotations
@@ -67,7 +73,8 @@ def open_machine_cli(ctx: CliContext, only: list[str] | None) -> Iterator[Machin
     (a failure keeps its one stderr line)."""
     from servobus.machine import open_machine
 
-    machine = open_machine(ctx.machine_path, only=only)
+    machine = open_machine(ctx.machine_path, only=only, origins=False)
+    note_origins_skipped(machine)
     try:
         yield machine
     except BaseException:
@@ -96,6 +103,18 @@ def open_axis_of_machine(ctx: CliContext) -> Iterator[Axis]:
 
 
 _noted: list[bool] = []
+
+
+def note_origins_skipped(machine: Machine) -> None:
+    """One stderr line naming the origin rules this one-shot command did not apply."""
+    rules = [f"{name} (origin = \"{machine.axes[name].core.spec.origin}\")"
+             for name in machine.origins_skipped]
+    if rules:
+        note(f"note: axis {', '.join(rules)}: not applied by a one-shot command, which "
+             "cannot tell whether the drive was power-cycled since the last one; positions "
+             "and limits count from the drive's own origin (`servobus gui --machine FILE`, "
+             "`servobus serve` or a script's open_machine() apply the rule once; "
+             "docs/machine.md)")
 
 
 def note_builtin_machine_once() -> None:
@@ -134,7 +153,9 @@ def status(ctx: CliContext) -> None:
         return
     from servobus.machine import open_machine
 
-    machine = open_machine(ctx.machine_path, retry=True)  # an unreachable link: offline row
+    machine = open_machine(ctx.machine_path, retry=True,  # an unreachable link: offline row
+                           origins=False)
+    note_origins_skipped(machine)
     try:
         records = [axis_record(a) for a in machine.axes.values()]
         name = machine.name
