@@ -34,8 +34,9 @@ import click
 from rich.console import Console
 
 from servobus.cli.context import CliContext
-from servobus.cli.failures import CliError
+from servobus.cli.failures import EXIT_FAULT, CliError
 from servobus.cli.open_axis import emit, kv_text, note
+from servobus.errors import DriveAlarm
 
 if TYPE_CHECKING:
     from servobus.axis.sync import Axis
@@ -150,6 +151,7 @@ def status(ctx: CliContext) -> None:
             record = axis_record(axis)
             title = f"status of {label(axis)}"
         emit(ctx, record, lambda con: con.print(kv_text(title, record), markup=False))
+        raise_alarms([record])
         return
     from servobus.machine import open_machine
 
@@ -165,11 +167,29 @@ def status(ctx: CliContext) -> None:
         note_builtin_machine_once()
     emit(ctx, {"machine": name, "axes": records},
          lambda con: render_machine_table(con, name, records))
+    raise_alarms(records)
     offline = [str(r["axis"]) for r in records if not r["online"]]
     if offline:
         raise CliError(f"axes offline: {', '.join(offline)} "
                        f"({'; '.join(str(r.get('error')) for r in records if not r['online'])})",
                        "check those links (power, cable, URL in the machine file)")
+
+
+def raise_alarms(records: list[dict[str, object]]) -> None:
+    """Exit 1 when an axis shown reports an alarm, as ``status`` of one drive does (after the
+    table is printed): DriveAlarm when one is latched, else a notice that needs no reset."""
+    alarmed = [r for r in records if r.get("alarm_code")]
+    if not alarmed:
+        return
+    what = "; ".join(f"axis {r['axis']} reports alarm {r['alarm_code']}: {r['alarm']}"
+                     + (" (latched)" if r.get("alarm_latched") else " (a notice)")
+                     for r in alarmed)
+    latched = [r for r in alarmed if r.get("alarm_latched")]
+    if latched:
+        code = latched[0]["alarm_code"]
+        raise DriveAlarm(what, code=code if isinstance(code, int) else 0)
+    raise CliError(what, "the drive keeps working; the notice goes once its cause is gone",
+                   EXIT_FAULT)
 
 
 def render_machine_table(con: Console, name: str, records: list[dict[str, object]]) -> None:
@@ -210,7 +230,12 @@ def position(ctx: CliContext) -> None:
          lambda con: con.print(f"{user:.4f} {axis.unit} ({counts} counts)", markup=False))
 
 
-def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: float) -> None:
+def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: float,
+         confirm: bool = False) -> None:
+    """``move`` on a machine axis; ``--wait``/``--confirm`` checked as on one drive
+    (servobus.cli.arrival)."""
+    from servobus.cli.arrival import check_arrival, check_ready, wait_arrival
+    from servobus.cli.drive_cmds import read_status
     from servobus.cli.motion_guard import stop_on_interrupt
     from servobus.machine import parse_quantity
 
@@ -219,8 +244,14 @@ def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: f
         user = axis.to_user(number) if unit == "counts" and axis.online else number
         core = axis.axis
         assert core is not None
+        who = f"axis {axis.name} (drive {core.drive_id})"
         with stop_on_interrupt(core):
-            if relative:
+            if wait or confirm:
+                check_ready(who, core.drive_id, read_status(core))
+            start = axis.counts() if relative and (wait or confirm) else 0
+            if confirm:
+                _confirmed_move(axis, core, user, relative, start)
+            elif relative:
                 axis.move_by(user)
             else:
                 axis.move_to(user)
@@ -228,10 +259,15 @@ def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: f
                                          "move": "relative" if relative else "absolute",
                                          "target": user, "unit": axis.unit}
             if wait:
-                st = axis.wait_idle(wait_timeout) if wait_timeout > 0 else axis.status()
+                st = wait_arrival(core, wait_timeout) if wait_timeout > 0 else axis.status()
                 counts = axis.counts()
                 record.update(in_position=st.in_position, position=axis.to_user(counts),
                               counts=counts)
+                if wait_timeout > 0:  # the target was checked (finite) by the move
+                    target = start + axis.to_counts(user)
+                    check_arrival(who, core.drive_id, st, counts, target,
+                                  core.position_window(),
+                                  f" ({axis.to_user(counts):.4f} {axis.unit})")
 
     def render(con: Console) -> None:
         verb = "moving by" if relative else "moving to"
@@ -240,6 +276,20 @@ def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: f
         con.print(f"axis {axis.name} {verb} {user:g} {axis.unit}{done}", markup=False)
 
     emit(ctx, record, render)
+
+
+def _confirmed_move(axis: MachineAxis, core: Axis, user: float, relative: bool,
+                    start: int) -> None:
+    """The machine's limit checks (nothing sent when they fail), then the Axis's confirmed
+    move (observed, never re-sent). ``start``: the position in counts a relative move's end
+    point counts from."""
+    if relative:
+        if axis.limits is not None:
+            axis.check_target(axis.to_user(start) + user)
+        core.move_by(axis.to_counts(user), confirm=True)
+    else:
+        axis.check_target(user)
+        core.move_to(axis.to_counts(user), confirm=True)
 
 
 def speed(ctx: CliContext, value: float) -> None:
