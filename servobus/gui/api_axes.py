@@ -103,8 +103,10 @@ async def wave(request: Request) -> Response:
     if kind == "off":
         await h.call(h.axis.wave_frequency(0))
         return ok()
-    await h.call(h.axis.wave_frequency(integer(doc, "hz")))
-    amplitude = integer(doc, "amplitude")
+    hz, amplitude = integer(doc, "hz"), integer(doc, "amplitude")  # both before any send
+    if hz < 1:
+        raise ArgumentRangeError(f"hz={hz}: a wave runs at 1 Hz or more (\"off\" stops it)")
+    await h.call(h.axis.wave_frequency(hz))
     if kind == "square":
         await h.call(h.axis.square_wave(amplitude))
     else:
