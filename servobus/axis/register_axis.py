@@ -203,8 +203,7 @@ class RegisterAxis(ClientAxis[C]):
             raise MotionRefused(
                 f"motor {self.drive_id}: the cruise speed (target_speed 0x02) is 0 rpm: a "
                 "position move would never get there; nothing was written - set "
-                "target_speed (1.."
-                f"{_SPEED.maximum} rpm) first")
+                f"target_speed (1..{_SPEED.maximum} rpm) first")
 
     async def _position_mode(self) -> None:
         if self._speed_mode is False:
@@ -254,7 +253,7 @@ class RegisterAxis(ClientAxis[C]):
             self._speed_mode = True
 
     async def _stop_ready(self) -> None:
-        """Ramp down and hold, then leave position mode at the cruise speed (module
+        """Ramp down and hold, then back to position mode at the cruise speed (module
         docstring: a stop leaves the motor ready for the next position move)."""
         cruise = self._cruise_rpm if self._cruise_rpm is not None else await self._cruise()
         if cruise <= 0:  # 0x02 = 0 in speed mode: a stop of a stop; nothing to restore
