@@ -12,8 +12,9 @@ Decisions:
   to compare with: only the enable is checked.
 * A drive that stands still off its target never reports "idle" on a family whose
   in-position flag compares with the target (YZ-AIM): :func:`wait_arrival` waits as
-  ``wait_idle`` does, and ends early once the motor has stood still for :data:`STILL_S`
-  without being in position (a stop from another program, a blocked axis), so the command
+  ``wait_idle`` does, and ends early once the motor has stood still (not moving, its
+  position unchanged within the in-position window) for :data:`STILL_S` without being in
+  position (a stop from another program, a blocked axis), so the command
   fails at once with MoveFailed instead of waiting out ``--wait-timeout`` (DriveTimeout).
 * The checks live here, in the CLI, not in ``Axis.move_to(wait=True)``: a script decides
   itself what a move that ended elsewhere means (``wait_idle`` returns the status).
@@ -37,11 +38,13 @@ STILL_S = 1.0
 SLICE_S = 0.25
 
 
-def wait_arrival(axis: Axis, timeout: float) -> AxisStatus:
-    """``axis.wait_idle(timeout)``, ended early by a motor standing still off its target or
-    disabled (module docstring); the status to judge with :func:`check_arrival`."""
+def wait_arrival(axis: Axis, timeout: float, window: int) -> AxisStatus:
+    """``axis.wait_idle(timeout)``, ended early by a disabled drive or by a motor that stands
+    still off its target: not moving, and its position within ``window`` counts of where it
+    was, on reads :data:`STILL_S` apart (module docstring). The status to judge with
+    :func:`check_arrival`."""
     deadline = time.monotonic() + timeout
-    still_since: float | None = None
+    still: tuple[float, int] | None = None  # since when, and where, the motor stands
     while True:
         remaining = deadline - time.monotonic()
         try:
@@ -53,14 +56,12 @@ def wait_arrival(axis: Axis, timeout: float) -> AxisStatus:
                 raise DriveTimeout(
                     f"drive {axis.drive_id} still moving after {timeout:g} s "
                     f"(moving={status.moving}, in_position={status.in_position})") from None
-        now = time.monotonic()
         if not status.enabled:
             return status
-        if status.moving:
-            still_since = None
-        elif still_since is None:
-            still_since = now
-        elif now - still_since >= STILL_S:
+        here, now = axis.position(), time.monotonic()
+        if status.moving or still is None or abs(here - still[1]) > window:
+            still = None if status.moving else (now, here)
+        elif now - still[0] >= STILL_S:
             return status
 
 

@@ -313,8 +313,10 @@ def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float, c
             record = {"counts": counts}
         record["move"] = "relative" if relative else "absolute"
         if wait:
-            status = wait_arrival(axis, wait_timeout) if wait_timeout > 0 else axis.status()
-            here, window = axis.position(), axis.position_window()
+            window = axis.position_window()
+            status = (wait_arrival(axis, wait_timeout, window) if wait_timeout > 0
+                      else axis.status())
+            here = axis.position()
             record.update(in_position=status.in_position, position=here, window=window)
             if unit != "cmd":
                 record["target"] = start + counts

@@ -259,14 +259,15 @@ def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: f
                                          "move": "relative" if relative else "absolute",
                                          "target": user, "unit": axis.unit}
             if wait:
-                st = wait_arrival(core, wait_timeout) if wait_timeout > 0 else axis.status()
+                window = core.position_window()
+                st = (wait_arrival(core, wait_timeout, window) if wait_timeout > 0
+                      else axis.status())
                 counts = axis.counts()
                 record.update(in_position=st.in_position, position=axis.to_user(counts),
                               counts=counts)
                 if wait_timeout > 0:  # the target was checked (finite) by the move
                     target = start + axis.to_counts(user)
-                    check_arrival(who, core.drive_id, st, counts, target,
-                                  core.position_window(),
+                    check_arrival(who, core.drive_id, st, counts, target, window,
                                   f" ({axis.to_user(counts):.4f} {axis.unit})")
 
     def render(con: Console) -> None:

@@ -251,6 +251,9 @@ class StillAxis:
 
         raise DriveTimeout("not idle")
 
+    def position(self) -> int:
+        return 50
+
     def status(self) -> AxisStatus:
         self.status_calls += 1
         return AxisStatus(enabled=True, moving=False, in_position=False, alarm_code=0,
@@ -261,7 +264,7 @@ def test_wait_arrival_ends_once_the_motor_stood_still_off_target(
         monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(arrival, "STILL_S", 0.05)
     axis = StillAxis()
-    status = wait_arrival(axis, timeout=60)  # type: ignore[arg-type]
+    status = wait_arrival(axis, 60, 10)  # type: ignore[arg-type]
     assert not status.moving and not status.in_position  # ended after STILL_S, not 60 s
     assert axis.status_calls >= 2  # seen still twice, STILL_S apart
     with pytest.raises(MoveFailed, match=r"stopped at 50 counts, -50 counts from the target"):
