@@ -53,6 +53,12 @@ class OwnerError(ServobusError):
         self.owner = owner
 
 
+class MotionRefused(ArgumentRangeError):
+    """A motion, or a register write that would start one, refused before it was written:
+    it would never end (open-ended motion on an axis that is not ``continuous``) or never
+    run (a YZ-AIM cruise speed of 0). Nothing was written."""
+
+
 class MachineFileError(ArgumentRangeError):
     """A mistake in a machine file (servobus.machine): one line naming file, axis and key."""
 
@@ -76,6 +82,18 @@ class DriveError(ServobusError):
         super().__init__(message)
         self.code = code
         self.drive_id = drive_id
+
+
+class MoveFailed(ServobusError):
+    """A move did not end where it was asked: the drive is disabled, or it stopped off its
+    target beyond its in-position window. ``position`` and ``target`` in counts when known."""
+
+    def __init__(self, message: str, drive_id: int | None = None,
+                 position: int | None = None, target: int | None = None) -> None:
+        super().__init__(message)
+        self.drive_id = drive_id
+        self.position = position
+        self.target = target
 
 
 class ConnectionLost(ServobusError, ConnectionError):

@@ -16,7 +16,8 @@ reply; the same on DYN CAN, section 6):
   corrupted packet the drive drops all look the same), or started to move.
 * A motion command is never re-sent: a resend could move twice (relative moves) or restart
   a profile. Reads are retried; motion is not.
-* ``confirm=True`` (or a ``confirm_timeout``) observes the drive after the one send: the
+* ``confirm=True`` (or a ``confirm_timeout``) refuses a drive in alarm (DriveAlarm) or
+  disabled (MoveFailed) before the send, and observes the drive after the one send: the
   move is confirmed when a status read shows it moving (and it was not before), or a
   position read shows the motor at the target within the in-position window or clearly
   nearer to it than before. Otherwise DriveTimeout after ``confirm_timeout``, without a
@@ -39,7 +40,13 @@ from types import TracebackType
 from servobus.axis import checks
 from servobus.axis.capture import Capture, CaptureSource
 from servobus.axis.virtual_io import VirtualIo, VirtualIoSource
-from servobus.errors import ArgumentRangeError, DriveAlarm, DriveTimeout, NotSupported
+from servobus.errors import (
+    ArgumentRangeError,
+    DriveAlarm,
+    DriveTimeout,
+    MoveFailed,
+    NotSupported,
+)
 from servobus.families.base import AxisStatus, Family, ParamInfo, StreamProfile
 from servobus.transport.base import Direction
 
@@ -357,10 +364,17 @@ class AsyncAxis(ABC):
     async def _confirmed_move(self, value: int, relative: bool, deadline_s: float) -> None:
         """Read where the drive is, send the move once, then observe that it took it.
 
-        The reads before the send may fail (DriveTimeout, ...): then nothing was sent.
+        The reads before the send may fail (DriveTimeout, ...): then nothing was sent. A
+        drive in alarm (DriveAlarm) or disabled (MoveFailed) would not take the move: it is
+        refused before the send (issue 28).
         """
         tolerance = await self.position_window()
-        was_busy = (await self.status()).moving
+        before = await self.status()
+        self._raise_alarm(before)
+        if not before.enabled:
+            raise MoveFailed(f"drive {self.drive_id} is disabled (motor free): the move was "
+                             "not sent; enable it first", drive_id=self.drive_id)
+        was_busy = before.moving
         start = await self.position()
         target = start + value if relative else value
         if relative:

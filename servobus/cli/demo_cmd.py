@@ -309,7 +309,11 @@ def _drive_demo(ctx: CliContext, yes: bool, script: _Script) -> str:
 
 
 def _machine_demo(ctx: CliContext, yes: bool, script: _Script) -> str:
-    from servobus.cli.machine_cli import _spec_names, note_builtin_machine_once
+    from servobus.cli.machine_cli import (
+        _spec_names,
+        note_builtin_machine_once,
+        note_origins_skipped,
+    )
     from servobus.machine import open_machine
     from servobus.machine.builtin import builtin_spec
     from servobus.machine.config import load_machine_file
@@ -329,7 +333,8 @@ def _machine_demo(ctx: CliContext, yes: bool, script: _Script) -> str:
         script.con.print("[bold]servobus demo[/bold] on " + escape(
             f"{label}: " + ", ".join(f"{a.name} ({a.url} id {a.drive_id}, {a.unit})"
                                      for a in spec.axes)))
-    machine = open_machine(path)
+    machine = open_machine(path, origins=False)  # a one-shot command (machine_cli)
+    note_origins_skipped(machine)
     try:
         with stop_on_interrupt(machine[chosen]):
             try:

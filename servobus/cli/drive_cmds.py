@@ -6,6 +6,8 @@ family (``move 16384``), revolutions (``2.5rev``), degrees (``90deg``) or the dr
 command units (``120cmd``, where the protocol has them); ``position`` prints counts and
 revolutions. Negative numbers are arguments: ``servobus move --relative -120``.
 Ctrl-C or SIGTERM during ``move --wait`` stops the motor first (servobus.cli.motion_guard).
+``move --wait`` and ``--confirm`` exit 1 when the drive is in alarm or disabled (nothing is
+sent) and ``--wait`` when the move ends off its target (servobus.cli.arrival).
 
 ``status`` exits 1 when the drive reports an alarm (README "Errors and exit codes"), after
 printing the status; ``reset`` clears a latched alarm the family's own way (Axis.reset():
@@ -28,6 +30,7 @@ import click
 from rich.console import Console
 
 from servobus.cli import machine_cli
+from servobus.cli.arrival import check_arrival, check_ready, wait_arrival
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.failures import EXIT_FAULT, CliError
@@ -336,10 +339,13 @@ def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float, c
     checked against its soft limits before anything is sent."""
     number, unit = target
     if ctx.machine_mode:
-        machine_cli.move(ctx, f"{number!r}{unit}", relative, wait, wait_timeout)
+        machine_cli.move(ctx, f"{number!r}{unit}", relative, wait, wait_timeout, confirm)
         return
     check_drive_target(number, unit)
     with open_axis(ctx) as axis, stop_on_interrupt(axis):
+        who = f"drive {axis.drive_id}"
+        if wait or confirm:  # a drive in alarm or disabled would not move (cli.arrival)
+            check_ready(who, axis.drive_id, read_status(axis))
         start = axis.position() if wait and relative else 0  # where "by" counts from
         if unit == "cmd":
             if not hasattr(axis.core, "move_to_command"):
@@ -354,11 +360,16 @@ def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float, c
             record = {"counts": counts}
         record["move"] = "relative" if relative else "absolute"
         if wait:
-            status = axis.wait_idle(timeout=wait_timeout) if wait_timeout > 0 else axis.status()
-            record.update(in_position=status.in_position, position=axis.position(),
-                          window=axis.position_window())
+            window = axis.position_window()
+            status = (wait_arrival(axis, wait_timeout, window) if wait_timeout > 0
+                      else axis.status())
+            here = axis.position()
+            record.update(in_position=status.in_position, position=here, window=window)
             if unit != "cmd":
                 record["target"] = start + counts
+            if wait_timeout > 0:
+                check_arrival(who, axis.drive_id, status, here,
+                              None if unit == "cmd" else start + counts, window)
 
     def render(con: Console) -> None:
         verb = "moving by" if relative else "moving to"

@@ -26,6 +26,8 @@ from servobus.errors import (
     EepromGuardError,
     LimitError,
     MachineFileError,
+    MotionRefused,
+    MoveFailed,
     NotSupported,
     ProtocolError,
     ServobusError,
@@ -33,7 +35,7 @@ from servobus.errors import (
 )
 
 EXIT_OK = 0
-EXIT_FAULT = 1  # the drive reports a fault (DriveAlarm, DriveError)
+EXIT_FAULT = 1  # the drive reports a fault (DriveAlarm, DriveError), a move failed (MoveFailed)
 EXIT_DIFFERENT = 1  # params --diff: drive differs from the file; decode: bytes with errors
 EXIT_USAGE = 2  # usage, connection, timeout, file: anything the user can fix at the terminal
 EXIT_INTERRUPTED = 130  # Ctrl-C (128 + SIGINT) or SIGTERM
@@ -74,6 +76,9 @@ HINTS: tuple[tuple[type[BaseException], int, str], ...] = (
      "drive)"),
     (DriveError, EXIT_FAULT,
      "the drive refused the command: check the value against the drive's manual"),
+    (MoveFailed, EXIT_FAULT,
+     "enable the drive and remove what stopped it (load, limit, another program), then "
+     "move again"),
     (DriveTimeout, EXIT_USAGE,
      "check --id (`servobus scan` lists the drives that answer), power, wiring and --baud"),
     (ConnectionRefusedError, EXIT_USAGE,
@@ -85,6 +90,7 @@ HINTS: tuple[tuple[type[BaseException], int, str], ...] = (
     (MachineFileError, EXIT_USAGE, "fix the machine file (docs/machine.md lists every key)"),
     (UnknownScheme, EXIT_USAGE,
      "write SCHEME://TARGET with a scheme above (docs/axis.md, \"Drive URLs\")"),
+    (MotionRefused, EXIT_USAGE, HELP_HINT),  # its message says what to do
     (ArgumentRangeError, EXIT_USAGE, "nothing was sent; give a value inside the range"),
     (NotSupported, EXIT_USAGE, "nothing was sent; this drive or protocol lacks the feature"),
     (EepromGuardError, EXIT_USAGE,

@@ -17,6 +17,12 @@ Decisions:
   motor moving, as on a single drive); Ctrl-C/SIGTERM stop the axis (motion_guard).
 * ``--axis`` without ``--machine`` and without a drive URL uses the built-in virtual
   machine (servobus.machine.builtin), announced on stderr.
+* ``origin = "set"`` / ``"home"`` is not applied by these one-shot commands, and a note on
+  stderr says so (issue 28): a command cannot know whether the drive was power-cycled since
+  the last one, and applying it at every command zeroed the axis again where it stood (two
+  ``move 90deg`` turned 180 deg, ``position`` read 0 after each; a DYN5 resets its servo
+  control when its origin is set). The drive keeps the origin it has until a power cycle;
+  ``servobus gui --machine FILE``, ``servobus serve`` or a script applies the rule once.
 """
 
 from __future__ import annotations
@@ -29,8 +35,9 @@ import click
 from rich.console import Console
 
 from servobus.cli.context import CliContext
-from servobus.cli.failures import CliError
+from servobus.cli.failures import EXIT_FAULT, CliError
 from servobus.cli.open_axis import emit, kv_text, note
+from servobus.errors import DriveAlarm
 
 if TYPE_CHECKING:
     from servobus.axis.sync import Axis
@@ -64,7 +71,8 @@ def open_machine_cli(ctx: CliContext, only: list[str] | None) -> Iterator[Machin
     (a failure keeps its one stderr line)."""
     from servobus.machine import open_machine
 
-    machine = open_machine(ctx.machine_path, only=only)
+    machine = open_machine(ctx.machine_path, only=only, origins=False)
+    note_origins_skipped(machine)
     try:
         yield machine
     except BaseException:
@@ -93,6 +101,18 @@ def open_axis_of_machine(ctx: CliContext) -> Iterator[Axis]:
 
 
 _noted: list[bool] = []
+
+
+def note_origins_skipped(machine: Machine) -> None:
+    """One stderr line naming the origin rules this one-shot command did not apply."""
+    rules = [f"{name} (origin = \"{machine.axes[name].core.spec.origin}\")"
+             for name in machine.origins_skipped]
+    if rules:
+        note(f"note: axis {', '.join(rules)}: not applied by a one-shot command, which "
+             "cannot tell whether the drive was power-cycled since the last one; positions "
+             "and limits count from the drive's own origin (`servobus gui --machine FILE`, "
+             "`servobus serve` or a script's open_machine() apply the rule once; "
+             "docs/machine.md)")
 
 
 def note_builtin_machine_once() -> None:
@@ -128,10 +148,13 @@ def status(ctx: CliContext) -> None:
             record = axis_record(axis)
             title = f"status of {label(axis)}"
         emit(ctx, record, lambda con: con.print(kv_text(title, record), markup=False))
+        raise_alarms([record])
         return
     from servobus.machine import open_machine
 
-    machine = open_machine(ctx.machine_path, retry=True)  # an unreachable link: offline row
+    machine = open_machine(ctx.machine_path, retry=True,  # an unreachable link: offline row
+                           origins=False)
+    note_origins_skipped(machine)
     try:
         records = [axis_record(a) for a in machine.axes.values()]
         name = machine.name
@@ -141,11 +164,29 @@ def status(ctx: CliContext) -> None:
         note_builtin_machine_once()
     emit(ctx, {"machine": name, "axes": records},
          lambda con: render_machine_table(con, name, records))
+    raise_alarms(records)
     offline = [str(r["axis"]) for r in records if not r["online"]]
     if offline:
         raise CliError(f"axes offline: {', '.join(offline)} "
                        f"({'; '.join(str(r.get('error')) for r in records if not r['online'])})",
                        "check those links (power, cable, URL in the machine file)")
+
+
+def raise_alarms(records: list[dict[str, object]]) -> None:
+    """Exit 1 when an axis shown reports an alarm, as ``status`` of one drive does (after the
+    table is printed): DriveAlarm when one is latched, else a notice that needs no reset."""
+    alarmed = [r for r in records if r.get("alarm_code")]
+    if not alarmed:
+        return
+    what = "; ".join(f"axis {r['axis']} reports alarm {r['alarm_code']}: {r['alarm']}"
+                     + (" (latched)" if r.get("alarm_latched") else " (a notice)")
+                     for r in alarmed)
+    latched = [r for r in alarmed if r.get("alarm_latched")]
+    if latched:
+        code = latched[0]["alarm_code"]
+        raise DriveAlarm(what, code=code if isinstance(code, int) else 0)
+    raise CliError(what, "the drive keeps working; the notice goes once its cause is gone",
+                   EXIT_FAULT)
 
 
 def render_machine_table(con: Console, name: str, records: list[dict[str, object]]) -> None:
@@ -186,7 +227,12 @@ def position(ctx: CliContext) -> None:
          lambda con: con.print(f"{user:.4f} {axis.unit} ({counts} counts)", markup=False))
 
 
-def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: float) -> None:
+def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: float,
+         confirm: bool = False) -> None:
+    """``move`` on a machine axis; ``--wait``/``--confirm`` checked as on one drive
+    (servobus.cli.arrival)."""
+    from servobus.cli.arrival import check_arrival, check_ready, wait_arrival
+    from servobus.cli.drive_cmds import read_status
     from servobus.cli.motion_guard import stop_on_interrupt
     from servobus.machine import parse_quantity
 
@@ -195,8 +241,14 @@ def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: f
         user = axis.to_user(number) if unit == "counts" and axis.online else number
         core = axis.axis
         assert core is not None
+        who = f"axis {axis.name} (drive {core.drive_id})"
         with stop_on_interrupt(core):
-            if relative:
+            if wait or confirm:
+                check_ready(who, core.drive_id, read_status(core))
+            start = axis.counts() if relative and (wait or confirm) else 0
+            if confirm:
+                _confirmed_move(axis, core, user, relative, start)
+            elif relative:
                 axis.move_by(user)
             else:
                 axis.move_to(user)
@@ -204,10 +256,16 @@ def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: f
                                          "move": "relative" if relative else "absolute",
                                          "target": user, "unit": axis.unit}
             if wait:
-                st = axis.wait_idle(wait_timeout) if wait_timeout > 0 else axis.status()
+                window = core.position_window()
+                st = (wait_arrival(core, wait_timeout, window) if wait_timeout > 0
+                      else axis.status())
                 counts = axis.counts()
                 record.update(in_position=st.in_position, position=axis.to_user(counts),
                               counts=counts)
+                if wait_timeout > 0:  # the target was checked (finite) by the move
+                    target = start + axis.to_counts(user)
+                    check_arrival(who, core.drive_id, st, counts, target, window,
+                                  f" ({axis.to_user(counts):.4f} {axis.unit})")
 
     def render(con: Console) -> None:
         verb = "moving by" if relative else "moving to"
@@ -216,6 +274,20 @@ def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: f
         con.print(f"axis {axis.name} {verb} {user:g} {axis.unit}{done}", markup=False)
 
     emit(ctx, record, render)
+
+
+def _confirmed_move(axis: MachineAxis, core: Axis, user: float, relative: bool,
+                    start: int) -> None:
+    """The machine's limit checks (nothing sent when they fail), then the Axis's confirmed
+    move (observed, never re-sent). ``start``: the position in counts a relative move's end
+    point counts from."""
+    if relative:
+        if axis.limits is not None:
+            axis.check_target(axis.to_user(start) + user)
+        core.move_by(axis.to_counts(user), confirm=True)
+    else:
+        axis.check_target(user)
+        core.move_to(axis.to_counts(user), confirm=True)
 
 
 def speed(ctx: CliContext, value: float, for_s: float | None) -> None:

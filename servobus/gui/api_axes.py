@@ -115,7 +115,9 @@ async def wave(request: Request) -> Response:
     if kind == "off":
         await h.call(h.axis.wave_frequency(0))
         return ok()
-    hz, amplitude = integer(doc, "hz"), integer(doc, "amplitude")
+    hz, amplitude = integer(doc, "hz"), integer(doc, "amplitude")  # both before any send
+    if hz < 1:
+        raise ArgumentRangeError(f"hz={hz}: a wave runs at 1 Hz or more (\"off\" stops it)")
     await check_wave(h, amplitude)  # soft limits and leases, before anything is sent
     await h.call(h.axis.wave_frequency(hz))
     if kind == "square":

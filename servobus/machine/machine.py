@@ -8,6 +8,14 @@ MachineLinkError naming the axis and its URL, and whatever was opened is closed 
 to :data:`RETRY_MAX_S`) until it opens or the machine closes.
 
 ``close()`` stops every axis first (servobus.axis.halt.halt), then closes the links.
+
+Origin rules (``origin = "set"`` / ``"home"``; decision, issue 28): a rule is applied once per
+machine, when its axis's link first opens; reopening a link never applies it again.
+``origins=False`` applies none: the one-shot CLI commands open the machine that way, since a
+command cannot know whether the drive was power-cycled since the last one. Applying the rule
+at every command re-zeroed the axis where it stood each time (two ``move 90deg`` turned 180
+deg and ``position`` read 0 after each), and on a DYN5 setting the origin resets the drive's
+servo control. Long-running owners (GUI, gateway, a script) open with origins applied.
 """
 
 from __future__ import annotations
@@ -73,6 +81,8 @@ class AsyncMachine:
         self._retries: list[asyncio.Task[None]] = []
         self._guards: list[asyncio.Task[None]] = []
         self._closed = False
+        self._origins = True
+        self._origin_done: set[str] = set()  # axes whose origin rule ran (never again)
 
     @property
     def name(self) -> str:
@@ -100,7 +110,15 @@ class AsyncMachine:
         return len(self._axes)
 
     # ------------------------------------------------------------- opening
-    async def _open(self, retry: bool, only: Collection[str] | None = None) -> None:
+    @property
+    def origins_skipped(self) -> tuple[str, ...]:
+        """The online axes whose origin rule was not applied (opened with ``origins=False``)."""
+        return tuple(name for name, a in self._axes.items()
+                     if a.online and a.spec.origin != "none" and name not in self._origin_done)
+
+    async def _open(self, retry: bool, only: Collection[str] | None = None,
+                    origins: bool = True) -> None:
+        self._origins = origins
         if only is not None:
             for name in only:
                 self[name]  # the one line naming the axes
@@ -120,8 +138,14 @@ class AsyncMachine:
                                                          name=f"machine-retry {link.url}"))
 
     async def _apply_origins(self, link: Link) -> None:
+        """Each axis's origin rule, once per machine (module docstring)."""
+        if not self._origins:
+            return
         for axis in link.axes:
+            if axis.name in self._origin_done:
+                continue
             await axis.apply_origin()
+            self._origin_done.add(axis.name)
 
     async def _retry(self, link: Link) -> None:
         delay = RETRY_S
@@ -267,18 +291,20 @@ def _retryable(exc: BaseException) -> bool:
 
 
 async def open_machine_async(path: str | Path | None = None, *, retry: bool = False,
-                             only: Collection[str] | None = None) -> AsyncMachine:
+                             only: Collection[str] | None = None,
+                             origins: bool = True) -> AsyncMachine:
     """Open the machine file ``path`` (None: the built-in virtual machine).
 
     ``only``: open just the links of these axes (the others stay offline, never opened);
-    the CLI opens only the axis a command acts on."""
+    the CLI opens only the axis a command acts on. ``origins=False``: apply no origin rule
+    (the one-shot CLI commands; module docstring)."""
     if path is None:
         spec, source = builtin_spec(), BUILTIN_SOURCE
     else:
         spec = load_machine_file(path)
         source = str(path)
     machine = AsyncMachine(spec, source=source)
-    await machine._open(retry, only)
+    await machine._open(retry, only, origins)
     return machine
 
 

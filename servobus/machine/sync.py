@@ -190,6 +190,10 @@ class Machine:
         self._core[name]  # the one error naming the axes
         return self._axes[name]
 
+    @property
+    def origins_skipped(self) -> tuple[str, ...]:
+        return self._core.origins_skipped
+
     def stop_all(self) -> dict[str, BaseException | None]:
         return self._runner.run(self._core.stop_all())
 
@@ -219,11 +223,11 @@ class Machine:
 
 
 def open_machine(path: str | Path | None = None, *, retry: bool = False,
-                 only: Collection[str] | None = None) -> Machine:
+                 only: Collection[str] | None = None, origins: bool = True) -> Machine:
     """Synchronous :func:`open_machine_async` on a private loop thread."""
     runner = LoopThread("servobus-machine")
     try:
-        core = runner.run(open_machine_async(path, retry=retry, only=only))
+        core = runner.run(open_machine_async(path, retry=retry, only=only, origins=origins))
     except BaseException:
         runner.stop()
         raise

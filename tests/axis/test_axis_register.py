@@ -5,8 +5,14 @@ from __future__ import annotations
 
 import pytest
 
-from servobus.axis.register_axis import RegisterAxis
-from servobus.errors import ArgumentRangeError, DriveError, DriveTimeout, FramingError
+from servobus.axis.register_axis import FALLBACK_CRUISE_RPM, RegisterAxis
+from servobus.errors import (
+    ArgumentRangeError,
+    DriveError,
+    DriveTimeout,
+    FramingError,
+    MotionRefused,
+)
 from servobus.families.yzaim import registers as Y
 from servobus.protocols.easycan.axis import EasyCanAxis
 from servobus.protocols.modbus.axis import ModbusAxis
@@ -146,3 +152,84 @@ def test_both_yzaim_wires_share_the_mapping() -> None:
     for cls in (EasyCanAxis, ModbusAxis):
         assert issubclass(cls, RegisterAxis)
         assert not shared & set(vars(cls)), cls
+
+
+# ------------------------------------------------------------- issue 28: stops and refusals
+async def test_a_stop_leaves_position_mode_at_the_cruise_speed_it_replaced() -> None:
+    """turn(0) ramps down in speed mode, then returns to position mode and writes the cruise
+    speed back on the drive: the next program's move does not run at 0 rpm."""
+    wire = Wire()
+    axis = FakeAxis(wire, 1)
+    wire.values["target_speed"] = 1200
+    await axis.turn(300)
+    wire.writes.clear()
+    await axis.stop()
+    assert wire.writes == [("target_speed", 0), ("special_function", 0),
+                           ("target_speed", 1200)]
+    assert (wire.values["special_function"], wire.values["target_speed"]) == (0, 1200)
+    wire.writes.clear()
+    await axis.move_to(50)  # position mode and cruise known: the move alone
+    assert wire.writes == [("absolute_position", 50)]
+
+
+async def test_a_stop_of_a_position_move_passes_through_speed_mode_and_back() -> None:
+    wire = Wire()
+    axis = FakeAxis(wire, 1)
+    await axis.move_to(5000)
+    wire.writes.clear()
+    await axis.stop()
+    assert wire.writes == [("target_speed", 0), ("special_function", 3),
+                           ("special_function", 0), ("target_speed", 1000)]
+
+
+async def test_a_stop_by_another_program_finding_speed_mode_restores_the_fallback() -> None:
+    """A new program finds the motor turning in speed mode: the cruise speed the other one
+    replaced is lost; the stop leaves the table's power-on cruise speed, never 0."""
+    wire = Wire()
+    wire.values.update(special_function=3, target_speed=0)  # left stopped in speed mode
+    axis = FakeAxis(wire, 1)
+    await axis.stop()
+    assert (wire.values["special_function"], wire.values["target_speed"]) == (
+        0, FALLBACK_CRUISE_RPM)
+    wire.values.update(special_function=3, target_speed=700)  # left turning at 700 rpm
+    fresh = FakeAxis(wire, 1)
+    wire.writes.clear()
+    await fresh.move_to(10)
+    assert wire.writes == [("special_function", 0), ("target_speed", FALLBACK_CRUISE_RPM),
+                           ("absolute_position", 10)]
+
+
+@pytest.mark.parametrize("relative", [False, True])
+async def test_a_move_at_cruise_speed_zero_is_refused_before_any_write(relative: bool) -> None:
+    wire = Wire()
+    wire.values["target_speed"] = 0
+    axis = FakeAxis(wire, 1)
+    with pytest.raises(MotionRefused, match=r"cruise speed .* is 0 rpm"):
+        await (axis.move_by(100) if relative else axis.move_to(100))
+    assert wire.writes == []
+    await axis.write_param("target_speed", 500)  # position mode: a cruise speed, allowed
+    await (axis.move_by(100) if relative else axis.move_to(100))
+    assert wire.writes[-1][0] == ("incremental_position" if relative else "absolute_position")
+
+
+async def test_speed_mode_register_writes_are_refused_unless_the_axis_is_continuous() -> None:
+    wire = Wire()
+    axis = FakeAxis(wire, 1)
+    with pytest.raises(MotionRefused, match="not continuous"):
+        await axis.write_param("special_function", Y.SpecialFunction.SPEED_MODE)
+    with pytest.raises(MotionRefused):
+        await axis.write_params({"target_speed": 10, "special_function": 3})
+    assert wire.writes == []
+    wire.values["special_function"] = 3  # another program left it in speed mode at 0 rpm
+    wire.values["target_speed"] = 0
+    with pytest.raises(MotionRefused, match="target_speed = 1000 rpm in speed mode"):
+        await axis.write_param("target_speed", 1000)  # 0x19 read once: speed mode
+    with pytest.raises(MotionRefused):
+        await axis.write_param("target_speed", 1000)  # known now: not even a read
+    await axis.write_param("target_speed", 0)  # slowing down is no open-ended motion
+    assert wire.writes == [("target_speed", 0)]
+    spindle = FakeAxis(Wire(), 2)
+    spindle.continuous = True
+    await spindle.write_param("special_function", 3)
+    await spindle.write_param("target_speed", 600)
+    assert spindle.client.writes == [("special_function", 3), ("target_speed", 600)]

@@ -214,6 +214,7 @@ async def test_reads_are_retried_moves_are_sent_once() -> None:
     assert len(bus.sent) == 3
     bus.sent.clear()
     axis._speed_mode = False  # known position mode: the move is the only frame
+    axis._speed_word = 1000  # and a known cruise speed (a move at 0 rpm is refused, issue 28)
     with pytest.raises(DriveTimeout, match="not re-sent"):
         await axis.move_to(5000)
     assert [codec.decode_request(*f) for f in bus.sent] == [

@@ -1,7 +1,7 @@
 // I/O panel: a virtual drive's JP3 inputs (analog, pulse train, ENA) and live outputs/state.
 // The tab shows only for an axis with virtual I/O (identity.virtual_io).
 import { api } from "./net.js";
-import { $, el, fmt, message } from "./util.js";
+import { $, el, fmt, message, readField, readFields } from "./util.js";
 
 const OUTPUTS = [  // [label, outputs field, title]
   ["ALM", "alarm", "JP3-8: LOW while an alarm is latched"],
@@ -38,7 +38,12 @@ export class IoPanel {
     });
     const slider = $("#io-analog"), num = $("#io-analog-num");
     slider.addEventListener("input", () => { num.value = slider.value; this.analog(Number(slider.value)); });
-    num.addEventListener("change", () => { slider.value = num.value; this.analog(Number(num.value)); });
+    num.addEventListener("change", () => {
+      const v = readField(num);  // refused text: shown at the field, nothing sent
+      if (v === null) { message(this.msg, "analog: not sent - correct the marked field", "error"); return; }
+      slider.value = v;
+      this.analog(v);
+    });
     $("#io-analog-zero").addEventListener("click", () => { slider.value = num.value = 0; this.analog(0); });
     $("#io-ena").addEventListener("change", (ev) => this.write({ ena: ev.target.checked }, "ENA"));
     $("#io-pulse-send").addEventListener("click", () => this.sendPulses());
@@ -137,9 +142,10 @@ export class IoPanel {
   }
 
   sendPulses() {
-    const train = { count: Math.round(Number($("#io-pulse-count").value)) };
-    const rate = Number($("#io-pulse-rate").value);
-    if (rate > 0) train.rate = rate;
+    const values = readFields([$("#io-pulse-count"), $("#io-pulse-rate")]);
+    if (values === null) { message(this.msg, "pulse train: not sent - correct the marked field", "error"); return; }
+    const [count, rate] = values;
+    const train = { count, rate };
     if ($("#io-pulse-format").value) train.format = $("#io-pulse-format").value;
     this.write({ pulses: train }, "pulse train");
   }

@@ -1,6 +1,6 @@
 // Motion panel: servo on/off, jog while held, moves in counts/rev/deg, constant speed, waves.
 import { api } from "./net.js";
-import { $, $$, axisLabel, el, fmt, message } from "./util.js";
+import { $, $$, axisLabel, el, fieldError, fmt, message, readField, readFields } from "./util.js";
 
 // The page renews its jog / constant speed this often; the server's lease ends one not
 // renewed within its ttl (0.5 s), in the drive too (servobus.gui.jog, docs/gui.md).
@@ -23,9 +23,12 @@ export class MotionPanel {
     $("#move-abs").addEventListener("click", () => this.move(false));
     $("#move-rel").addEventListener("click", () => this.move(true));
     $("#turn-run").addEventListener("click", () => this.turnStart());
-    $("#wave-start").addEventListener("click", () => this.run("/wave", {
-      kind: $("#wave-kind").value, amplitude: Math.round(Number($("#wave-amp").value)),
-      hz: Math.round(Number($("#wave-hz").value)) }, "test motion"));
+    $("#wave-start").addEventListener("click", () => {
+      const values = readFields([$("#wave-amp"), $("#wave-hz")]);
+      if (values === null) { this.refused("test motion"); return; }
+      const [amplitude, hz] = values;
+      this.run("/wave", { kind: $("#wave-kind").value, amplitude, hz }, "test motion");
+    });
     $("#wave-off").addEventListener("click", () => this.run("/wave", { kind: "off" }, "test motion off"));
     for (const [id, sign] of [["#jog-plus", 1], ["#jog-minus", -1]]) this.bindJog($(id), sign);
     window.addEventListener("blur", () => this.jogEnd());
@@ -43,19 +46,27 @@ export class MotionPanel {
 
   url(path) { return `/api/axes/${this.ctx.selected}${path}`; }
 
-  async run(path, body, what) {
+  // ``field``: where a refusal of the server (range, soft limits) is shown as well.
+  async run(path, body, what, field = null) {
     try {
       await api(this.url(path), body);
       message(this.msg, `${what}: sent to ${axisLabel(this.ctx.identity(this.ctx.selected))}`, "ok");
     } catch (err) {
       message(this.msg, `${what}: ${err.message}`, "error");
+      if (field && err.status === 400) fieldError(field, err.message);
     }
   }
 
+  // A field refused the input (its own message says why): nothing was sent.
+  refused(what) { message(this.msg, `${what}: not sent - correct the marked field`, "error"); }
+
   move(relative) {
-    const value = Number($("#move-value").value);
+    const what = relative ? "move by" : "move to";
+    const field = $("#move-value");
+    const value = readField(field);
+    if (value === null) { this.refused(what); return; }
     const unit = $("#move-unit").value;
-    this.run("/move", { value, unit, relative }, `${relative ? "move by" : "move to"} ${value} ${unit}`);
+    this.run("/move", { value, unit, relative }, `${what} ${value} ${unit}`, field);
   }
 
   bindJog(button, sign) {
@@ -73,7 +84,9 @@ export class MotionPanel {
 
   jogStart(sign) {
     this.jogEnd();
-    const rpm = sign * Math.max(1, Math.round(Math.abs(Number($("#jog-rpm").value)) || 1));
+    const speed = readField($("#jog-rpm"));
+    if (speed === null) { this.refused("jog"); return; }
+    const rpm = sign * speed;
     const axis = this.ctx.selected;
     const send = () => {
       if (!this.ctx.link.send({ type: "jog", axis, rpm })) {
@@ -99,7 +112,8 @@ export class MotionPanel {
 
   async turnStart() {
     this.turnEnd();
-    const rpm = Math.round(Number($("#turn-rpm").value));
+    const rpm = readField($("#turn-rpm"));
+    if (rpm === null) { this.refused("constant speed"); return; }
     const axis = this.ctx.selected;
     const label = axisLabel(this.ctx.identity(axis));
     if (this.ctx.owner === null) {

@@ -2,7 +2,9 @@
 
 const TOKEN = new URLSearchParams(location.search).get("token");
 
-export class ApiError extends Error {}
+export class ApiError extends Error {
+  constructor(message, status = 0) { super(message); this.status = status; }
+}
 
 // GET (no body) or POST JSON; resolves to the JSON answer, rejects with the server's text.
 export async function api(path, body) {
@@ -17,7 +19,7 @@ export async function api(path, body) {
   const res = await fetch(path, init);
   let doc = null;
   try { doc = await res.json(); } catch { /* not JSON */ }
-  if (!res.ok) throw new ApiError((doc && doc.error) || `${res.status} ${res.statusText}`);
+  if (!res.ok) throw new ApiError((doc && doc.error) || `${res.status} ${res.statusText}`, res.status);
   return doc;
 }
 

@@ -3,7 +3,7 @@
 // Frames arrive binary (frames.js); the page acks each one once drawn, so the server
 // never sends faster than this page draws.
 import { parseFrame, FLAG_TRIGGERED, FLAG_HOLDING, FLAG_FREE_RUN } from "./frames.js";
-import { $, el, fmt, download, COLORS } from "./util.js";
+import { $, el, fmt, download, readField, COLORS } from "./util.js";
 
 const WINDOWS = [0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1, 2, 5, 10, 20];
 const MAX_CHANNELS = 8;
@@ -93,11 +93,20 @@ export class ScopePanel {
     return {
       channels: this.channels.map((c) => ({ axis: c.axis, signal: c.signal })),
       window_s: Number($("#scope-window").value), mode: $("#trig-mode").value,
-      edge: $("#trig-edge").value, level: Number($("#trig-level").value) || 0,
-      pre: Math.min(100, Math.max(0, Number($("#trig-pre").value) || 0)) / 100,
+      edge: $("#trig-edge").value, level: this.fieldValue("#trig-level", 0),
+      pre: this.fieldValue("#trig-pre", 10) / 100,
       trigger_channel: Number($("#trig-source").value || 0),
       width: Math.round($("#scope-plot").clientWidth || 1000),
     };
+  }
+
+  // A trigger field's number; a refused text shows at the field and the last good value
+  // (else ``fallback``) stays in use, so nothing made up is sent.
+  fieldValue(sel, fallback) {
+    this.good = this.good || {};
+    const v = readField($(sel));
+    if (v !== null) this.good[sel] = v;
+    return this.good[sel] ?? fallback;
   }
 
   configure() {
@@ -233,7 +242,7 @@ export class ScopePanel {
       if (tc) {
         const scale = unitScale(this.signal(tc.signal).unit);
         const slot = this.bitSlot.get(tc);
-        const level = Number($("#trig-level").value) + (slot === undefined ? 0 : slot * 1.25);
+        const level = ((this.good || {})["#trig-level"] ?? 0) + (slot === undefined ? 0 : slot * 1.25);
         const y = u.valToPos(level, scale, true);
         if (y >= top && y <= top + height) { ctx.beginPath(); ctx.moveTo(left, y); ctx.lineTo(left + width, y); ctx.stroke(); }
       }

@@ -1,6 +1,6 @@
 // Tuning panel: step test with its figures, before/after comparison, gains apply/revert.
 import { api } from "./net.js";
-import { $, el, fmt, ms, message, COLORS } from "./util.js";
+import { $, el, fieldError, fmt, ms, message, readField, readFields, COLORS } from "./util.js";
 
 const METRICS = [
   ["rise_time_s", "rise time (10–90 %)", ms], ["overshoot_pct", "overshoot", (v) => `${fmt(v)} %`],
@@ -43,13 +43,15 @@ export class TuningPanel {
   }
 
   async step(sign) {
+    const fields = readFields([$("#step-value"), $("#step-duration")]);
+    if (fields === null) { message(this.msg, "step: not sent - correct the marked field", "error"); return; }
+    const [size, duration] = fields;
     const buttons = [$("#step-plus"), $("#step-minus")];
     buttons.forEach((b) => { b.disabled = true; });
     message(this.msg, "step test running…");
     try {
       const r = await api(this.url("/step"), {
-        distance: sign * Math.abs(Number($("#step-value").value)), unit: $("#step-unit").value,
-        duration_s: Number($("#step-duration").value) });
+        distance: sign * Math.abs(size), unit: $("#step-unit").value, duration_s: duration });
       const m = r.metrics;
       message(this.msg, `run ${r.run}: overshoot ${fmt(m.overshoot_pct)} %, rise ${ms(m.rise_time_s)}, settling ${m.settling_time_s === null ? "not settled" : ms(m.settling_time_s)} (${r.samples} samples, ${r.source === "trace" ? "drive trace" : "polled"} ${fmt(r.rate_hz)} Hz)`, "ok");
       $("#tuning-msg").dataset.overshoot = m.overshoot_pct;
@@ -58,6 +60,7 @@ export class TuningPanel {
       await this.load();
     } catch (err) {
       message(this.msg, `step: ${err.message}`, "error");
+      if (err.status === 400) fieldError($("#step-value"), err.message);
     } finally {
       buttons.forEach((b) => { b.disabled = false; });
     }
@@ -65,14 +68,16 @@ export class TuningPanel {
 
   async apply() {
     const values = {};
+    const refused = [];
     for (const input of document.querySelectorAll("#gains-table input")) {
       const g = this.gains.find((x) => x.name === input.dataset.gain);
-      const v = Number(input.value);
-      if (!Number.isInteger(v) || v < g.minimum || v > g.maximum) {
-        message(this.msg, `${g.name} must be an integer within ${g.minimum}..${g.maximum}`, "error");
-        return;
-      }
-      if (v !== g.value) values[g.name] = v;
+      const v = readField(input, { integer: true, min: g.minimum, max: g.maximum });
+      if (v === null) refused.push(g.name);
+      else if (v !== g.value) values[g.name] = v;
+    }
+    if (refused.length) {
+      message(this.msg, `apply: not sent - ${refused.join(", ")}: an integer within the range shown`, "error");
+      return;
     }
     if (!Object.keys(values).length) { message(this.msg, "no gain changed"); return; }
     try {
@@ -99,7 +104,8 @@ export class TuningPanel {
     gt.replaceChildren(el("tr", {}, ...["gain", "drive", "new", "range", "stored"].map((t) => el("th", { text: t }))),
       ...this.gains.map((g) => el("tr", {}, el("td", { text: g.name, title: g.doc }),
         el("td", { class: "num", text: g.value }),
-        el("td", {}, el("input", { type: "number", step: 1, min: g.minimum, max: g.maximum, value: g.value, "data-gain": g.name })),
+        el("td", {}, el("input", { type: "text", inputmode: "numeric", autocomplete: "off", class: "num", value: g.value,
+          "data-gain": g.name, "data-integer": true, "data-min": g.minimum, "data-max": g.maximum })),
         el("td", { class: "num", text: `${g.minimum}..${g.maximum}` }),
         el("td", {}, el("span", { class: `badge ${g.storage}`, text: g.storage.toUpperCase() })))));
     $("#gains-apply").disabled = this.gains.length === 0;
