@@ -130,8 +130,12 @@ async def stream(lease: Lease, name: str, read: Reader, send: Sender, stop: Stop
         lease.ended = lease.ended or "stopped"
         raise
     except Exception as exc:  # the link failed: the lease ends, never resumed
-        lease.ended = f"failed: {exc}"
-        log.warning("axis %s: its %s motion ended (%s); stopping it", name, lease.owner, exc)
+        if lease.ended:  # the machine ended it (its link dropped) and said so
+            log.debug("axis %s: its %s motion ended (%s)", name, lease.owner, lease.ended)
+        else:
+            lease.ended = f"failed: {exc}"
+            log.warning("axis %s: its %s motion ended (%s); stopping it", name, lease.owner,
+                        exc)
     else:
         log.info("axis %s: the motion of %s was not renewed within its ttl: stopping",
                  name, lease.owner)
