@@ -5,9 +5,10 @@ one RS-485 line, a YZ-AIM motor on CAN), or on ``--machine FILE`` (the steps act
 ``--axis``, else the file's first axis), or on one drive (``--url``/``--port``/``--can``).
 Because it moves motors, running it on a real drive needs ``--yes``. Steps: status (one table
 of every axis on a machine), parameters, a 10-revolution point-to-point move with live
-position (in the axis's unit on a machine), constant speed then stop, a Max Speed change
-(the same distance back is visibly slower), the original value restored, on a machine every
-axis moved together (with the measured start skew), and a one-line final status per axis.
+position (in the axis's unit on a machine), constant speed (a lease the demo renews,
+servobus.cli.hold) then stop, a Max Speed change (the same distance back is visibly
+slower), the original value restored, on a machine every axis moved together (with the
+measured start skew), and a one-line final status per axis.
 
 Live readouts poll status + position every 0.1 s (20 queries/s), below the ~50 queries/s a
 real drive is known to drop silently (docs/dyn232.md).
@@ -26,8 +27,10 @@ from rich.markup import escape
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.drive_cmds import render_status, status_record
+from servobus.cli.failures import EXIT_FAULT, CliError
+from servobus.cli.hold import TTL_S, owner
 from servobus.cli.motion_guard import stop_on_interrupt
-from servobus.cli.open_axis import console, emit_json, open_axis
+from servobus.cli.open_axis import console, emit_json, open_drive_machine
 from servobus.cli.params_cmd import params_table
 from servobus.errors import DriveAlarm, DriveTimeout
 
@@ -67,11 +70,16 @@ class _Script:
 
 
 class _Where:
-    """Positions and speeds as the demo prints them: counts, or the machine axis's unit."""
+    """Positions and speeds as the demo prints them: counts, or the machine axis's unit.
 
-    def __init__(self, axis: Axis, machine_axis: MachineAxis | None) -> None:
+    ``mover`` holds the constant speed as a lease the demo renews while it samples
+    (servobus.cli.hold): the machine axis, or the drive as a one-axis machine."""
+
+    def __init__(self, axis: Axis, machine_axis: MachineAxis | None,
+                 mover: MachineAxis | None = None) -> None:
         self.axis = axis
         self.m = machine_axis
+        self.mover = machine_axis if mover is None else mover
 
     def position(self, counts: int) -> str:
         if self.m is not None:
@@ -96,10 +104,26 @@ class _Where:
             self.axis.move_by(counts)
 
     def turn(self, rpm: int) -> None:
-        if self.m is not None:  # watched to the soft limit
-            self.m.turn(self.m.core.scale.from_rpm(rpm))
+        """Start the constant speed: a lease (inside the soft limits) unless the axis is
+        continuous; the demo renews it while it samples (:meth:`renew`)."""
+        if self.mover is not None:
+            self.mover.turn(self.mover.core.scale.from_rpm(rpm), owner=owner(), ttl=TTL_S)
         else:
             self.axis.turn(rpm)
+
+    def renew(self) -> None:
+        """Keep the constant speed alive; a lease that ended (a link failure) is one error,
+        never restarted."""
+        m = self.mover
+        if m is None or m.continuous or self.axis.continuous:
+            return  # open-ended: nothing to renew
+        if not m.renew(owner(), TTL_S):
+            raise CliError(f"the demo's constant speed ended on axis {m.name}", "check the "
+                           "link and the drive, then run the demo again", EXIT_FAULT)
+
+    def stop(self) -> None:
+        """The lease ends first, so no target update follows the stop."""
+        (self.mover if self.mover is not None else self.axis).stop()
 
 
 def _follow_move(axis: Axis, where: _Where, script: _Script, timeout: float) -> dict[str, object]:
@@ -134,10 +158,11 @@ def summary(status: AxisStatus) -> str:
 
 
 def run_demo(axis: Axis, script: _Script, label: str,
-             machine_axis: MachineAxis | None = None) -> None:
+             machine_axis: MachineAxis | None = None, mover: MachineAxis | None = None) -> None:
     """Steps 2-6 (parameters, move, constant speed, a slower move back, restore) on one axis;
-    step 1 (status) is the caller's."""
-    where = _Where(axis, machine_axis)
+    step 1 (status) is the caller's. ``mover``: the one-axis machine of a bare drive, whose
+    lease holds the constant speed."""
+    where = _Where(axis, machine_axis, mover)
     values = axis.read_params()
     script.step("parameters", params=dict(values), axis=label)
     if not script.as_json:
@@ -157,20 +182,24 @@ def run_demo(axis: Axis, script: _Script, label: str,
     where.turn(TURN_RPM)
     t0 = time.monotonic()
     speeds: list[list[float]] = []
+    positions: list[list[float]] = []
     while (t := time.monotonic() - t0) < TURN_S:
+        where.renew()
         speed = axis.speed()
+        pos = axis.position()
         speeds.append([round(t, 3), speed])
+        positions.append([round(time.monotonic() - t0, 3), pos])
         script.line(f"t={t:5.2f} s  speed {where.speed(speed)}  position "
-                    f"{where.position(axis.position())}")
+                    f"{where.position(pos)}")
         time.sleep(POLL_S * 2)
-    axis.stop()
+    where.stop()
     t0 = time.monotonic()
     while (speed := axis.speed()) != 0 and time.monotonic() - t0 < 3.0:
         time.sleep(POLL_S)
     held = axis.position()
     script.line(f"stop(): speed {speed} rpm after {time.monotonic() - t0:.2f} s, "
                 f"holding at {where.position(held).strip()}")
-    rec.update(speeds=speeds, stopped_speed=speed, held_position=held)
+    rec.update(speeds=speeds, positions=positions, stopped_speed=speed, held_position=held)
 
     if SPEED_PARAM in values:
         original = values[SPEED_PARAM]
@@ -262,7 +291,9 @@ def _drive_demo(ctx: CliContext, yes: bool, script: _Script) -> str:
     real = not ctx.url.startswith("sim:")
     if real and not yes:
         raise click.UsageError("the demo moves the motor; add --yes to run it on a real drive")
-    with open_axis(ctx) as axis, stop_on_interrupt(axis):
+    with open_drive_machine(ctx) as mover, stop_on_interrupt(mover):
+        axis = mover.axis
+        assert axis is not None  # opened without retry: a failure raised
         label = f"{ctx.url}, id {axis.drive_id}"
         if not ctx.json:
             script.con.print(f"[bold]servobus demo[/bold] on {escape(label)}")
@@ -270,7 +301,7 @@ def _drive_demo(ctx: CliContext, yes: bool, script: _Script) -> str:
         script.step("status", **record)
         if not script.as_json:
             render_status(script.con, record, f"status of {label}")
-        run_demo(axis, script, f"drive {axis.drive_id}")
+        run_demo(axis, script, f"drive {axis.drive_id}", mover=mover)
         st = axis.status()
         script.step("final status", position=axis.position(), summary=summary(st))
         script.line(f"position {axis.position()} counts, {summary(st)}")
@@ -300,9 +331,7 @@ def _machine_demo(ctx: CliContext, yes: bool, script: _Script) -> str:
                                      for a in spec.axes)))
     machine = open_machine(path)
     try:
-        core = machine[chosen].axis
-        assert core is not None
-        with stop_on_interrupt(core):
+        with stop_on_interrupt(machine[chosen]):
             try:
                 run_machine_demo(machine, chosen, script)
             except KeyboardInterrupt:

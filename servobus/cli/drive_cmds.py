@@ -31,8 +31,15 @@ from servobus.cli import machine_cli
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.failures import EXIT_FAULT, CliError
+from servobus.cli.hold import Held, hold_speed
 from servobus.cli.motion_guard import stop_on_interrupt
-from servobus.cli.open_axis import connection_label, emit, kv_text, open_axis
+from servobus.cli.open_axis import (
+    connection_label,
+    emit,
+    kv_text,
+    open_axis,
+    open_drive_machine,
+)
 from servobus.cli.param_types import Seconds
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveTimeout, NotSupported
 
@@ -254,22 +261,62 @@ def position_cmd(ctx: CliContext) -> None:
          lambda con: con.print(f"{pos} counts ({pos / per_rev:.4f} rev)"))
 
 
+FOR_HELP = ("hold the speed this many seconds, then stop (default: until Ctrl-C or SIGTERM; "
+            "on a continuous axis: return at once, the speed stays on)")
+
+
 @click.command("speed", cls=ServobusCommand)
+@click.option("--for", "for_s", type=Seconds(), default=None, metavar="SECONDS", help=FOR_HELP)
 @click.argument("rpm", type=float)
 @pass_cli
-def speed_cmd(ctx: CliContext, rpm: float) -> None:
-    """Turn at constant speed RPM (positive = towards increasing position; 0 ramps down).
+def speed_cmd(ctx: CliContext, for_s: float | None, rpm: float) -> None:
+    """Turn at constant speed RPM while this command runs, then stop (positive = towards
+    increasing position; 0 ramps down).
+
+    The command holds the motion (a lease it renews, docs/safety.md): Ctrl-C, SIGTERM or
+    --for SECONDS stops it, and if the process dies the drive comes to rest by itself within
+    a bounded distance. On a continuous axis (?continuous=1 on the URL, continuous = true in
+    a machine file) the speed is open-ended: the command returns at once and `servobus stop`
+    stops it.
 
     On a machine axis (--machine/--axis) the speed is in its unit per second (mm/s, deg/s)."""
     if ctx.machine_mode:
-        machine_cli.speed(ctx, rpm)
+        machine_cli.speed(ctx, rpm, for_s)
         return
     if not rpm.is_integer():
         raise click.BadParameter(f"{rpm:g} is not a whole number of rpm", param_hint="RPM")
     rpm = int(rpm)
-    with open_axis(ctx) as axis:
-        axis.turn(rpm)
-    emit(ctx, {"speed_command": rpm}, lambda con: con.print(f"turning at {rpm} rpm"))
+    with open_drive_machine(ctx) as axis:
+        core = axis.axis
+        assert core is not None  # opened without retry: a failure raised
+        if not (axis.continuous or core.continuous):
+            check_lease_rpm(core, rpm)
+        held = hold_speed(axis, axis.core.scale.from_rpm(rpm), for_s,
+                          announce=f"turning at {rpm} rpm while this command runs "
+                                   "(Ctrl-C stops it)")
+    record: dict[str, object] = {"speed_command": rpm, "ended": held.why}
+    if held.why in ("for", "limit"):
+        record["held_s"] = round(held.seconds, 3)
+    emit(ctx, record, lambda con: con.print(speed_words(f"{rpm} rpm", held)))
+
+
+def check_lease_rpm(axis: Axis, rpm: int) -> None:
+    """A held speed runs the drive's own profile: above its top speed it is refused in rpm
+    (the EEPROM's max_speed is never raised per motion), before anything is sent."""
+    top = math.floor(axis.stream_profile().max_rpm)
+    if abs(rpm) > top:
+        raise ArgumentRangeError(f"speed {rpm} rpm is outside the -{top}..{top} rpm the "
+                                 f"drive's profile runs ({axis.family.title} over "
+                                 f"{axis.protocol}, its max_speed)")
+
+
+def speed_words(speed: str, held: Held) -> str:
+    """What a ``speed`` command did, in one line."""
+    if held.why == "continuous":
+        return f"turning at {speed} (continuous: open-ended, `servobus stop` stops it)"
+    if held.why == "stopped":
+        return "stopping"
+    return f"turned at {speed} for {held.seconds:.2f} s, then stopped"
 
 
 @click.command("move", cls=ServobusCommand)

@@ -9,8 +9,10 @@ Decisions:
 * Positions, distances and speeds are in the axis's unit (``move 12.5`` = 12.5 mm on a mm
   axis; ``12.5mm``, ``100counts`` also work; ``speed 20`` = 20 mm/s). Every move is
   checked against the soft limits before anything is sent (LimitError, exit 2).
-* ``speed`` on an axis with limits stays in the foreground, watching the limit, until the
-  axis stops there or Ctrl-C stops it: a watcher cannot outlive the command.
+* ``speed`` holds the motion while the command runs (servobus.cli.hold: a lease it renews;
+  the target never passes the soft limit it heads for): it ends with ``--for SECONDS``,
+  Ctrl-C/SIGTERM, or at the limit once the motor rests there, then stops the axis. On a
+  ``continuous`` axis it returns at once (open-ended).
 * The machine is closed without a stop on success (``move`` without ``--wait`` leaves the
   motor moving, as on a single drive); Ctrl-C/SIGTERM stop the axis (motion_guard).
 * ``--axis`` without ``--machine`` and without a drive URL uses the built-in virtual
@@ -19,7 +21,6 @@ Decisions:
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from typing import TYPE_CHECKING
@@ -34,10 +35,6 @@ from servobus.cli.open_axis import emit, kv_text, note
 if TYPE_CHECKING:
     from servobus.axis.sync import Axis
     from servobus.machine import Machine, MachineAxis
-
-#: How often ``speed`` on a limited axis checks whether the watcher stopped it.
-FOLLOW_S = 0.05
-
 
 def _spec_names(ctx: CliContext) -> tuple[str, list[str]]:
     from servobus.machine.builtin import BUILTIN_SOURCE, builtin_spec
@@ -221,32 +218,31 @@ def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: f
     emit(ctx, record, render)
 
 
-def speed(ctx: CliContext, value: float) -> None:
-    from servobus.cli.motion_guard import stop_on_interrupt
+def speed(ctx: CliContext, value: float, for_s: float | None) -> None:
+    from servobus.cli.drive_cmds import speed_words
+    from servobus.cli.hold import hold_speed
 
     with open_machine_axis(ctx) as axis:
-        core = axis.axis
-        assert core is not None
-        with stop_on_interrupt(core):
-            axis.turn(value)
-            record: dict[str, object] = {"axis": axis.name, "speed": value,
-                                         "unit": axis.speed_unit}
-            if axis.limits is not None and value != 0:
-                if not ctx.json:
-                    note(f"axis {axis.name} turning at {value:g} {axis.speed_unit}; watching "
-                         "its soft limits (Ctrl-C stops it)")
-                while abs(axis.speed()) > 0 or _starting(axis):
-                    time.sleep(FOLLOW_S)
-                record["stopped_at"] = axis.position()
-    emit(ctx, record, lambda con: con.print(
-        f"axis {axis.name} turning at {value:g} {axis.speed_unit}"
-        + (f"; stopped at its soft limit, {record['stopped_at']:.3f} {axis.unit}"
-           if "stopped_at" in record else ""), markup=False))
+        unit = axis.speed_unit
+        held = hold_speed(axis, value, for_s,
+                          announce=f"axis {axis.name} turning at {value:g} {unit} while this "
+                                   "command runs (Ctrl-C stops it)")
+        record: dict[str, object] = {"axis": axis.name, "speed": value, "unit": unit,
+                                     "ended": held.why}
+        if held.why in ("for", "limit"):
+            record["held_s"] = round(held.seconds, 3)
+        if held.why == "limit":
+            record["stopped_at"] = axis.position()
 
+    def render(con: Console) -> None:
+        if held.why == "limit":
+            con.print(f"axis {axis.name} turned at {value:g} {unit}; stopped at its soft "
+                      f"limit, {record['stopped_at']:.3f} {axis.unit}", markup=False)
+        else:
+            con.print(f"axis {axis.name} " + speed_words(f"{value:g} {unit}", held),
+                      markup=False)
 
-def _starting(axis: MachineAxis) -> bool:
-    """The limit watcher still runs (the drive may not show speed yet)."""
-    return axis.core.lease is not None
+    emit(ctx, record, render)
 
 
 def stop(ctx: CliContext) -> None:

@@ -16,12 +16,16 @@ import signal
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 from servobus.cli.failures import Interrupted, one_line
 
-if TYPE_CHECKING:
-    from servobus.axis.sync import Axis
+
+class Stoppable(Protocol):
+    """An Axis, or a machine axis (whose stop ends its lease first, so no target update
+    follows the stop)."""
+
+    def stop(self) -> None: ...
 
 _SIGNALS = (signal.SIGINT, signal.SIGTERM)
 STOPPED = "motion stopped: the drive ramps down at Max Accel and holds position"
@@ -43,7 +47,7 @@ def _signals_ignored() -> Iterator[None]:
 
 
 @contextmanager
-def stop_on_interrupt(axis: Axis) -> Iterator[None]:
+def stop_on_interrupt(axis: Stoppable) -> Iterator[None]:
     """Stop ``axis`` if the block is interrupted (Ctrl-C / SIGTERM); re-raise Interrupted."""
     try:
         yield

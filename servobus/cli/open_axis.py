@@ -18,10 +18,11 @@ from rich.console import Console
 from servobus.axis.url import parse_url
 from servobus.cli.context import CliContext
 from servobus.cli.open_failures import check_reachable, open_failure
-from servobus.errors import ArgumentRangeError, NotSupported
+from servobus.errors import ArgumentRangeError, MachineFileError, MachineLinkError, NotSupported
 
 if TYPE_CHECKING:
     from servobus.axis.sync import Axis
+    from servobus.machine import MachineAxis
 
 
 @contextmanager
@@ -54,10 +55,7 @@ def open_axis(ctx: CliContext, drive_id: int | None = None) -> Iterator[Axis]:
         raise
     except Exception as exc:  # whatever the driver raises, one line names the port
         raise open_failure(url, exc) from exc
-    address = axis.id_address if wanted is not None else None
-    if address is not None and address not in ctx.url:
-        note(f"note: --id {wanted} addresses {address} (on {axis.protocol} the drive id is the "
-             "last byte of the address; docs/axis.md, \"Drive ids\")")
+    _note_id_address(ctx, wanted, axis.id_address, axis.protocol)
     try:
         yield axis
     except BaseException:
@@ -67,6 +65,49 @@ def open_axis(ctx: CliContext, drive_id: int | None = None) -> Iterator[Axis]:
     axis.close()
     if not ctx.url_given:  # after success only: a failure keeps its one stderr line
         note_builtin_once()
+
+
+@contextmanager
+def open_drive_machine(ctx: CliContext) -> Iterator[MachineAxis]:
+    """The drive the global options name as a one-axis machine (a bare URL is a machine,
+    servobus.machine.open_url_machine): motion that must end by itself (a held ``speed``)
+    runs through the machine's leases, on a loop thread of their own. Opening fails as in
+    :func:`open_axis`, in one line. The machine closes without a stop: the command stops
+    what it started itself (a ``continuous`` speed is left turning on purpose)."""
+    from servobus.machine import open_url_machine
+
+    url = parse_url(ctx.url)
+    check_reachable(url)
+    options = {k: v for k, v in (("baud", ctx.baud), ("timeout", ctx.timeout)) if v is not None}
+    query = "&".join(f"{k}={v}" for k, v in options.items())
+    spelled = ctx.url if not query else f"{ctx.url}{'&' if url.options else '?'}{query}"
+    try:
+        machine = open_url_machine(spelled, (ctx.drive_id,))
+    except (MachineFileError, MachineLinkError) as exc:  # the link's words: unwrap them
+        cause = exc.__cause__ if exc.__cause__ is not None else exc
+        if isinstance(cause, ArgumentRangeError | NotSupported):
+            raise cause from None
+        raise open_failure(url, cause) from exc
+    try:
+        axis = next(iter(machine.axes.values()))
+        core = axis.axis
+        if core is not None:
+            _note_id_address(ctx, ctx.drive_id, core.id_address, core.protocol)
+        yield axis
+    except BaseException:
+        with suppress(Exception):
+            machine.close(stop=False)
+        raise
+    machine.close(stop=False)
+    if not ctx.url_given:
+        note_builtin_once()
+
+
+def _note_id_address(ctx: CliContext, wanted: int | None, address: str | None,
+                     protocol: str) -> None:
+    if wanted is not None and address is not None and address not in ctx.url:
+        note(f"note: --id {wanted} addresses {address} (on {protocol} the drive id is the "
+             "last byte of the address; docs/axis.md, \"Drive ids\")")
 
 
 _noted: list[bool] = []

@@ -123,6 +123,9 @@ class Family:
     features: frozenset[str] = frozenset()
     #: Alarm code -> text.
     alarms: Mapping[int, str] = field(default_factory=dict)
+    #: Motor counts per unit of a drive-generated wave's amplitude (families with "waves"):
+    #: a front end checks offset +- amplitude against soft limits before starting one.
+    wave_counts_per_unit: float = 0.0
 
     def param(self, name: str) -> ParamInfo:
         for p in self.params:

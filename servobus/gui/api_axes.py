@@ -12,9 +12,12 @@ from servobus import __version__
 from servobus.errors import ArgumentRangeError
 from servobus.gui.http_util import api, body, handle, integer, number, ok, state
 from servobus.gui.signals import SIGNALS
+from servobus.gui.soft_limits import check_wave
 from servobus.gui.units import UNITS, to_counts
 
 ACTIONS = ("enable", "disable", "stop", "set_origin", "reset")
+#: Actions that end a running jog or constant speed first (whoever holds it: Stop wins).
+ENDS_LEASE = ("disable", "stop", "set_origin", "reset")
 WAVES = ("square", "sine", "off")
 
 
@@ -27,7 +30,8 @@ async def info(request: Request) -> Response:
         "signals": [{"name": s.name, "unit": s.unit, "label": s.label}
                     for s in SIGNALS.values()],
         "units": list(UNITS), "jog_lease_s": gui.jog.lease_s,
-        "machine": gui.fleet.machine.name if gui.fleet.machine is not None else None,
+        "machine": gui.fleet.machine.name if gui.fleet.machine_file and gui.fleet.machine
+        else None,
     })
 
 
@@ -53,9 +57,11 @@ async def command(request: Request) -> Response:
     action = (await body(request)).get("action")
     if action not in ACTIONS:
         raise ArgumentRangeError(f"action {action!r}: one of {', '.join(ACTIONS)}")
-    await h.call(getattr(h.axis, str(action))())
-    if action == "stop":
-        state(request).jog.leases.pop(h.id, None)
+    m = h.machine_axis
+    if m is not None and (action == "stop" or (action in ENDS_LEASE and m.lease is not None)):
+        await h.call(m.stop())  # ends the lease first: no target update after the stop
+    if action != "stop" or m is None:
+        await h.call(getattr(h.axis, str(action))())
     return ok(status=await _refresh(request, h.id))
 
 
@@ -66,13 +72,15 @@ async def move(request: Request) -> Response:
     value, unit = number(doc, "value"), str(doc.get("unit", "counts"))
     relative = bool(doc.get("relative", False))
     m = h.machine_axis
-    if m is not None:  # a machine axis: its own unit, and its soft limits before the wire
+    if m is not None and h.named:  # a machine axis: its own unit, its limits before the wire
         user = value if unit == m.unit else m.to_user(to_counts(h.axis, value, unit))
         await h.call(m.move_by(user) if relative else m.move_to(user))
         return ok(counts=m.to_counts(user), relative=relative, value=user, unit=m.unit,
                   status=await _refresh(request, h.id))
     counts = to_counts(h.axis, value, unit)
-    if relative:
+    if m is not None:  # a bare URL's axis, in counts: a move replaces a running lease
+        await h.call(m.move_by(counts) if relative else m.move_to(counts))
+    elif relative:
         await h.call(h.axis.move_by(counts))
     else:
         await h.call(h.axis.move_to(counts))
@@ -81,20 +89,24 @@ async def move(request: Request) -> Response:
 
 @api
 async def turn(request: Request) -> Response:
+    """Constant speed: a lease owned by the page ``page`` (its ``hello`` owner; the page
+    renews it over its WebSocket) or, without ``page``, by this REST client (renewed by
+    posting again within ``ttl`` s, at most 1). Open-ended on a continuous axis."""
     h = handle(request)
-    rpm = integer(await body(request), "rpm")
-    m = h.machine_axis
-    if m is not None and m.limits is not None:  # refused at the limit, watched to it
-        await h.call(m.turn(m.scale.from_rpm(rpm)))
-    else:
-        await h.call(h.axis.turn(rpm))
-    return ok(rpm=rpm)
+    doc = await body(request)
+    rpm = integer(doc, "rpm")
+    page = integer(doc, "page") if doc.get("page") is not None else None
+    ttl = number(doc, "ttl") if doc.get("ttl") is not None else None
+    result = await state(request).jog.turn(h.id, rpm, page=page, ttl=ttl)
+    return ok(rpm=rpm, **result)
 
 
 @api
 async def wave(request: Request) -> Response:
-    """Drive-generated test motion (families with "waves"): frequency first, then the
-    wave; ``off`` sets the frequency to 0 (the drive stops the wave)."""
+    """Drive-generated test motion (families with "waves"): offset +- amplitude checked
+    against the soft limits first (servobus.gui.soft_limits), then frequency, then the
+    wave; ``off`` sets the frequency to 0 (the drive stops the wave). Not leased: it runs
+    until Off, Stop, STOP ALL or the GUI's shutdown."""
     h = handle(request)
     doc = await body(request)
     kind = doc.get("kind")
@@ -103,8 +115,9 @@ async def wave(request: Request) -> Response:
     if kind == "off":
         await h.call(h.axis.wave_frequency(0))
         return ok()
-    await h.call(h.axis.wave_frequency(integer(doc, "hz")))
-    amplitude = integer(doc, "amplitude")
+    hz, amplitude = integer(doc, "hz"), integer(doc, "amplitude")
+    await check_wave(h, amplitude)  # soft limits and leases, before anything is sent
+    await h.call(h.axis.wave_frequency(hz))
     if kind == "square":
         await h.call(h.axis.square_wave(amplitude))
     else:
@@ -130,7 +143,7 @@ async def diagnostics(request: Request) -> Response:
         "traffic_counts": gui.fleet.traffic.counts,
         "samplers": [s.describe() for s in gui.samplers.values()],
         "scopes": [s.state() for s in gui.sessions],
-        "jog": {"active": {str(k): v.rpm for k, v in gui.jog.leases.items()},
+        "jog": {"active": {str(k): v["rpm"] for k, v in gui.jog.active().items()},
                 "stops": gui.jog.stops},
     })
 

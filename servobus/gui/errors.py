@@ -11,12 +11,14 @@ from servobus.errors import (
     DriveAlarm,
     DriveTimeout,
     NotSupported,
+    OwnerError,
     ServobusError,
 )
 
 #: Most specific first.
 STATUS: tuple[tuple[type[BaseException], int], ...] = (
     (NotSupported, 501),
+    (OwnerError, 409),  # another page or client holds the axis
     (ParamsFileError, 400),
     (ArgumentRangeError, 400),
     (DriveAlarm, 409),

@@ -1,16 +1,21 @@
 """The axes the GUI serves: one connection (a drive URL) or a machine file.
 
-One URL: the first id opens the connection (``connect_async``); the others are its
-siblings (the same line or bus). With no URL :meth:`Fleet.open` runs on :data:`DEFAULT_URL`,
-three in-process virtual drives. On ``sim://`` the ids become the virtual drives' ids unless
-the URL names its own.
+Both are a machine (servobus.machine), so jog, constant speed and waves take one path
+(leases, owners, soft limits; issue 27). One URL (:meth:`Fleet.open`) is a machine of one
+axis per id (``open_url_machine_async``): the first id opens the connection, the others are
+its siblings (the same line or bus); the GUI keys them by drive id and shows them as before
+(counts and rpm, no names). With no URL it runs on :data:`DEFAULT_URL`, three in-process
+virtual drives. On ``sim://`` the ids become the virtual drives' ids unless the URL names
+its own.
 
 A machine (:meth:`Fleet.open_machine`, servobus.machine): every axis of every link and vendor,
 keyed 1..n in file order (drive ids repeat across links, so the GUI's axis number is the
 axis's place in the file), named as in the file, with its unit and limits in the identity
 and its position/speed in that unit in every status. Links open with ``retry=True``: an
 axis whose link is down shows its link error and comes back when the link does (reload the
-page for its identity). The machine's guard stops a jog or wave at a soft limit.
+page for its identity). A jog or constant speed never passes a soft limit (its lease's
+target stops there); the machine's guard still watches for motion from outside (a wave
+run from another program).
 """
 
 from __future__ import annotations
@@ -22,7 +27,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TypeVar, cast
 
 from servobus.axis.base import AsyncAxis
-from servobus.axis.connect import connect_async
 from servobus.errors import ArgumentRangeError
 from servobus.gui.link_stats import CallStats, client_counters
 from servobus.gui.traffic import TrafficLog
@@ -59,8 +63,11 @@ class AxisHandle:
 
     base_axis: AsyncAxis | None
     stats: CallStats = field(default_factory=CallStats)
-    key: int | None = None  # the GUI's axis number on a machine (its place in the file)
+    key: int | None = None  # the GUI's axis number (machine file: its place; URL: drive id)
     machine_axis: AsyncMachineAxis | None = None
+    #: A machine file's axis: shown by its name, in its unit. False for an axis of a bare
+    #: URL (a one-axis-per-id machine in counts): shown as a drive, in counts and rpm.
+    named: bool = True
 
     @property
     def axis(self) -> AsyncAxis:
@@ -77,7 +84,7 @@ class AxisHandle:
     def user_values(self, position: float, speed: float) -> dict[str, object]:
         """Position and speed in the machine axis's unit (nothing on a plain connection)."""
         m = self.machine_axis
-        if m is None or not m.online:
+        if m is None or not m.online or not self.named:
             return {}
         return {"name": m.name, "unit": m.unit, "user_position": m.to_user(position),
                 "user_speed": m.scale.from_rpm(speed), "speed_unit": m.speed_unit}
@@ -87,17 +94,21 @@ class AxisHandle:
 
     def identity(self) -> dict[str, object]:
         m = self.machine_axis
-        named: dict[str, object] = {} if m is None else {
-            "name": m.name, "unit": m.unit, "speed_unit": m.speed_unit, "url": m.url,
-            "drive_id": m.drive_id, "limits": list(m.limits) if m.limits else None,
-            "default_speed": m.default_speed, "label": m.spec.label, "online": m.online}
+        named: dict[str, object] = {}
+        if m is not None:
+            named["continuous"] = m.continuous  # constant speed is open-ended (issue 27)
+        if m is not None and self.named:
+            named.update({
+                "name": m.name, "unit": m.unit, "speed_unit": m.speed_unit, "url": m.url,
+                "drive_id": m.drive_id, "limits": list(m.limits) if m.limits else None,
+                "default_speed": m.default_speed, "label": m.spec.label, "online": m.online})
         if m is not None and not m.online:  # what the page can show until it comes back
             return {"id": self.id, "protocol": "", "family": "", "family_title": "offline",
                     "counts_per_rev": 1, "features": [], "alarms": {}, "params": 0,
                     "virtual_io": False, **named}
         a = self.axis
         fam = a.family
-        if m is not None:
+        if m is not None and self.named:
             named["counts_per_unit"] = m.scale.counts_per_unit
         return {
             "id": self.id, "protocol": a.protocol, "family": fam.name,
@@ -114,12 +125,16 @@ class AxisHandle:
 
 
 class Fleet:
+    """The GUI's axes by number; ``machine`` runs their motion (None only for a fleet built
+    by hand from plain axes); ``machine_file``: it came from a machine file (named axes)."""
+
     def __init__(self, url: str, handles: Sequence[AxisHandle], traffic: TrafficLog,
-                 machine: AsyncMachine | None = None) -> None:
+                 machine: AsyncMachine | None = None, *, machine_file: bool = True) -> None:
         self.url = url
         self.handles = {h.id: h for h in handles}
         self.traffic = traffic
         self.machine = machine
+        self.machine_file = machine is not None and machine_file
 
     @classmethod
     async def open_machine(cls, path: str | Path | None = None) -> Fleet:
@@ -142,33 +157,27 @@ class Fleet:
 
     @classmethod
     async def open(cls, url: str | None = None, ids: Sequence[int] | None = None) -> Fleet:
-        """Open ``url`` (default: three virtual drives) and an axis per id."""
+        """Open ``url`` (default: three virtual drives) as a machine of one axis per id."""
+        from servobus.machine import open_url_machine_async
+
         url = url or DEFAULT_URL
         if ids is None and url == DEFAULT_URL:
             ids = DEFAULT_IDS
         wanted: list[int | None] = list(ids) if ids else [None]
         if len(set(wanted)) != len(wanted):
             raise ArgumentRangeError(f"duplicate drive ids {wanted}")
-        options: dict[str, object] = {}
-        if url.startswith("sim:") and "ids=" not in url and ids:
-            options["ids"] = ",".join(str(i) for i in ids)
-        first = await connect_async(url, drive_id=wanted[0], **options)
-        axes = [first]
+        machine = await open_url_machine_async(url, wanted, retry=False)
         try:
-            for drive_id in ids[1:] if ids else ():
-                sib = await first.sibling(drive_id)
-                if sib.capture_source is None:
-                    sib.capture_source = first.capture_source  # same connection
-                if sib.io_source is None:
-                    sib.io_source = first.io_source
-                axes.append(sib)
             traffic = TrafficLog()
-            await first.add_trace(traffic.hook)  # siblings share the connection
+            for link in machine.links:  # siblings share the connection's trace
+                if link.owner is not None:
+                    await link.owner.add_trace(traffic.hook)
         except BaseException:
-            for a in reversed(axes):
-                await a.close()
+            await machine.close()
             raise
-        return cls(url, [AxisHandle(a) for a in axes], traffic)
+        handles = [AxisHandle(None, key=a.core().drive_id, machine_axis=a, named=False)
+                   for a in machine.axes.values()]
+        return cls(url, handles, traffic, machine, machine_file=False)
 
     def get(self, drive_id: int) -> AxisHandle:
         try:
@@ -178,7 +187,7 @@ class Fleet:
                                      f"{', '.join(map(str, self.handles))}") from None
 
     async def close(self) -> None:
-        """Siblings first, the connection's owner last (a machine: stopped, then closed)."""
+        """The machine: leases ended, every axis stopped, then closed (siblings first)."""
         if self.machine is not None:
             await self.machine.close()
             return

@@ -154,14 +154,14 @@ async def _serve(options: ServeOptions, token: str | None, loopback: bool,
                 return
             await asyncio.sleep(0.02)
         axes = ", ".join(str(i) for i in fleet.handles)
-        if fleet.machine is not None:
+        if fleet.machine_file:
             axes = ", ".join(f"{i} {h.machine_axis.name}" for i, h in fleet.handles.items()
                              if h.machine_axis is not None)
         if not loopback:
             say(f"warning: listening on {options.host}: anyone who can reach this address "
                 "and has the token can move the drives")
         say(f"servobus gui: {url}")
-        if fleet.machine is not None:
+        if fleet.machine is not None and fleet.machine_file:
             offline = [h.machine_axis.name for h in fleet.handles.values()
                        if h.machine_axis is not None and not h.machine_axis.online]
             say(f"drives: machine {fleet.machine.name} ({fleet.url}); axes {axes}"

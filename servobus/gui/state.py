@@ -50,37 +50,48 @@ class GuiState:
         self.monitor.start()
         self.jog.start()
 
-    async def _stop(self, axis: AsyncAxis, timeout_s: float) -> None:
-        """One axis's stop, counted on its handle like every other call of the GUI."""
-        handle = self.fleet.get(axis.drive_id)
-        await handle.call(asyncio.wait_for(axis.stop(), timeout_s))
+    async def _halt(self) -> dict[int, BaseException | None]:
+        """Every axis stopped at once (servobus.axis.halt). A machine axis's stop ends its
+        lease first, whoever holds it (no target update follows the stop); each stop is
+        counted on its handle like every other call of the GUI."""
+        handles = self.fleet.handles
+        axes = {i: h.axis for i, h in handles.items()}
+        by_axis = {id(a): handles[i] for i, a in axes.items()}
+
+        async def stop(axis: AsyncAxis, timeout_s: float) -> None:
+            handle = by_axis[id(axis)]
+            m = handle.machine_axis
+            await handle.call(asyncio.wait_for(axis.stop() if m is None else m.stop(),
+                                               timeout_s))
+
+        return await halt(axes, stop=stop)
 
     async def stop_all(self) -> dict[int, str]:
-        """STOP: every axis ramps down and holds (all at once); '' or the error per axis."""
-        self.jog.forget()
-        axes = {i: h.axis for i, h in self.fleet.handles.items()}
-        results = await halt(axes, stop=self._stop)
+        """STOP: every axis ramps down and holds (all at once); '' or the error per axis.
+        Every lease ends, and a page still renewing is refused (servobus.gui.jog)."""
+        results = await self._halt()
         return {i: "" if r is None else f"{type(r).__name__}: {r}" for i, r in results.items()}
 
     async def shut_down(self) -> None:
         """The GUI is going away: stop every axis first, then the services, the link last.
 
         The stop (servobus.axis.halt) comes before anything else and nothing can skip it:
-        it never raises for an axis and finishes under cancellation; jogs are refused from
-        the moment it starts. Then each service stops in its own try (a sampler that died
-        with an exception is logged, the others still stop) and the fleet closes last,
+        it never raises for an axis and finishes under cancellation; every lease (jog,
+        constant speed) ends with it and new ones are refused from the moment it starts;
+        drive-generated waves stop with it. Then each service stops in its own try (a
+        sampler that died with an exception is logged, the others still stop) and the
+        fleet closes last,
         whatever happened before. A second call does nothing.
         """
         if self._closed:
             return
         self._closed = True
         self.jog.close()  # no page can start a jog from here on
-        axes = {i: h.axis for i, h in self.fleet.handles.items()}
         try:
-            self.halted = await halt(axes, stop=self._stop)
+            self.halted = await self._halt()
         finally:
             steps: list[tuple[str, Callable[[], Awaitable[None]]]] = [
-                ("jog watchdog", self.jog.stop), ("status monitor", self.monitor.stop),
+                ("page motions", self.jog.stop), ("status monitor", self.monitor.stop),
                 *((f"sampler of axis {i}", s.stop) for i, s in self.samplers.items()),
                 ("connection", self.fleet.close)]
             await _each(steps)

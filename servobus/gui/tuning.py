@@ -1,6 +1,7 @@
 """Tuning: a step test (move_by + the capture around it), its figures, gains apply/revert.
 
-The step is commanded with ``move_by`` and the capture is triggered by the command itself:
+The step is commanded with ``move_by`` (its end point checked against the soft limits first,
+servobus.gui.soft_limits) and the capture is triggered by the command itself:
 the sampler's samples (the drive's trace, or polls) from shortly before the command to
 ``duration`` after it are cut out and measured (servobus.gui.step_metrics). A DMM drive
 moves along its Max Speed / Max Accel profile, so the figures describe the profile and
@@ -22,6 +23,7 @@ from datetime import UTC, datetime
 from servobus.errors import ArgumentRangeError, DriveTimeout, ServobusError
 from servobus.gui.fleet import AxisHandle
 from servobus.gui.sampler import AxisSampler
+from servobus.gui.soft_limits import check_step, has_limits
 from servobus.gui.step_metrics import step_metrics
 
 #: A parameter is a tuning gain when its name contains one of these.
@@ -75,6 +77,11 @@ async def run_step(handle: AxisHandle, sampler: AxisSampler, state: TuningState,
         raise ArgumentRangeError(f"duration {duration_s} s: 0.05..{MAX_DURATION_S} s")
     axis = handle.axis
     ring = sampler.ring
+    # soft limits (issue 27): refused at once, before the recording, and checked again from
+    # the position at the command; either way no motion command is sent
+    check_step(handle, 0.0, 0)
+    if has_limits(handle):
+        check_step(handle, float(await handle.call(axis.position())), distance)
     token = sampler.subscribe(STEP_SIGNALS)
     try:
         pre_s = PRE_FRACTION * duration_s
@@ -90,6 +97,7 @@ async def run_step(handle: AxisHandle, sampler: AxisSampler, state: TuningState,
         start = ring.value("position", i_cmd - 1) if i_cmd > ring.base else math.nan
         if math.isnan(start):
             start = float(await handle.call(axis.position()))
+        check_step(handle, start, distance)
         await handle.call(axis.move_by(distance))
         await _wait_for(sampler, t_cmd + duration_s, duration_s + FRESH_TIMEOUT_S)
     finally:

@@ -1,7 +1,9 @@
 """The page's WebSocket: live status out, jog and scope control in, scope frames out.
 
 Messages from the page (JSON): ``jog`` {axis, rpm} (repeated while the button is held),
-``jog_stop`` {axis}, ``stop_all``, ``scope`` {settings}, ``scope_run`` {running},
+``jog_stop`` {axis}, ``turn`` {axis, rpm} (renews the constant speed the page started with
+``POST /api/axes/N/turn`` {rpm, page}, repeated while it is on), ``turn_stop`` {axis},
+``stop_all``, ``scope`` {settings}, ``scope_run`` {running},
 ``scope_arm``, ``scope_csv``, ``ack`` {seq}, ``io_watch`` {axis or null}. To the page:
 ``hello``, ``status`` (every :data:`STATUS_PERIOD_S`), ``io`` (the watched axis's virtual
 outputs and state, as often), ``scope_state``, ``csv``, ``error`` (``message``; ``request``:
@@ -9,7 +11,11 @@ the type of the message it answers, ``received``: that message's start), ``stopp
 and scope frames (binary, servobus.gui.frames). Message sizes and JSON nesting are bounded
 (servobus.gui.limits).
 
-When the WebSocket closes, for whatever reason, every jog of this page stops first.
+The page owns its jogs and constant speeds as ``page N`` (N: ``hello``'s ``owner``;
+servobus.gui.jog). ``status`` carries ``jog`` (axis -> rpm of every running lease),
+``leases`` (axis -> owner, rpm, at_limit, mine) and ``ended`` (axis -> why this page's
+motion ended without it letting go). When the WebSocket closes, for whatever reason, every
+motion of this page stops first.
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 from servobus.errors import ServobusError
 from servobus.gui import limits
 from servobus.gui.api_io import snapshot
+from servobus.gui.jog import page_owner
 from servobus.gui.scope_session import ScopeSession, ScopeSettings
 from servobus.gui.state import GuiState
 
@@ -57,10 +64,15 @@ class PageLink:
     async def push_status(self) -> None:
         while True:
             gui = self.gui
+            active = gui.jog.active()
+            mine = page_owner(self.owner)
             await self.send_json({
                 "type": "status",
                 "axes": [_finite(s) for s in gui.monitor.snapshots.values()],
-                "jog": {str(k): v.rpm for k, v in gui.jog.leases.items()},
+                "jog": {str(k): v["rpm"] for k, v in active.items()},
+                "leases": {str(k): {**v, "mine": v["owner"] == mine}
+                           for k, v in active.items()},
+                "ended": {str(k): v for k, v in gui.jog.ended(self.owner).items()},
                 "alarms": len(gui.monitor.log),
             })
             await asyncio.sleep(STATUS_PERIOD_S)
@@ -88,7 +100,10 @@ class PageLink:
                 session.ack(seq)
         elif kind == "jog":
             await gui.jog.jog(self.owner, _int(doc, "axis"), _int(doc, "rpm"))
-        elif kind == "jog_stop":
+        elif kind == "turn":
+            await gui.jog.turn(_int(doc, "axis"), _int(doc, "rpm"), page=self.owner,
+                               start=False)
+        elif kind in ("jog_stop", "turn_stop"):
             await gui.jog.release(self.owner, _int(doc, "axis"))
         elif kind == "stop_all":
             failed = {str(k): v for k, v in (await gui.stop_all()).items() if v}
@@ -147,6 +162,7 @@ class PageLink:
         gui = self.gui
         await self.ws.accept()
         gui.sessions.add(self.session)
+        gui.jog.pages.add(self.owner)
         tasks = [asyncio.create_task(_quietly(self.push_status)),
                  asyncio.create_task(_quietly(self.session.run)),
                  asyncio.create_task(_quietly(self.push_io))]
@@ -164,6 +180,7 @@ class PageLink:
         except (WebSocketDisconnect, RuntimeError):
             pass  # the page went away (closed, reloaded, network dropped)
         finally:
+            gui.jog.pages.discard(self.owner)  # no Run names it any more
             await gui.jog.release(self.owner)  # first: a jog never outlives its page
             for task in tasks:
                 task.cancel()

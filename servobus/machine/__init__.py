@@ -18,7 +18,7 @@ from servobus.machine.machine import (
     open_machine_async,
     open_url_machine_async,
 )
-from servobus.machine.sync import Machine, MachineAxis, open_machine
+from servobus.machine.sync import Machine, MachineAxis, open_machine, open_url_machine
 from servobus.machine.units import Scale, parse_quantity
 
 __all__ = [
@@ -33,6 +33,7 @@ __all__ = [
     "load_machine_file",
     "open_machine",
     "open_machine_async",
+    "open_url_machine",
     "open_url_machine_async",
     "parse_machine",
     "parse_quantity",

@@ -486,6 +486,17 @@ class AsyncMachineAxis:
         lease = self._lease
         return lease if lease is not None and lease.alive else None
 
+    def renew(self, owner: str, ttl: float = DEFAULT_TTL_S) -> bool:
+        """Keep ``owner``'s running lease alive for ``ttl`` more seconds; False (and nothing
+        started) when it has ended meanwhile: a renewal never resumes a motion (a CLI that
+        holds a speed calls this, not :meth:`jog`, so a late renewal cannot restart it)."""
+        ttl = check_ttl(ttl)
+        lease = self.lease
+        if lease is None or lease.owner != owner:
+            return False
+        lease.renew(ttl)
+        return True
+
     async def release(self, owner: str) -> None:
         """``owner`` lets go (a page left, a session closed): its motion stops."""
         lease = self.lease

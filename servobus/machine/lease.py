@@ -32,7 +32,7 @@ import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 
-from servobus.errors import ArgumentRangeError
+from servobus.errors import ArgumentRangeError, DriveTimeout
 from servobus.families.base import StreamProfile
 
 log = logging.getLogger(__name__)
@@ -108,13 +108,31 @@ Stopper = Callable[[], Awaitable[None]]
 
 async def stream(lease: Lease, name: str, read: Reader, send: Sender, stop: Stopper) -> None:
     """Run ``lease`` until it expires (then ``stop``), fails (then ``stop``, once, logged)
-    or is cancelled (the canceller stops the axis)."""
+    or is cancelled (the canceller stops the axis).
+
+    Decision: a reply that misses its deadline (DriveTimeout, after the link's own bounded
+    retries of a read) is not a dropped link. Without a fresh position no update is sent
+    (the drive rests at the last target by itself), and the lease goes on; it ends when no
+    read has succeeded for :data:`MAX_TTL_S`, or at once when the link is lost."""
     target: float | None = None
     heading = lease.heading
     last = time.monotonic()
+    good = last  # the last successful read
+    position: float | None = None
     try:
-        position = await read()
         while True:
+            if position is None:
+                position = await _fresh(read)
+                now = time.monotonic()
+                if position is None:
+                    if now - good >= MAX_TTL_S:
+                        raise DriveTimeout(f"no position read for {MAX_TTL_S:g} s")
+                    if now >= lease.until:
+                        lease.ended = "expired"
+                        break
+                    await asyncio.sleep(STREAM_S)
+                    continue
+                good = now
             now = time.monotonic()
             if now >= lease.until:
                 lease.ended = "expired"
@@ -123,9 +141,10 @@ async def stream(lease: Lease, name: str, read: Reader, send: Sender, stop: Stop
                 target, heading = None, lease.heading
             target = lease.next_target(target, position, now - last)
             last = now
-            await send(target)
+            with contextlib.suppress(DriveTimeout):  # sent once, never again; next one new
+                await send(target)
             await asyncio.sleep(STREAM_S)
-            position = await read()
+            position = await _fresh(read)
     except asyncio.CancelledError:
         lease.ended = lease.ended or "stopped"
         raise
@@ -141,6 +160,14 @@ async def stream(lease: Lease, name: str, read: Reader, send: Sender, stop: Stop
                  name, lease.owner)
     with contextlib.suppress(Exception):
         await stop()
+
+
+async def _fresh(read: Reader) -> float | None:
+    """The position, or None when the reply missed its deadline."""
+    try:
+        return await read()
+    except DriveTimeout:
+        return None
 
 
 def check_speed(name: str, speed: float, rpm: float, profile: StreamProfile,

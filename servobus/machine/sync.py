@@ -6,14 +6,19 @@ machine's loop thread and blocks on the result.
 
 from __future__ import annotations
 
-from collections.abc import Collection, Mapping
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from types import MappingProxyType, TracebackType
 from typing import TYPE_CHECKING
 
 from servobus.axis.sync import Axis, LoopThread
 from servobus.machine.lease import DEFAULT_TTL_S, Lease
-from servobus.machine.machine import AsyncMachine, TogetherReport, open_machine_async
+from servobus.machine.machine import (
+    AsyncMachine,
+    TogetherReport,
+    open_machine_async,
+    open_url_machine_async,
+)
 
 if TYPE_CHECKING:
     from servobus.families.base import AxisStatus, Family
@@ -144,6 +149,13 @@ class MachineAxis:
         """Start or renew a leased motion (AsyncMachineAxis.jog)."""
         self._runner.run(self._core.jog(speed, owner=owner, ttl=ttl))
 
+    def renew(self, owner: str, ttl: float = DEFAULT_TTL_S) -> bool:
+        """Keep ``owner``'s lease alive; False when it has ended (AsyncMachineAxis.renew)."""
+        return self._runner.run(self._renew(owner, ttl))
+
+    async def _renew(self, owner: str, ttl: float) -> bool:
+        return self._core.renew(owner, ttl)  # on the loop thread, beside the streamer
+
     def release(self, owner: str) -> None:
         self._runner.run(self._core.release(owner))
 
@@ -239,6 +251,19 @@ def open_machine(path: str | Path | None = None, *, retry: bool = False,
     runner = LoopThread("servobus-machine")
     try:
         core = runner.run(open_machine_async(path, retry=retry, only=only))
+    except BaseException:
+        runner.stop()
+        raise
+    return Machine(core, runner)
+
+
+def open_url_machine(url: str, drive_ids: Sequence[int | None] = (None,), *,
+                     retry: bool = False) -> Machine:
+    """Synchronous :func:`open_url_machine_async`: a bare drive URL as a machine of one
+    axis per id, on a private loop thread (a lease's streamer runs there between calls)."""
+    runner = LoopThread("servobus-machine")
+    try:
+        core = runner.run(open_url_machine_async(url, drive_ids, retry=retry))
     except BaseException:
         runner.stop()
         raise

@@ -123,3 +123,41 @@ async def _still(axis: object) -> bool:
 
     assert isinstance(axis, AsyncMachineAxis)
     return abs(await axis.speed()) < 1.0
+
+
+async def test_a_missed_reply_is_not_a_dropped_link() -> None:
+    """Two reads that miss their deadline send no update and keep the lease; a lost link
+    ends it at once; either way the axis is stopped once at the end (lease.stream)."""
+    import time
+
+    from servobus.errors import ConnectionLost, DriveTimeout
+    from servobus.machine.lease import stream
+
+    replies: list[object] = [DriveTimeout("late"), DriveTimeout("late"), 0.0, 0.1, 0.2]
+    sent: list[float] = []
+    stops: list[int] = []
+
+    async def read() -> float:
+        reply = replies.pop(0) if replies else 0.3
+        if isinstance(reply, Exception):
+            assert not sent, "no update may go out without a fresh position"
+            raise reply
+        assert isinstance(reply, float)
+        return reply
+
+    async def send(target: float) -> None:
+        sent.append(target)
+
+    async def stop() -> None:
+        stops.append(1)
+
+    lease = Lease("page 1", 1.0, accel=100.0, limit=None, until=time.monotonic() + 0.3)
+    await stream(lease, "c", read, send, stop)
+    assert lease.ended == "expired" and sent and stops == [1]
+
+    async def lost() -> float:
+        raise ConnectionLost("reset by peer")
+
+    lease = Lease("page 1", 1.0, accel=100.0, limit=None, until=time.monotonic() + 10)
+    await stream(lease, "c", lost, send, stop)
+    assert lease.ended.startswith("failed") and stops == [1, 1]

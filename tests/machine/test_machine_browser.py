@@ -27,6 +27,7 @@ DRIVER = shutil.which("chromedriver")
 try:
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
+    from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.by import By
     from selenium.webdriver.remote.webdriver import WebDriver
 except ImportError:  # pragma: no cover - the skip below says so
@@ -113,13 +114,51 @@ def test_mixed_machine_named_in_its_units_and_stop_all(page: WebDriver, server: 
     page.find_element(By.ID, "move-abs").click()
     wait_until(lambda: abs(status(server, 1)["user_position"] - 12.5) < 0.01, timeout=10,
                what="x at 12.5 mm")
-    for axis in (1, 2, 3):
-        api(server, f"/api/axes/{axis}/turn", {"rpm": 120})
-    wait_until(lambda: all(abs(status(server, a)["speed"]) > 60 for a in (1, 2, 3)),
-               timeout=10, what="every axis of both links turning")
+    # Constant speed is a lease (issue 27): x's is the page's own (Run, renewed over its
+    # WebSocket), y's and c's a REST client's, renewed by posting again while it waits;
+    # turning is seen on the position (a streamed lease's speed reading varies)
+    start = {a: status(server, a)["position"] for a in (1, 2, 3)}
+    rpm = page.find_element(By.ID, "turn-rpm")
+    rpm.clear()
+    rpm.send_keys("120")
+    run = page.find_element(By.ID, "turn-run")
+    run.click()
+
+    def turning() -> bool:
+        for axis in (2, 3):
+            api(server, f"/api/axes/{axis}/turn", {"rpm": 120, "ttl": 1.0})
+        return all(abs(status(server, a)["position"] - start[a]) > 20000 for a in (1, 2, 3))
+
+    wait_until(turning, timeout=10, what="every axis of both links turning")
+    assert "held" in (run.get_attribute("class") or "")
     page.find_element(By.ID, "stop-all").click()
     wait_until(lambda: all(abs(status(server, a)["speed"]) < 1 for a in (1, 2, 3)),
                timeout=10, what="STOP ALL stopped every axis")
+    # the page was told its constant speed ended: Run is no longer lit, and says why
+    wait_until(lambda: "held" not in (run.get_attribute("class") or ""), timeout=10,
+               what="Run dark again")
+    said = page.find_element(By.ID, "motion-msg").text
+    assert "ended" in said and "stopped" in said, said
     shot = Path(__file__).parents[1] / "artifacts" / "gui"
     shot.mkdir(parents=True, exist_ok=True)
     page.save_screenshot(str(shot / "machine.png"))
+
+
+def test_a_held_jog_stops_at_the_soft_limit_and_the_button_goes_dark(
+        page: WebDriver, server: str) -> None:
+    """Issue 27: the page's jog is a lease whose target stops at the limit; the page says
+    "at soft limit" and the button does not stay lit while it is still held."""
+    page.find_elements(By.CSS_SELECTOR, ".axis-card")[0].click()  # x: limits -10 .. 300 mm
+    speed = page.find_element(By.ID, "jog-rpm")
+    speed.clear()
+    speed.send_keys("600")  # 50 mm/s
+    button = page.find_element(By.ID, "jog-minus")
+    ActionChains(page).click_and_hold(button).perform()
+    try:
+        wait_until(lambda: "at soft limit" in page.find_element(By.ID, "motion-msg").text,
+                   timeout=20, what="the page says at soft limit")
+        assert "held" not in (button.get_attribute("class") or "")
+    finally:
+        ActionChains(page).release(button).perform()
+    wait_until(lambda: not status(server, 1)["moving"], timeout=10, what="x at rest")
+    assert status(server, 1)["user_position"] >= -10.0  # never past the limit

@@ -59,15 +59,28 @@ def test_moves_in_the_axis_unit_inside_the_limits(client: TestClient) -> None:
 
 
 def test_stop_all_stops_every_axis_of_every_link(client: TestClient) -> None:
-    for axis in (1, 2, 3):
-        r = client.post(f"/api/axes/{axis}/turn", json={"rpm": 60})
-        assert r.status_code == 200, r.text
-    wait_until(lambda: all(abs(status(client, a)["speed"]) > 30 for a in (1, 2, 3)),
-               timeout=10, what="all turning")
-    answer = client.post("/api/stop_all", json={}).json()
-    assert answer["failed"] == [] and set(answer["axes"]) == {"1", "2", "3"}
-    wait_until(lambda: all(abs(status(client, a)["speed"]) < 1 for a in (1, 2, 3)),
-               timeout=10, what="all stopped")
+    # Constant speed is a lease owned by the page that started it and renewed over its
+    # WebSocket (issue 27; it used to be an open-ended turn): a page holds all three, and
+    # STOP ALL wins over its renewals, which are refused from then on.
+    with client.websocket_connect(WS) as ws:
+        page = json.loads(ws.receive_text())["owner"]
+        start = {a: status(client, a)["position"] for a in (1, 2, 3)}
+        for axis in (1, 2, 3):
+            r = client.post(f"/api/axes/{axis}/turn", json={"rpm": 60, "page": page})
+            assert r.status_code == 200 and r.json()["open_ended"] is False, r.text
+
+        def turning() -> bool:  # Run again renews (and restarts one a slow poll let lapse)
+            for axis in (1, 2, 3):
+                client.post(f"/api/axes/{axis}/turn", json={"rpm": 60, "page": page})
+            return all(abs(status(client, a)["position"] - start[a]) > 20000 for a in (1, 2, 3))
+
+        wait_until(turning, timeout=10, what="all turning")
+        answer = client.post("/api/stop_all", json={}).json()
+        assert answer["failed"] == [] and set(answer["axes"]) == {"1", "2", "3"}
+        ws.send_text(json.dumps({"type": "turn", "axis": 1, "rpm": 60}))  # a late renewal
+        wait_until(lambda: all(abs(status(client, a)["speed"]) < 1 for a in (1, 2, 3))
+                   and not client.get("/api/diagnostics").json()["jog"]["active"],
+                   timeout=10, what="all stopped")
 
 
 def test_one_scope_plots_axes_of_two_protocols(client: TestClient) -> None:

@@ -32,6 +32,7 @@ DYN2 = Family(
     params=tuple(p.info for p in P.PARAMS),
     features=FEATURES,
     alarms={int(k): v for k, v in ALARM_TEXT.items()},
+    wave_counts_per_unit=U.WAVE_COUNTS_PER_UNIT,
 )
 
 

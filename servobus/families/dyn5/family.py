@@ -86,6 +86,7 @@ DYN5 = Family(
     params=tuple(_info(i) for i in SETTABLE),
     features=FEATURES,
     alarms=ALARM_TEXT,
+    wave_counts_per_unit=U.WAVE_COUNTS_PER_UNIT,
 )
 
 

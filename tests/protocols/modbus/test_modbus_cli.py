@@ -56,7 +56,8 @@ def test_status_position_and_a_move_in_counts(line: tuple[str, str]) -> None:
 
 def test_speed_stop_params_set_and_backup(line: tuple[str, str], tmp_path: Path) -> None:
     url, _ = line
-    assert servobus("--url", url, "--id", "1", "speed", "200").returncode == 0
+    # issue 27: speed holds the motion while it runs; --for ends it (then it stops)
+    assert servobus("--url", url, "--id", "1", "speed", "200", "--for", "0.3").returncode == 0
     assert servobus("--url", url, "--id", "1", "stop").returncode == 0
     out = servobus("--url", url, "--id", "1", "set", "acceleration", "20000")
     assert out.returncode == 0, out.stderr

@@ -15,6 +15,9 @@ class Context {
     this.link = link;
     this.status = new Map();
     this.jogs = {};
+    this.leases = {};  // axis -> {owner, rpm, at_limit, mine}: every running jog/constant speed
+    this.ended = {};  // axis -> why this page's jog/constant speed ended without it letting go
+    this.owner = null;  // this page's WebSocket session ("page N" owns its motions)
     this.selected = info.axes[0].id;
     this.selectListeners = [];
     this.statusListeners = [];
@@ -29,6 +32,8 @@ class Context {
   setStatus(doc) {
     for (const snap of doc.axes) this.status.set(snap.id, snap);
     this.jogs = doc.jog || {};
+    this.leases = doc.leases || {};
+    this.ended = doc.ended || {};
     for (const fn of this.statusListeners) fn(this.status);
   }
   async stopAll() {
@@ -47,6 +52,7 @@ async function main() {
     node.dataset.state = state;
     node.textContent = { live: "● live", down: "● connection lost – retrying", connecting: "connecting…" }[state];
   });
+  link.on("hello", (doc) => { ctx.owner = doc.owner; });
   link.on("status", (doc) => ctx.setStatus(doc));
   link.on("error", (doc) => console.warn("server:", doc.message));
 

@@ -2,7 +2,9 @@
 import { api } from "./net.js";
 import { $, $$, axisLabel, el, fmt, message } from "./util.js";
 
-const JOG_REPEAT_MS = 150;  // the server stops a jog not repeated within its lease (0.6 s)
+// The page renews its jog / constant speed this often; the server's lease ends one not
+// renewed within its ttl (0.5 s), in the drive too (servobus.gui.jog, docs/gui.md).
+const JOG_REPEAT_MS = 150;
 
 export class MotionPanel {
   constructor(ctx) {
@@ -10,13 +12,17 @@ export class MotionPanel {
     this.msg = $("#motion-msg");
     this.jogTimer = null;
     this.jogAxis = null;
+    this.turnTimer = null;
+    this.turnAxis = null;
     for (const b of $$("#panel-motion [data-action]")) {
-      b.addEventListener("click", () => this.run(`/command`, { action: b.dataset.action }, b.textContent));
+      b.addEventListener("click", () => {
+        if (b.dataset.action === "stop") this.turnEnd();  // Stop ends this page's constant speed
+        this.run(`/command`, { action: b.dataset.action }, b.textContent);
+      });
     }
     $("#move-abs").addEventListener("click", () => this.move(false));
     $("#move-rel").addEventListener("click", () => this.move(true));
-    $("#turn-run").addEventListener("click", () =>
-      this.run("/turn", { rpm: Math.round(Number($("#turn-rpm").value)) }, "constant speed"));
+    $("#turn-run").addEventListener("click", () => this.turnStart());
     $("#wave-start").addEventListener("click", () => this.run("/wave", {
       kind: $("#wave-kind").value, amplitude: Math.round(Number($("#wave-amp").value)),
       hz: Math.round(Number($("#wave-hz").value)) }, "test motion"));
@@ -25,7 +31,13 @@ export class MotionPanel {
     window.addEventListener("blur", () => this.jogEnd());
     document.addEventListener("visibilitychange", () => { if (document.hidden) this.jogEnd(); });
     ctx.onSelect(() => { this.jogEnd(); this.renderSelection(); });
-    ctx.onStatus(() => this.renderReadout());
+    ctx.onStatus(() => { this.renderReadout(); this.watchLeases(); });
+    // a refused jog or renewal (another page holds the axis, at soft limit, it ended):
+    // said on the page, and the button no longer shows it held
+    ctx.link.on("error", (doc) => {
+      if (doc.request === "jog" && this.jogTimer !== null) this.jogEnd(`jog: ${doc.message}`, "error");
+      if (doc.request === "turn" && this.turnTimer !== null) this.turnEnd(`constant speed: ${doc.message}`, "error");
+    });
     this.renderSelection();
   }
 
@@ -75,14 +87,66 @@ export class MotionPanel {
     message(this.msg, `jogging axis ${axis} at ${rpm} rpm`, "ok");
   }
 
-  jogEnd() {
+  jogEnd(text, kind = "") {
     if (this.jogTimer === null) return;
     clearInterval(this.jogTimer);
     this.jogTimer = null;
     this.ctx.link.send({ type: "jog_stop", axis: this.jogAxis });
     for (const b of $$("button.jog")) b.classList.remove("held");
-    message(this.msg, `jog of axis ${this.jogAxis} released`, "");
+    message(this.msg, text ?? `jog of axis ${this.jogAxis} released`, kind);
     this.jogAxis = null;
+  }
+
+  async turnStart() {
+    this.turnEnd();
+    const rpm = Math.round(Number($("#turn-rpm").value));
+    const axis = this.ctx.selected;
+    const label = axisLabel(this.ctx.identity(axis));
+    if (this.ctx.owner === null) {
+      message(this.msg, "constant speed: no connection to the server", "error");
+      return;
+    }
+    try {
+      const doc = await api(`/api/axes/${axis}/turn`, { rpm, page: this.ctx.owner });
+      if (doc.open_ended) {
+        message(this.msg, `constant speed ${rpm} rpm on ${label}: open-ended (continuous axis), runs until Stop`, "ok");
+        return;
+      }
+      if (rpm === 0) { message(this.msg, `constant speed of ${label} stopped`, "ok"); return; }
+      this.turnAxis = axis;
+      $("#turn-run").classList.add("held");
+      this.turnTimer = setInterval(() => {
+        if (!this.ctx.link.send({ type: "turn", axis, rpm })) this.turnEnd("constant speed: no connection to the server", "error");
+      }, JOG_REPEAT_MS);
+      message(this.msg, `constant speed ${rpm} rpm on ${label}: held while this page stays open`, "ok");
+    } catch (err) {
+      message(this.msg, `constant speed: ${err.message}`, "error");
+    }
+  }
+
+  turnEnd(text, kind = "") {
+    if (this.turnTimer === null) return;
+    clearInterval(this.turnTimer);
+    this.turnTimer = null;
+    this.ctx.link.send({ type: "turn_stop", axis: this.turnAxis });
+    $("#turn-run").classList.remove("held");
+    if (text !== undefined) message(this.msg, text, kind);
+    this.turnAxis = null;
+  }
+
+  // This page's jog or constant speed: at a soft limit, or ended without the page letting go
+  // (Stop, STOP ALL, not renewed in time): the button goes dark and the page says why.
+  watchLeases() {
+    const seen = (axis, what, end) => {
+      if (axis === null) return;
+      const label = axisLabel(this.ctx.identity(axis));
+      const why = this.ctx.ended[String(axis)];
+      const lease = this.ctx.leases[String(axis)];
+      if (why) end(`${what} of ${label} ended: ${why}`, "error");
+      else if (lease && lease.mine && lease.at_limit) end(`${what} of ${label}: at soft limit`, "error");
+    };
+    seen(this.jogAxis, "jog", (t, k) => this.jogEnd(t, k));
+    seen(this.turnAxis, "constant speed", (t, k) => this.turnEnd(t, k));
   }
 
   renderSelection() {
@@ -100,6 +164,9 @@ export class MotionPanel {
     const limits = ident.limits ? `; soft limits ${ident.limits[0]} … ${ident.limits[1]} ${ident.unit}` : "";
     const own = ident.unit && ident.unit !== "counts" ? `1 ${ident.unit} = ${fmt(ident.counts_per_unit)} counts; ` : "";
     $("#move-hint").textContent = `${own}1 rev = ${ident.counts_per_rev.toLocaleString("en-US")} counts on ${ident.family_title}${limits}.`;
+    $("#turn-hint").textContent = ident.continuous
+      ? "Continuous axis: constant speed is open-ended; it runs until Stop, also after this page closes."
+      : `Held while this page is open: it ends within ${this.ctx.info.jog_lease_s} s when the page closes or loses its connection, and stops at a soft limit.`;
     this.renderReadout();
   }
 
