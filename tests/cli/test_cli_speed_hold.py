@@ -138,4 +138,4 @@ def test_a_killed_speed_command_stops_within_the_lead(dyncan_drive: str) -> None
     # at_death is read after the kill, so the travel from it is at most the last lead;
     # the bound adds one renewal period (docs/safety.md) and the margin 1/16 rev for the
     # drive's settling. A lease left streaming or an open-ended speed would run on for ever.
-    assert 0 <= travel <= bound + cpr / 16, (travel, bound)
+    assert -cpr / 16 <= travel <= bound + cpr / 16, (travel, bound)
