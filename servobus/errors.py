@@ -104,6 +104,17 @@ class MachineLinkError(ConnectionLost):
     """A machine axis's link cannot be opened (or is offline): names the axis and its URL."""
 
 
+class PowerLostError(ServobusError):
+    """A machine axis whose drive may have lost power (position or origin may be gone)
+    refuses motion until acknowledged (``acknowledge()``, ``servobus ack``); nothing was
+    sent."""
+
+
+class ClosedError(ServobusError, RuntimeError):
+    """A call on an Axis or a machine after its ``close()`` (or from the wrong thread):
+    nothing was sent. Also a ``RuntimeError``, as before it had a type of its own."""
+
+
 class NotSupported(ServobusError):
     """The connected drive family or protocol does not have this feature; nothing was sent."""
 

@@ -42,6 +42,7 @@ from servobus.axis.capture import Capture, CaptureSource
 from servobus.axis.virtual_io import VirtualIo, VirtualIoSource
 from servobus.errors import (
     ArgumentRangeError,
+    ConnectionLost,
     DriveAlarm,
     DriveTimeout,
     MoveFailed,
@@ -196,6 +197,19 @@ class AsyncAxis(ABC):
     async def close(self) -> None: ...
 
     # ------------------------------------------------------------- optional features
+    def on_link_lost(self, callback: Callable[[ConnectionLost], object]) -> bool:
+        """Call ``callback(error)`` once when the link under this axis is lost (the peer
+        closed it, the medium failed; never on ``close()``): the transport-closed signal a
+        machine reopens links on. False where the protocol cannot tell; then only a call
+        that fails shows it."""
+        return False
+
+    async def power_marker(self, token: int | None = None) -> int | None:
+        """A cell of the drive that a power cycle clears: write ``token`` (when given), then
+        return what the cell holds. None where the family has no such cell; the machine
+        then judges a power loss by the position (docs/machine.md, "Recovery")."""
+        return None
+
     def unsupported(self, feature: str) -> NotSupported:
         """The error for a feature this family (or this protocol) does not have."""
         self.family.require(feature)  # raises when the family lacks it

@@ -9,13 +9,17 @@ from __future__ import annotations
 
 from abc import abstractmethod
 from collections.abc import Awaitable, Callable
-from typing import ClassVar, Generic, Protocol, Self, TypeVar
+from typing import Any, ClassVar, Generic, Protocol, Self, TypeVar
 
 from servobus.axis.base import AsyncAxis, AxisTraceHook
+from servobus.errors import ConnectionLost
+from servobus.link.transaction import TransactionManager
 
 
 class LinkClient(Protocol):
     """What a ClientAxis needs of any protocol client."""
+
+    transactions: TransactionManager[Any, Any, Any]
 
     def add_trace(self, hook: AxisTraceHook) -> None: ...
     async def close(self) -> None: ...
@@ -61,6 +65,11 @@ class ClientAxis(AsyncAxis, Generic[C]):
 
     async def add_trace(self, hook: AxisTraceHook) -> None:
         self.client.add_trace(hook)
+
+    def on_link_lost(self, callback: Callable[[ConnectionLost], object]) -> bool:
+        """The client's transaction manager hears of the medium's end (link.transaction)."""
+        self.client.transactions.on_lost(callback)
+        return True
 
     async def close(self) -> None:
         if self._owns_client:

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
-from typing import ClassVar, Never, Protocol, TypeVar, cast
+from typing import Any, ClassVar, Never, Protocol, TypeVar, cast
 
 from servobus.axis import checks
 from servobus.axis.base import DEFAULT_WAIT_TIMEOUT_S, AxisTraceHook, check_int
@@ -28,6 +28,7 @@ from servobus.families.dmm import vocabulary as V
 from servobus.families.dmm.family import DYN2, axis_status, command_to_counts, counts_to_command
 from servobus.families.dmm.registers import DriveConfig, DriveStatus
 from servobus.link.eeprom_guard import EepromGuard
+from servobus.link.transaction import TransactionManager
 
 T = TypeVar("T")
 T_co = TypeVar("T_co", covariant=True)
@@ -79,6 +80,8 @@ class CommandSet(Protocol):
 class CommandClient(Protocol):
     """What CommandAxis needs of a protocol client. ``execute`` refuses (ArgumentRangeError)
     a Request built by another protocol's CommandSet."""
+
+    transactions: TransactionManager[Any, Any, Any]
 
     @property
     def guard(self) -> EepromGuard: ...

@@ -40,6 +40,7 @@ from collections.abc import Coroutine
 from typing import Any, TypeVar
 
 from servobus.axis.sync import LoopThread
+from servobus.errors import ClosedError
 
 T = TypeVar("T")
 
@@ -104,11 +105,11 @@ class InlineRunner:
             return thread.run(coro, timeout)
         if self._stopped:
             coro.close()
-            raise RuntimeError("the connection is closed")
+            raise ClosedError("the connection is closed")
         running = events._get_running_loop()
         if running is self.loop:  # a hook or callback of this loop calling the facade
             coro.close()
-            raise RuntimeError("sync facade called from its own loop thread (use the async API)")
+            raise ClosedError("sync facade called from its own loop thread (use the async API)")
         if (running is not None or threading.get_ident() != self._owner
                 or not self._lock.acquire(blocking=False)):
             return self._hand_over().run(coro, timeout)
@@ -191,7 +192,7 @@ class InlineRunner:
             while not done.wait(_STOP_CHECK_S if end is None
                                 else min(_STOP_CHECK_S, max(0.0, end - self.loop.time()))):
                 if self._stopped:
-                    raise RuntimeError("the connection was closed during the call")
+                    raise ClosedError("the connection was closed during the call")
                 if end is not None and self.loop.time() >= end:
                     raise TimeoutError(f"no result within {timeout} s")
         except BaseException:  # the timeout above, or Ctrl-C while waiting
@@ -239,7 +240,7 @@ class InlineRunner:
         self._take_lock()
         try:
             if self._thread is None and self._stopped:
-                raise RuntimeError("the connection is closed")
+                raise ClosedError("the connection is closed")
             return self._start_thread()
         finally:
             self._lock.release()
@@ -248,7 +249,7 @@ class InlineRunner:
         """Close the loop (stop the loop thread, if it has one); idempotent. A call in
         progress on the owner's thread lets go of the loop first, as for another thread."""
         if events._get_running_loop() is self.loop:
-            raise RuntimeError("sync facade stopped from its own loop thread (use the async API)")
+            raise ClosedError("sync facade stopped from its own loop thread (use the async API)")
         self._take_lock()
         try:
             if self._stopped:

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any, ParamSpec, Protocol, TypeVar
 
 from servobus import fastloop
 from servobus.axis.base import DEFAULT_POLL_S, DEFAULT_WAIT_TIMEOUT_S
+from servobus.errors import ClosedError, ConnectionLost
 
 if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis, AxisTraceHook
@@ -94,16 +95,16 @@ class LoopThread:
         """
         if self._stopped:
             coro.close()
-            raise RuntimeError("the connection is closed")
+            raise ClosedError("the connection is closed")
         if threading.current_thread() is self._thread:
             coro.close()
-            raise RuntimeError("sync facade called from its own loop thread (use the async API)")
+            raise ClosedError("sync facade called from its own loop thread (use the async API)")
         call = _Call(coro)
         try:
             self.loop.call_soon_threadsafe(call.start, self.loop)
         except RuntimeError:  # the loop was closed under us
             coro.close()
-            raise RuntimeError("the connection is closed") from None
+            raise ClosedError("the connection is closed") from None
         try:
             if not call.done.acquire(timeout=-1 if timeout is None else timeout):
                 raise TimeoutError(f"no result within {timeout} s")
@@ -330,6 +331,15 @@ class Axis:
     def move_range(self, *, relative: bool = False) -> tuple[int, int] | None:
         """The counts a move to (``relative``: by) can reach on this drive, None if unbounded."""
         return self._call(self._core.move_range, relative=relative)
+
+    def on_link_lost(self, callback: Callable[[ConnectionLost], object]) -> bool:
+        """``callback(error)`` once when the link is lost (called on the loop's thread)."""
+        return self._core.on_link_lost(callback)
+
+    def power_marker(self, token: int | None = None) -> int | None:
+        """Write ``token`` into the drive's power-cleared cell and read it back; None where
+        the family has none (:meth:`AsyncAxis.power_marker`)."""
+        return self._call(self._core.power_marker, token)
 
     def ping(self, timeout: float = 0.05) -> bool:
         """One status read, no retry; False on timeout."""

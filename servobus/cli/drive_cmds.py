@@ -405,6 +405,17 @@ def stop_cmd(ctx: CliContext) -> None:
     emit(ctx, {"stopped": True}, lambda con: con.print("stopping"))
 
 
+@click.command("ack", cls=ServobusCommand)
+@pass_cli
+def ack_cmd(ctx: CliContext) -> None:
+    """Acknowledge a possible power loss of a machine axis (--axis; docs/machine.md)."""
+    if not ctx.machine_mode:
+        raise click.UsageError("ack acts on a machine axis: give --machine FILE --axis NAME "
+                               "(or --axis NAME on the built-in machine)")
+    machine_cli.ack(ctx)
+
+
 def register(group: click.Group) -> None:
-    for command in (status_cmd, position_cmd, speed_cmd, move_cmd, stop_cmd, reset_cmd):
+    for command in (status_cmd, position_cmd, speed_cmd, move_cmd, stop_cmd, reset_cmd,
+                    ack_cmd):
         group.add_command(command)

@@ -323,3 +323,26 @@ def stop(ctx: CliContext) -> None:
     emit(ctx, {"axis": axis.name, "stopped": True},
          lambda con: con.print(f"axis {axis.name} stopping", markup=False))
 
+
+
+def ack(ctx: CliContext) -> None:
+    """``servobus ack``: acknowledge a possible power loss of one axis (docs/machine.md).
+
+    A one-shot command has no flag from an earlier process to clear: it tells what the
+    drive itself shows - a DYN5's power-cleared cell holds the machine's token unless the
+    drive was power-cycled or reset since a machine last left it there - then leaves the
+    token again and acknowledges. Families without such a cell cannot tell across
+    processes; the command says so."""
+    from servobus.machine.axis import POWER_TOKEN
+
+    with open_machine_axis(ctx) as axis:
+        marker = axis.core.marker_before
+        axis.acknowledge()
+    if marker is None:
+        seen = "unknown: the family keeps no mark of a power cycle across processes"
+    elif marker == POWER_TOKEN:
+        seen = "no power cycle since a machine last marked the drive"
+    else:
+        seen = "the drive was power-cycled or reset since a machine last marked it"
+    emit(ctx, {"axis": axis.name, "acknowledged": True, "power_cycle": seen},
+         lambda con: con.print(f"axis {axis.name}: acknowledged ({seen})", markup=False))

@@ -168,6 +168,16 @@ class TransactionManager(Generic[K, P, V]):
         self._timer_at = 0.0
         self._closed = False
         self._dead: ConnectionLost | None = None
+        self._on_lost: list[Callable[[ConnectionLost], object]] = []
+
+    def on_lost(self, callback: Callable[[ConnectionLost], object]) -> None:
+        """``callback(error)`` once when the medium is lost (closed by the peer, failed) -
+        the transport-closed signal the machine reopens links on (issue 29); never for
+        :meth:`close`. At once when it already was lost."""
+        if self._dead is not None and not self._closed:
+            callback(self._dead)
+            return
+        self._on_lost.append(callback)
 
     # ------------------------------------------------------------- tracing
     def add_trace(self, hook: LinkTraceHook) -> None:
@@ -438,6 +448,9 @@ class TransactionManager(Generic[K, P, V]):
             if self._dead is None:
                 self._dead = out
                 log.debug("%s", out)
+                callbacks, self._on_lost = self._on_lost, []
+                for callback in callbacks:
+                    callback(out)
             self._hang_up()
         return out
 
@@ -458,6 +471,7 @@ class TransactionManager(Generic[K, P, V]):
         self._closed = True
         if self._dead is None:
             self._dead = ConnectionLost("client is closed")
+        self._on_lost.clear()
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None

@@ -16,6 +16,12 @@ Every motion is checked against the limits before anything reaches the wire
   position, or a multi-turn encoder's zero).
 * While the link is offline every call raises :class:`MachineLinkError` naming the axis and
   URL; ``limits``, ``unit`` and the checks still work.
+* Recovery (issue 29, docs/machine.md "Recovery"): a call whose link is lost (ConnectionLost)
+  raises MachineLinkError and tells the machine, which takes every axis of that link
+  offline and reopens it. ``last_good`` keeps the time of the last call that succeeded.
+  Nothing is resumed: a motion that ran is reported in ``interrupted``, its lease ends.
+  A drive that may have lost power is flagged (``power_lost``) until :meth:`acknowledge`;
+  until then motion commands raise PowerLostError (stop, enable, reset ... still work).
 """
 
 from __future__ import annotations
@@ -25,14 +31,19 @@ import contextlib
 import logging
 import math
 import time
+from collections.abc import Awaitable, Callable, Iterator
 from typing import TYPE_CHECKING
 
 from servobus.errors import (
     ArgumentRangeError,
+    ClosedError,
+    ConnectionLost,
+    DriveTimeout,
     LimitError,
     MachineLinkError,
     NotSupported,
     OwnerError,
+    PowerLostError,
 )
 from servobus.machine.config import AxisSpec
 from servobus.machine.lease import DEFAULT_TTL_S, Lease, check_speed, check_ttl, stream
@@ -46,6 +57,22 @@ log = logging.getLogger(__name__)
 
 UNITS_PER_S = {"mm": "mm/s", "deg": "deg/s", "rev": "rev/s", "counts": "counts/s"}
 
+#: Calls in a row that time out, over at least SILENT_S, before a drive counts as silent;
+#: when a silent drive answers again it may have been power-cycled (flagged,
+#: docs/machine.md). Decision: the seconds keep a loaded host, whose replies miss a few
+#: deadlines in a row, from flagging a drive that never lost power (a DMM drive takes well
+#: over SILENT_S to boot).
+SILENT_CALLS = 3
+SILENT_S = 2.0
+#: What the machine leaves in a drive's power-cleared cell (AsyncAxis.power_marker; DYN5
+#: memory test instance 0x01, range 0..63).
+POWER_TOKEN = 0x29
+#: Without such a cell: a position that moved by more than 1/64 rev while the link was down
+#: and no motion ran counts as a power loss.
+JUMP_REVS = 1 / 64
+
+DropHandler = Callable[["AsyncMachineAxis", BaseException], None]
+
 
 class AsyncMachineAxis:
     """One axis of a machine file; see the module docstring for the rules."""
@@ -56,6 +83,19 @@ class AsyncMachineAxis:
         self.axis: AsyncAxis | None = None  # the underlying Axis; None while offline
         self.last_error: BaseException | None = None
         self._lease: Lease | None = None
+        #: Set by the machine: told when a call finds the link lost.
+        self.on_drop: DropHandler | None = None
+        self._last_good: float | None = None
+        self._last_counts: int | None = None
+        self._moving = False  # a motion was commanded and not yet seen to end
+        self._silent = 0  # calls in a row that timed out
+        self._silent_since = 0.0  # time.monotonic() of the first of them
+        self._interrupted: str | None = None
+        self._power_lost: str | None = None
+        self._origin_pending = False
+        self._is_closed = False
+        self.checking = False  # set by the machine while it checks a reopened link
+        self.marker_before: int | None = None  # the power cell when the link last opened
 
     # ------------------------------------------------------------- identity
     @property
@@ -107,10 +147,165 @@ class AsyncMachineAxis:
 
     def core(self) -> AsyncAxis:
         """The underlying Axis, or MachineLinkError naming the axis and its URL."""
+        if self._is_closed:
+            raise ClosedError(f"axis {self.name}: the machine is closed")
         if self.axis is None:
             why = f": {self.last_error}" if self.last_error is not None else ""
             raise MachineLinkError(f"axis {self.name} is offline ({self.url}){why}")
         return self.axis
+
+    # ------------------------------------------------------------- recovery (issue 29)
+    @property
+    def last_good(self) -> float | None:
+        """``time.time()`` of the last call that succeeded on this axis (None: none yet)."""
+        return self._last_good
+
+    @property
+    def interrupted(self) -> str | None:
+        """The motion that ran when the link dropped (never re-sent), until the next motion
+        command or :meth:`acknowledge`; None otherwise."""
+        return self._interrupted
+
+    @property
+    def power_lost(self) -> bool:
+        """The drive may have lost power (its position or origin may be gone): motion is
+        refused (PowerLostError) until :meth:`acknowledge`."""
+        return self._power_lost is not None
+
+    @property
+    def power_lost_reason(self) -> str | None:
+        """How servobus noticed the power loss (docs/machine.md), None when not flagged."""
+        return self._power_lost
+
+    @property
+    def origin_pending(self) -> bool:
+        """The file's ``origin`` was not applied: the link opened only after start-up
+        (reopening never applies it); :meth:`set_origin` clears it."""
+        return self._origin_pending
+
+    async def acknowledge(self) -> None:
+        """A person or program has seen the power loss (and the interrupted motion): the
+        flags clear and motion is allowed again. Nothing is sent."""
+        if self._power_lost is not None or self._interrupted is not None:
+            log.warning("axis %s: acknowledged (%s)", self.name,
+                        self._power_lost or self._interrupted)
+        self._power_lost = None
+        self._interrupted = None
+
+    def flag_power_lost(self, why: str) -> None:
+        """Flag a possible power loss (the machine's checks; one log line)."""
+        if self._power_lost is None:
+            log.warning("axis %s: the drive may have lost power (%s); acknowledge() it "
+                        "before the next motion", self.name, why)
+        self._power_lost = why
+
+    @contextlib.contextmanager
+    def _watch(self) -> Iterator[None]:
+        """Around every call on the Axis: a lost link becomes MachineLinkError (and the
+        machine hears of it), timeouts are counted, success stamps ``last_good``."""
+        used = self.axis
+        try:
+            yield
+        except MachineLinkError:
+            raise
+        except ConnectionLost as exc:
+            raise self.link_lost(exc, used) from exc
+        except DriveTimeout:
+            if not self._silent:
+                self._silent_since = time.monotonic()
+            self._silent += 1
+            raise
+        self._good()
+
+    def _good(self) -> None:
+        self._last_good = time.time()
+        if self._silent >= SILENT_CALLS and time.monotonic() - self._silent_since >= SILENT_S:
+            self.flag_power_lost(f"it did not answer {self._silent} calls in a row and "
+                                 "answers again")
+        self._silent = 0
+
+    def link_lost(self, exc: BaseException, used: AsyncAxis | None) -> MachineLinkError:
+        """The error a call on a lost link raises; the machine takes the link offline
+        (unless ``used``, the Axis the call ran on, is no longer this axis's: the link was
+        reopened meanwhile)."""
+        err = MachineLinkError(f"axis {self.name}: the link {self.url} is down: {exc}")
+        if used is not None and used is self.axis and self.on_drop is not None:
+            self.on_drop(self, err)
+        return err
+
+    def went_offline(self, err: BaseException) -> None:
+        """The link dropped (the machine calls this for every axis on it): nothing is
+        resumed; a motion that ran is reported in ``interrupted``, a lease ends."""
+        self.axis = None
+        self.last_error = err
+        lease = self._lease
+        running = lease is not None and lease.alive
+        if running and lease is not None:
+            lease.ended = "link dropped"
+            if lease.task is not None and lease.task is not asyncio.current_task():
+                lease.task.cancel()  # its own task ends by itself on the failed read
+            self._interrupted = f"the {lease.owner} motion at {lease.speed:g} " \
+                                f"{self.speed_unit} (lease) stopped being sent"
+        elif self._moving:
+            self._interrupted = "a commanded motion may not have finished"
+        self._moving = False
+        if self._interrupted is not None:
+            log.warning("axis %s: motion interrupted by the link drop: %s; it is not "
+                        "re-sent", self.name, self._interrupted)
+
+    async def mark_power(self) -> None:
+        """Leave the machine's token in the drive's power-cleared cell, where it has one;
+        what the cell held before is kept in ``marker_before`` (``servobus ack`` reports
+        it: the token means no power cycle since a machine last left it)."""
+        core = self.core()
+        with self._watch():
+            self.marker_before = await core.power_marker()
+            if self.marker_before is not None:
+                await core.power_marker(POWER_TOKEN)
+
+    async def check_power(self) -> None:
+        """After the link came back: did the drive lose power meanwhile? The cell where
+        the family has one (DYN5), else the position (docs/machine.md)."""
+        core = self.core()
+        with self._watch():
+            marker = await core.power_marker()
+        if marker is not None:
+            if marker != POWER_TOKEN:
+                self.flag_power_lost(f"its power-cleared memory holds {marker}, not the "
+                                     f"token {POWER_TOKEN} left there: power cycle or Reset")
+            with self._watch():
+                await core.power_marker(POWER_TOKEN)
+            return
+        if self._interrupted is not None:
+            self.flag_power_lost("a motion was interrupted and the family keeps no mark "
+                                 "of a power cycle: the position is unverified")
+            return
+        with self._watch():
+            counts = await core.position()
+        before = self._last_counts
+        self._last_counts = counts
+        if before is not None and abs(counts - before) > core.counts_per_rev * JUMP_REVS:
+            self.flag_power_lost(f"the position moved from {before} to {counts} counts "
+                                 "while the link was down")
+
+    def _motion(self) -> AsyncAxis:
+        """The Axis for a motion command: refused while a power loss is unacknowledged."""
+        if self._power_lost is not None:
+            raise PowerLostError(f"axis {self.name}: the drive may have lost power "
+                                 f"({self._power_lost}); acknowledge it first "
+                                 "(acknowledge(), servobus ack); nothing was sent")
+        core = self.core()
+        if self.checking:
+            raise MachineLinkError(f"axis {self.name}: its link is back and being checked for "
+                                   "a power loss; nothing was sent, try again")
+        self._interrupted = None
+        return core
+
+    def _seen(self, counts: int | None = None, status: AxisStatus | None = None) -> None:
+        if counts is not None:
+            self._last_counts = counts
+        if status is not None and not status.moving:
+            self._moving = False
 
     @property
     def scale(self) -> Scale:
@@ -141,21 +336,30 @@ class AsyncMachineAxis:
     # ------------------------------------------------------------- reads (user units)
     async def counts(self) -> int:
         """The position in the Axis's counts."""
-        return await self.core().position()
+        with self._watch():
+            counts = await self.core().position()
+        self._seen(counts)
+        return counts
 
     async def position(self) -> float:
-        return self.to_user(await self.core().position())
+        return self.to_user(await self.counts())
 
     async def speed(self) -> float:
         """User units per second (the Axis reads motor rpm)."""
-        return self.scale.from_rpm(await self.core().speed())
+        with self._watch():
+            return self.scale.from_rpm(await self.core().speed())
 
     async def status(self) -> AxisStatus:
-        return await self.core().status()
+        with self._watch():
+            status = await self.core().status()
+        self._seen(status=status)
+        return status
 
     async def readings(self) -> tuple[float, float, AxisStatus]:
         """Position and speed in user units and the status (see ``AsyncAxis.readings``)."""
-        position, speed, status = await self.core().readings()
+        with self._watch():
+            position, speed, status = await self.core().readings()
+        self._seen(position, status)
         return self.to_user(position), self.scale.from_rpm(speed), status
 
     # ------------------------------------------------------------- motion
@@ -165,7 +369,7 @@ class AsyncMachineAxis:
         self.check_target(target)
         counts = self.to_counts(target)
         await self._end_lease("replaced by a move")
-        await self.core().move_to(counts, wait=wait, timeout=timeout)
+        await self._move(lambda core: core.move_to(counts, wait=wait, timeout=timeout))
 
     async def move_by(self, distance: float, *, wait: bool = False,
                       timeout: float | None = None) -> None:
@@ -182,7 +386,14 @@ class AsyncMachineAxis:
             self.check_target(await self.position() + distance)
         counts = self.to_counts(distance)
         await self._end_lease("replaced by a move")
-        await self.core().move_by(counts, wait=wait, timeout=timeout)
+        await self._move(lambda core: core.move_by(counts, wait=wait, timeout=timeout))
+
+    async def _move(self, send: Callable[[AsyncAxis], Awaitable[None]]) -> None:
+        """A motion command, sent once (never re-sent, whatever happens to the link)."""
+        core = self._motion()
+        self._moving = True
+        with self._watch():
+            await send(core)
 
     async def turn(self, speed: float | None = None, *, owner: str = "api",
                    ttl: float = DEFAULT_TTL_S) -> None:
@@ -194,7 +405,7 @@ class AsyncMachineAxis:
             speed = self._checked_speed(speed)
             rpm = round(self.scale.to_rpm(speed))
             await self._end_lease("replaced by an open-ended speed")
-            await self.core().turn(rpm)
+            await self._move(lambda core: core.turn(rpm))
             return
         await self.jog(speed, owner=owner, ttl=ttl)
 
@@ -222,9 +433,10 @@ class AsyncMachineAxis:
             lease.speed = speed  # the streamer picks the new speed up at its next update
             lease.renew(ttl)
             return
-        core = self.core()
+        core = self._motion()
         rpm = self.scale.to_rpm(speed)
-        profile = await core.stream_profile()
+        with self._watch():
+            profile = await core.stream_profile()
         check_speed(self.name, speed, rpm, profile, self.speed_unit, self.scale.from_rpm)
         limit = None
         if self.limits is not None:
@@ -262,11 +474,16 @@ class AsyncMachineAxis:
         rpm = abs(self.scale.to_rpm(lease.speed))
 
         async def read() -> float:
-            return self.to_user(await core.position())
+            with self._watch():
+                counts = await core.position()
+            self._seen(counts)
+            return self.to_user(counts)
 
         async def send(target: float) -> None:
-            await core.stream_to(self.to_counts(target), abs(self.scale.to_rpm(lease.speed))
-                                 or rpm)
+            self._moving = True
+            with self._watch():
+                await core.stream_to(self.to_counts(target),
+                                     abs(self.scale.to_rpm(lease.speed)) or rpm)
 
         await stream(lease, self.name, read, send, core.stop)
 
@@ -308,9 +525,9 @@ class AsyncMachineAxis:
             core = self.axis
             if core is not None:
                 try:
-                    position = self.to_user(await core.position())
+                    position = await self.position()
                     if position > high or position < low:
-                        speed = self.scale.from_rpm(await core.speed())
+                        speed = await self.speed()
                         if (position > high and speed > 0) or (position < low and speed < 0):
                             await core.stop()
                             log.warning("axis %s passed its soft limit at %g %s: stopped",
@@ -322,7 +539,9 @@ class AsyncMachineAxis:
     async def stop(self) -> None:
         """Stop whatever runs (a lease of any owner too: Stop always wins)."""
         await self._end_lease("stopped")
-        await self.core().stop()
+        with self._watch():
+            await self.core().stop()
+        self._moving = False
 
     async def _end_lease(self, why: str) -> None:
         lease, self._lease = self._lease, None
@@ -333,21 +552,33 @@ class AsyncMachineAxis:
                 await lease.task
 
     async def enable(self) -> None:
-        await self.core().enable()
+        with self._watch():
+            await self.core().enable()
 
     async def disable(self) -> None:
-        await self.core().disable()
+        with self._watch():
+            await self.core().disable()
 
     async def reset(self) -> None:
-        await self.core().reset()
+        """The family's own reset; a DYN5's clears its power-cleared cell too (4.4), so the
+        machine's token is left there again."""
+        with self._watch():
+            await self.core().reset()
+        with contextlib.suppress(NotSupported, ArgumentRangeError):
+            await self.mark_power()
 
     async def set_origin(self) -> None:
         """The position here becomes 0 counts (limits count from it)."""
-        await self.core().set_origin()
+        with self._watch():
+            await self.core().set_origin()
+        self._origin_pending = False
 
     async def wait_idle(self, timeout: float | None = None) -> AxisStatus:
         core = self.core()
-        return await (core.wait_idle() if timeout is None else core.wait_idle(timeout))
+        with self._watch():
+            status = await (core.wait_idle() if timeout is None else core.wait_idle(timeout))
+        self._seen(status=status)
+        return status
 
     async def apply_origin(self) -> None:
         """The file's origin rule at start-up: "set" sets the origin here, "home" runs the
@@ -363,9 +594,18 @@ class AsyncMachineAxis:
                                    "homing; use origin = \"set\"", family=core.family.name)
             await home()
 
+    def skip_origin(self) -> None:
+        """The link opened after start-up: the file's origin rule is not applied (one
+        line); ``origin_pending`` tells until :meth:`set_origin`."""
+        if self.spec.origin != "none":
+            self._origin_pending = True
+            log.warning("axis %s: origin = %r not applied (the link opened after start-up); "
+                        "set it with set_origin()", self.name, self.spec.origin)
+
     async def _closed(self) -> None:
         """The machine closes: the lease ends (the machine stops the axes first)."""
         await self._end_lease("closed")
+        self._is_closed = True
 
     def __repr__(self) -> str:
         state = "" if self.online else " offline"

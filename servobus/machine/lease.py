@@ -94,6 +94,12 @@ class Lease:
         ahead = self.lead if target is None else min(h * (target - position)
                                                      + abs(self.speed) * elapsed, self.lead)
         new = position + h * max(ahead, 0.0)
+        if target is not None and h * (new - target) < 0:
+            # Decision: a target never steps back. A position read that lags the motor (a
+            # late reply, a slow host) would otherwise put the target behind it and reverse
+            # the axis; the last target was at most one lead ahead of a motor that never
+            # passes it, so holding it keeps the bound.
+            new = target
         if self.limit is not None and h * (new - self.limit) >= 0:
             self.at_limit = True
             return self.limit

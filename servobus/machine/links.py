@@ -75,6 +75,19 @@ class Link:
             axis.axis = core
             axis.last_error = None
 
+    def cores(self) -> list[AsyncAxis]:
+        """The Axes of the link while it is online (the owner's first)."""
+        return [a.axis for a in self.axes if a.axis is not None]
+
+    def take_offline(self, err: BaseException) -> list[AsyncAxis]:
+        """The link dropped: every axis offline (AsyncMachineAxis.went_offline); the Axes
+        it had, for the caller to close."""
+        cores = self.cores()
+        self.owner = None
+        for axis in self.axes:
+            axis.went_offline(err)
+        return cores
+
     def _id(self, axis: AsyncMachineAxis) -> int:
         if axis.spec.drive_id is None:  # two axes on one link need ids (config checks it)
             raise MachineFileError(f"{self.source}: axis {axis.name}: id: missing: axes that "

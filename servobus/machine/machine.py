@@ -4,10 +4,8 @@
 rules. ``retry=False`` (scripts, the CLI): a link that cannot be opened is one
 MachineLinkError naming the axis and its URL, and whatever was opened is closed again.
 ``retry=True`` (GUI, gateway): such an axis starts offline (``online`` False,
-``last_error`` set) and a background task retries its link every :data:`RETRY_S` (doubling up
-to :data:`RETRY_MAX_S`) until it opens or the machine closes.
-
-``close()`` stops every axis first (servobus.axis.halt.halt), then closes the links.
+``last_error`` set) and a background task retries its link until it opens or the machine
+closes.
 
 Origin rules (``origin = "set"`` / ``"home"``; decision, issue 28): a rule is applied once per
 machine, when its axis's link first opens; reopening a link never applies it again.
@@ -16,22 +14,41 @@ command cannot know whether the drive was power-cycled since the last one. Apply
 at every command re-zeroed the axis where it stood each time (two ``move 90deg`` turned 180
 deg and ``position`` read 0 after each), and on a DYN5 setting the origin resets the drive's
 servo control. Long-running owners (GUI, gateway, a script) open with origins applied.
+
+Recovery (issue 29, docs/machine.md "Recovery"), whatever ``retry`` says: a link that drops
+(its transport says so, ``AsyncAxis.on_link_lost``, or a call on it fails with
+ConnectionLost) takes its axes offline and is reopened with :func:`backoff` - the first try
+at once, then after :data:`RETRY_S`, doubling to at most :data:`RETRY_MAX_S` between tries,
+slept on the injected ``sleep`` (a test runs simulated minutes). One log line when a link
+goes down, one when it is back; tries in between log at debug level only. Nothing is
+resumed: no motion is re-sent, leases end, ``origin`` is never applied again; after the
+link is back each axis is checked for a power loss (AsyncMachineAxis.check_power).
+
+``close()`` stops every axis first (servobus.axis.halt.halt), then closes the links. Any
+call after it raises ClosedError.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import logging
 import time
-from collections.abc import Collection, Iterator, Mapping, Sequence
+from collections.abc import Awaitable, Callable, Collection, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType, TracebackType
 
 from servobus.axis.base import AsyncAxis
 from servobus.axis.halt import halt
-from servobus.errors import ArgumentRangeError, LimitError
+from servobus.errors import (
+    ArgumentRangeError,
+    ClosedError,
+    LimitError,
+    MachineLinkError,
+    ServobusError,
+)
 from servobus.machine.axis import AsyncMachineAxis
 from servobus.machine.builtin import BUILTIN_SOURCE, builtin_spec
 from servobus.machine.config import MachineSpec, load_machine_file, url_spec
@@ -39,8 +56,21 @@ from servobus.machine.links import Link, group_links
 
 log = logging.getLogger(__name__)
 
-RETRY_S = 0.5
-RETRY_MAX_S = 5.0
+#: Reconnect backoff: the first try at once, then after RETRY_S, doubling to RETRY_MAX_S.
+RETRY_S = 0.1
+RETRY_MAX_S = 2.0
+
+Sleep = Callable[[float], Awaitable[None]]
+
+
+def backoff(*, at_once: bool = True) -> Iterator[float]:
+    """Seconds to wait before each reconnect try: 0 (``at_once``), 0.1, 0.2 ... 2, 2 ..."""
+    if at_once:
+        yield 0.0
+    delay = RETRY_S
+    while True:
+        yield delay
+        delay = min(delay * 2, RETRY_MAX_S)
 
 
 @dataclass(frozen=True)
@@ -73,16 +103,22 @@ class TogetherReport:
 class AsyncMachine:
     """Axes by name (ordered as in the file); see the module docstring."""
 
-    def __init__(self, spec: MachineSpec, *, source: str) -> None:
+    def __init__(self, spec: MachineSpec, *, source: str, sleep: Sleep = asyncio.sleep) -> None:
         self.spec = spec
         self.source = source
         self._axes = {s.name: AsyncMachineAxis(s, source) for s in spec.axes}
         self.links = group_links(list(self._axes.values()), source)
-        self._retries: list[asyncio.Task[None]] = []
+        self._link_of = {a.name: link for link in self.links for a in link.axes}
+        for axis in self._axes.values():
+            axis.on_drop = self._axis_dropped
+        self._sleep = sleep  # the reconnect clock (a test injects a simulated one)
+        self._retries: set[asyncio.Task[None]] = set()
         self._guards: list[asyncio.Task[None]] = []
         self._closed = False
         self._origins = True
         self._origin_done: set[str] = set()  # axes whose origin rule ran (never again)
+        #: Reconnect tries made (every link), for tests and the fault run.
+        self.reconnect_tries = 0
 
     @property
     def name(self) -> str:
@@ -128,14 +164,15 @@ class AsyncMachine:
             try:
                 await link.open()
                 await self._apply_origins(link)
+                await self._opened(link)
             except Exception as exc:
                 if not retry or not _retryable(exc):
                     await self.close()
                     raise
                 link.mark_offline(exc)
                 log.warning("%s", exc)
-                self._retries.append(asyncio.create_task(self._retry(link),
-                                                         name=f"machine-retry {link.url}"))
+                self._spawn(self._reconnect(link, backoff(at_once=False), first=True),
+                            f"machine-retry {link.url}")
 
     async def _apply_origins(self, link: Link) -> None:
         """Each axis's origin rule, once per machine (module docstring)."""
@@ -147,19 +184,99 @@ class AsyncMachine:
             await axis.apply_origin()
             self._origin_done.add(axis.name)
 
-    async def _retry(self, link: Link) -> None:
-        delay = RETRY_S
-        while not self._closed:
-            await asyncio.sleep(delay)
+    async def _opened(self, link: Link) -> None:
+        """A link is open: watch its transport, leave the power token (where the family
+        keeps one)."""
+        for axis in link.axes:
+            core = axis.core()
+            core.on_link_lost(functools.partial(self._link_signal, asyncio.get_running_loop(),
+                                                link, core))
+            with contextlib.suppress(ServobusError):  # MachineLinkError: dropped again
+                await axis.mark_power()
+
+    def _spawn(self, coro: Awaitable[None], name: str) -> None:
+        task = asyncio.ensure_future(coro)
+        task.set_name(name)
+        self._retries.add(task)
+        task.add_done_callback(self._retries.discard)
+
+    # ------------------------------------------------------------- recovery
+    def _axis_dropped(self, axis: AsyncMachineAxis, err: BaseException) -> None:
+        link = self._link_of[axis.name]
+        self._link_lost(link, axis.axis, err)
+
+    def _link_signal(self, loop: asyncio.AbstractEventLoop, link: Link, core: AsyncAxis,
+                     err: BaseException) -> None:
+        """The transport's own signal (AsyncAxis.on_link_lost): handled on the loop, after
+        the receive path that raised it has returned."""
+        with contextlib.suppress(RuntimeError):  # the loop is closed: nothing to reopen
+            loop.call_soon_threadsafe(self._link_lost, link, core, err)
+
+    def _link_lost(self, link: Link, core: AsyncAxis | None, err: BaseException) -> None:
+        """A link dropped (a failed call or its transport's signal; called once or many
+        times, from any of its axes): offline now, reopened by a task."""
+        if self._closed or core is None or core not in link.cores():
+            return  # closed, already offline, or a signal of a link reopened since
+        cause = err.__cause__ if isinstance(err, MachineLinkError) and err.__cause__ else err
+        log.warning("%s: link %s is down (%s); reopening it", self.source, link.url, cause)
+        cores = link.take_offline(err if isinstance(err, MachineLinkError) else
+                                  MachineLinkError(f"the link {link.url} is down: {err}"))
+        self._spawn(self._recover(link, cores), f"machine-reopen {link.url}")
+
+    async def _recover(self, link: Link, cores: Sequence[AsyncAxis]) -> None:
+        for core in reversed(cores):  # siblings first, the owner last
+            with contextlib.suppress(Exception):
+                await core.close()
+        await self._reconnect(link, backoff(at_once=True), first=False)
+
+    async def _reconnect(self, link: Link, delays: Iterator[float], *, first: bool) -> None:
+        """Try to open ``link`` after each delay until it opens or the machine closes.
+
+        ``first``: the link never opened (down at start-up): its origin rule is skipped
+        (never applied late). Otherwise it was open and is checked for a power loss."""
+        for delay in delays:
+            if delay:
+                await self._sleep(delay)
+            if self._closed:
+                return
+            self.reconnect_tries += 1
+            for axis in link.axes:
+                axis.checking = not first
             try:
                 await link.open()
-                await self._apply_origins(link)
             except Exception as exc:
-                link.mark_offline(exc)
-                delay = min(delay * 2, RETRY_MAX_S)
+                if not _retryable(exc):
+                    log.warning("%s", exc)
+                    link.mark_offline(exc)
+                    return
+                for axis in link.axes:
+                    axis.last_error = exc
+                log.debug("%s", exc)
                 continue
+            if self._closed:
+                return
             log.warning("%s: link %s is online", self.source, link.url)
+            if first:
+                for axis in link.axes:
+                    axis.skip_origin()
+            else:  # before the token is left again
+                await self._check_power(link)
+            await self._opened(link)
             return
+
+    async def _check_power(self, link: Link) -> None:
+        """Every axis of a reopened link: a power loss meanwhile? Motion waits for it."""
+        try:
+            for axis in link.axes:
+                try:
+                    await axis.check_power()
+                except MachineLinkError:
+                    return  # dropped again: the next reopen checks
+                except ServobusError as exc:  # no answer: a later answer tells (SILENT_CALLS)
+                    log.debug("axis %s: power check after reopening: %s", axis.name, exc)
+        finally:
+            for axis in link.axes:
+                axis.checking = False
 
     def guard_limits(self, period: float = 0.05) -> None:
         """Watch every limited axis for motion past its limits from outside the machine API
@@ -173,9 +290,14 @@ class AsyncMachine:
     def online_cores(self) -> dict[str, AsyncAxis]:
         return {name: a.axis for name, a in self._axes.items() if a.axis is not None}
 
+    def _check_open(self) -> None:
+        if self._closed:
+            raise ClosedError(f"the machine {self.name} is closed")
+
     async def stop_all(self) -> dict[str, BaseException | None]:
         """Stop every online axis at once (servobus.axis.halt.halt); None per stopped axis,
         the error otherwise (offline axes: their MachineLinkError). Never raises per axis."""
+        self._check_open()
         for axis in self._axes.values():
             await axis._end_lease("stopped")
         out: dict[str, BaseException | None] = dict(await halt(self.online_cores()))
@@ -195,12 +317,14 @@ class AsyncMachine:
         Axes whose Axis reports the same ``sync_group()`` start by one trigger; the rest
         start as close together as the links allow (concurrently). The report holds the
         measured start skew."""
+        self._check_open()
         axes = [self[name] for name in targets]
         counts: dict[str, int] = {}
         for axis in axes:
             axis.check_target(targets[axis.name])
         for axis in axes:
             counts[axis.name] = axis.to_counts(targets[axis.name])  # offline: raises here
+            axis._motion()  # a power loss not acknowledged: PowerLostError, nothing sent
         groups: dict[object, list[AsyncMachineAxis]] = {}
         singles: list[AsyncMachineAxis] = []
         for axis in axes:
@@ -218,12 +342,15 @@ class AsyncMachine:
             await axis._end_lease("stopped")
 
         async def start_group(members: list[AsyncMachineAxis]) -> float:
-            lead = members[0].core()
-            await lead.sync_move_to([(m.core(), counts[m.name]) for m in members])
+            lead = members[0]
+            for m in members:
+                m._moving = True
+            with lead._watch():
+                await lead.core().sync_move_to([(m.core(), counts[m.name]) for m in members])
             return time.perf_counter()
 
         async def start_one(axis: AsyncMachineAxis) -> float:
-            await axis.core().move_to(counts[axis.name])
+            await axis._move(lambda core: core.move_to(counts[axis.name]))
             return time.perf_counter()
 
         for members in synced:
@@ -264,9 +391,10 @@ class AsyncMachine:
             if stop:
                 await halt(self.online_cores())
         finally:
-            for task in [*self._retries, *self._guards]:
+            tasks = [*self._retries, *self._guards]
+            for task in tasks:
                 task.cancel()
-            for task in [*self._retries, *self._guards]:
+            for task in tasks:
                 with contextlib.suppress(BaseException):
                     await task
             for axis in self._axes.values():
@@ -291,28 +419,30 @@ def _retryable(exc: BaseException) -> bool:
 
 
 async def open_machine_async(path: str | Path | None = None, *, retry: bool = False,
-                             only: Collection[str] | None = None,
-                             origins: bool = True) -> AsyncMachine:
+                             only: Collection[str] | None = None, origins: bool = True,
+                             sleep: Sleep = asyncio.sleep) -> AsyncMachine:
     """Open the machine file ``path`` (None: the built-in virtual machine).
 
     ``only``: open just the links of these axes (the others stay offline, never opened);
     the CLI opens only the axis a command acts on. ``origins=False``: apply no origin rule
-    (the one-shot CLI commands; module docstring)."""
+    (the one-shot CLI commands; module docstring). ``sleep``: the reconnect clock (module
+    docstring)."""
     if path is None:
         spec, source = builtin_spec(), BUILTIN_SOURCE
     else:
         spec = load_machine_file(path)
         source = str(path)
-    machine = AsyncMachine(spec, source=source)
+    machine = AsyncMachine(spec, source=source, sleep=sleep)
     await machine._open(retry, only, origins)
     return machine
 
 
 async def open_url_machine_async(url: str, drive_ids: Sequence[int | None] = (None,), *,
-                                 retry: bool = False) -> AsyncMachine:
+                                 retry: bool = False,
+                                 sleep: Sleep = asyncio.sleep) -> AsyncMachine:
     """A bare drive URL as a machine of one axis per id (config.url_spec): the GUI, the CLI
     and the gateway run motion, limits and leases through the one machine path."""
     spec = url_spec(url, drive_ids)
-    machine = AsyncMachine(spec, source=url)
+    machine = AsyncMachine(spec, source=url, sleep=sleep)
     await machine._open(retry, None)
     return machine

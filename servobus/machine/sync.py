@@ -70,6 +70,33 @@ class MachineAxis:
         return self._core.last_error
 
     @property
+    def last_good(self) -> float | None:
+        """``time.time()`` of the last call that succeeded (AsyncMachineAxis.last_good)."""
+        return self._core.last_good
+
+    @property
+    def interrupted(self) -> str | None:
+        """The motion the last link drop interrupted (never re-sent), or None."""
+        return self._core.interrupted
+
+    @property
+    def power_lost(self) -> bool:
+        """The drive may have lost power: motion is refused until :meth:`acknowledge`."""
+        return self._core.power_lost
+
+    @property
+    def power_lost_reason(self) -> str | None:
+        return self._core.power_lost_reason
+
+    @property
+    def origin_pending(self) -> bool:
+        return self._core.origin_pending
+
+    def acknowledge(self) -> None:
+        """Clear the power-loss and interrupted-motion flags (nothing is sent)."""
+        self._runner.run(self._core.acknowledge())
+
+    @property
     def family(self) -> Family | None:
         return self._core.family
 

@@ -33,6 +33,8 @@ from servobus.transport.base import Direction
 
 SOCKETCAND_DEFAULT_CHANNEL = "can0"
 NOTIFIER_POLL_S = 0.1  # python-can Notifier recv timeout: bounds close() latency
+#: How long opening a socketcand bus waits for the daemon's TCP port (issue 29).
+SOCKETCAND_CONNECT_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -170,10 +172,32 @@ def parse_can_spec(spec: str, **options: Any) -> dict[str, Any]:
 
 
 def open_bus(spec: str, **options: Any) -> Any:
-    """Blocking: ``can.Bus(**parse_can_spec(spec, **options))``."""
+    """Blocking: ``can.Bus(**parse_can_spec(spec, **options))``.
+
+    socketcand: the daemon's TCP port is tried once first (:func:`_reach_socketcand`)."""
     import can  # lazy: python-can is only needed for CAN work
 
-    return can.Bus(**parse_can_spec(spec, **options))
+    kwargs = parse_can_spec(spec, **options)
+    if kwargs["interface"] == "socketcand":
+        _reach_socketcand(kwargs["host"], kwargs["port"])
+    return can.Bus(**kwargs)
+
+
+def _reach_socketcand(host: str, port: int, timeout: float = SOCKETCAND_CONNECT_S) -> None:
+    """ConnectionLost at once when nothing accepts at ``host:port`` (within ``timeout``).
+
+    Decision (issue 29): python-can's socketcand client retries ``connect`` in a tight loop
+    for 10 s, logging one warning per try (~255,000 lines), and then raises a bare
+    TimeoutError. One plain connection first turns "nothing listens" into one typed error
+    within the connect timeout; the daemon sees a client that hangs up before ``open``. A
+    daemon that goes away between this try and python-can's own is the narrow case left
+    to python-can's loop."""
+    try:
+        with socket.create_connection((host, port), timeout=timeout):
+            pass
+    except OSError as exc:
+        raise ConnectionLost(f"cannot reach socketcand at {host}:{port}: "
+                             f"{exc.strerror or exc}") from exc
 
 
 def _watch_socketcand_eof(bus: Any, on_eof: Callable[[BaseException], object]) -> None:

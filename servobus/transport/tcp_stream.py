@@ -112,8 +112,12 @@ class TcpStream:
         self._protocol = protocol
         self._closed = False
         sock = transport.get_extra_info("socket")
-        if sock is not None:
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        if sock is not None and not protocol.lost:
+            # a peer that accepts and hangs up at once (a DYN5 rebooting after Reset) may
+            # close the socket before this runs: EBADF here; read/write then say
+            # ConnectionLost, the typed error a caller retries on
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 
     @classmethod
     async def connect(cls, host: str, port: int, *, timeout: float = 5.0) -> TcpStream:
@@ -122,7 +126,7 @@ class TcpStream:
             transport, protocol = await asyncio.wait_for(
                 loop.create_connection(_Protocol, host, port), timeout)
         except (OSError, TimeoutError) as exc:
-            raise ServobusError(f"cannot connect to {host}:{port}: {exc}") from exc
+            raise ConnectionLost(f"cannot connect to {host}:{port}: {exc}") from exc
         return cls(transport, protocol)
 
     @classmethod

@@ -161,3 +161,14 @@ async def test_a_missed_reply_is_not_a_dropped_link() -> None:
     lease = Lease("page 1", 1.0, accel=100.0, limit=None, until=time.monotonic() + 10)
     await stream(lease, "c", lost, send, stop)
     assert lease.ended.startswith("failed") and stops == [1, 1]
+
+
+def test_a_target_never_steps_back_on_a_late_position() -> None:
+    """A position read that lags the motor would put the target behind it: the target
+    holds instead (the axis never reverses inside a lease)."""
+    lease = make(10.0)
+    first = lease.next_target(None, 1.0, 0.0)
+    assert lease.next_target(first, -5.0, 0.05) == first
+    lease = make(-10.0)
+    first = lease.next_target(None, -1.0, 0.0)
+    assert lease.next_target(first, 5.0, 0.05) == first

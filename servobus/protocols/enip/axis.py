@@ -333,6 +333,22 @@ class EnipAxis(AsyncAxis):
                 if broken is not None:
                     await broken.close()
 
+    def on_link_lost(self, callback: Callable[[ConnectionLost], object]) -> bool:
+        """The session open now (a sibling's, opened on first use, is not watched: its
+        failed calls show the loss)."""
+        if self._client is None:
+            return False
+        self._client.transactions.on_lost(callback)
+        return True
+
+    async def power_marker(self, token: int | None = None) -> int | None:
+        """Instance 0x01, the memory test object (4.4): RAM that "will be lost after power
+        cycle or Reset", 0 after power-up. The machine leaves a non-zero token there and
+        reads it after its link came back: 0 means the drive lost power (or was reset)."""
+        if token is not None:
+            await self._write(_I["memory_test"], token)
+        return await self.read_instance("memory_test")
+
     # ------------------------------------------------------------- torque mode
     async def set_torque_mode(self, torque: bool) -> None:
         """0x25: torque mode (True) or position/speed mode (False); the torque command
