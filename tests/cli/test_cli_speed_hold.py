@@ -91,24 +91,37 @@ def test_a_speed_above_the_profile_is_refused_in_rpm(capsys: pytest.CaptureFixtu
 
 
 # ------------------------------------------------------------------ the owner dies
-@pytest.fixture
-def dyncan_drive() -> Iterator[str]:
-    """A virtual DYN CAN drive (id 1) in its own process; stops by itself at the latest
-    after --duration (a safety net: the fixture stops it)."""
-    sim = subprocess.Popen([*SERVOBUS, "sim", "dyncan", "--fast", "--socketcand",
-                            "127.0.0.1:0", "--ids", "1", "--duration", "300"],
+#: The virtual drive in its own process, per protocol: the command line, what it prints when
+#: it listens, and the URL that reaches it (docs/safety.md: the front ends' kill tests cover
+#: every protocol between them; the CLI's covers DYN CAN and Modbus RTU).
+DRIVES = {
+    "dyncan": (["dyncan", "--socketcand", "127.0.0.1:0"], "listening on socketcand ",
+               "dyncan+socketcand://"),
+    "modbus": (["modbus", "--listen", "tcp://127.0.0.1:0"], "listening on ",
+               "modbus+socket://"),
+}
+
+
+@pytest.fixture(params=sorted(DRIVES))
+def drive_url(request: pytest.FixtureRequest) -> Iterator[str]:
+    """A virtual drive (id 1) in its own process; stops by itself at the latest after
+    --duration (a safety net: the fixture stops it)."""
+    args, listening, scheme = DRIVES[request.param]
+    sim = subprocess.Popen([*SERVOBUS, "sim", *args, "--fast", "--ids", "1",
+                            "--duration", "300"],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        line = read_line(sim, "listening on socketcand ")
-        yield "dyncan+socketcand://" + line.rsplit(" ", 1)[1]
+        line = read_line(sim, listening)
+        address = line.rsplit(" ", 1)[1]
+        yield scheme + address.removeprefix("tcp://")
     finally:
         stop_process(sim)
 
 
 @pytest.mark.slow
 @pytest.mark.timeout(120)
-def test_a_killed_speed_command_stops_within_the_lead(dyncan_drive: str) -> None:
-    url = dyncan_drive
+def test_a_killed_speed_command_stops_within_the_lead(drive_url: str) -> None:
+    url = drive_url
     with connect(url, drive_id=1) as watcher:
         cpr = watcher.counts_per_rev
         profile = watcher.stream_profile()

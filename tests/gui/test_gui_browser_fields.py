@@ -12,39 +12,24 @@ is missing.
 from __future__ import annotations
 
 import asyncio
-import os
 import re
-import shutil
-import tempfile
 import threading
 from collections.abc import Iterator
 from typing import Any
 
+import browser_rig
 import pytest
 from conftest import wait_until
 
-CHROMIUM = next((p for p in map(shutil.which, ("chromium", "chromium-browser", "google-chrome"))
-                 if p), None)
-DRIVER = shutil.which("chromedriver")
-try:
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-    from selenium.webdriver.common.action_chains import ActionChains
-    from selenium.webdriver.common.by import By
-    from selenium.webdriver.remote.webdriver import WebDriver
-    from selenium.webdriver.remote.webelement import WebElement
-except ImportError:  # pragma: no cover - the skip below says so
-    webdriver = None  # type: ignore[assignment]
+browser_rig.skip_without_browser()
 
-_missing = [name for name, ok in (("chromium", CHROMIUM), ("chromedriver", DRIVER),
-                                  ("selenium (pip install -e '.[test]')", webdriver)) if not ok]
-if _missing:  # one skip for the module, saying what to install
-    pytest.skip("browser tests need " + ", ".join(_missing)
-                + " (Debian: apt-get install chromium chromium-driver)", allow_module_level=True)
+from selenium.webdriver.common.action_chains import ActionChains  # noqa: E402
+from selenium.webdriver.common.by import By  # noqa: E402
+from selenium.webdriver.remote.webdriver import WebDriver  # noqa: E402
+from selenium.webdriver.remote.webelement import WebElement  # noqa: E402
+
 pytestmark = [pytest.mark.timeout(180), pytest.mark.slow]
-CHROME_ARGS = ("--headless=new", "--no-sandbox", "--disable-gpu",
-               "--disable-background-networking", "--disable-component-update",
-               "--disable-sync", "--no-first-run", "--window-size=1400,950")
+
 TYPED = ["", "abc", "12,5", "1e999", "-", "fast"]
 #: A DYN232M read; every other packet is a command or a write.
 READ = re.compile(r": (READ_\w+|GENERAL_READ\b)")
@@ -111,18 +96,8 @@ def gui() -> Iterator[Gui]:
 
 @pytest.fixture(scope="module")
 def browser() -> Iterator[WebDriver]:
-    options = webdriver.ChromeOptions()
-    options.binary_location = CHROMIUM  # type: ignore[assignment]
-    profile = tempfile.mkdtemp(prefix="servobus-chromium-")
-    for arg in (*CHROME_ARGS, f"--user-data-dir={profile}"):
-        options.add_argument(arg)
-    os.environ.setdefault("SE_OFFLINE", "true")  # never let Selenium fetch a driver
-    driver = webdriver.Chrome(service=Service(DRIVER), options=options)
-    try:
+    with browser_rig.chrome() as driver:
         yield driver
-    finally:
-        driver.quit()
-        shutil.rmtree(profile, ignore_errors=True)
 
 
 @pytest.fixture

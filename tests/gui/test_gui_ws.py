@@ -178,7 +178,8 @@ def test_rolling_scope_streams_the_4khz_trace_and_shows_a_move(client: TestClien
                               {"axis": 2, "signal": "speed"}], window_s=2.0, width=400)
         # The first frames may come before the trace's rate is known (no min/max pairs yet):
         # wait for the grid the 4 kHz trace gets.
-        first = page.frame_after(0, frames.FLAG_PAIRS)
+        # (30 s: beside two CPU hogs the first such frame once took longer than 15 s)
+        first = page.frame_after(0, frames.FLAG_PAIRS, timeout=30.0)
         assert first.rate_hz == 4000.0 and len(first.ys) == 3
         assert first.flags & frames.FLAG_PAIRS and len(first.x) == 2 * 400
         assert first.x[0] == pytest.approx(-2.0, abs=0.01) and first.x[-1] <= 0
