@@ -296,7 +296,7 @@ def test_closing_the_page_during_a_jog_stops_the_axis(page: WebDriver, server: s
     wait_until(lambda: status(server, 2)["speed"] < -100, timeout=5, what="jogging axis 2")
     page.close()  # the button is still held down
     page.switch_to.window(first)
-    # It stops (the page's close, or failing that the 0.6 s jog lease); how soon is this
+    # It stops (the page's close, or failing that the jog lease's ttl); how soon is this
     # machine's pace, so the deadline is generous and there is no second, tighter bound.
     wait_until(lambda: abs(status(server, 2)["speed"]) < 2, timeout=15, what="axis 2 stopped")
 
