@@ -39,7 +39,8 @@ from servobus.errors import (
     ServobusError,
 )
 from servobus.gateway.source import Machine, MachineAxis
-from servobus.machine.lease import DEFAULT_TTL_S, MAX_TTL_S
+from servobus.machine.lease import DEFAULT_TTL_S
+from servobus.machine.lease import check_ttl as lease_ttl
 
 log = logging.getLogger(__name__)
 
@@ -191,6 +192,7 @@ def check_ttl(command: Command) -> None:
         raise Refused("BadInvalidArgument", f"{command.name} takes no ttl (set_speed does)")
     if isinstance(ttl, bool) or not isinstance(ttl, int | float) or not math.isfinite(ttl):
         raise Refused("BadInvalidArgument", "ttl is a finite number of seconds")
-    if not 0 < ttl <= MAX_TTL_S:
-        raise Refused("BadOutOfRange", f"ttl {ttl:g} s: a speed holds above 0 and at most "
-                      f"{MAX_TTL_S:g} s after each call; call again to renew it")
+    try:
+        lease_ttl(ttl)  # the lease's own range, (0, MAX_TTL_S]
+    except ArgumentRangeError as exc:
+        raise Refused("BadOutOfRange", f"{exc}; call again to renew it") from None

@@ -30,7 +30,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 
-from servobus.errors import ArgumentRangeError, ConnectionLost, OwnerError, ServobusError
+from servobus.errors import ArgumentRangeError, ConnectionLost, ServobusError
 from servobus.gui.fleet import AxisHandle, Fleet
 from servobus.machine.axis import AsyncMachineAxis
 from servobus.machine.lease import DEFAULT_TTL_S, Lease, check_ttl
@@ -142,7 +142,8 @@ class JogControl:
         if self.closed:
             raise ConnectionLost("the GUI is shutting down: every axis is being stopped")
         if isinstance(rpm, bool) or not isinstance(rpm, int) or abs(rpm) > MAX_JOG_RPM:
-            raise ValueError(f"jog speed must be an integer rpm within +-{MAX_JOG_RPM}")
+            raise ArgumentRangeError(f"jog speed must be an integer rpm within "
+                                     f"+-{MAX_JOG_RPM}")
 
     async def _hold(self, kind: str, page: int, axis_id: int, rpm: int,
                     *, start: bool | None) -> dict[str, object]:
@@ -166,10 +167,7 @@ class JogControl:
                               "press Run again")
         speed = m.scale.from_rpm(rpm)
         if kind == "turn" and m.continuous:
-            lease = m.lease
-            if lease is not None and lease.owner != owner:
-                raise OwnerError(f"axis {m.name} is held by {lease.owner}; stop it first "
-                                 "(Stop and STOP ALL always win)", owner=lease.owner)
+            m.check_owner(owner)
             await handle.call(m.turn(speed, owner=owner, ttl=self.lease_s))
             self.held.pop(key, None)
             return {"open_ended": True}
@@ -186,9 +184,7 @@ class JogControl:
         self._check(rpm)
         m = self._machine_axis(handle)
         ttl = check_ttl(self.lease_s if ttl is None else ttl)
-        lease = m.lease
-        if m.continuous and lease is not None and lease.owner != REST_OWNER:
-            raise OwnerError(f"axis {m.name} is held by {lease.owner}; stop it first "
-                             "(Stop and STOP ALL always win)", owner=lease.owner)
+        if m.continuous:
+            m.check_owner(REST_OWNER)
         await handle.call(m.turn(m.scale.from_rpm(rpm), owner=REST_OWNER, ttl=ttl))
         return {"open_ended": m.continuous, "ttl": None if m.continuous else ttl}

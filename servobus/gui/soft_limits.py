@@ -31,16 +31,16 @@ def check_free(handle: AxisHandle, what: str) -> None:
 
 
 def check_travel(handle: AxisHandle, low: float, high: float, what: str) -> None:
-    """LimitError when counts ``low``..``high`` leave the axis's soft limits."""
+    """LimitError (the machine axis's own check) when counts ``low``..``high`` of ``what``
+    leave the axis's soft limits."""
     m = handle.machine_axis
     if m is None or m.limits is None:
         return
-    ends = sorted((m.to_user(low), m.to_user(high)))
-    lo, hi = m.limits
-    if ends[0] < lo or ends[1] > hi:
-        raise LimitError(f"axis {m.name}: {what} would reach {ends[0]:g} .. {ends[1]:g} "
-                         f"{m.unit}, outside the soft limits [{lo:g}, {hi:g}] {m.unit}; "
-                         "nothing was sent")
+    try:
+        for end in (low, high):
+            m.check_target(m.to_user(end))
+    except LimitError as exc:
+        raise LimitError(f"{what}: {exc}") from None
 
 
 def has_limits(handle: AxisHandle) -> bool:

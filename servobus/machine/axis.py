@@ -401,7 +401,7 @@ class AsyncMachineAxis:
 
         On a ``continuous`` axis an open-ended speed command. On any other axis a lease
         (:meth:`jog`): it ends ``ttl`` seconds after the last call unless called again."""
-        if self.spec.continuous or self.core().continuous:
+        if self.spec.continuous:  # the link gives its Axis the spec's (links.Link.open)
             speed = self._checked_speed(speed)
             rpm = round(self.scale.to_rpm(speed))
             await self._end_lease("replaced by an open-ended speed")
@@ -420,16 +420,17 @@ class AsyncMachineAxis:
         (OwnerError). The target never passes the limit it heads for."""
         speed = self._checked_speed(speed)
         ttl = check_ttl(ttl)
-        lease = self._lease if self._lease is not None and self._lease.alive else None
-        if lease is not None and lease.owner != owner:
-            raise OwnerError(f"axis {self.name} is held by {lease.owner}; stop it first "
-                             "(Stop and STOP ALL always win)", owner=lease.owner)
+        self.check_owner(owner)
+        lease = self.lease
         if speed == 0:
             if lease is not None:
                 await self.stop()
             return
         heading = 1 if speed > 0 else -1
         if lease is not None and lease.heading == heading:
+            if lease.profile is not None and speed != lease.speed:
+                check_speed(self.name, speed, self.scale.to_rpm(speed), lease.profile,
+                            self.speed_unit, self.scale.from_rpm)
             lease.speed = speed  # the streamer picks the new speed up at its next update
             lease.renew(ttl)
             return
@@ -448,9 +449,16 @@ class AsyncMachineAxis:
                                  "refused, nothing was sent")
         await self._end_lease("reversed")
         accel = abs(self.scale.from_rpm(profile.accel_rpm_s))
-        new = Lease(owner, speed, accel, limit, time.monotonic() + ttl)
+        new = Lease(owner, speed, accel, limit, time.monotonic() + ttl, profile=profile)
         new.task = asyncio.create_task(self._stream(new), name=f"lease {self.name}")
         self._lease = new
+
+    def check_owner(self, owner: str) -> None:
+        """OwnerError (nothing sent) when another owner's lease runs on this axis."""
+        lease = self.lease
+        if lease is not None and lease.owner != owner:
+            raise OwnerError(f"axis {self.name} is held by {lease.owner}; stop it first "
+                             "(Stop and STOP ALL always win)", owner=lease.owner)
 
     def _checked_speed(self, speed: float | None) -> float:
         if speed is None:
@@ -471,7 +479,6 @@ class AsyncMachineAxis:
 
     async def _stream(self, lease: Lease) -> None:
         core = self.core()
-        rpm = abs(self.scale.to_rpm(lease.speed))
 
         async def read() -> float:
             with self._watch():
@@ -482,8 +489,7 @@ class AsyncMachineAxis:
         async def send(target: float) -> None:
             self._moving = True
             with self._watch():
-                await core.stream_to(self.to_counts(target),
-                                     abs(self.scale.to_rpm(lease.speed)) or rpm)
+                await core.stream_to(self.to_counts(target), abs(self.scale.to_rpm(lease.speed)))
 
         await stream(lease, self.name, read, send, core.stop)
 
@@ -509,11 +515,6 @@ class AsyncMachineAxis:
         lease = self.lease
         if lease is not None and lease.owner == owner:
             await self.stop()
-
-    def _beyond(self, position: float, heading: int) -> bool:
-        assert self.limits is not None
-        low, high = self.limits
-        return position >= high if heading > 0 else position <= low
 
     async def guard(self, period: float = 0.05) -> None:
         """Watch for any motion (GUI jog, waves) beyond the limits and stop it; runs until

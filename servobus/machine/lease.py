@@ -71,6 +71,8 @@ class Lease:
     until: float  # time.monotonic() at which it ends unless renewed
     at_limit: bool = False  # the target stands at the limit (the motion went as far as allowed)
     ended: str = ""  # why it ended ("" while it runs)
+    #: The drive's profile the lease started on (a renewal's new speed is checked on it).
+    profile: StreamProfile | None = None
     task: asyncio.Task[None] | None = field(default=None, repr=False)
 
     @property

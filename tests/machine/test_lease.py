@@ -172,3 +172,16 @@ def test_a_target_never_steps_back_on_a_late_position() -> None:
     lease = make(-10.0)
     first = lease.next_target(None, -1.0, 0.0)
     assert lease.next_target(first, 5.0, 0.05) == first
+
+
+async def test_a_renewal_above_the_drive_profile_is_refused(tmp_path: Path) -> None:
+    """A renewal that changes the speed is checked as a new jog is: above the YZ-AIM's
+    3000 rpm (18,000 deg/s) it is refused and the lease keeps its speed."""
+    async with await open_machine_async(write_machine(tmp_path, LIMITED)) as m:
+        c = m["c"]
+        await c.jog(90.0, owner="page 1", ttl=1.0)
+        with pytest.raises(ArgumentRangeError, match="max_speed allows"):
+            await c.jog(20_000.0, owner="page 1", ttl=1.0)
+        lease = c.lease
+        assert lease is not None and lease.speed == 90.0
+        await c.stop()
