@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+
+#: The machine CLI tests' ``run`` fixture (tests/machine/conftest.py): args -> (exit code,
+#: stdout, stderr).
+Run = Callable[..., tuple[int, str, str]]
 
 #: Two DMM axes on one virtual RS-485 line, a YZ-AIM motor on a virtual CAN bus.
 MIXED = """\

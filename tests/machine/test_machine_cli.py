@@ -4,34 +4,15 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
-from machine_rig import write_machine
+from machine_rig import Run, write_machine
 
 import servobus.machine.links as links
 from servobus.axis.base import AsyncAxis
-from servobus.cli.main import main
 from servobus.transport.base import Direction
-
-Run = Callable[..., tuple[int, str, str]]
-
-
-@pytest.fixture
-def run(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> Run:
-    monkeypatch.delenv("SERVOBUS_MACHINE", raising=False)
-    monkeypatch.delenv("SERVOBUS_URL", raising=False)
-
-    def go(*args: str) -> tuple[int, str, str]:
-        capsys.readouterr()
-        with pytest.raises(SystemExit) as info:
-            main(list(args))
-        out, err = capsys.readouterr()
-        return int(info.value.code or 0), out, err
-
-    return go
 
 
 @pytest.fixture

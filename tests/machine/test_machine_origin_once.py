@@ -11,18 +11,16 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from machine_rig import write_machine
+from machine_rig import Run, write_machine
 from subprocess_rig import read_line, stop_process
 
 from servobus.axis import connect
-from servobus.cli.main import main
 from servobus.machine import AsyncMachineAxis, open_machine_async
 
-Run = Callable[..., tuple[int, str, str]]
 ORIGIN_SET = ('[axes.c]\nurl = "{url}"\nid = 1\nunit = "deg"\nlimits = [-360, 360]\n'
               'origin = "set"\n')
 
@@ -69,21 +67,6 @@ def easycan_url() -> Iterator[str]:
         yield "easycan+socketcand://" + read_line(sim, "listening on ").split()[-1]
     finally:
         stop_process(sim)
-
-
-@pytest.fixture
-def run(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> Run:
-    monkeypatch.delenv("SERVOBUS_MACHINE", raising=False)
-    monkeypatch.delenv("SERVOBUS_URL", raising=False)
-
-    def go(*args: str) -> tuple[int, str, str]:
-        capsys.readouterr()
-        with pytest.raises(SystemExit) as info:
-            main(list(args))
-        out, err = capsys.readouterr()
-        return int(info.value.code or 0), out, err
-
-    return go
 
 
 @pytest.mark.slow  # a simulator process and wall-clock motion
