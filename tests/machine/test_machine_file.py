@@ -77,3 +77,31 @@ def test_a_missing_file_is_one_line(tmp_path: Path) -> None:
 def test_axis_names_may_have_digits_dash_and_underscore() -> None:
     spec = parse_machine(AXIS.replace("axes.x", "axes.x_2-b"))
     assert spec.axes[0].name == "x_2-b"
+
+
+def test_continuous_is_a_bool_only_without_limits_and_the_url_may_say_it() -> None:
+    """Issue 27: only an axis that may turn for ever (no limits) runs open-ended speed."""
+    axis = '[axes.s]\nurl = "sim://dyn232"\n'
+    assert not parse_machine(axis).axes[0].continuous
+    assert parse_machine(axis + "continuous = true\n").axes[0].continuous
+    assert parse_machine(axis.replace("dyn232", "dyn232?continuous=1")).axes[0].continuous
+    with pytest.raises(MachineFileError, match=r"axis s: continuous: must be true or false"):
+        parse_machine(axis + 'continuous = "yes"\n')
+    with pytest.raises(MachineFileError, match=r"axis s: continuous: .*no soft limits"):
+        parse_machine(axis + "continuous = true\nlimits = [0.0, 1.0]\n")
+    with pytest.raises(MachineFileError, match=r"continuous: .*no soft limits"):
+        parse_machine(axis.replace("dyn232", "dyn232?continuous=1") + "limits = [0.0, 1.0]\n")
+
+
+async def test_a_url_says_continuous_to_its_axis() -> None:
+    from servobus.axis.connect import connect_async
+
+    for url, want in (("sim://dyn232?fast=1&continuous=1", True), ("sim://dyn232?fast=1", False),
+                      ("sim://dyn232?fast=1&continuous=no", False)):
+        axis = await connect_async(url)
+        try:
+            assert axis.continuous is want, url
+        finally:
+            await axis.close()
+    with pytest.raises(ArgumentRangeError, match="continuous must be 1 or 0"):
+        await connect_async("sim://dyn232?continuous=maybe")
