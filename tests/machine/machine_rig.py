@@ -5,8 +5,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-#: The machine CLI tests' ``run`` fixture (tests/machine/conftest.py): args -> (exit code,
-#: stdout, stderr).
+import pytest
+
+from servobus.cli.main import main
+
+#: The machine CLI tests' ``run`` fixture (below): args -> (exit code, stdout, stderr).
 Run = Callable[..., tuple[int, str, str]]
 
 #: Two DMM axes on one virtual RS-485 line, a YZ-AIM motor on a virtual CAN bus.
@@ -54,3 +57,20 @@ async def flaky_open(url: object, *, drive_id: int | None = None, **options: obj
     if FLAKY["down"]:
         raise ConnectionRefusedError("nothing listens on flaky://")
     return await connect_async("sim://dyn232?fast=1", drive_id=drive_id, **options)
+
+
+@pytest.fixture
+def run(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> Run:
+    """The ``servobus`` command in this process, without the environment's machine or
+    URL: ``run(*args)`` gives (exit code, stdout, stderr). A test module imports it."""
+    monkeypatch.delenv("SERVOBUS_MACHINE", raising=False)
+    monkeypatch.delenv("SERVOBUS_URL", raising=False)
+
+    def go(*args: str) -> tuple[int, str, str]:
+        capsys.readouterr()
+        with pytest.raises(SystemExit) as info:
+            main(list(args))
+        out, err = capsys.readouterr()
+        return int(info.value.code or 0), out, err
+
+    return go

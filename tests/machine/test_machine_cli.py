@@ -9,6 +9,7 @@ from typing import Any
 
 import pytest
 from machine_rig import Run, write_machine
+from machine_rig import run as run  # the fixture, for this module
 
 import servobus.machine.links as links
 from servobus.axis.base import AsyncAxis

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 from machine_rig import Run, write_machine
+from machine_rig import run as run  # the fixture, for this module
 from subprocess_rig import read_line, stop_process
 
 from servobus.axis import connect
