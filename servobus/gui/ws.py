@@ -31,6 +31,7 @@ from typing import Any
 
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
+from servobus import bounded_json
 from servobus.errors import ServobusError
 from servobus.gui import limits
 from servobus.gui.api_io import snapshot
@@ -145,13 +146,13 @@ class PageLink:
             return True
         kind = ""
         try:
-            doc = limits.loads(text)
+            doc = bounded_json.loads(text, max_bytes=limits.MAX_MESSAGE_BYTES)
             if not isinstance(doc, dict):
                 raise ValueError("a message is a JSON object")
             kind = str(doc.get("type", ""))
             await self.handle(doc)
         except (ValueError, ServobusError) as exc:
-            await self.refuse(str(exc), kind, limits.excerpt(text))
+            await self.refuse(str(exc), kind, bounded_json.excerpt(text))
         return True
 
     async def refuse(self, text: str, kind: str, received: str) -> None:
