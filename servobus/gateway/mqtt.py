@@ -36,7 +36,8 @@ from urllib.parse import unquote, urlparse
 import aiomqtt
 from paho.mqtt.subscribeoptions import SubscribeOptions
 
-from servobus.errors import ArgumentRangeError
+from servobus import bounded_json
+from servobus.errors import ArgumentRangeError, JsonRefused
 from servobus.gateway.commands import Commander, Refused
 from servobus.gateway.mqtt_gate import DEFAULT_MAX_AGE_S, CommandGate
 from servobus.gateway.sampler import Sample, Sampler
@@ -270,8 +271,8 @@ class MqttGateway:
 
 def _peek_id(payload: bytes) -> str | None:
     try:
-        data = json.loads(payload)
-    except (ValueError, UnicodeDecodeError):
+        data = bounded_json.loads(payload)
+    except JsonRefused:
         return None
     ident = data.get("id") if isinstance(data, dict) else None
     return ident[:128] if isinstance(ident, str) else None

@@ -50,7 +50,7 @@ from servobus.gateway.commands import Command, Commander, Refused
 from servobus.gateway.opcua_model import SERVOBUS_URI, AxisNodes, build_model
 from servobus.gateway.sampler import Sample
 from servobus.gateway.source import Machine
-from servobus.gateway.users import LoginBudget, Users
+from servobus.gateway.users import Admission, LoginBudget, Users
 from servobus.transport.address import is_loopback
 
 log = logging.getLogger(__name__)
@@ -65,6 +65,9 @@ MAX_SUBSCRIPTIONS = 200
 MAX_ITEM_QUEUE = 1_000
 _caller: contextvars.ContextVar[GatewaySession | None] = contextvars.ContextVar(
     "opcua_caller", default=None)
+#: The address of the client whose session asyncua is activating ("" when unknown).
+_login_peer: contextvars.ContextVar[str] = contextvars.ContextVar("opcua_login_peer",
+                                                                  default="")
 ADMIN_REQUESTS = {ua.NodeId(i) for i in (
     ua.ObjectIds.AddNodesRequest_Encoding_DefaultBinary,
     ua.ObjectIds.DeleteNodesRequest_Encoding_DefaultBinary,
@@ -104,6 +107,24 @@ class GatewaySession(InternalSession):  # type: ignore[misc]
         results: list[ua.CallMethodResult] = await super().call(params)
         return results
 
+    def activate_session(self, params: ua.ActivateSessionParameters,
+                         peer_certificate: bytes | None) -> ua.ActivateSessionResult:
+        """asyncua's activation, which calls the user manager's ``get_user`` synchronously,
+        with the client's address in :data:`_login_peer` (FileUsers reads it there).
+
+        The address (decision): asyncua names an external session after its connection's
+        peer (``transport.get_extra_info("peername")``); a client that re-activates its
+        session over a new connection (OPC UA reconnect) counts against the address it
+        created the session from, which needs that session's secret token.
+        """
+        token = _login_peer.set(peer_host(self.name))
+        try:
+            result: ua.ActivateSessionResult = super().activate_session(params,
+                                                                         peer_certificate)
+            return result
+        finally:
+            _login_peer.reset(token)
+
     async def close_session(self, delete_subs: bool = True) -> None:
         closed = self.state == SessionState.Closed
         await super().close_session(delete_subs)
@@ -131,7 +152,9 @@ class FileUsers(UserManager):  # type: ignore[misc]
     """Anonymous sessions are read-only users; a name and password must be in the file.
 
     asyncua calls :meth:`get_user` on the event loop and waits for it, so each password check
-    (a scrypt hash) stalls the loop: ``budget`` refuses logins beyond its rate unhashed."""
+    (a scrypt hash) stalls the loop: ``budget`` refuses logins beyond its rates unhashed, per
+    peer address and in all (servobus.gateway.users.LoginBudget). asyncua passes get_user no
+    session and no address: the peer is the one :class:`GatewaySession` sets around it."""
 
     def __init__(self, users: Users, budget: LoginBudget | None = None) -> None:
         self.users = users
@@ -141,14 +164,35 @@ class FileUsers(UserManager):  # type: ignore[misc]
                  certificate: Any = None) -> User | None:
         if username is None:  # certificate tokens are not offered: anonymous
             return User(role=UserRole.Anonymous)
-        if not self.budget.take():
-            log.warning("OPC UA login refused for user %r: more than %g password checks a "
-                        "second", username, self.budget.per_second)
+        peer = _login_peer.get()
+        admission = self.budget.take(peer)
+        if admission is not Admission.CHECK:
+            if self.budget.announce:  # one line per spell, not one per try
+                log.warning("OPC UA logins from %s refused unchecked (user %r): %s",
+                            peer or "an unknown address", username,
+                            _SPENT[admission].format(b=self.budget))
             return None
         if self.users.verify(username, password):
+            self.budget.refund(peer)
             return User(role=UserRole.User, name=username)
-        log.warning("OPC UA login refused for user %r", username)
+        log.warning("OPC UA login refused for user %r from %s: wrong name or password",
+                    username, peer or "an unknown address")
         return None
+
+
+_SPENT = {
+    Admission.PEER_SPENT: "more than {b.peer_burst} wrong passwords from this address "
+                          "(then one every {b.peer_interval_s:g} s)",
+    Admission.ALL_SPENT: "more than {b.per_second:g} password checks a second in all",
+}
+
+
+def peer_host(name: object) -> str:
+    """The host of asyncua's peer name (the socket's ``peername``: (host, port, ...)), or
+    ""."""
+    if isinstance(name, tuple | list) and name and isinstance(name[0], str):
+        return name[0]
+    return ""
 
 
 def parse_endpoint(url: str) -> tuple[str, int]:

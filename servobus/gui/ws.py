@@ -29,10 +29,11 @@ import math
 from collections.abc import Awaitable, Callable, Mapping
 from typing import Any
 
-from starlette.websockets import WebSocket, WebSocketDisconnect
+from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketState
 
+from servobus import bounded_json
 from servobus.errors import ServobusError
-from servobus.gui import limits
+from servobus.gui import fair, limits
 from servobus.gui.api_io import snapshot
 from servobus.gui.jog import page_owner
 from servobus.gui.scope_session import ScopeSession, ScopeSettings
@@ -131,7 +132,8 @@ class PageLink:
 
         Every bad message gets an ``error`` naming that message (its type, and its start
         in ``received``) and the session goes on; only one over the size limit closes the
-        socket (1009, servobus.gui.limits).
+        socket (1009, servobus.gui.limits). A message whose handling fails unexpectedly (a
+        bug) is answered with an ``error`` too, and logged in one line (servobus.gui.boundary).
         """
         text = message.get("text")
         data = message.get("bytes")
@@ -145,14 +147,33 @@ class PageLink:
             return True
         kind = ""
         try:
-            doc = limits.loads(text)
+            doc = bounded_json.loads(text, max_bytes=limits.MAX_MESSAGE_BYTES)
             if not isinstance(doc, dict):
                 raise ValueError("a message is a JSON object")
             kind = str(doc.get("type", ""))
             await self.handle(doc)
         except (ValueError, ServobusError) as exc:
-            await self.refuse(str(exc), kind, limits.excerpt(text))
+            await self.refuse(str(exc), kind, bounded_json.excerpt(text))
+        except WebSocketDisconnect:
+            raise
+        except Exception as exc:  # this message's boundary: a bug fails it, not the page
+            if self.ws.application_state != WebSocketState.CONNECTED:
+                raise  # the socket is gone: the page ends
+            log.error("GUI WebSocket message %r of page %d failed: %s: %s", kind[:40],
+                      self.owner, type(exc).__name__, bounded_json.excerpt(str(exc), 300))
+            log.debug("GUI WebSocket message failed", exc_info=True)
+            await self.refuse(f"internal error ({type(exc).__name__}); the page and the "
+                              "server go on", kind, bounded_json.excerpt(text))
         return True
+
+    async def turn_away(self) -> None:
+        """One page more than :data:`servobus.gui.fair.MAX_PAGES`: told why, then closed
+        with 1013 ("try again later"); the page's own reconnection tries again."""
+        text = f"the GUI serves at most {fair.MAX_PAGES} pages at once: close one"
+        with contextlib.suppress(WebSocketDisconnect, RuntimeError, OSError):
+            await self.ws.accept()
+            await self.send_json({"type": "error", "message": text, "request": ""})
+            await self.ws.close(fair.CLOSE_TRY_AGAIN_LATER, text)
 
     async def refuse(self, text: str, kind: str, received: str) -> None:
         await self.send_json({"type": "error", "message": text, "request": kind,
@@ -160,13 +181,17 @@ class PageLink:
 
     async def serve(self) -> None:
         gui = self.gui
-        await self.ws.accept()
-        gui.sessions.add(self.session)
-        gui.jog.pages.add(self.owner)
-        tasks = [asyncio.create_task(_quietly(self.push_status)),
-                 asyncio.create_task(_quietly(self.session.run)),
-                 asyncio.create_task(_quietly(self.push_io))]
+        if len(gui.sessions) >= fair.MAX_PAGES:
+            await self.turn_away()
+            return
+        gui.sessions.add(self.session)  # before any await: pages opening at once count too
+        tasks: list[asyncio.Task[None]] = []
         try:
+            await self.ws.accept()
+            gui.jog.pages.add(self.owner)
+            tasks = [asyncio.create_task(_quietly(self.push_status)),
+                     asyncio.create_task(_quietly(self.session.run)),
+                     asyncio.create_task(_quietly(self.push_io))]
             await self.send_json({"type": "hello", "owner": self.owner, "url": gui.fleet.url,
                                   "axes": [h.identity() for h in gui.fleet.handles.values()]})
             while True:

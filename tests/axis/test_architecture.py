@@ -225,3 +225,10 @@ def test_every_family_is_a_package_with_a_family_module() -> None:
     packages = [p for p in (ROOT / "families").iterdir() if (p / "__init__.py").is_file()]
     assert {p.name for p in packages} == {"dmm", "dyn5", "yzaim"}
     assert all((p / "family.py").is_file() for p in packages)
+
+
+def test_bounded_json_imports_only_the_errors() -> None:
+    """The JSON reader both front ends share (GUI, gateway) sits beside ``errors``: any
+    layer may use it."""
+    found = {name for name in imports(ROOT / "bounded_json.py") if name.startswith("servobus")}
+    assert found == {"servobus.errors", "servobus.errors.JsonRefused"}

@@ -1,6 +1,9 @@
 // REST and WebSocket to the servobus GUI server (same origin; token from the page URL).
 
 const TOKEN = new URLSearchParams(location.search).get("token");
+// This page's WebSocket number (hello's owner): its requests count against its own limits
+// on the server (servobus/gui/fair.py), not against every page of this computer.
+let PAGE = null;
 
 export class ApiError extends Error {
   constructor(message, status = 0) { super(message); this.status = status; }
@@ -10,6 +13,7 @@ export class ApiError extends Error {
 export async function api(path, body) {
   const headers = {};
   if (TOKEN) headers["X-Servobus-Token"] = TOKEN;
+  if (PAGE !== null) headers["X-Servobus-Page"] = String(PAGE);
   const init = { headers, credentials: "same-origin" };
   if (body !== undefined) {
     init.method = "POST";
@@ -56,6 +60,7 @@ export class Link {
     ws.onmessage = (ev) => {
       if (typeof ev.data !== "string") { if (this.binary) this.binary(ev.data); return; }
       const doc = JSON.parse(ev.data);
+      if (doc.type === "hello") PAGE = doc.owner;
       for (const fn of this.handlers.get(doc.type) || []) fn(doc);
     };
   }
