@@ -120,6 +120,20 @@ class AxisHandle:
             **named,
         }
 
+    def recovery(self) -> dict[str, object]:
+        """What the machine knows of the axis's link and drive (issue 29, docs/gui.md):
+        ``online``, ``last_good`` (``time.time()`` of its last good call, None before
+        one), ``interrupted`` (the motion the drop cut short, never re-sent),
+        ``power_lost`` and its reason, ``checking`` (a reopened link checked for a power
+        loss). Read live at each status, not from the last poll."""
+        m = self.machine_axis
+        if m is None:  # a fleet built from plain Axes: no machine to ask
+            return {"online": True, "last_good": None, "interrupted": None,
+                    "power_lost": False, "power_lost_reason": None, "checking": False}
+        return {"online": m.online, "last_good": m.last_good, "interrupted": m.interrupted,
+                "power_lost": m.power_lost, "power_lost_reason": m.power_lost_reason,
+                "checking": m.checking}
+
     def link(self) -> dict[str, object]:
         return {"gui": self.stats.as_dict(), "client": client_counters(self.axis)}
 

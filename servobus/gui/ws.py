@@ -26,6 +26,7 @@ import itertools
 import json
 import logging
 import math
+import time
 from collections.abc import Awaitable, Callable, Mapping
 from typing import Any
 
@@ -67,9 +68,10 @@ class PageLink:
             gui = self.gui
             active = gui.jog.active()
             mine = page_owner(self.owner)
+            now = time.time()
             await self.send_json({
                 "type": "status",
-                "axes": [_finite(s) for s in gui.monitor.snapshots.values()],
+                "axes": [_finite(gui.monitor.view(i, now)) for i in gui.monitor.snapshots],
                 "jog": {str(k): v["rpm"] for k, v in active.items()},
                 "leases": {str(k): {**v, "mine": v["owner"] == mine}
                            for k, v in active.items()},
