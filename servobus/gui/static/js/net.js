@@ -20,7 +20,12 @@ export async function api(path, body) {
     headers["Content-Type"] = "application/json";
     init.body = JSON.stringify(body);
   }
-  const res = await fetch(path, init);
+  let res;
+  try {
+    res = await fetch(path, init);
+  } catch {  // the browser's "Failed to fetch": say what it means
+    throw new ApiError("no answer from the servobus GUI server (is it running?)", 0);
+  }
   let doc = null;
   try { doc = await res.json(); } catch { /* not JSON */ }
   if (!res.ok) throw new ApiError((doc && doc.error) || `${res.status} ${res.statusText}`, res.status);
