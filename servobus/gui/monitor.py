@@ -140,6 +140,7 @@ class StatusMonitor:
             self._track_flags(handle)
             try:
                 await self.read(handle)
+                await self.fleet.trace_links()  # a reopened link: its traffic in Diagnostics
             except ServobusError as exc:
                 last_start = None
                 text = f"{type(exc).__name__}: {exc}"

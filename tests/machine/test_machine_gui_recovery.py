@@ -110,6 +110,9 @@ def test_a_dropped_link_keeps_its_values_aged_and_motion_waits_for_acknowledge(
         r = c.post("/api/axes/1/move", json={"value": 1, "unit": "rev"})
         assert r.status_code == 409 and r.json()["kind"] == "PowerLostError", r.text
 
+        sent = c.get("/api/diagnostics").json()["traffic_counts"]["tx"]
+        wait_until(lambda: c.get("/api/diagnostics").json()["traffic_counts"]["tx"] > sent,
+                   what="the reopened link's traffic in Diagnostics")
         r = c.post("/api/axes/1/acknowledge", json={})
         assert r.status_code == 200 and r.json()["status"]["power_lost"] is False, r.text
         assert state(c)["power_lost_reason"] is None and state(c)["interrupted"] is None
