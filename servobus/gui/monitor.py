@@ -8,10 +8,11 @@ power and when that is acknowledged, with wall-clock times.
 
 What the GUI shows is what it knows (issue 29, docs/gui.md). A failed read keeps the last
 values with their time ``t``; :meth:`StatusMonitor.view` adds the machine's live link state
-(AxisHandle.recovery), ``age_s`` (seconds since ``t``) and ``stale_after_s``: two polling
+(AxisHandle.recovery), ``age_s`` (seconds since ``t``), ``stale_after_s``: two polling
 periods as measured on this axis (the period rises at once with a slower link and decays
-slowly, so a loaded host does not grey values that are fresh). The page greys a value older
-than that with "last seen N s ago".
+slowly, so a loaded host does not grey values that are fresh), and ``stale``: older than
+that, or offline. The page greys stale values with "last seen N s ago" (and every value
+once its statuses stop coming).
 
 Decision: status and position are read through the machine axis (not its Axis), so every
 poll stamps the machine's ``last_good`` and a lost link found by a poll takes the link
@@ -75,9 +76,11 @@ class StatusMonitor:
         snap = self.snapshots[axis_id]
         t = snap.get("t")
         now = time.time() if now is None else now
-        return {**snap, **self.fleet.handles[axis_id].recovery(),
-                "age_s": max(0.0, now - t) if isinstance(t, float) else None,
-                "stale_after_s": STALE_PERIODS * self._poll_s.get(axis_id, self.period_s)}
+        recovery = self.fleet.handles[axis_id].recovery()
+        age = max(0.0, now - t) if isinstance(t, float) else None
+        stale_after = STALE_PERIODS * self._poll_s.get(axis_id, self.period_s)
+        return {**snap, **recovery, "age_s": age, "stale_after_s": stale_after,
+                "stale": age is None or age > stale_after or not recovery["online"]}
 
     async def read(self, handle: AxisHandle) -> dict[str, object]:
         """One snapshot (also used right after a command, for a prompt update)."""

@@ -74,6 +74,7 @@ def test_a_dropped_link_keeps_its_values_aged_and_motion_waits_for_acknowledge(
         assert (s["online"], s["power_lost"], s["interrupted"]) == (True, False, None)
         assert isinstance(s["last_good"], float) and abs(s["last_good"] - time.time()) < 30
         assert s["stale_after_s"] >= 0.2 and s["age_s"] >= 0
+        wait_until(lambda: not state(c)["stale"], what="a fresh reading")
         assert c.post("/api/axes/1/move", json={"value": 2, "unit": "rev"}).status_code == 200
         wait_until(lambda: abs(state(c)["user_position"] - 2) < 0.01 and not state(c)["moving"],
                    timeout=10, what="z at 2 rev")
@@ -89,12 +90,13 @@ def test_a_dropped_link_keeps_its_values_aged_and_motion_waits_for_acknowledge(
         dropped = state(c)
         assert dropped["last_good"] is not None
         assert abs(dropped["position"] - 2 * COUNTS_PER_REV) < NEAR  # the last value kept ...
+        assert dropped["stale"]  # offline: stale at once ...
         wait_until(lambda: state(c)["age_s"] > state(c)["stale_after_s"],
                    what="the kept value older than two polling periods")  # ... with its age
         r = c.post("/api/axes/1/move", json={"value": 1, "unit": "rev"})
         assert r.status_code == 503 and r.json()["kind"] == "MachineLinkError", r.text
-        wait_until(lambda: machine.reconnect_tries >= tries + 4, timeout=30,
-                   what="four reconnect tries")
+        wait_until(lambda: machine.reconnect_tries >= tries + 3, timeout=30,
+                   what="three reconnect tries")
         down = events(caplog)
         assert len(down) == 1 and "is down" in down[0], down  # not one line per try
 

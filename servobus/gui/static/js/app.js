@@ -12,6 +12,8 @@ import { applyGates } from "./gate.js";
 
 // Ages and gates are redrawn this often even when no status arrives (the server gone).
 const TICK_MS = 500;
+// No status for this long (the server pushes one every 0.1 s): every value is stale.
+const STATUS_LATE_MS = 1000;
 
 class Context {
   constructor(info, link) {
@@ -42,11 +44,12 @@ class Context {
     if (!s || s.age_s === null || s.age_s === undefined) return null;
     return s.age_s + (performance.now() - this.statusAt) / 1000;
   }
-  // Values are stale without the server, on an offline axis, or older than two polling periods.
+  // Values are stale without the server, on an offline axis, older than two polling
+  // periods (the server's "stale", judged when it sent the status), or once statuses
+  // stop coming (a server that hangs with its socket open).
   isStale(s) {
-    if (!s || !this.serverUp || s.online === false) return true;
-    const age = this.ageOf(s);
-    return age === null || age > (s.stale_after_s ?? 0.2);
+    if (!s || !this.serverUp || s.online === false || s.stale !== false) return true;
+    return performance.now() - this.statusAt > STATUS_LATE_MS;
   }
   setServer(up) {
     this.serverUp = up;
