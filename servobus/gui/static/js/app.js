@@ -113,13 +113,14 @@ async function main() {
   const ctx = new Context(info, link);
   window.servobus = ctx;  // for people poking around, and for the browser tests
   $("#conn-url").textContent = info.machine ? `machine ${info.machine} · ${info.url}` : info.url;
-  link.onState((state) => {
+  link.onState((state, why) => {
     const node = $("#conn");
     node.dataset.state = state;
     node.textContent = { live: "● live", down: "● connection lost – retrying", connecting: "connecting…" }[state];
     if (state === "live") ctx.setServer(true);
     else if (state === "down" || ctx.serverUp) ctx.setServer(false);  // not the first connecting
     $("#server-banner").classList.toggle("hidden", !ctx.serverLost);
+    if (state === "down") $("#server-banner-why").textContent = why ? ` (it said: ${why})` : "";
   });
   link.on("hello", (doc) => {
     ctx.owner = doc.owner;

@@ -48,7 +48,8 @@ export class Link {
     this.handlers.get(type).push(fn);
   }
   onState(fn) { this.stateListeners.push(fn); }
-  setState(state) { for (const fn of this.stateListeners) fn(state); }
+  // state: "connecting", "live" or "down"; why: the server's reason when it closed the socket
+  setState(state, why = "") { for (const fn of this.stateListeners) fn(state, why); }
   connect() {
     const proto = location.protocol === "https:" ? "wss" : "ws";
     const q = TOKEN ? `?token=${encodeURIComponent(TOKEN)}` : "";
@@ -57,8 +58,8 @@ export class Link {
     this.ws = ws;
     this.setState("connecting");
     ws.onopen = () => { this.retry = 250; this.setState("live"); };
-    ws.onclose = () => {
-      this.setState("down");
+    ws.onclose = (ev) => {
+      this.setState("down", ev.reason || "");
       setTimeout(() => this.connect(), this.retry);
       this.retry = Math.min(this.retry * 2, 4000);
     };
