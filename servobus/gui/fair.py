@@ -19,6 +19,10 @@ Decisions (issue 30: one page, or one script, must not take the server from the 
   a page before its WebSocket is up). A page waits for most answers before the next
   request, so 8 in flight is far more than it uses; a request that waits on a slow or dead
   link holds its place until it ends.
+* **The page's own files** (``/``, ``/static/...``) count towards the total only, not per
+  client: they are read from disk and never wait on a link, and a browser loading the
+  page fetches its dozen modules at once, before its WebSocket can name the page - counted
+  per peer they were refused (429) and the page did not start.
 * **Stop is never refused** (docs/safety.md: Stop and STOP ALL always win):
   ``POST /api/stop_all`` and a ``command`` whose action is ``stop`` pass both caps and are
   not counted, even when the page's other requests hang on a dead link.
@@ -77,9 +81,9 @@ class RequestCaps:
         if stop:
             await app(scope, receive, send)
             return
-        client = client_of(scope)
+        client = "" if _page_file(scope["path"]) else client_of(scope)  # "": not counted
         count = self.in_flight.get(client, 0)
-        if count >= MAX_REQUESTS_PER_CLIENT:
+        if client and count >= MAX_REQUESTS_PER_CLIENT:
             self._log_once(client, f"GUI: {client} has {count} requests in progress: "
                                    "refusing more (429) until they end")
             what = "this page has" if client.startswith("page") else f"{client} has"
@@ -97,25 +101,34 @@ class RequestCaps:
                           f"the GUI server has {self.total} requests in progress (at most "
                           f"{MAX_REQUESTS}): try again; Stop is always served")
             return
-        self.in_flight[client] = count + 1
+        if client:
+            self.in_flight[client] = count + 1
         self.total += 1
         try:
             await app(scope, receive, send)
         finally:
             self.total -= 1
-            left = self.in_flight[client] - 1
-            if left:
-                self.in_flight[client] = left
-            else:
-                del self.in_flight[client]
-                self._refusing.discard(client)
+            if client:
+                self._ended(client)
             if self._full and self.total <= MAX_REQUESTS // 2:
                 self._full = False
+
+    def _ended(self, client: str) -> None:
+        left = self.in_flight[client] - 1
+        if left:
+            self.in_flight[client] = left
+        else:
+            del self.in_flight[client]
+            self._refusing.discard(client)
 
     def _log_once(self, client: str, line: str) -> None:
         if client not in self._refusing:
             self._refusing.add(client)
             log.warning("%s", line)
+
+
+def _page_file(path: str) -> bool:
+    return path == "/" or path.startswith("/static/")
 
 
 async def _is_stop(scope: Scope, receive: Receive) -> tuple[Receive, bool]:

@@ -5,11 +5,12 @@ Messages from the page (JSON): ``jog`` {axis, rpm} (repeated while the button is
 ``POST /api/axes/N/turn`` {rpm, page}, repeated while it is on), ``turn_stop`` {axis},
 ``stop_all``, ``scope`` {settings}, ``scope_run`` {running},
 ``scope_arm``, ``scope_csv``, ``ack`` {seq}, ``io_watch`` {axis or null}. To the page:
-``hello``, ``status`` (every :data:`STATUS_PERIOD_S`), ``io`` (the watched axis's virtual
-outputs and state, as often), ``scope_state``, ``csv``, ``error`` (``message``; ``request``:
-the type of the message it answers, ``received``: that message's start), ``stopped`` (JSON)
-and scope frames (binary, servobus.gui.frames). Message sizes and JSON nesting are bounded
-(servobus.gui.limits).
+``hello``, ``status`` (every :data:`STATUS_PERIOD_S`; each axis as StatusMonitor.view
+gives it: its last values with their age and the machine's live link state, issue 29),
+``io`` (the watched axis's virtual outputs and state, as often), ``scope_state``, ``csv``,
+``error`` (``message``; ``request``: the type of the message it answers, ``received``: that
+message's start), ``stopped`` (JSON) and scope frames (binary, servobus.gui.frames).
+Message sizes and JSON nesting are bounded (servobus.gui.limits).
 
 The page owns its jogs and constant speeds as ``page N`` (N: ``hello``'s ``owner``;
 servobus.gui.jog). ``status`` carries ``jog`` (axis -> rpm of every running lease),
@@ -26,6 +27,7 @@ import itertools
 import json
 import logging
 import math
+import time
 from collections.abc import Awaitable, Callable, Mapping
 from typing import Any
 
@@ -67,9 +69,10 @@ class PageLink:
             gui = self.gui
             active = gui.jog.active()
             mine = page_owner(self.owner)
+            now = time.time()
             await self.send_json({
                 "type": "status",
-                "axes": [_finite(s) for s in gui.monitor.snapshots.values()],
+                "axes": [_finite(gui.monitor.view(i, now)) for i in gui.monitor.snapshots],
                 "jog": {str(k): v["rpm"] for k, v in active.items()},
                 "leases": {str(k): {**v, "mine": v["owner"] == mine}
                            for k, v in active.items()},

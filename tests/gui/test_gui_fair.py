@@ -125,6 +125,18 @@ def test_a_page_has_at_most_8_requests_in_flight_stop_is_always_served(
         assert post(client, "/api/axes/2/command", ENABLE, page_a)[0] == 200  # room again
 
 
+def test_the_page_files_load_while_their_peer_has_8_requests_in_flight(
+        client: TestClient, gate: Gate) -> None:
+    # a browser fetches the page's dozen modules at once, before its WebSocket names the
+    # page: counted per peer, one was refused (429) and the page never started
+    held = hold(client, gate, fair.MAX_REQUESTS_PER_CLIENT, None)
+    assert post(client, "/api/axes/2/command", ENABLE)[0] == 429  # the peer is full ...
+    for path in ("/", "/static/js/app.js", "/static/js/gate.js", "/static/style.css"):
+        assert client.get(path).status_code == 200, path  # ... its page still loads
+    gate.open()
+    assert [f.result(timeout=20)[0] for f in held] == [200] * len(held)
+
+
 def test_all_clients_together_are_held_to_the_cap_in_all(
         client: TestClient, gate: Gate, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(fair, "MAX_REQUESTS", 10)  # the rule, with fewer threads than 64

@@ -8,17 +8,15 @@ import asyncio
 import contextlib
 import json
 import logging
-import socket
 import subprocess
-import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import machine_rig
 import pytest
 from conftest import wait_until_async
+from drive_process_rig import SIMS, free_port, start_sim
+from drive_process_rig import procs as procs  # the fixture, for this module
 from machine_rig import write_machine
-from subprocess_rig import read_line, stop_process
 
 from servobus import connect
 from servobus.axis import registry
@@ -33,12 +31,6 @@ from servobus.machine import open_machine, open_machine_async
 from servobus.machine.machine import RETRY_MAX_S, RETRY_S, AsyncMachine, backoff
 
 SIMULATED_S = 60.0
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def allowed_tries(seconds: float) -> int:
@@ -138,38 +130,6 @@ async def test_after_close_every_call_is_a_servobus_error(tmp_path: Path) -> Non
 
 
 # ------------------------------------------------------------ virtual drives in processes
-#: protocol -> (servobus sim arguments, drive URL); {port} is the fixed free port.
-SIMS = {
-    "dyn232": (["dyn232", "--listen", "tcp://127.0.0.1:{port}", "--ids", "1", "--fast"],
-               "dyn232+socket://127.0.0.1:{port}"),
-    "dyncan": (["dyncan", "--socketcand", "127.0.0.1:{port}", "--ids", "1"],
-               "dyncan+socketcand://127.0.0.1:{port}"),
-    "easycan": (["easycan", "--socketcand", "127.0.0.1:{port}", "--ids", "1"],
-                "easycan+socketcand://127.0.0.1:{port}"),
-    "enip": (["enip", "--tcp-port", "{port}", "--udp-port", "0"], "enip://127.0.0.1:{port}"),
-    "modbus": (["modbus", "--listen", "tcp://127.0.0.1:{port}", "--ids", "1"],
-               "modbus+socket://127.0.0.1:{port}"),
-}
-
-
-def start_sim(protocol: str, port: int) -> subprocess.Popen[str]:
-    args = [a.format(port=port) for a in SIMS[protocol][0]]
-    proc = subprocess.Popen([sys.executable, "-m", "servobus", "sim", *args,
-                             "--duration", "300"],  # a safety net only
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    while "listening on" not in read_line(proc):
-        pass
-    return proc
-
-
-@pytest.fixture
-def procs() -> Iterator[list[subprocess.Popen[str]]]:
-    started: list[subprocess.Popen[str]] = []
-    yield started
-    for proc in started:
-        stop_process(proc)
-
-
 async def offline(machine: AsyncMachine, name: str) -> bool:
     """Reads (as the GUI and the gateway poll) until the axis is offline."""
     axis = machine[name]

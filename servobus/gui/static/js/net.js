@@ -20,7 +20,12 @@ export async function api(path, body) {
     headers["Content-Type"] = "application/json";
     init.body = JSON.stringify(body);
   }
-  const res = await fetch(path, init);
+  let res;
+  try {
+    res = await fetch(path, init);
+  } catch {  // the browser's "Failed to fetch": say what it means
+    throw new ApiError("no answer from the servobus GUI server (is it running?)", 0);
+  }
   let doc = null;
   try { doc = await res.json(); } catch { /* not JSON */ }
   if (!res.ok) throw new ApiError((doc && doc.error) || `${res.status} ${res.statusText}`, res.status);
@@ -43,7 +48,8 @@ export class Link {
     this.handlers.get(type).push(fn);
   }
   onState(fn) { this.stateListeners.push(fn); }
-  setState(state) { for (const fn of this.stateListeners) fn(state); }
+  // state: "connecting", "live" or "down"; why: the server's reason when it closed the socket
+  setState(state, why = "") { for (const fn of this.stateListeners) fn(state, why); }
   connect() {
     const proto = location.protocol === "https:" ? "wss" : "ws";
     const q = TOKEN ? `?token=${encodeURIComponent(TOKEN)}` : "";
@@ -52,8 +58,8 @@ export class Link {
     this.ws = ws;
     this.setState("connecting");
     ws.onopen = () => { this.retry = 250; this.setState("live"); };
-    ws.onclose = () => {
-      this.setState("down");
+    ws.onclose = (ev) => {
+      this.setState("down", ev.reason || "");
       setTimeout(() => this.connect(), this.retry);
       this.retry = Math.min(this.retry * 2, 4000);
     };
