@@ -21,7 +21,7 @@ from typing import Any, ClassVar, Never, Protocol, TypeVar, cast
 from servobus.axis import checks
 from servobus.axis.base import DEFAULT_WAIT_TIMEOUT_S, AxisTraceHook, check_int
 from servobus.axis.client_axis import ClientAxis
-from servobus.errors import DriveTimeout, ProtocolError
+from servobus.errors import DriveTimeout, NotSupported, ProtocolError
 from servobus.families.base import AxisStatus, Family, ParamInfo, StreamProfile
 from servobus.families.dmm import units as U
 from servobus.families.dmm import vocabulary as V
@@ -218,6 +218,26 @@ class CommandAxis(ClientAxis[CommandClient]):
 
     async def reset(self) -> None:
         await self._run(self.commands.make_reset(self._id))
+
+    async def home(self) -> None:
+        """DMM absolute-encoder homing (DYN2 manual 7.1 "Absolute encoder homing", 7.3
+        config b2; DYN CAN 6 Set_Origin): in absolute mode the drive returns to its stored
+        zero after a power-on reset - the nearest one, within half a turn (the encoder is
+        single-turn) - and takes no command until it is there. The reset selector is that
+        reset (it also clears a latched alarm). In relative mode there is no stored zero:
+        NotSupported, nothing sent."""
+        if not (await self.config()).absolute:
+            raise NotSupported(
+                f"drive {self._id} is in relative mode (config b2 = 0): a {self.family.title} "
+                "homes only in absolute mode, returning to the zero stored by Set_Origin after "
+                "a power-on reset: set absolute mode in its config, or set "
+                "the zero where the axis stands (origin)", family=self.family.name)
+        await self.reset()
+
+    async def _move_profile_values(self, rpm: float | None,
+                                   accel_rpm_s: float | None) -> dict[str, int]:
+        """Max Speed and Max Accel (EEPROM) at the drive's GEAR_NUM (units.profile_params)."""
+        return U.profile_params(rpm, accel_rpm_s, await self.gear_num())
 
     # ------------------------------------------------------------- registers and readouts
     async def drive_status(self) -> DriveStatus:

@@ -44,6 +44,7 @@ from servobus.errors import (
     DriveError,
     DriveTimeout,
     FramingError,
+    NotSupported,
     ProtocolError,
 )
 from servobus.families.base import AxisStatus, Family, ParamInfo, StreamProfile
@@ -298,6 +299,20 @@ class EnipAxis(AsyncAxis):
         drive resets its servo control (4.4): RAM values, GEAR_NUM included, are reloaded."""
         await self._write(_I["set_abs_origin"], dyn5.ORIGIN_KEY)
         self._gear_num = None
+
+    async def home(self) -> None:
+        """The DYN5 runs no homing of its own: after power-up or Reset it reports its
+        absolute position without moving (DYN5 manual 4.4, 0x21 and "Motor Absolute
+        Position"); nothing is sent."""
+        raise NotSupported(f"a {self.family.title} runs no homing of its own: after a "
+                           "power-up or Reset it reports its absolute position without "
+                           "moving: set the zero where the axis stands "
+                           "(origin: Set ABS Origin), then move to 0", family=self.family.name)
+
+    async def _move_profile_values(self, rpm: float | None,
+                                   accel_rpm_s: float | None) -> dict[str, int]:
+        """High Speed and High Accel (EEPROM; the DMM formulas, Appendix B) at GEAR_NUM."""
+        return U.profile_params(rpm, accel_rpm_s, await self.gear_num())
 
     async def enable(self) -> None:
         await self._write(_I["sw_enable"], dyn5.ENABLE)
