@@ -41,6 +41,7 @@ COMMAND_MODULES: list[str] = [
     "servobus.cli.users_cmd",
     "servobus.cli.enable_cmd",
     "servobus.cli.origin_cmd",
+    "servobus.cli.jog_cmd",
 ]
 
 DEBUG_ENV = "SERVOBUS_DEBUG"
