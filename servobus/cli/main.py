@@ -42,6 +42,7 @@ COMMAND_MODULES: list[str] = [
     "servobus.cli.enable_cmd",
     "servobus.cli.origin_cmd",
     "servobus.cli.jog_cmd",
+    "servobus.cli.shell_cmd",
 ]
 
 DEBUG_ENV = "SERVOBUS_DEBUG"
