@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 from collections.abc import Awaitable, Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -172,9 +173,11 @@ def test_origin_on_a_machine_axis_counts_the_limits_from_it(
     on_connect.append(one_rev_off)
     code, out, err = run(capsys, "--machine", str(machine), "--axis", "x", "origin")
     assert code == 0, err
-    assert out.startswith("axis x: origin set where it stands (it read 5.00")
-    assert "now 0.0000 mm" in out or "now -0.0000 mm" in out
-    assert out.rstrip().endswith("the soft limits count from it")
+    match = re.fullmatch(r"axis x: origin set where it stands \(it read (\S+) mm, now (\S+) "
+                         r"mm\); the soft limits count from it\n", out)
+    assert match is not None, out
+    before, now = (float(v) for v in match.groups())
+    assert abs(before - 5.0) < 0.01 and abs(now) < 0.01  # one revolution of a 5 mm screw
 
 
 # ------------------------------------------------------------------ home
