@@ -21,12 +21,12 @@ from typing import Any, ClassVar, Never, Protocol, TypeVar, cast
 from servobus.axis import checks
 from servobus.axis.base import DEFAULT_WAIT_TIMEOUT_S, AxisTraceHook, check_int
 from servobus.axis.client_axis import ClientAxis
-from servobus.errors import DriveTimeout, NotSupported, ProtocolError
+from servobus.errors import DriveTimeout, MoveFailed, NotSupported, ProtocolError
 from servobus.families.base import AxisStatus, Family, ParamInfo, StreamProfile
 from servobus.families.dmm import units as U
 from servobus.families.dmm import vocabulary as V
 from servobus.families.dmm.family import DYN2, axis_status, command_to_counts, counts_to_command
-from servobus.families.dmm.registers import DriveConfig, DriveStatus
+from servobus.families.dmm.registers import DriveConfig, DriveStatus, ServoMode
 from servobus.link.eeprom_guard import EepromGuard
 from servobus.link.transaction import TransactionManager
 
@@ -226,12 +226,19 @@ class CommandAxis(ClientAxis[CommandClient]):
         single-turn) - and takes no command until it is there. The reset selector is that
         reset (it also clears a latched alarm). In relative mode there is no stored zero:
         NotSupported, nothing sent."""
-        if not (await self.config()).absolute:
+        cfg = await self.config()
+        if not cfg.absolute:
             raise NotSupported(
                 f"drive {self._id} is in relative mode (config b2 = 0): a {self.family.title} "
                 "homes only in absolute mode, returning to the zero stored by Set_Origin after "
                 "a power-on reset: set absolute mode in its config, or set "
                 "the zero where the axis stands (origin)", family=self.family.name)
+        if cfg.free or cfg.servo_mode is not ServoMode.POSITION:
+            how = ("with the motor free (b5 = 1)" if cfg.free
+                   else f"in {cfg.servo_mode.name.lower()} mode")
+            raise MoveFailed(f"drive {self._id} would not home: its config starts it {how}, "
+                             "and only a drive in position mode returns to its zero; nothing "
+                             "was sent", drive_id=self._id)
         await self.reset()
 
     async def _move_profile_values(self, rpm: float | None,

@@ -15,9 +15,10 @@ import math
 import pytest
 
 from servobus.axis import Axis, connect
-from servobus.errors import ArgumentRangeError, NotSupported
+from servobus.errors import ArgumentRangeError, MoveFailed, NotSupported
 from servobus.families.dmm import units as U
-from servobus.families.dmm.registers import DriveConfig
+from servobus.families.dmm.registers import DriveConfig, ServoMode
+from servobus.transport.base import Direction
 
 URLS = ["sim://dyn232?fast=1", "sim://dyncan?fast=1", "sim://enip", "sim://easycan?fast=1",
         "sim://modbus?fast=1"]
@@ -100,3 +101,16 @@ def test_the_following_error_is_the_virtual_drives_own(axis: Axis) -> None:
         assert isinstance(error, float) and abs(error) < axis.position_window()
     else:  # YZ-AIM: no register holds it, and its virtual motor keeps no such state
         assert error is None
+
+
+@pytest.mark.parametrize("config", [DriveConfig(absolute=True, free=True),
+                                    DriveConfig(absolute=True, servo_mode=ServoMode.SPEED)])
+def test_a_dmm_drive_that_would_not_home_is_refused_before_the_reset(config: DriveConfig
+                                                                     ) -> None:
+    with connect("sim://dyn232?fast=1", drive_id=1) as axis:
+        axis.extra.set_config(config)
+        sent: list[object] = []
+        axis.add_trace(lambda d, packet, t: sent.append(packet) if d is Direction.TX else None)
+        with pytest.raises(MoveFailed, match="would not home: its config starts it"):
+            axis.home()
+        assert len(sent) == 1  # the config read, and no reset
