@@ -10,15 +10,14 @@ import json
 import logging
 import socket
 import subprocess
-import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import machine_rig
 import pytest
 from conftest import wait_until_async
 from machine_rig import write_machine
-from subprocess_rig import read_line, stop_process
+from sim_process_rig import SIMS, sim_url, start_sim
+from sim_process_rig import procs as procs  # the fixture, for this module
 
 from servobus import connect
 from servobus.axis import registry
@@ -138,38 +137,6 @@ async def test_after_close_every_call_is_a_servobus_error(tmp_path: Path) -> Non
 
 
 # ------------------------------------------------------------ virtual drives in processes
-#: protocol -> (servobus sim arguments, drive URL); {port} is the fixed free port.
-SIMS = {
-    "dyn232": (["dyn232", "--listen", "tcp://127.0.0.1:{port}", "--ids", "1", "--fast"],
-               "dyn232+socket://127.0.0.1:{port}"),
-    "dyncan": (["dyncan", "--socketcand", "127.0.0.1:{port}", "--ids", "1"],
-               "dyncan+socketcand://127.0.0.1:{port}"),
-    "easycan": (["easycan", "--socketcand", "127.0.0.1:{port}", "--ids", "1"],
-                "easycan+socketcand://127.0.0.1:{port}"),
-    "enip": (["enip", "--tcp-port", "{port}", "--udp-port", "0"], "enip://127.0.0.1:{port}"),
-    "modbus": (["modbus", "--listen", "tcp://127.0.0.1:{port}", "--ids", "1"],
-               "modbus+socket://127.0.0.1:{port}"),
-}
-
-
-def start_sim(protocol: str, port: int) -> subprocess.Popen[str]:
-    args = [a.format(port=port) for a in SIMS[protocol][0]]
-    proc = subprocess.Popen([sys.executable, "-m", "servobus", "sim", *args,
-                             "--duration", "300"],  # a safety net only
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    while "listening on" not in read_line(proc):
-        pass
-    return proc
-
-
-@pytest.fixture
-def procs() -> Iterator[list[subprocess.Popen[str]]]:
-    started: list[subprocess.Popen[str]] = []
-    yield started
-    for proc in started:
-        stop_process(proc)
-
-
 async def offline(machine: AsyncMachine, name: str) -> bool:
     """Reads (as the GUI and the gateway poll) until the axis is offline."""
     axis = machine[name]
@@ -184,7 +151,7 @@ async def test_a_restarted_drive_comes_back_online(
         protocol: str, tmp_path: Path, procs: list[subprocess.Popen[str]]) -> None:
     port = free_port()
     procs.append(start_sim(protocol, port))
-    url = SIMS[protocol][1].format(port=port)
+    url = sim_url(protocol, port)
     path = write_machine(tmp_path, f'[axes.a]\nurl = "{url}"\nid = 1\nunit = "rev"\n')
     machine = await open_machine_async(path, retry=True)
     try:
