@@ -2,8 +2,9 @@
 
 Decisions (docs/gateway.md "MQTT commands"): a command is a JSON object
 ``{"id": "...", "ts": <unix seconds>, "cmd": "move_relative", "value": 1.5}``. A motion
-command (MOTION) must carry ``id`` (1-128 characters) and ``ts``; a stop may leave them
-out. Refused, never run, and answered on ``.../reply``:
+command (MOTION, ``ack`` included: it allows motion again after a possible power loss)
+must carry ``id`` (1-128 characters) and ``ts``; a stop may leave them out. Refused, never
+run, and answered on ``.../reply``:
 
 * a retained message (the broker would replay it to every new subscription);
 * an id seen before (QoS 1 redelivers a message after a reconnect) - ids are remembered

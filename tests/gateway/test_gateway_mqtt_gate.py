@@ -31,6 +31,17 @@ def refused(gate: CommandGate, payload: bytes, *, retained: bool = False,
     return exc.value.code
 
 
+def test_ack_needs_an_id_and_a_fresh_timestamp_as_motion_does() -> None:
+    """ack allows motion again: a replayed or late one must never acknowledge a power
+    loss its sender did not see (docs/gateway.md "Recovery")."""
+    gate = CommandGate(max_age_s=5)
+    assert refused(gate, msg(cmd="ack")) == "BadInvalidArgument"
+    assert refused(gate, msg(id="k0", ts=NOW - 60, cmd="ack")) == "BadInvalidTimestamp"
+    ok = gate.admit("x", msg(id="k1", ts=NOW, cmd="ack"), False, NOW)
+    assert (ok.command.name, ok.command.value) == ("ack", None)
+    assert refused(gate, msg(id="k1", ts=NOW, cmd="ack")) == "BadRequestNotAllowed"
+
+
 def test_a_motion_command_runs_once() -> None:
     gate = CommandGate(max_age_s=5)
     ok = gate.admit("x", msg(id="a1", ts=NOW - 1, cmd="move_relative", value=2), False, NOW)

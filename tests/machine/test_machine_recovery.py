@@ -14,7 +14,7 @@ from pathlib import Path
 import machine_rig
 import pytest
 from conftest import wait_until_async
-from drive_process_rig import SIMS, free_port, start_sim
+from drive_process_rig import SIMS, free_port, sim_url, start_sim
 from drive_process_rig import procs as procs  # the fixture, for this module
 from machine_rig import write_machine
 
@@ -129,6 +129,29 @@ async def test_after_close_every_call_is_a_servobus_error(tmp_path: Path) -> Non
             call()
 
 
+async def test_a_status_read_in_flight_during_a_move_does_not_hide_the_motion(
+        tmp_path: Path) -> None:
+    """A front end polls while it moves the axis: a status read sent before the move and
+    answered "not moving" must not make a drop right after the move look like no motion
+    ran (the gateway's restart test lost the power-loss flag that way)."""
+    # paced like the wire: the status reply comes after the move has been handed over
+    path = write_machine(tmp_path, '[axes.a]\nurl = "sim://dyn232"\nid = 1\nunit = "rev"\n')
+    machine = await open_machine_async(path)
+    try:
+        axis = machine["a"]
+        core = axis.core()
+        read = asyncio.create_task(axis.status())
+        await asyncio.sleep(0)  # one loop turn: the status request goes out first
+        await axis.move_to(20.0)  # no read first: the move follows the status request
+        assert not (await read).moving  # answered before the drive took the move
+        axis.went_offline(MachineLinkError("the link dropped"))  # as the machine does
+        assert axis.interrupted == "a commanded motion may not have finished"
+        await core.stop()
+        await core.close()
+    finally:
+        await machine.close()
+
+
 # ------------------------------------------------------------ virtual drives in processes
 async def offline(machine: AsyncMachine, name: str) -> bool:
     """Reads (as the GUI and the gateway poll) until the axis is offline."""
@@ -144,7 +167,7 @@ async def test_a_restarted_drive_comes_back_online(
         protocol: str, tmp_path: Path, procs: list[subprocess.Popen[str]]) -> None:
     port = free_port()
     procs.append(start_sim(protocol, port))
-    url = SIMS[protocol][1].format(port=port)
+    url = sim_url(protocol, port)
     path = write_machine(tmp_path, f'[axes.a]\nurl = "{url}"\nid = 1\nunit = "rev"\n')
     machine = await open_machine_async(path, retry=True)
     try:
