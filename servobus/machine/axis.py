@@ -44,6 +44,7 @@ from servobus.errors import (
     NotSupported,
     OwnerError,
     PowerLostError,
+    ServobusError,
 )
 from servobus.machine.config import AxisSpec
 from servobus.machine.lease import DEFAULT_TTL_S, Lease, check_speed, check_ttl, stream
@@ -272,8 +273,23 @@ class AsyncMachineAxis:
 
     async def check_power(self) -> None:
         """After the link came back: did the drive lose power meanwhile? The cell where
-        the family has one (DYN5), else the position (docs/machine.md)."""
+        the family has one (DYN5), else the position (docs/machine.md). A check the drive
+        does not answer (a timeout, an error; not a dropped link) cannot tell: the axis is
+        flagged, its position unverified, and the error raised. (Decision, issue 29's fault
+        run: a check that timed out on a loaded host let a drive restart pass unflagged,
+        and its stale reference flagged the next, harmless drop.)"""
         core = self.core()
+        try:
+            await self._check_power(core)
+        except MachineLinkError:
+            raise  # dropped again: the next reopen checks
+        except ServobusError as exc:
+            self._counts_at_drop = None
+            self.flag_power_lost(f"the check after the link came back got no answer ({exc}): "
+                                 "the position is unverified")
+            raise
+
+    async def _check_power(self, core: AsyncAxis) -> None:
         with self._watch():
             marker = await core.power_marker()
         if marker is not None:

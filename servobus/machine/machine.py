@@ -322,7 +322,7 @@ class AsyncMachine:
                     await axis.check_power()
                 except MachineLinkError:
                     return  # dropped again: the next reopen checks
-                except ServobusError as exc:  # no answer: a later answer tells (SILENT_CALLS)
+                except ServobusError as exc:  # no answer: flagged (check_power)
                     log.debug("axis %s: power check after reopening: %s", axis.name, exc)
         finally:
             for axis in link.axes:

@@ -1,7 +1,7 @@
 """Links that come back badly (issue 29, found by ``python -m benchmarks faults``): a peer that
 accepts a connection and hangs up at once, a link that drops again soon after coming back,
-a poll that reaches the reopened link before the power check, and interrupted motion
-reported once (docs/machine.md, "Recovery")."""
+a poll that reaches the reopened link before the power check, a power check that gets no
+answer, and interrupted motion reported once (docs/machine.md, "Recovery")."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from conftest import wait_until_async
 from machine_rig import write_machine
 
 from servobus.axis import connect_async
-from servobus.errors import MachineLinkError
+from servobus.errors import DriveTimeout, MachineLinkError
 from servobus.machine import machine as machine_module
 from servobus.machine import open_machine_async
 from servobus.machine.machine import RETRY_S, AsyncMachine
@@ -204,6 +204,38 @@ async def test_a_poll_on_the_reopened_link_does_not_hide_the_position_jump(
         await machine.close()
         if old is not None:
             await old.close()
+
+
+async def test_a_power_check_that_gets_no_answer_flags_the_position_unverified(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A check that times out (a loaded host) cannot tell a restart from none: flagged, and
+    its reference is gone, so a later harmless drop is not flagged by it."""
+    url = "sim://dyn232?fast=1"
+    machine = await open_machine_async(write_machine(tmp_path, ONE_AXIS.format(url=url)))
+    axis = machine["a"]
+    core = axis.axis
+    assert core is not None
+    try:
+        await _drive_at(machine, 0.5)
+        axis.went_offline(MachineLinkError("the link is down"))
+        axis.axis = core
+
+        async def no_answer() -> int:
+            raise DriveTimeout("no reply from drive 1 (the test)")
+
+        with monkeypatch.context() as patch:
+            patch.setattr(core, "position", no_answer)
+            with pytest.raises(DriveTimeout):
+                await axis.check_power()
+        assert axis.power_lost and "unverified" in str(axis.power_lost_reason)
+        await axis.acknowledge()
+        await _drive_at(machine, 1.0)  # the axis moves on, then its link drops, harmlessly
+        axis.went_offline(MachineLinkError("the link is down"))
+        axis.axis = core
+        await axis.check_power()
+        assert not axis.power_lost, axis.power_lost_reason
+    finally:
+        await machine.close()
 
 
 async def test_an_interrupted_motion_is_logged_once_and_a_waited_move_interrupts_nothing(
