@@ -44,6 +44,7 @@ from servobus.errors import (
     NotSupported,
     OwnerError,
     PowerLostError,
+    ServobusError,
 )
 from servobus.machine.config import AxisSpec
 from servobus.machine.lease import DEFAULT_TTL_S, Lease, check_speed, check_ttl, stream
@@ -87,6 +88,9 @@ class AsyncMachineAxis:
         self.on_drop: DropHandler | None = None
         self._last_good: float | None = None
         self._last_counts: int | None = None
+        #: The last position read before the link dropped, kept for the power check until it
+        #: ran (reads on the reopened link - a GUI's poll - must not replace it first).
+        self._counts_at_drop: int | None = None
         self._moving = False  # a motion was commanded and not yet seen to end
         #: Motion commands sent so far: a status read that began before the last one may
         #: be answered before the drive starts it, so its "not moving" clears nothing.
@@ -241,21 +245,24 @@ class AsyncMachineAxis:
         resumed; a motion that ran is reported in ``interrupted``, a lease ends."""
         self.axis = None
         self.last_error = err
-        before = self._interrupted  # a drop during the reopen: the same interruption
+        if self._counts_at_drop is None:  # a link that drops again before its check keeps it
+            self._counts_at_drop = self._last_counts
         lease = self._lease
         running = lease is not None and lease.alive
+        interrupted = None
         if running and lease is not None:
             lease.ended = "link dropped"
             if lease.task is not None and lease.task is not asyncio.current_task():
                 lease.task.cancel()  # its own task ends by itself on the failed read
-            self._interrupted = f"the {lease.owner} motion at {lease.speed:g} " \
-                                f"{self.speed_unit} (lease) stopped being sent"
+            interrupted = f"the {lease.owner} motion at {lease.speed:g} " \
+                          f"{self.speed_unit} (lease) stopped being sent"
         elif self._moving:
-            self._interrupted = "a commanded motion may not have finished"
+            interrupted = "a commanded motion may not have finished"
         self._moving = False
-        if self._interrupted is not None and self._interrupted != before:
+        if interrupted is not None:  # one line when it happens, not at every later drop
+            self._interrupted = interrupted
             log.warning("axis %s: motion interrupted by the link drop: %s; it is not "
-                        "re-sent", self.name, self._interrupted)
+                        "re-sent", self.name, interrupted)
 
     async def mark_power(self) -> None:
         """Leave the machine's token in the drive's power-cleared cell, where it has one;
@@ -269,8 +276,23 @@ class AsyncMachineAxis:
 
     async def check_power(self) -> None:
         """After the link came back: did the drive lose power meanwhile? The cell where
-        the family has one (DYN5), else the position (docs/machine.md)."""
+        the family has one (DYN5), else the position (docs/machine.md). A check the drive
+        does not answer (a timeout, an error; not a dropped link) cannot tell: the axis is
+        flagged, its position unverified, and the error raised. (Decision, issue 29's fault
+        run: a check that timed out on a loaded host let a drive restart pass unflagged,
+        and its stale reference flagged the next, harmless drop.)"""
         core = self.core()
+        try:
+            await self._check_power(core)
+        except MachineLinkError:
+            raise  # dropped again: the next reopen checks
+        except ServobusError as exc:
+            self._counts_at_drop = None
+            self.flag_power_lost(f"the check after the link came back got no answer ({exc}): "
+                                 "the position is unverified")
+            raise
+
+    async def _check_power(self, core: AsyncAxis) -> None:
         with self._watch():
             marker = await core.power_marker()
         if marker is not None:
@@ -279,15 +301,16 @@ class AsyncMachineAxis:
                                      f"token {POWER_TOKEN} left there: power cycle or Reset")
             with self._watch():
                 await core.power_marker(POWER_TOKEN)
+            self._counts_at_drop = None
             return
+        with self._watch():
+            counts = await core.position()  # read either way: it proves the link answers
+        before, self._counts_at_drop = self._counts_at_drop, None
+        self._seen(counts)
         if self._interrupted is not None:
             self.flag_power_lost("a motion was interrupted and the family keeps no mark "
                                  "of a power cycle: the position is unverified")
             return
-        with self._watch():
-            counts = await core.position()
-        before = self._last_counts
-        self._last_counts = counts
         if before is not None and abs(counts - before) > core.counts_per_rev * JUMP_REVS:
             self.flag_power_lost(f"the position moved from {before} to {counts} counts "
                                  "while the link was down")
@@ -385,7 +408,7 @@ class AsyncMachineAxis:
         self.check_target(target)
         counts = self.to_counts(target)
         await self._end_lease("replaced by a move")
-        await self._move(lambda core: core.move_to(counts, wait=wait, timeout=timeout))
+        await self._move(lambda core: core.move_to(counts, wait=wait, timeout=timeout), wait)
 
     async def move_by(self, distance: float, *, wait: bool = False,
                       timeout: float | None = None) -> None:
@@ -402,14 +425,18 @@ class AsyncMachineAxis:
             self.check_target(await self.position() + distance)
         counts = self.to_counts(distance)
         await self._end_lease("replaced by a move")
-        await self._move(lambda core: core.move_by(counts, wait=wait, timeout=timeout))
+        await self._move(lambda core: core.move_by(counts, wait=wait, timeout=timeout), wait)
 
-    async def _move(self, send: Callable[[AsyncAxis], Awaitable[None]]) -> None:
-        """A motion command, sent once (never re-sent, whatever happens to the link)."""
+    async def _move(self, send: Callable[[AsyncAxis], Awaitable[None]],
+                    waited: bool = False) -> None:
+        """A motion command, sent once (never re-sent, whatever happens to the link);
+        ``waited``: ``send`` returns once the motion ended (a later drop interrupts nothing)."""
         core = self._motion()
         self._commanded()
         with self._watch():
             await send(core)
+        if waited:
+            self._moving = False
 
     async def turn(self, speed: float | None = None, *, owner: str = "api",
                    ttl: float = DEFAULT_TTL_S) -> None:
