@@ -192,7 +192,12 @@ class AsyncMachineAxis:
 
     async def acknowledge(self) -> None:
         """A person or program has seen the power loss (and the interrupted motion): the
-        flags clear and motion is allowed again. Nothing is sent."""
+        flags clear and motion is allowed again. Nothing is sent. Refused
+        (MachineLinkError) while a reopened link is being checked for a power loss: the
+        check may still flag what the caller has not seen."""
+        if self.checking:
+            raise MachineLinkError(f"axis {self.name}: its link is back and being checked for "
+                                   "a power loss; nothing was acknowledged, try again")
         if self._power_lost is not None or self._interrupted is not None:
             log.warning("axis %s: acknowledged (%s)", self.name,
                         self._power_lost or self._interrupted)

@@ -261,3 +261,19 @@ async def test_an_interrupted_motion_is_logged_once_and_a_waited_move_interrupts
         axis.axis = core
     finally:
         await machine.close()
+
+
+async def test_acknowledge_waits_for_the_power_check(tmp_path: Path) -> None:
+    """While a reopened link is being checked, the check may still flag a power loss the
+    caller has not seen: acknowledge() is refused then (every front end asks the machine)."""
+    path = write_machine(tmp_path, ONE_AXIS.format(url="sim://dyn232"))
+    async with await open_machine_async(path) as machine:
+        axis = machine["a"]
+        axis.flag_power_lost("a test")
+        axis.checking = True
+        with pytest.raises(MachineLinkError, match="being checked"):
+            await axis.acknowledge()
+        assert axis.power_lost
+        axis.checking = False
+        await axis.acknowledge()
+        assert not axis.power_lost
