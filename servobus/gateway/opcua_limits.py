@@ -20,6 +20,11 @@ Decisions (docs/gateway.md "Limits per client", issue 30):
   back, and closes it with its subscriptions at that timeout (asyncua's default cap was
   10 minutes; a vanished client's subscriptions then counted against the caps that long).
 
+* TransferSubscriptions moves a subscription to the calling session only from a session
+  of the same user (anonymous from anonymous; else BadUserAccessDenied: asyncua moved any
+  subscription whose number a client named) and only within the caller's cap
+  (BadTooManySubscriptions).
+
 asyncua (2.1) enforces only a server-wide count of subscriptions; the per-session and item
 caps are :class:`LimitedSession`'s, the session caps :func:`check_session_room`'s. The
 item counts read asyncua's per-subscription table of items (``_monitored_items``).
@@ -131,3 +136,40 @@ class LimitedSession(InternalSession):  # type: ignore[misc]
             refused.StatusCode = ua.StatusCode(ua.StatusCodes.BadTooManyMonitoredItems)
             results.append(refused)
         return results
+
+    async def transfer_subscriptions(
+            self, params: ua.TransferSubscriptionsParameters, callback: Callable[..., Any]
+    ) -> list[ua.TransferResult]:
+        """Only a subscription of the same user, and only within this session's cap."""
+        held = len(self._subscriptions())
+        refusals: dict[int, int] = {}  # position in the request -> status code
+        allowed: list[int] = []
+        for position, sub_id in enumerate(params.SubscriptionIds):
+            sub = self.subscription_service.subscriptions.get(int(sub_id))
+            if sub is None or sub.session_id == self.session_id:
+                allowed.append(sub_id)  # asyncua answers these itself
+            elif not self._same_user(sub.session_id):
+                refusals[position] = ua.StatusCodes.BadUserAccessDenied
+            elif held >= MAX_SUBSCRIPTIONS_PER_SESSION:
+                refusals[position] = ua.StatusCodes.BadTooManySubscriptions
+            else:
+                allowed.append(sub_id)
+                held += 1
+        params.SubscriptionIds = allowed
+        moved: list[ua.TransferResult] = (
+            await super().transfer_subscriptions(params, callback) if allowed else [])
+        results: list[ua.TransferResult] = []
+        for position in range(len(allowed) + len(refusals)):
+            if position in refusals:
+                refused = ua.TransferResult()
+                refused.StatusCode = ua.StatusCode(refusals[position])
+                results.append(refused)
+            else:
+                results.append(moved.pop(0))
+        return results
+
+    def _same_user(self, session_id: ua.NodeId) -> bool:
+        owner = next((s for s in self.iserver._external_sessions.values()
+                      if s.session_id == session_id), None)
+        return owner is not None and (owner.user.role, owner.user.name) == (
+            self.user.role, self.user.name)

@@ -286,3 +286,27 @@ async def test_node_ids_live_in_the_gateways_own_namespace(served: Served) -> No
         assert axes["a0"].nodeid == ua.NodeId("bench.a0", 1)
         endpoints = await client.get_endpoints()
         assert {e.Server.ApplicationUri for e in endpoints} == {"urn:servobus:gateway:bench"}
+
+
+async def transfer(client: Client, subscription_id: int) -> int:
+    params = ua.TransferSubscriptionsParameters()
+    params.SubscriptionIds = [subscription_id]
+    params.SendInitialValues = False
+    results = await client.uaclient.transfer_subscriptions(params)
+    code: int = results[0].StatusCode.value
+    return code
+
+
+async def test_a_subscription_moves_only_to_its_own_user_within_the_cap(
+        served: Served) -> None:
+    """asyncua moved any subscription whose number a client named to that client."""
+    async with user_client(served.endpoint) as owner, Client(served.endpoint) as stranger, \
+            user_client(served.endpoint) as same_user:
+        subscription = await owner.create_subscription(500, Quiet())
+        sub_id = subscription.subscription_id
+        assert await transfer(stranger, sub_id) == ua.StatusCodes.BadUserAccessDenied
+        own = [await same_user.create_subscription(500, Quiet())
+               for _ in range(opcua_limits.MAX_SUBSCRIPTIONS_PER_SESSION)]
+        assert await transfer(same_user, sub_id) == ua.StatusCodes.BadTooManySubscriptions
+        await own[0].delete()
+        assert await transfer(same_user, sub_id) == ua.StatusCodes.Good
