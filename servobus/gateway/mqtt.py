@@ -273,7 +273,6 @@ class MqttGateway:
             reply = {"id": ident, "ok": False, "code": exc.code, "error": exc.message}
         await client.publish(f"{self.base}/{axis}/reply", json.dumps(reply).encode(), qos=1)
 
-
     async def _answer(self, client: aiomqtt.Client, axis: str, payload: bytes,
                       retained: bool) -> None:
         """One command in its own error boundary: an unexpected error is answered
@@ -287,7 +286,7 @@ class MqttGateway:
             log.error("mqtt: command on %s/%s/cmd failed unexpectedly: %s: %s", self.base,
                       axis, type(exc).__name__, exc)
             reply = {"id": _peek_id(payload), "ok": False, "code": "BadInternalError",
-                     "error": f"internal error ({type(exc).__name__}); nothing was run"}
+                     "error": f"internal error ({type(exc).__name__}), in the gateway's log"}
             await client.publish(f"{self.base}/{axis}/reply", json.dumps(reply).encode(),
                                  qos=1)
 

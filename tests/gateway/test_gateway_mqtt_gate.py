@@ -251,3 +251,30 @@ def test_serve_refuses_a_bad_gateway_id_or_prefix() -> None:
     assert result.exit_code == 2 and "--gateway-id 'cell 3'" in result.output
     result = CliRunner().invoke(cli, ["serve", "--mqtt-prefix", "plant/#"])
     assert result.exit_code == 2 and "--mqtt-prefix 'plant/#'" in result.output
+
+
+async def test_an_unexpected_error_in_a_command_is_answered_and_the_next_runs(
+        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    """The error boundary (issue 30): one bad command is answered BadInternalError with one
+    log line; the handler takes the next one."""
+    machine = FakeMachine()
+    sampler = Sampler(machine, 10)  # type: ignore[arg-type]
+    gw = MqttGateway(machine, sampler, Commander(machine),  # type: ignore[arg-type]
+                     MqttOptions("mqtt://u:p@127.0.0.1:1884", commands=True))
+    client = Published()
+    admit = gw.gate.admit
+
+    def broken(axis: str, payload: bytes, retained: bool, now: float | None = None) -> Any:
+        if b"boom" in payload:
+            raise RuntimeError("a bug")
+        return admit(axis, payload, retained, now)
+
+    monkeypatch.setattr(gw.gate, "admit", broken)
+    with caplog.at_level("ERROR", logger="servobus.gateway.mqtt"):
+        await gw._answer(client, "a0", msg(id="b1", cmd="boom"), False)  # type: ignore[arg-type]
+    await gw._answer(client, "a0", msg(cmd="stop"), False)  # type: ignore[arg-type]
+    assert [reply["code"] for _, reply in client.messages] == ["BadInternalError", "Good"]
+    assert client.messages[0][1]["id"] == "b1"
+    errors = [r for r in caplog.records if r.levelname == "ERROR"]
+    assert len(errors) == 1 and "RuntimeError: a bug" in errors[0].getMessage()
+    assert machine.log == ["a0 stop"]
