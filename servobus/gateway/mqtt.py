@@ -142,7 +142,7 @@ class MqttGateway:
         self.gate = CommandGate(options.max_age_s)
         self.base = f"{check_prefix(options.prefix)}/{machine.name}"
         self.presence = Presence(self.base, gateway_id(machine.name, options.gateway_id))
-        self._rival_told = False
+        self._rival_told = self._blind_told = False  # one log line a spell
         self.published = 0
         self.connected = asyncio.Event()
         self._alarm: dict[str, tuple[int, bool]] = {}
@@ -295,6 +295,11 @@ class MqttGateway:
         (the next birth's number taken); False, one log line a spell, while a live gateway
         serves them after this one did; GatewayConflict when this one never served them."""
         seen = await self.presence.probe(self.client(probe=True))
+        if not seen.checked and not self._blind_told:
+            log.warning("MQTT: the broker refused this gateway's subscription to %s/status/#: "
+                        "connecting without looking for a rival gateway on these topics",
+                        self.base)
+        self._blind_told = not seen.checked
         if self.presence.free(seen):
             self._rival_told = False
             return True

@@ -24,8 +24,10 @@ Decisions (docs/gateway.md "Identity", issue 30):
 * **A rival** is another live gateway on the same topics (same prefix and machine name).
   Before each connection with the shared client id (which would close the rival's), a
   probe connection with a client id of its own reads the retained ``status`` and ``seq``
-  (a round trip of its own message on ``<base>/status/probe/<token>`` marks the end of
-  the retained messages). The topics are free when ``status`` is not ``online``, or when
+  (the SUBACK of a second subscription, to ``<base>/status/probe`` where nobody publishes,
+  comes after the retained messages of the first: it marks their end; the probe needs
+  nothing but leave to subscribe to ``<base>/status/#``). The topics are free when
+  ``status`` is not ``online``, or when
   the retained seq is this process's own last birth (a reconnect). Otherwise the probe
   waits up to :data:`LIVENESS_S` for a heartbeat published live: one comes from a live
   rival (refused: :class:`~servobus.errors.GatewayConflict`); none comes when the
@@ -33,6 +35,9 @@ Decisions (docs/gateway.md "Identity", issue 30):
   connection the broker has not yet given up (its will has not fired yet): taken over.
   A gateway killed outright (its socket closed by the kernel) left ``offline`` already:
   its restart is not delayed at all.
+* A broker that refuses the probe's subscriptions (its ACL) leaves the check undone: the
+  gateway connects without it (it must not stop serving for want of a safety net) and
+  says so in one log line.
 """
 
 from __future__ import annotations
@@ -58,8 +63,6 @@ HEARTBEAT_S = 1.0
 #: A live gateway's heartbeat comes at least this often (3 beats; a loaded machine may be
 #: late by a beat or two).
 LIVENESS_S = 3.0
-#: The probe's connection and its retained messages take at most this long.
-PROBE_TIMEOUT_S = 10.0
 ONLINE, OFFLINE = b"online", b"offline"
 MAX_SEQ_PAYLOAD = 512
 
@@ -73,6 +76,7 @@ class Seen:
     gateway: str = ""  # the gateway id that published it
     since: float | None = None  # when that birth was (its gateway's clock)
     live: bool = False  # a heartbeat was published while the probe listened
+    checked: bool = True  # False: the broker refused the probe's subscriptions
 
 
 def parse_seq(payload: bytes) -> tuple[int, str, float | None] | None:
@@ -118,28 +122,22 @@ class Presence:
     async def probe(self, client: aiomqtt.Client) -> Seen:
         """Read the retained status and seq through ``client`` (a connection of its own; it
         is closed here), and listen for a live heartbeat when that decides."""
-        mark = f"{self.base}/status/probe/{secrets.token_hex(6)}"
         status: bytes | None = None
         seq: tuple[int, str, float | None] | None = None
         live = False
         async with client:
-            for topic in (self.status_topic, self.seq_topic, mark):
-                await client.subscribe(topic, qos=1)
-            await client.publish(mark, b"probe", qos=1)
-            try:
-                async with asyncio.timeout(PROBE_TIMEOUT_S):
-                    async for message in client.messages:
-                        topic, payload = message.topic.value, _payload(message.payload)
-                        if topic == mark:
-                            break
-                        if topic == self.status_topic:
-                            status = payload
-                        elif topic == self.seq_topic:
-                            seq = parse_seq(payload) or seq
-                            live = live or not message.retain
-            except TimeoutError:  # as a lost broker: the caller retries
-                raise aiomqtt.MqttError(f"the probe's own message on {mark} did not come "
-                                        f"back within {PROBE_TIMEOUT_S:g} s") from None
+            granted = await client.subscribe([(self.status_topic, 1), (self.seq_topic, 1)])
+            marker = await client.subscribe(f"{self.base}/status/probe", qos=1)
+            if _refused(granted) or _refused(marker):
+                return Seen(None, None, checked=False)
+            for _ in range(len(client.messages)):  # the retained ones, all in by now
+                message = await anext(client.messages)
+                topic, payload = message.topic.value, _payload(message.payload)
+                if topic == self.status_topic:
+                    status = payload
+                elif topic == self.seq_topic:
+                    seq = parse_seq(payload) or seq
+                    live = live or not message.retain
             if status == ONLINE and not live and not self._own(seq):
                 status, live = await self._listen(client, status)
         number, gateway, since = seq if seq is not None else (None, "", None)
@@ -166,7 +164,7 @@ class Presence:
     def free(self, seen: Seen) -> bool:
         """Whether the topics are free for this gateway (no live rival in ``seen``); when
         they are, the next birth's number follows the one seen (and this process's own)."""
-        if seen.status == ONLINE and seen.live:
+        if seen.checked and seen.status == ONLINE and seen.live:
             return False
         after = -1 if seen.seq is None else seen.seq
         self._next = max(after, -1 if self.seq is None else self.seq) + 1
@@ -202,6 +200,14 @@ class Presence:
         body = {"seq": self.seq, "gateway": self.ident, "since": round(self._since, 3),
                 "time": round(time.time(), 3)}
         return json.dumps(body, separators=(",", ":")).encode()
+
+
+def _refused(granted: object) -> bool:
+    """Whether a SUBACK refused a topic (MQTT 3.1.1: granted QoS 128; MQTT 5: a reason
+    code of 128 or more)."""
+    codes = granted if isinstance(granted, list | tuple) else [granted]
+    return any(getattr(code, "is_failure", False) is True
+               or (isinstance(code, int) and code >= 128) for code in codes)
 
 
 def _payload(payload: object) -> bytes:

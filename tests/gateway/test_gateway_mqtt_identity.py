@@ -19,6 +19,8 @@ import pytest
 from conftest import wait_until_async
 from fake_machine import FakeMachine
 from gateway_rig import BROKER_USERS, mosquitto
+from paho.mqtt.packettypes import PacketTypes
+from paho.mqtt.reasoncodes import ReasonCode
 
 from benchmarks.faults_hostile import hostile_mqtt, hostile_payloads, nested_4k
 from servobus.errors import GatewayConflict
@@ -252,6 +254,38 @@ def test_a_seq_message_is_read_only_when_it_is_one() -> None:
     for junk in (b"", b"[]", b"null", b'{"seq":-1}', b'{"seq":true}', b'{"seq":"3"}',
                  b'{"seq":1e400}', b"{" * 600, b"\xff", nested_4k()):
         assert parse_seq(junk) is None, junk
+
+
+class RefusingBroker:
+    """An aiomqtt client whose broker refuses every subscription (its ACL)."""
+
+    def __init__(self, refusal: object) -> None:
+        self.refusal = refusal
+        self.messages: list[object] = []
+
+    async def __aenter__(self) -> RefusingBroker:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        return None
+
+    async def subscribe(self, topic: object, qos: int = 0) -> list[object]:
+        return [self.refusal] * (len(topic) if isinstance(topic, list) else 1)
+
+
+@pytest.mark.parametrize("refusal", [128, ReasonCode(PacketTypes.SUBACK, identifier=0x87)],
+                         ids=["MQTT 3.1.1", "MQTT 5"])
+async def test_a_broker_that_refuses_the_probe_leaves_the_check_undone(
+        refusal: object, caplog: pytest.LogCaptureFixture) -> None:
+    """The gateway must not stop serving for want of a safety net: it connects, and says
+    once that it could not look for a rival."""
+    gateway = Running(1883, "acl-cell")
+    broker = RefusingBroker(refusal)
+    gateway.mqtt.client = lambda probe=False: broker  # type: ignore[method-assign]
+    with caplog.at_level("WARNING", logger="servobus.gateway.mqtt"):
+        assert await gateway.mqtt.claim() and await gateway.mqtt.claim()
+    told = [r for r in caplog.records if "refused this gateway's subscription" in r.message]
+    assert len(told) == 1
 
 
 def test_the_hostile_payloads_hold_the_three_of_the_issue() -> None:
