@@ -26,7 +26,7 @@ Decisions (docs/gateway.md "Limits per client", issue 30):
   (BadTooManySubscriptions).
 
 asyncua (2.1) enforces only a server-wide count of subscriptions; the per-session and item
-caps are :class:`LimitedSession`'s, the session caps :func:`check_session_room`'s. The
+caps are :class:`LimitedSession`'s, the session caps :class:`SessionRoom`'s. The
 item counts read asyncua's per-subscription table of items (``_monitored_items``).
 """
 
@@ -64,19 +64,30 @@ CAPABILITIES: dict[int, int] = {
 PeerOf = Callable[[object], str]
 
 
-def check_session_room(sessions: Iterable[InternalSession], name: object,
-                       peer_of: PeerOf) -> None:
-    """ServiceError(BadTooManySessions) when a new session from ``name``'s address (asyncua
-    names a session after its connection's peer) would pass a cap; one warning line."""
-    peer = peer_of(name)
-    count = from_peer = 0
-    for session in sessions:
-        count += 1
-        from_peer += peer_of(session.name) == peer
-    if count >= MAX_SESSIONS or from_peer >= MAX_SESSIONS_PER_PEER:
-        log.warning("OPC UA session from %s refused: %s", peer or "an unknown address",
-                    f"{MAX_SESSIONS} sessions in all" if count >= MAX_SESSIONS else
-                    f"{MAX_SESSIONS_PER_PEER} sessions from this address")
+class SessionRoom:
+    """MaxSessions, in all and per client address; one warning line per spell of
+    refusals (a spell ends when a session is admitted)."""
+
+    def __init__(self) -> None:
+        self.refusing = False
+
+    def check(self, sessions: Iterable[InternalSession], name: object,
+              peer_of: PeerOf) -> None:
+        """ServiceError(BadTooManySessions) when a new session from ``name``'s address
+        (asyncua names a session after its connection's peer) would pass a cap."""
+        peer = peer_of(name)
+        count = from_peer = 0
+        for session in sessions:
+            count += 1
+            from_peer += peer_of(session.name) == peer
+        if count < MAX_SESSIONS and from_peer < MAX_SESSIONS_PER_PEER:
+            self.refusing = False
+            return
+        if not self.refusing:
+            self.refusing = True
+            log.warning("OPC UA sessions refused from %s on: %s", peer or "an unknown address",
+                        f"{MAX_SESSIONS} sessions in all" if count >= MAX_SESSIONS else
+                        f"{MAX_SESSIONS_PER_PEER} sessions from this address")
         raise ServiceError(ua.StatusCodes.BadTooManySessions)
 
 

@@ -48,7 +48,7 @@ from asyncua.server.user_managers import UserManager
 from servobus.errors import ArgumentRangeError
 from servobus.gateway.commands import Command, Commander, Refused
 from servobus.gateway.identity import application_uri, gateway_id
-from servobus.gateway.opcua_limits import LimitedSession, apply_limits, check_session_room
+from servobus.gateway.opcua_limits import LimitedSession, SessionRoom, apply_limits
 from servobus.gateway.opcua_model import SERVOBUS_URI, AxisNodes, build_model
 from servobus.gateway.sampler import Sample
 from servobus.gateway.source import Machine
@@ -141,11 +141,12 @@ class GatewayServer(InternalServer):  # type: ignore[misc]
     def __init__(self, user_manager: UserManager, on_close: SessionGone) -> None:
         super().__init__(user_manager=user_manager)
         self.on_session_close = on_close
+        self.session_room = SessionRoom()
 
     def create_session(self, name: str, user: User | None = None,
                        external: bool = False) -> InternalSession:
         if external:  # MaxSessions, in all and per client address
-            check_session_room(self._external_sessions.values(), name, peer_host)
+            self.session_room.check(self._external_sessions.values(), name, peer_host)
         session = GatewaySession(self, self.aspace, self.subscription_service, name,
                                  user=User(role=UserRole.Anonymous) if user is None else user,
                                  external=external)

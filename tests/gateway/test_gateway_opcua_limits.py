@@ -117,11 +117,19 @@ async def test_sessions_from_one_address_are_capped_and_another_is_served(
     share of sessions and subscriptions, no more; a client from another address is
     served."""
     monkeypatch.setattr(opcua_limits, "MAX_SESSIONS_PER_PEER", 3)
-    result = await session_flood(served.endpoint, sessions=5, subscriptions=12,
-                                 source="127.0.0.2", other="127.0.0.3")
+    lines = Lines()
+    logger = logging.getLogger("servobus.gateway.opcua_limits")
+    logger.addHandler(lines)
+    try:
+        result = await session_flood(served.endpoint, sessions=6, subscriptions=12,
+                                     source="127.0.0.2", other="127.0.0.3")
+    finally:
+        logger.removeHandler(lines)
     assert result["opened"] == 3 and result["subscriptions"] == 30, result
-    assert result["refused"] == {"BadTooManySessions": 2, "BadTooManySubscriptions": 6}
+    assert result["refused"] == {"BadTooManySessions": 3, "BadTooManySubscriptions": 6}
     assert result["serving"], result
+    assert lines.lines == ["OPC UA sessions refused from 127.0.0.2 on: 3 sessions from this "
+                           "address"]  # one line for the spell, not one per refusal
     await wait_until_async(lambda: served.subscriptions() == 0, timeout=10,
                            what="the flood's subscriptions gone with its sessions")
 
