@@ -4,6 +4,7 @@ Topics (``<m>`` the machine's name, ``<a>`` an axis's name)::
 
     servobus/<m>/status        "online" / "offline" (retained; "offline" is the last will)
     servobus/<m>/link          JSON when a link goes down or comes back (QoS 1, not retained)
+    servobus/<m>/status/seq    the birth sequence and heartbeat (servobus.gateway.mqtt_presence)
     servobus/<m>/<a>/state     JSON every 1/rate s: position, speed, current, unit, moving,
                                enabled, in_position, alarm (code), alarm_text, ok, error,
                                online, last_good, power_lost, power_lost_reason,
@@ -27,6 +28,13 @@ retained (one topic serves every link of the machine, and a retained message wou
 only the last link's; the state messages carry each axis's ``online`` for a late
 subscriber). While the broker is away they wait, at most :data:`MAX_PENDING_LINK_EVENTS`
 (the oldest go first), and go out with their own ``time`` when it is back.
+``servobus`` is the default prefix (``--mqtt-prefix``).
+
+Identity (issue 30, servobus.gateway.mqtt_presence): one client id per gateway,
+``servobus-<gateway id>``; before each connection a probe looks for a live rival on the same
+topics and the gateway does not take them over from one (at start it refuses to start).
+Error boundary: each command is answered, an unexpected error as BadInternalError with one
+log line; the command loop and the gateway go on.
 """
 
 from __future__ import annotations
@@ -36,7 +44,6 @@ import contextlib
 import json
 import logging
 import math
-import secrets
 import ssl
 from collections import deque
 from dataclasses import dataclass
@@ -49,8 +56,10 @@ from paho.mqtt.subscribeoptions import SubscribeOptions
 from servobus import bounded_json
 from servobus.errors import ArgumentRangeError, JsonRefused
 from servobus.gateway.commands import Commander, Refused
+from servobus.gateway.identity import DEFAULT_PREFIX, check_prefix, gateway_id
 from servobus.gateway.link_events import LinkEvent
 from servobus.gateway.mqtt_gate import DEFAULT_MAX_AGE_S, CommandGate
+from servobus.gateway.mqtt_presence import Presence
 from servobus.gateway.sampler import Sample, Sampler
 from servobus.gateway.source import Machine
 
@@ -74,7 +83,8 @@ class MqttOptions:
     key: Path | None = None
     insecure: bool = False
     max_age_s: float = DEFAULT_MAX_AGE_S
-    prefix: str = "servobus"
+    prefix: str = DEFAULT_PREFIX
+    gateway_id: str | None = None  # None: the machine's name (servobus.gateway.identity)
 
 
 @dataclass(frozen=True)
@@ -156,7 +166,9 @@ class MqttGateway:
             raise ArgumentRangeError("--mqtt-commands needs the broker's authentication: "
                                      "give --mqtt-user and a password")
         self.gate = CommandGate(options.max_age_s)
-        self.base = f"{options.prefix}/{machine.name}"
+        self.base = f"{check_prefix(options.prefix)}/{machine.name}"
+        self.presence = Presence(self.base, gateway_id(machine.name, options.gateway_id))
+        self._rival_told = self._blind_told = False  # one log line a spell
         self.published = 0
         self.connected = asyncio.Event()
         self._alarm: dict[str, tuple[int, bool]] = {}
@@ -170,30 +182,22 @@ class MqttGateway:
         self._link_wake.set()
 
     def _tls(self) -> ssl.SSLContext | None:
-        o = self.options
-        if not (self.broker.tls or o.ca or o.cert):
-            return None
-        ctx = ssl.create_default_context(cafile=str(o.ca) if o.ca else None)
-        if o.cert:
-            ctx.load_cert_chain(str(o.cert), str(o.key) if o.key else None)
-        if o.insecure:
-            ctx.check_hostname = False
-            ctx.verify_mode = ssl.CERT_NONE
-        return ctx
+        return tls_context(self.options, self.broker)
 
-    def client(self) -> aiomqtt.Client:
-        return aiomqtt.Client(
-            self.broker.host, self.broker.port, username=self.username, password=self.password,
-            identifier=f"servobus-{self.machine.name}-{secrets.token_hex(4)}",
-            will=aiomqtt.Will(f"{self.base}/status", b"offline", qos=1, retain=True),
-            tls_context=self._tls(), timeout=5.0, keepalive=10,
-            protocol=(aiomqtt.ProtocolVersion.V5 if self.options.commands
-                      else aiomqtt.ProtocolVersion.V311))
+    def client(self, probe: bool = False) -> aiomqtt.Client:
+        """The gateway's connection (its client id, its will), or a probe's."""
+        p = self.presence
+        return broker_client(self.options, p.probe_id() if probe else p.client_id,
+                             None if probe else p.will())
 
     async def run(self) -> None:
-        """Publish until cancelled; reconnects after a lost broker."""
+        """Publish until cancelled; reconnects after a lost broker. GatewayConflict when a
+        live gateway serves the topics before this one ever did."""
         while True:
             try:
+                if not await self.claim():
+                    await asyncio.sleep(RECONNECT_S)
+                    continue
                 async with self.client() as client:
                     await self._session(client)
             except aiomqtt.MqttError as exc:
@@ -203,7 +207,7 @@ class MqttGateway:
                 await asyncio.sleep(RECONNECT_S)
 
     async def _session(self, client: aiomqtt.Client) -> None:
-        await client.publish(f"{self.base}/status", b"online", qos=1, retain=True)
+        await self.presence.birth(client)
         self._alarm.clear()
         log.info("MQTT: publishing %s/... to %s:%s%s", self.base, self.broker.host,
                  self.broker.port, " (commands on)" if self.options.commands else "")
@@ -215,6 +219,7 @@ class MqttGateway:
             await client.subscribe(f"{self.base}/+/cmd", options=SubscribeOptions(
                 qos=1, retainAsPublished=True))
             tasks.append(asyncio.create_task(self._command_loop(client)))
+        tasks.append(asyncio.create_task(self.presence.beat(client)))
         self.connected.set()
         try:
             done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_EXCEPTION)
@@ -300,7 +305,7 @@ class MqttGateway:
             axis = parts[2]
             payload = message.payload if isinstance(message.payload, bytes) else \
                 str(message.payload).encode()
-            await self._command(client, axis, payload, bool(message.retain))
+            await self._answer(client, axis, payload, bool(message.retain))
 
     async def _command(self, client: aiomqtt.Client, axis: str, payload: bytes,
                        retained: bool) -> None:
@@ -318,6 +323,84 @@ class MqttGateway:
                             exc.code, exc.message)
             reply = {"id": ident, "ok": False, "code": exc.code, "error": exc.message}
         await client.publish(f"{self.base}/{axis}/reply", json.dumps(reply).encode(), qos=1)
+
+    async def _answer(self, client: aiomqtt.Client, axis: str, payload: bytes,
+                      retained: bool) -> None:
+        """One command in its own error boundary: an unexpected error is answered
+        BadInternalError with one log line, and the next command is read. A lost broker
+        (MqttError) still ends the session, to reconnect."""
+        try:
+            await self._command(client, axis, payload, retained)
+        except (aiomqtt.MqttError, asyncio.CancelledError):
+            raise
+        except Exception as exc:
+            log.error("mqtt: command on %s/%s/cmd failed unexpectedly: %s: %s", self.base,
+                      axis, type(exc).__name__, exc)
+            reply = {"id": _peek_id(payload), "ok": False, "code": "BadInternalError",
+                     "error": f"internal error ({type(exc).__name__}), in the gateway's log"}
+            await client.publish(f"{self.base}/{axis}/reply", json.dumps(reply).encode(),
+                                 qos=1)
+
+    async def claim(self) -> bool:
+        """Probe the broker before taking the client id: True when the topics are free
+        (the next birth's number taken); False, one log line a spell, while a live gateway
+        serves them after this one did; GatewayConflict when this one never served them."""
+        seen = await self.presence.probe(self.client(probe=True))
+        if not seen.checked and not self._blind_told:
+            log.warning("MQTT: the broker refused this gateway's subscription to %s/status/#: "
+                        "connecting without looking for a rival gateway on these topics",
+                        self.base)
+        self._blind_told = not seen.checked
+        if self.presence.free(seen):
+            self._rival_told = False
+            return True
+        conflict = self.presence.conflict(seen, f"{self.broker.host}:{self.broker.port}")
+        if self.presence.births == 0:
+            raise conflict
+        if not self._rival_told:
+            self._rival_told = True
+            log.error("%s; checking again every %g s", conflict, RECONNECT_S)
+        return False
+
+
+def tls_context(o: MqttOptions, broker: Broker) -> ssl.SSLContext | None:
+    if not (broker.tls or o.ca or o.cert):
+        return None
+    ctx = ssl.create_default_context(cafile=str(o.ca) if o.ca else None)
+    if o.cert:
+        ctx.load_cert_chain(str(o.cert), str(o.key) if o.key else None)
+    if o.insecure:
+        ctx.check_hostname = False
+        ctx.verify_mode = ssl.CERT_NONE
+    return ctx
+
+
+def broker_client(options: MqttOptions, identifier: str,
+                  will: aiomqtt.Will | None) -> aiomqtt.Client:
+    """A connection to the options' broker with the gateway's login."""
+    broker = parse_broker(options.url)
+    return aiomqtt.Client(
+        broker.host, broker.port, username=options.username or broker.username,
+        password=options.password or broker.password, identifier=identifier, will=will,
+        tls_context=tls_context(options, broker), timeout=5.0, keepalive=10,
+        protocol=(aiomqtt.ProtocolVersion.V5 if options.commands
+                  else aiomqtt.ProtocolVersion.V311))
+
+
+async def check_topics_free(options: MqttOptions, machine_name: str) -> None:
+    """Before the machine is opened: GatewayConflict when a live gateway serves its topics.
+    A broker that cannot be reached now is no refusal (the gateway checks again each time
+    it connects)."""
+    check_topic_name("machine", machine_name)
+    base = f"{check_prefix(options.prefix)}/{machine_name}"
+    presence = Presence(base, gateway_id(machine_name, options.gateway_id))
+    try:
+        seen = await presence.probe(broker_client(options, presence.probe_id(), None))
+    except aiomqtt.MqttError:
+        return
+    if not presence.free(seen):
+        broker = parse_broker(options.url)
+        raise presence.conflict(seen, f"{broker.host}:{broker.port}")
 
 
 def _peek_id(payload: bytes) -> str | None:

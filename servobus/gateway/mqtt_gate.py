@@ -108,7 +108,9 @@ class CommandGate:
             if len(self._seen) >= MAX_IDS:
                 raise Refused("BadTooManyOperations", "too many commands: try again later")
             self._seen[ident] = now
-        command = Command(axis, name, None if value is None else float(value),
+        # a value on a command that takes none is ignored: a stop runs whatever it carries
+        number = float(value) if AXIS_COMMANDS[name] and value is not None else None
+        command = Command(axis, name, number,
                           None if ttl is None else float(ttl))
         return Accepted(command, ident, "mqtt" if client is None else f"mqtt:{client}")
 

@@ -56,7 +56,9 @@ from asyncua.server.user_managers import UserManager
 
 from servobus.errors import ArgumentRangeError
 from servobus.gateway.commands import Command, Commander, Refused
+from servobus.gateway.identity import application_uri, gateway_id
 from servobus.gateway.link_events import LinkEvent
+from servobus.gateway.opcua_limits import LimitedSession, SessionRoom, apply_limits
 from servobus.gateway.opcua_model import SERVOBUS_URI, AxisNodes, build_model
 from servobus.gateway.sampler import Sample
 from servobus.gateway.source import Machine
@@ -101,8 +103,9 @@ class GatewayRules:
 SessionGone = Callable[[str], Awaitable[None]]
 
 
-class GatewaySession(InternalSession):  # type: ignore[misc]
-    """A client's session: the owner of the leases its SetSpeed calls hold."""
+class GatewaySession(LimitedSession):
+    """A client's session: the owner of the leases its SetSpeed calls hold, with the caps
+    on its subscriptions and monitored items (servobus.gateway.opcua_limits)."""
 
     on_close: SessionGone | None = None
     _owner: str | None = None
@@ -151,9 +154,12 @@ class GatewayServer(InternalServer):  # type: ignore[misc]
     def __init__(self, user_manager: UserManager, on_close: SessionGone) -> None:
         super().__init__(user_manager=user_manager)
         self.on_session_close = on_close
+        self.session_room = SessionRoom()
 
     def create_session(self, name: str, user: User | None = None,
                        external: bool = False) -> InternalSession:
+        if external:  # MaxSessions, in all and per client address
+            self.session_room.check(self._external_sessions.values(), name, peer_host)
         session = GatewaySession(self, self.aspace, self.subscription_service, name,
                                  user=User(role=UserRole.Anonymous) if user is None else user,
                                  external=external)
@@ -227,6 +233,7 @@ class OpcUaOptions:
     key: Path | None = None
     cert_dir: Path | None = None
     cert_stem: str = "servobus"
+    gateway_id: str | None = None  # None: the machine's name (servobus.gateway.identity)
 
 
 def _status(code: str) -> ua.StatusCode:
@@ -243,6 +250,8 @@ class OpcUaGateway:
         self.options = options
         self.source = source
         self.host, self.port = parse_endpoint(options.endpoint)
+        self.gateway_id = gateway_id(machine.name, options.gateway_id)
+        self.application_uri = application_uri(self.gateway_id)
         self.loopback = is_loopback(self.host)
         self.server = Server(iserver=GatewayServer(FileUsers(options.users or Users()),
                                                    self._session_closed))
@@ -272,13 +281,15 @@ class OpcUaGateway:
         s.iserver.max_pending_activation_seconds = PENDING_ACTIVATION_S
         s.iserver.max_subscriptions = MAX_SUBSCRIPTIONS
         s.iserver.max_monitored_item_queue_size = MAX_ITEM_QUEUE
+        await apply_limits(s)
         s.set_endpoint(f"opc.tcp://{self.host}:{self.port}")
         s.set_server_name(f"servobus gateway {self.machine.name}")
-        await s.set_application_uri(f"{SERVOBUS_URI}:{self.machine.name}")
+        await s.set_application_uri(self.application_uri)
         s.set_identity_tokens([ua.AnonymousIdentityToken, ua.UserNameIdentityToken])
         policies = await self._security()
         s.set_security_policy(policies, permission_ruleset=GatewayRules())
-        self.device, self.axes = await build_model(s, self.machine, self.source, self._call)
+        self.device, self.axes = await build_model(s, self.machine, self.source, self._call,
+                                         self.application_uri)
         waiting = ua.DataValue(StatusCode=ua.StatusCode(ua.StatusCodes.BadWaitingForInitialData))
         for nodes in self.axes.values():  # until the first sample of the axis
             for node in (*nodes.variables.values(), *nodes.health.values()):
@@ -304,7 +315,7 @@ class OpcUaGateway:
             cert = folder / f"{o.cert_stem}.opcua-cert.der"
             key = folder / f"{o.cert_stem}.opcua-key.pem"
             await setup_self_signed_certificate(
-                key, cert, f"{SERVOBUS_URI}:{self.machine.name}", socket.gethostname(),
+                key, cert, self.application_uri, socket.gethostname(),
                 [ExtendedKeyUsageOID.SERVER_AUTH], {"commonName": "servobus gateway"})
             key.chmod(0o600)
         await self.server.load_certificate(str(cert))
@@ -347,6 +358,17 @@ class OpcUaGateway:
     # ---------------------------------------------------------------- methods
     async def _call(self, axis: str, command: str, arguments: tuple[float, ...]
                     ) -> ua.StatusCode:
+        """A method call in its own error boundary: an unexpected error is BadInternalError
+        and one log line; the server goes on."""
+        try:
+            return await self._run_call(axis, command, arguments)
+        except Exception as exc:
+            log.error("opcua: %s %s on axis %r failed unexpectedly: %s: %s", command,
+                      arguments, axis, type(exc).__name__, exc)
+            return ua.StatusCode(ua.StatusCodes.BadInternalError)
+
+    async def _run_call(self, axis: str, command: str, arguments: tuple[float, ...]
+                        ) -> ua.StatusCode:
         session = _caller.get()
         user = session.user if session is not None else None
         name = user.name if user is not None and user.role == UserRole.User else None
