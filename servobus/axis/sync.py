@@ -36,8 +36,8 @@ from servobus.errors import ClosedError, ConnectionLost
 if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis, AxisTraceHook
     from servobus.axis.capture import Capture
+    from servobus.axis.types import AxisStatus, Family, ParamInfo, StreamProfile
     from servobus.axis.virtual_io import VirtualIo
-    from servobus.families.base import AxisStatus, Family, ParamInfo, StreamProfile
 
 T = TypeVar("T")
 P = ParamSpec("P")

@@ -29,7 +29,7 @@ from servobus.errors import DriveAlarm, DriveTimeout, MoveFailed
 
 if TYPE_CHECKING:
     from servobus.axis.sync import Axis
-    from servobus.families.base import AxisStatus
+    from servobus.axis.types import AxisStatus
 
 #: How long a motor must stand still, not in position, before a waited move counts as
 #: stopped off its target (far longer than the instant between a send and the start).

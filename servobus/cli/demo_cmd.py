@@ -36,7 +36,7 @@ from servobus.errors import DriveAlarm, DriveTimeout
 
 if TYPE_CHECKING:
     from servobus.axis.sync import Axis
-    from servobus.families.base import AxisStatus
+    from servobus.axis.types import AxisStatus
     from servobus.machine import Machine, MachineAxis
 
 POLL_S = 0.1

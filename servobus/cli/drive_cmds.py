@@ -48,7 +48,7 @@ from servobus.errors import ArgumentRangeError, DriveAlarm, DriveTimeout, NotSup
 
 if TYPE_CHECKING:
     from servobus.axis.sync import Axis
-    from servobus.families.base import AxisStatus
+    from servobus.axis.types import AxisStatus
 
     _TargetType: TypeAlias = click.ParamType[tuple[float, str]]
 else:

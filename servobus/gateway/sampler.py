@@ -32,8 +32,8 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from servobus.axis.types import AxisStatus
 from servobus.errors import NotSupported
-from servobus.families.base import AxisStatus
 from servobus.gateway.source import Machine, MachineAxis
 
 log = logging.getLogger(__name__)

@@ -13,9 +13,9 @@ from starlette.requests import Request
 from starlette.responses import JSONResponse, Response
 from starlette.routing import Route
 
+from servobus.axis.types import ParamInfo, Storage
 from servobus.cli import params_file as PF
 from servobus.errors import ArgumentRangeError
-from servobus.families.base import ParamInfo, Storage
 from servobus.gui import tuning
 from servobus.gui.fleet import AxisHandle
 from servobus.gui.http_util import api, body, handle, integer, number, ok, state

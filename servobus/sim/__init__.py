@@ -1,6 +1,6 @@
 """Virtual drives: one protocol-free core (``VirtualDrive``) and one server per protocol."""
 
 from servobus.sim.dmm.drive import VirtualDrive
-from servobus.sim.eeprom import EepromStore
+from servobus.sim.dmm.eeprom import EepromStore
 
 __all__ = ["EepromStore", "VirtualDrive"]

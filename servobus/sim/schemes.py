@@ -9,7 +9,7 @@ the protocol's factory id), ``fast=1`` (no wire pacing), ``state=FILE`` (EEPROM 
 JSON file), ``model=NAME`` (motor/drive model).
 
 Every ``sim://`` axis reads its virtual drives' 4 kHz trace with ``trace_buffer()``
-(servobus.sim.capture), whatever the protocol; the axes of the DMM families reach their
+(servobus.sim.core.capture), whatever the protocol; the axes of the DMM families reach their
 drives' JP3 inputs and outputs with ``virtual_io()`` (servobus.sim.dmm.virtual_io).
 """
 
@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 from servobus.axis import registry
 from servobus.axis.url import DriveUrl
 from servobus.errors import ArgumentRangeError
-from servobus.sim import capture
+from servobus.sim.core import capture
 from servobus.sim.dmm import virtual_io
 from servobus.sim.dmm.drive import VirtualDrive
 

@@ -177,7 +177,7 @@ def test_every_protocol_package_has_the_same_module_names(protocol: str) -> None
 
 def defines_an_axis(path: Path) -> list[str]:
     """Classes in ``path`` deriving AsyncAxis or one of its servobus subclasses (by name:
-    ``...Axis`` bases, CommandAxis, RegisterAxis)."""
+    ``...Axis`` bases, CommandAxis, YzaimAxis)."""
     found: list[str] = []
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
         if isinstance(node, ast.ClassDef):

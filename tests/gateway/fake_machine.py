@@ -6,8 +6,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from servobus.axis.base import AsyncAxis
+from servobus.axis.types import AxisStatus, Family
 from servobus.errors import ConnectionLost, LimitError
-from servobus.families.base import AxisStatus, Family
 
 
 class FakeAxis:

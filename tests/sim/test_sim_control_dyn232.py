@@ -20,8 +20,8 @@ from subprocess_rig import read_line
 
 from servobus.families.dmm.registers import ALARM_SHIFT, StatusBits
 from servobus.protocols.dyn232 import codec as c
-from servobus.sim.control import ControlError
 from servobus.sim.control_client import ControlClient
+from servobus.sim.dmm.control import ControlError
 
 pytestmark = [pytest.mark.timeout(90), pytest.mark.slow]
 H, GR = c.HostFunction, c.GeneralReadSelector

@@ -28,7 +28,7 @@ from servobus.cli.sim_control import control_option, start_control
 from servobus.families.dmm import units as U
 from servobus.protocols.dyn232.codec import FACTORY_ID
 from servobus.protocols.dyn232.server import run_server
-from servobus.sim.fleet import make_drives, parse_ids
+from servobus.sim.dmm.fleet import make_drives, parse_drive_ids
 from servobus.sim.server_limits import log_to_stderr
 
 
@@ -48,7 +48,7 @@ def sim_dyn2_cmd(listen: str | None, ids: str | None, pty: bool, fast: bool, sta
                  control: tuple[str, int] | None) -> None:
     """Virtual DYN2/DC2 drives sharing one RS485 line (DYN232M protocol)."""
     log_to_stderr()
-    drive_ids = option_value("--ids", parse_ids, ids) if ids is not None else (FACTORY_ID,)
+    drive_ids = option_value("--ids", parse_drive_ids, ids) if ids is not None else (FACTORY_ID,)
     endpoint, tap_endpoint = line_endpoints(listen, pty, tap)
     drives = make_drives(drive_ids, state=state, model=model)
     banner = sim_banner("dyn232", len(drives), "drive", model, "ids",

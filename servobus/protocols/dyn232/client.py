@@ -59,8 +59,8 @@ from typing import Generic, TypeVar, cast
 
 from servobus.axis import checks
 from servobus.axis.base import AxisTraceHook
-from servobus.axis.command_axis import Request
 from servobus.errors import ArgumentRangeError, ChecksumError, ConnectionLost
+from servobus.families.dmm.command_axis import Request
 from servobus.families.dmm.registers import DriveConfig, DriveStatus
 from servobus.link.eeprom_guard import EepromGuard
 from servobus.link.late_replies import DEFAULT_LATE_REPLY_S, LateReplies

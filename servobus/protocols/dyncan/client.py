@@ -48,7 +48,6 @@ from collections.abc import Callable, Iterable, Mapping
 from typing import Any, TypeVar, cast
 
 from servobus.axis import checks
-from servobus.axis.command_axis import Request
 from servobus.errors import (
     ArgumentRangeError,
     DriveAlarm,
@@ -56,6 +55,7 @@ from servobus.errors import (
     DriveTimeout,
     ServobusError,
 )
+from servobus.families.dmm.command_axis import Request
 from servobus.link.can import CanClient
 from servobus.link.eeprom_guard import EepromGuard
 from servobus.link.late_replies import DEFAULT_LATE_REPLY_S

@@ -23,7 +23,7 @@ from servobus.protocols.enip.axis import DRIVE_IDS, EnipAxis, with_last_octet
 from servobus.protocols.enip.client import AsyncEnipClient
 from servobus.protocols.enip.opener import OPTIONS, axis_options
 from servobus.protocols.enip.server import start_fleet
-from servobus.sim.fleet import parse_ids
+from servobus.sim.core.ids import parse_ids
 
 if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis

@@ -51,6 +51,7 @@ from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, cast
 
 from servobus.axis import checks
+from servobus.axis.types import AxisStatus
 from servobus.errors import (
     ArgumentRangeError,
     ConnectionLost,
@@ -59,7 +60,6 @@ from servobus.errors import (
     FramingError,
     ProtocolError,
 )
-from servobus.families.base import AxisStatus
 from servobus.families.dyn5 import params as dyn5
 from servobus.families.dyn5.family import axis_status
 from servobus.protocols.enip.clock import ClockThread, Tick

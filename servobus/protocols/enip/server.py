@@ -71,8 +71,9 @@ from servobus.protocols.enip.codec.encap import (
 from servobus.protocols.enip.connections import IoConnection
 from servobus.protocols.enip.device import Dyn5Adapter, Origin, Outcome
 from servobus.protocols.enip.production import Producer, ProductionWheel
+from servobus.sim.core.state_file import StateKind
 from servobus.sim.dmm.drive import VirtualDrive
-from servobus.sim.eeprom import EepromStore, StateKind, check_drive_record
+from servobus.sim.dmm.eeprom import EepromStore, check_drive_record
 from servobus.sim.realtime import RealtimeClock
 from servobus.sim.server_limits import MAX_OUTPUT_BYTES, WRITE_HIGH_WATER
 

@@ -16,7 +16,7 @@ from servobus.protocols.dyn232.device import Dyn232Line, wrap28
 from servobus.protocols.dyn232.inprocess import open_sim_stream, open_sim_url, parse_sim_url
 from servobus.protocols.dyn232.pacing import BYTE_TIME_S, WireClock
 from servobus.sim.dmm.drive import VirtualDrive
-from servobus.sim.eeprom import EepromStore
+from servobus.sim.dmm.eeprom import EepromStore
 
 H, D, GR = c.HostFunction, c.DriveFunction, c.GeneralReadSelector
 

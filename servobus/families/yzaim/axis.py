@@ -1,7 +1,7 @@
-"""RegisterAxis: the AsyncAxis of a YZ-AIM register-map motor, whatever wire reaches it.
+"""YzaimAxis: the AsyncAxis of a YZ-AIM register-map motor, whatever wire reaches it.
 
-A protocol supplies only the register primitives (:meth:`RegisterAxis._read`,
-:meth:`RegisterAxis._read_words`, :meth:`RegisterAxis._write`) and what its wire does its
+A protocol supplies only the register primitives (:meth:`YzaimAxis._read`,
+:meth:`YzaimAxis._read_words`, :meth:`YzaimAxis._write`) and what its wire does its
 own way (the emergency stop, the position clear); the mapping of the Axis API onto the
 YZ-AIM registers lives here once (YZ-AIM manual sections; docs/easycan.md, docs/modbus.md):
 
@@ -58,6 +58,7 @@ from typing import ClassVar, TypeVar
 from servobus.axis import checks
 from servobus.axis.base import check_int
 from servobus.axis.client_axis import ClientAxis, LinkClient
+from servobus.axis.types import AxisStatus, Family, ParamInfo, StreamProfile
 from servobus.errors import (
     ArgumentRangeError,
     DriveError,
@@ -65,7 +66,6 @@ from servobus.errors import (
     MotionRefused,
     ProtocolError,
 )
-from servobus.families.base import AxisStatus, Family, ParamInfo, StreamProfile
 from servobus.families.yzaim import registers as Y
 from servobus.families.yzaim.family import YZAIM, axis_status
 
@@ -94,7 +94,7 @@ def _reachable(names: tuple[str, ...]) -> dict[str, ParamInfo]:
     return {p.name: p for p in YZAIM.params if p.name in reach}
 
 
-class RegisterAxis(ClientAxis[C]):
+class YzaimAxis(ClientAxis[C]):
     """One YZ-AIM motor; subclasses supply the register primitives of their wire."""
 
     address_word = "motor"

@@ -1,25 +1,13 @@
-"""EEPROM of a virtual drive: parameters, config, id, per-item write counters.
+"""The state file of the virtual drives: their EEPROM records, kept across restarts.
 
-Survives ``VirtualDrive.reset()``; with a path it is saved as JSON so it survives a restart
-of the simulator (``servobus sim ... --state FILE``). Several drives may share one file:
-each drive keeps its own record keyed by the id it had at power-on (its serial number).
-
-Wear (manual 5.1: 1,000,000 guaranteed write cycles). Decision: writes are counted per item
-(each parameter, ``config``, ``drive_id``, ``origin``); past ``EEPROM_CYCLE_LIMIT`` writes an
-item's cell is worn out: further writes are still counted but no longer stick, so the value
-read back after the next power cycle is the last one written before wear-out (the drive
-keeps running on the value in RAM). :meth:`EepromStore.worn` reports it.
-
-The state file (:class:`StateFile`), decisions:
+Every family's virtual drive (the DMM drives, :mod:`servobus.sim.dmm.eeprom`; the YZ-AIM
+motors, :mod:`servobus.sim.yzaim.store`) keeps its EEPROM in one machinery: a
+:class:`StateKind` names what a file holds and checks one record; a file is opened as one
+kind per process (a DMM and a YZ-AIM simulator cannot share one file). Decisions:
 
 * It is checked whole at start-up and the simulator refuses to start on anything it cannot
   serve faithfully, with one line naming the file and the problem (:class:`StateFileError`);
-  the file is never rewritten then. Valid: a JSON object mapping power-on ids ("0".."63") to
-  records ``{"drive_id": 0..63, "params": {name: value}, "config": 0..0x3F, "origin":
-  0..65535, "writes": {item: count >= 0}}``; ``drive_id`` is required, the rest optional
-  (defaults); every parameter must be a known EEPROM parameter inside its range in
-  :mod:`servobus.families.dmm.params`; values are integers (not booleans, not floats); no
-  other keys.
+  the file is never rewritten then. What a valid record is, is the kind's.
 * A missing file is created (``{}``) at start-up, which also proves the directory writable.
 * One process at a time: the file is locked (``fcntl.flock``, exclusive, non-blocking; not
   on Windows); a second simulator on the same file refuses to start. Within one process,
@@ -30,9 +18,6 @@ The state file (:class:`StateFile`), decisions:
   survives the simulator being killed, not a power cut of the host.
 * A write that fails later (disk full, directory removed) logs one line; the drive keeps
   running on the values in RAM and the next write tries again.
-* The same machinery keeps the YZ-AIM motors' EEPROM (:mod:`servobus.sim.yzaim.store`): a
-  :class:`StateKind` names what a file holds and checks one record; a file is opened as one
-  kind per process (a DMM and a YZ-AIM simulator cannot share one file).
 * A file nested too deeply to be a state file (JSON parsing would exhaust the recursion limit)
   is refused with one line like any other invalid file.
 """
@@ -50,20 +35,13 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from servobus.errors import ServobusError
-from servobus.families.dmm import params as P
-from servobus.families.dmm.registers import CONFIG_DEFINED_MASK
-from servobus.families.dmm.units import COUNTS_PER_REV
-from servobus.families.dmm.vocabulary import MAX_DRIVE_ID
 
 try:
     import fcntl
 except ImportError:  # pragma: no cover - Windows: the state file is not locked there
     fcntl = None  # type: ignore[assignment]
 
-EEPROM_CYCLE_LIMIT = 1_000_000
 MAX_STATE_BYTES = 1 << 20  # 64 records are a few KiB; anything this large is not a state file
-_FIELDS = frozenset({"drive_id", "params", "config", "origin", "writes"})
-_ITEMS = frozenset({*P.BY_NAME, "config", "drive_id", "origin"})  # what write counters count
 _LOCK_ATTEMPTS = 20  # the file may be replaced between open and lock by its owner's write
 
 logger = logging.getLogger("servobus.sim")
@@ -89,9 +67,8 @@ class StateFile:
     """One validated, locked state file shared by the stores of one process."""
 
     @classmethod
-    def shared(cls, path: str | Path, kind: StateKind | None = None) -> StateFile:
+    def shared(cls, path: str | Path, kind: StateKind) -> StateFile:
         """The process's one StateFile for ``path`` (opened, checked and locked on first use)."""
-        kind = kind or DMM_STATE
         key = os.path.realpath(path)
         found = _OPEN.get(key)
         if found is None:
@@ -102,9 +79,9 @@ class StateFile:
                         f"use another file for {kind.holds}")
         return found
 
-    def __init__(self, path: Path, kind: StateKind | None = None) -> None:
+    def __init__(self, path: Path, kind: StateKind) -> None:
         self.path = path
-        self.kind = kind or DMM_STATE
+        self.kind = kind
         self.tmp = path.with_name(path.name + ".tmp")
         self.records: dict[str, dict[str, Any]] = {}
         self._fd = [-1]  # the locked descriptor, in a box the finalizer can see
@@ -258,10 +235,8 @@ def _read_all(fd: int) -> bytes:
 
 
 # ---------------------------------------------------------------- validation
-def parse_state(raw: bytes, name: str, kind: StateKind | None = None
-                ) -> dict[str, dict[str, Any]]:
+def parse_state(raw: bytes, name: str, kind: StateKind) -> dict[str, dict[str, Any]]:
     """The records of a state file's bytes; StateFileError (one line) if anything is off."""
-    kind = kind or DMM_STATE
 
     def fail(problem: str) -> StateFileError:
         return StateFileError(f"state file {name}: {problem} - fix or remove it; it was not "
@@ -315,121 +290,3 @@ def checked_int(value: object, what: str, low: int, high: int) -> int:
     if not low <= value <= high:
         raise ValueError(f"{what} {value} is outside {low}..{high}")
     return value
-
-
-def check_record(key: str, rec: object) -> dict[str, Any]:
-    """One record, normalised (every field present); ValueError names the first problem."""
-    if not (key.isdigit() and key == str(int(key)) and int(key) <= MAX_DRIVE_ID):
-        raise ValueError(f"the key must be a power-on drive id 0..{MAX_DRIVE_ID}")
-    return check_drive_record(rec)
-
-
-def check_drive_record(rec: object) -> dict[str, Any]:
-    """One record's fields (whatever its key), normalised; ValueError names the problem."""
-    if not isinstance(rec, dict):
-        raise ValueError(f"must be an object, got {describe(rec)}")
-    unknown = sorted(set(rec) - _FIELDS)
-    if unknown:
-        raise ValueError(f"unknown field {unknown[0]!r}")
-    if "drive_id" not in rec:
-        raise ValueError("has no drive_id")
-    out: dict[str, Any] = {
-        "drive_id": checked_int(rec["drive_id"], "drive_id", 0, MAX_DRIVE_ID),
-        "config": checked_int(rec.get("config", 0), "config", 0, CONFIG_DEFINED_MASK),
-        "origin": checked_int(rec.get("origin", 0), "origin", 0, COUNTS_PER_REV - 1),
-    }
-    params = rec.get("params", {})
-    if not isinstance(params, dict):
-        raise ValueError(f"params must be an object, got {describe(params)}")
-    checked = P.defaults()
-    for name, value in params.items():
-        spec = P.BY_NAME.get(name)
-        if spec is None or spec.storage is not P.Storage.EEPROM:
-            raise ValueError(f"{name!r} is not an EEPROM parameter")
-        checked[name] = checked_int(value, name, spec.minimum, spec.maximum)
-    out["params"] = checked
-    writes = rec.get("writes", {})
-    if not isinstance(writes, dict):
-        raise ValueError(f"writes must be an object, got {describe(writes)}")
-    for item, count in writes.items():
-        if item not in _ITEMS:
-            raise ValueError(f"writes counts an unknown item {item!r}")
-        checked_int(count, f"writes[{item!r}]", 0, 1 << 62)
-    out["writes"] = dict(writes)
-    return out
-
-
-DMM_STATE = StateKind("drive records", check_record)
-
-
-# ---------------------------------------------------------------- the store
-class EepromStore:
-    def __init__(self, path: str | Path | None = None, key: str = "0",
-                 kind: StateKind | None = None) -> None:
-        self.path = Path(path) if path is not None else None
-        self.key = key
-        self.params: dict[str, int] = P.defaults()
-        self.config = 0
-        self.drive_id = 0
-        self.origin = 0  # stored absolute zero: encoder angle within one revolution (counts)
-        self.writes: dict[str, int] = {}
-        self._initialised = False
-        self._file = StateFile.shared(self.path, kind) if self.path is not None else None
-        if self._file is not None:
-            self._load(self._file)
-
-    def setdefault_drive(self, drive_id: int) -> None:
-        """Factory id for a fresh EEPROM (ignored when a stored state was loaded)."""
-        if not self._initialised:
-            self.drive_id = drive_id
-            self._initialised = True
-
-    def _count(self, item: str) -> bool:
-        """Count one write; False when the item's cell is worn out (the write is lost)."""
-        self.writes[item] = self.writes.get(item, 0) + 1
-        return self.writes[item] <= EEPROM_CYCLE_LIMIT
-
-    def worn(self, item: str) -> bool:
-        return self.writes.get(item, 0) >= EEPROM_CYCLE_LIMIT
-
-    def write_param(self, name: str, value: int) -> bool:
-        """Write one parameter; returns False when the cell is worn out (value not stored)."""
-        stored = self._count(name)
-        if stored:
-            self.params[name] = value
-        self.save()
-        return stored
-
-    def write_config(self, value: int) -> None:
-        if self._count("config"):
-            self.config = value
-        self.save()
-
-    def write_id(self, drive_id: int) -> None:
-        if self._count("drive_id"):
-            self.drive_id = drive_id
-        self.save()
-
-    def write_origin(self, angle: int) -> None:
-        if self._count("origin"):
-            self.origin = angle
-        self.save()
-
-    def _record(self) -> dict[str, Any]:
-        return {"params": dict(self.params), "config": self.config, "drive_id": self.drive_id,
-                "origin": self.origin, "writes": dict(self.writes)}
-
-    def save(self) -> None:
-        if self._file is not None:
-            self._file.save(self.key, self._record())
-
-    def _load(self, state: StateFile) -> None:
-        rec = state.records.get(self.key)
-        if rec is None:
-            return
-        self.params.update(rec["params"])
-        self.config = rec["config"]
-        self.drive_id = rec["drive_id"]
-        self.origin = rec["origin"]
-        self.writes = dict(rec["writes"])
-        self._initialised = True

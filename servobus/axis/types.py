@@ -1,6 +1,10 @@
-"""What every device family gives the vendor-neutral Axis (docs/axis.md).
+"""The Axis API's value types: what every device family gives the vendor-neutral Axis.
 
-A family (DMM DYN2/DYN4, DMM DYN5, YZ-AIM) is a model of a kind of drive, independent of the
+:class:`Family` describes a kind of drive, :class:`ParamInfo` one of its parameters,
+:class:`AxisStatus` one status, :class:`StreamProfile` how it runs a streamed target
+(docs/axis.md). The families (``servobus.families.<f>``) fill them in.
+
+A family is a model of a kind of drive, independent of the
 wire: its parameter table (names, ranges, units, RAM/EEPROM), how its status decodes into one
 :class:`AxisStatus`, and its counts per revolution. Protocols carry a family's values; the
 Axis, the CLI and the GUI read the family to know what a drive has.

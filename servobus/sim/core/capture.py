@@ -2,20 +2,20 @@
 
 A real drive's capture buffer records its servo loop on the drive's own clock; a virtual
 drive does the same: while someone reads its trace, :class:`Recorder` observes every control
-period (``VirtualDrive.period_observer``) and keeps position, position error, speed,
+period (the core's ``period_observer``) and keeps position, position error, speed,
 current and status (servobus.axis.capture). Nobody reading for :data:`IDLE_STOP_S` stops
 the recording, so an unwatched drive runs its periods in one batch again.
 
 ``sim://`` opens drives through each protocol's own front end; :func:`collecting` notes
-every VirtualDrive created while it is active (``VirtualDrive.__init__`` calls
-:func:`note_created`), so ``servobus.sim.schemes`` gives each opened axis a
-:class:`SimCapture` without knowing the protocol.
+every virtual drive created while it is active (each family's drive calls
+:func:`note_created` as it is built), so ``servobus.sim.schemes`` gives each opened axis a
+:class:`SimCapture` without knowing the protocol or the family.
 
-What is recorded is a :class:`Traced`: a DMM VirtualDrive as it is (:class:`DriveTrace`: its
-id, its counts), or a motor of another family built on one (a YZ-AIM motor: its own address,
-its own counts and offset, its own alarm), which replaces its core with :func:`note_front`.
-The host asks by the id it talks to, so several YZ-AIM motors on one bus (whose cores all
-have id 0) each give their own trace.
+What is recorded is a :class:`Traced`: a family's view of a clocked core (the DMM drive as it
+is, :class:`servobus.sim.dmm.trace.DriveTrace`; a YZ-AIM motor with its own address, counts,
+offset and alarm). A front built on a core that was noted already replaces it
+(:func:`note_front`). The host asks by the id it talks to, so several YZ-AIM motors on one
+bus (whose cores all have id 0) each give their own trace.
 
 Time: a drive's simulated time runs at wall-clock rate from a fixed offset
 (servobus.sim.realtime); the offset is ``monotonic() - drive.time`` at the first read of the
@@ -27,20 +27,14 @@ from __future__ import annotations
 
 import time
 from array import array
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from contextvars import ContextVar
-from typing import TYPE_CHECKING, Protocol
+from typing import Any, Protocol
 
-from servobus.axis.capture import SIGNALS, Capture, status_bits
+from servobus.axis.capture import SIGNALS, Capture
 from servobus.errors import ArgumentRangeError
-from servobus.families.base import motion_state
-from servobus.families.dmm import units as U
 from servobus.sim.core.constants import CONTROL_HZ
-
-if TYPE_CHECKING:
-    from servobus.sim.core.motor import Motor
-    from servobus.sim.dmm.drive import VirtualDrive
 
 #: Samples kept between reads (2 s at 4 kHz); older ones are dropped and counted as lost.
 CAPACITY = 2 * CONTROL_HZ
@@ -49,12 +43,21 @@ CAPACITY = 2 * CONTROL_HZ
 IDLE_STOP_S = 2.0
 
 
+class Clocked(Protocol):
+    """A simulated core that runs control periods (the DMM drive, the protocol-free Motor)."""
+
+    time: float
+    period_observer: Callable[[Any], None] | None
+
+    @property
+    def periods(self) -> int: ...
+
 
 class Traced(Protocol):
     """What a trace records every control period of its core :attr:`drive`."""
 
     @property
-    def drive(self) -> VirtualDrive | Motor: ...
+    def drive(self) -> Clocked: ...
 
     @property
     def trace_id(self) -> int:
@@ -67,34 +70,12 @@ class Traced(Protocol):
         """Position, position error (counts), speed (rpm), current (A), status bits."""
 
 
-class DriveTrace:
-    """A DMM VirtualDrive as the host sees it: its own id and counts."""
-
-    __slots__ = ("drive",)
-    counts_per_rev = U.COUNTS_PER_REV
-
-    def __init__(self, drive: VirtualDrive) -> None:
-        self.drive = drive
-
-    @property
-    def trace_id(self) -> int:
-        return self.drive.drive_id
-
-    def trace_sample(self) -> tuple[float, float, float, float, int]:
-        d = self.drive
-        speed = d.speed_rpm
-        enabled, busy, on_position, alarm = d.trace_flags()
-        moving, in_position = motion_state(busy, on_position, speed)  # as AxisStatus has them
-        return (d.position, d.position_error, speed, d.current_a,
-                status_bits(enabled, moving, in_position, alarm))
-
-
 _created: ContextVar[list[Traced] | None] = ContextVar("servobus_sim_created", default=None)
 
 
 @contextmanager
 def collecting() -> Iterator[list[Traced]]:
-    """Every VirtualDrive (or front, :func:`note_front`) created inside the block (same task
+    """Every virtual drive (or front, :func:`note_front`) created inside the block (same task
     context) lands in the list."""
     made: list[Traced] = []
     token = _created.set(made)
@@ -104,10 +85,11 @@ def collecting() -> Iterator[list[Traced]]:
         _created.reset(token)
 
 
-def note_created(drive: VirtualDrive) -> None:
+def note_created(traced: Traced) -> None:
+    """A virtual drive was built: what the host sees of it is ``traced``."""
     made = _created.get()
     if made is not None:
-        made.append(DriveTrace(drive))
+        made.append(traced)
 
 
 def note_front(front: Traced) -> None:
@@ -139,7 +121,7 @@ class Recorder:
     def active(self) -> bool:
         return self.drive.period_observer is self
 
-    def __call__(self, drive: VirtualDrive | Motor) -> None:
+    def __call__(self, drive: Clocked) -> None:
         if drive.periods - self.last_read > IDLE_STOP_S * CONTROL_HZ:
             drive.period_observer = None  # nobody reads: stop costing CPU
             return
@@ -174,26 +156,18 @@ class Recorder:
         return first, signals, lost
 
 
-def _traced(item: VirtualDrive | Traced) -> Traced:
-    from servobus.sim.dmm.drive import VirtualDrive  # drive imports this module
-
-    return DriveTrace(item) if isinstance(item, VirtualDrive) else item
-
-
 class SimCapture:
     """The CaptureSource of an in-process virtual line or bus (servobus.axis.capture)."""
 
-    def __init__(self, drives: Sequence[VirtualDrive | Traced]) -> None:
-        self.traced: list[Traced] = [_traced(d) for d in drives]
+    def __init__(self, traced: Sequence[Traced]) -> None:
+        self.traced: list[Traced] = list(traced)
         self._recorders: dict[int, Recorder] = {}  # id(drive) -> recorder
         self._offset: dict[int, float] = {}  # id(drive) -> monotonic - simulated time
 
     @property
-    def drives(self) -> list[VirtualDrive]:
-        """The DMM virtual drives recorded (a YZ-AIM motor's core is no drive: left out)."""
-        from servobus.sim.dmm.drive import VirtualDrive  # drive imports this module
-
-        return [t.drive for t in self.traced if isinstance(t.drive, VirtualDrive)]
+    def drives(self) -> list[Clocked]:
+        """The cores recorded (a family's own view of them: ``traced``)."""
+        return [t.drive for t in self.traced]
 
     def _find(self, drive_id: int) -> Traced:
         for traced in self.traced:
