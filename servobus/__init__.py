@@ -1,4 +1,4 @@
-"""servobus: codecs, clients, virtual drives and tools for DMM servo drives."""
+"""servobus: codecs, clients, virtual drives and tools for industrial servo drives (DMM, YZ-AIM)."""
 
 from servobus.errors import (
     ArgumentRangeError,

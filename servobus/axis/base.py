@@ -37,7 +37,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from types import TracebackType
 
-from servobus.axis import checks
+from servobus import checks
 from servobus.axis.capture import Capture, CaptureSource
 from servobus.axis.types import AxisStatus, Family, ParamInfo, StreamProfile
 from servobus.axis.virtual_io import VirtualIo, VirtualIoSource

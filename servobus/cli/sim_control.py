@@ -21,7 +21,7 @@ from servobus.sim.control_server import ControlServer, print_endpoint
 from servobus.sim.dmm.control import DriveControl
 from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.line_server import parse_listen_url
-from servobus.sim.realtime import RealtimeClock
+from servobus.sim.wall_clock import RealtimeClock
 
 F = TypeVar("F", bound=Callable[..., Any])
 

@@ -1,8 +1,8 @@
 """``sim://<protocol>``: in-process virtual drives of any protocol (docs/axis.md).
 
-The scheme is registered here, in the simulator, so a host client never imports the
-simulator unless a ``sim://`` URL is opened. Each protocol package names the opener of its
-in-process virtual drive in its ``SIM`` table (``sim://dyn232``, ``sim://dyncan``, ...).
+The registry names this module for the scheme (``BUILTIN_SCHEMES``), so a host client never
+imports the simulator unless a ``sim://`` URL is opened. Each protocol's spec names the
+opener of its in-process virtual drive (``sim``: ``sim://dyn232``, ``sim://dyncan``, ...).
 
 Options every protocol's virtual drive takes: ``ids=1,2,3`` (default: the id asked for, else
 the protocol's factory id), ``fast=1`` (no wire pacing), ``state=FILE`` (EEPROM kept in a
@@ -27,7 +27,6 @@ from servobus.sim.dmm.drive import VirtualDrive
 if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis
 
-SCHEMES: dict[str, str] = {"sim": "servobus.sim.schemes:open_axis"}
 DEFAULT_PROTOCOL = "dyn232"
 
 

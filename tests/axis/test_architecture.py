@@ -21,7 +21,7 @@ SHARED = ("axis", "cli", "families", "transport", "sim", "gui", "link", "machine
 ABOVE_TRANSPORT = ("sim", "axis", "protocols", "families", "cli", "gui", "link", "sniff",
                    "machine")
 #: What link/ may take from the Axis layer (argument checks, the drive URL's type).
-LINK_FROM_AXIS = ("servobus.axis.checks", "servobus.axis.url")
+LINK_FROM_AXIS = ("servobus.checks", "servobus.axis.url")
 CLIENT_MODULES = ("client.py", "opener.py", "commands.py", "codec.py")
 
 
@@ -120,25 +120,6 @@ def test_link_imports_no_protocol_and_no_simulator() -> None:
     assert bad == []
 
 
-def test_axis_holds_no_client_plumbing() -> None:
-    """axis/ is the API: the transaction plumbing lives in link/ (issue 19); the old
-    modules are one-release aliases that only re-export it."""
-    for name in ("transaction", "late_replies", "eeprom_guard"):
-        names = imports(ROOT / "axis" / f"{name}.py")
-        assert names and all(n.startswith("servobus.link.") for n in names), name
-
-
-def test_old_simulator_paths_are_aliases() -> None:
-    """Issue 19 moved the virtual drives into sim/dmm/ and sim/yzaim/; the public names keep
-    their old import paths for one release (docs examples use them)."""
-    from servobus.sim import drive, yzaim_motor
-    from servobus.sim.dmm.drive import VirtualDrive
-    from servobus.sim.yzaim.motor import YzaimMotor
-
-    assert drive.VirtualDrive is VirtualDrive
-    assert yzaim_motor.YzaimMotor is YzaimMotor
-
-
 SIM_FAMILIES = ("dmm", "yzaim")
 
 
@@ -195,30 +176,6 @@ def test_no_axis_class_lives_in_a_client_module(protocol: str) -> None:
     client = ROOT / "protocols" / protocol / "client.py"
     assert defines_an_axis(client) == []
     assert defines_an_axis(ROOT / "protocols" / protocol / "axis.py") != []  # the rule bites
-
-
-def test_moved_axis_classes_keep_their_old_path() -> None:
-    """One-release aliases (issue 19): the Axis classes left dyn232/dyncan client.py."""
-    from servobus.protocols.dyn232 import axis as dyn232_axis
-    from servobus.protocols.dyn232 import client as dyn232_client
-    from servobus.protocols.dyncan import axis as dyncan_axis
-    from servobus.protocols.dyncan import client as dyncan_client
-
-    assert dyn232_client.Dyn232Axis is dyn232_axis.Dyn232Axis
-    assert dyncan_client.DynCanAxis is dyncan_axis.DynCanAxis
-    assert dyncan_client.open_can_axis is dyncan_axis.open_can_axis
-
-
-def test_old_family_paths_are_aliases() -> None:
-    """Issue 19 made every family a package; the old flat modules stay one release."""
-    from servobus.families import dyn5, dyn5_family, yzaim, yzaim_family
-    from servobus.families.dyn5 import family as dyn5_new
-    from servobus.families.dyn5 import params
-    from servobus.families.yzaim import family as yzaim_new
-    from servobus.families.yzaim import registers
-
-    assert dyn5_family.DYN5 is dyn5_new.DYN5 and yzaim_family.YZAIM is yzaim_new.YZAIM
-    assert dyn5.INSTANCES is params.INSTANCES and yzaim.REGISTERS is registers.REGISTERS
 
 
 def test_every_family_is_a_package_with_a_family_module() -> None:

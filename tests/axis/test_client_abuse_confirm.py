@@ -16,6 +16,7 @@ from dyncan_rig import harness
 from servobus.errors import ArgumentRangeError, DriveTimeout
 from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyncan import codec as cc
 from servobus.transport.base import Direction
@@ -23,7 +24,7 @@ from servobus.transport.pair import Fault
 
 pytestmark = pytest.mark.timeout(30)
 H = c.HostFunction
-MOVES = {int(H.GO_ABSOLUTE_POS), int(H.GO_RELATIVE_POS)}
+MOVES = {int(DmmFunction.GO_ABSOLUTE_POS), int(DmmFunction.GO_RELATIVE_POS)}
 TOLERANCE = U.onrange_to_counts(P.spec("on_range").default)
 CONFIRM_S = 0.3
 
@@ -132,10 +133,10 @@ async def test_dyncan_confirmed_move_and_a_lost_one() -> None:
         network = h.network  # from now on the bus eats every motion frame
         real = network.handle
         network.handle = lambda frame: (  # type: ignore[method-assign]
-            [] if frame.function in (cc.Function.GO_ABSOLUTE_POS, cc.Function.GO_RELATIVE_POS)
+            [] if frame.function in (DmmFunction.GO_ABSOLUTE_POS, DmmFunction.GO_RELATIVE_POS)
             else real(frame))
         with pytest.raises(DriveTimeout):
             await ax.move_by(1000, confirm=True, confirm_timeout=CONFIRM_S)
-        moves = [f for f in sent if f.function in (cc.Function.GO_ABSOLUTE_POS,
-                                                   cc.Function.GO_RELATIVE_POS)]
+        moves = [f for f in sent if f.function in (DmmFunction.GO_ABSOLUTE_POS,
+                                                   DmmFunction.GO_RELATIVE_POS)]
         assert len(moves) == 2

@@ -171,7 +171,7 @@ class ScriptedCanPort:
         request = cc.decode(arbitration_id, data)
         if not cc.expects_reply(request):
             return
-        answer = cc.reply(request.drive_id, cc.Function(request.function), self.received)
+        answer = cc.reply(request.drive_id, cc.function_of(request.function), self.received)
         self.received += 1
         delay = self.delays.pop(0) if self.delays else 0.0
         if delay is None:

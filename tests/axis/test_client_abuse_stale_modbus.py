@@ -36,7 +36,7 @@ from servobus.families.yzaim import registers as Y
 from servobus.protocols.dyn232.axis import Dyn232Axis
 from servobus.protocols.dyn232.client import AsyncDyn232Client
 from servobus.protocols.modbus.axis import ModbusAxis
-from servobus.protocols.modbus.client import ModbusClient
+from servobus.protocols.modbus.client import AsyncModbusClient
 from servobus.transport.base import Direction
 from servobus.transport.pair import Manipulator, open_pair
 
@@ -80,7 +80,7 @@ async def test_a_late_reply_never_answers_the_next_read(protocol: str, how: str,
     server = asyncio.create_task(SERVERS[protocol](device, counter))
     axis: ModbusAxis | Dyn232Axis
     if protocol == "modbus":
-        axis = ModbusAxis(ModbusClient(host, timeout=DEADLINE_S), 1)
+        axis = ModbusAxis(AsyncModbusClient(host, timeout=DEADLINE_S), 1)
     else:
         axis = Dyn232Axis(AsyncDyn232Client(host, timeout=DEADLINE_S), 1)
     stale = []

@@ -47,7 +47,7 @@ class ErrorPort:
         if not cc.expects_reply(request):
             return
         if self.answer is None:
-            frame = cc.reply(request.drive_id, cc.Function(request.function), 0)
+            frame = cc.reply(request.drive_id, cc.function_of(request.function), 0)
         else:
             frame = cc.Frame(request.drive_id, cc.Function.DRIVE_ERROR, bytes((self.answer,)))
         asyncio.get_running_loop().call_soon(self.push, frame)

@@ -17,6 +17,7 @@ import pytest
 from sim_abuse_rig import SERVOBUS, readable, run_cli, sim
 
 from servobus.families.dmm import params as P
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.protocols.dyn232 import codec as c
 from servobus.sim.core.state_file import StateFile, StateFileError, parse_state
 from servobus.sim.dmm.drive import VirtualDrive
@@ -189,7 +190,7 @@ def test_kill_9_during_writes_leaves_a_valid_file_and_no_tmp_after_restart(
             with socket.create_connection(("127.0.0.1", port), timeout=5) as s:
                 writes = b"".join(c.encode(1, H.SET_MAIN_GAIN, 10 + i % 100)
                                   for i in range(2000))
-                s.sendall(c.encode(1, H.READ_DRIVE_STATUS) + writes)
+                s.sendall(c.encode(1, DmmFunction.READ_DRIVE_STATUS) + writes)
                 assert readable(s, 10.0)  # the status reply: the writes have begun
                 time.sleep(0.01 * round_)  # the kill lands at varied points of the writes
                 proc.send_signal(signal.SIGKILL)

@@ -17,7 +17,7 @@ import asyncio
 from collections.abc import Callable
 from typing import Any, ClassVar, Never, Protocol, TypeVar, cast
 
-from servobus.axis import checks
+from servobus import checks
 from servobus.axis.base import AxisTraceHook
 from servobus.axis.client_axis import ClientAxis
 from servobus.axis.types import AxisStatus, Family, ParamInfo

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from abc import abstractmethod
 
-from servobus.axis import checks
+from servobus import checks
 from servobus.axis.types import AxisStatus, Family, ParamInfo
 from servobus.errors import ArgumentRangeError
 from servobus.families.dmm.axis import Action, DmmAxis, Readout

@@ -55,7 +55,7 @@ from abc import abstractmethod
 from functools import cache
 from typing import ClassVar, TypeVar
 
-from servobus.axis import checks
+from servobus import checks
 from servobus.axis.base import check_int
 from servobus.axis.client_axis import ClientAxis, LinkClient
 from servobus.axis.types import AxisStatus, Family, ParamInfo, StreamProfile

@@ -27,9 +27,11 @@ from servobus.cli.sim_cmd import (
 from servobus.cli.sim_control import control_option, start_control
 from servobus.families.dmm import units as U
 from servobus.protocols.dyn232.codec import FACTORY_ID
-from servobus.protocols.dyn232.server import run_server
+from servobus.protocols.dyn232.pacing import FINE_COARSE_S
+from servobus.protocols.dyn232.server import serve
 from servobus.sim.dmm.fleet import make_drives, parse_drive_ids
-from servobus.sim.server_limits import log_to_stderr
+from servobus.sim.line_server import run_in_fine_loop
+from servobus.sim.server_limits import fit_fd_limit, log_to_stderr
 
 
 @click.command("dyn232")
@@ -58,8 +60,9 @@ def sim_dyn2_cmd(listen: str | None, ids: str | None, pty: bool, fast: bool, sta
         click.echo(banner, err=True)
         start_control(control, drives)
 
-    server = run_server(drives, listen=endpoint, pty=pty, tap=tap_endpoint, paced=not fast,
-                        duration=duration, max_clients=max_clients, ready=ready)
+    server = run_in_fine_loop(serve(
+        drives, listen=endpoint, pty=pty, tap=tap_endpoint, paced=not fast, duration=duration,
+        coarse_s=FINE_COARSE_S, max_clients=fit_fd_limit(max_clients), ready=ready))
     line = server.line
     echo_stopped(f"{line.packets} packet(s)", f"{line.checksum_errors} checksum error(s)",
                  f"{line.framing_errors} framing error(s)",

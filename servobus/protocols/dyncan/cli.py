@@ -32,10 +32,10 @@ from servobus.protocols.dyncan.device import DynCanNetwork
 from servobus.protocols.dyncan.server import serve
 from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.dmm.fleet import make_drives, parse_drive_ids
-from servobus.sim.realtime import RealtimeClock
 from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS, fit_fd_limit, log_to_stderr
 from servobus.sim.socketcand_bus import socketcand_bus
 from servobus.sim.socketcand_hub import SocketcandHub, parse_socketcand_address
+from servobus.sim.wall_clock import RealtimeClock
 
 
 async def run_socketcand_nodes(drives: Sequence[VirtualDrive], host: str, port: int, *,

@@ -22,7 +22,7 @@ from servobus.protocols.dyncan.device import DynCanNetwork
 from servobus.protocols.dyncan.server import serve
 from servobus.sim.core.ids import parse_ids
 from servobus.sim.dmm.fleet import make_drives
-from servobus.sim.realtime import RealtimeClock
+from servobus.sim.wall_clock import RealtimeClock
 from servobus.transport.can_bus import AsyncCanBus, BitTiming
 
 if TYPE_CHECKING:

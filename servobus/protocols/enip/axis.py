@@ -33,7 +33,7 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
-from servobus.axis import checks
+from servobus import checks
 from servobus.axis.base import AxisTraceHook
 from servobus.errors import (
     ArgumentRangeError,

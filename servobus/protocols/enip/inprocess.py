@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from servobus.axis import checks
+from servobus import checks
 from servobus.axis.url import DriveUrl, merge_options
 from servobus.errors import ArgumentRangeError
 from servobus.families.dmm import units as U

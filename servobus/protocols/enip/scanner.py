@@ -50,7 +50,7 @@ from collections.abc import AsyncIterator, Callable
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, cast
 
-from servobus.axis import checks
+from servobus import checks
 from servobus.axis.types import AxisStatus
 from servobus.errors import (
     ArgumentRangeError,

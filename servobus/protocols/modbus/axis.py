@@ -25,7 +25,7 @@ from servobus.errors import ArgumentRangeError, DriveError
 from servobus.families.yzaim import registers as Y
 from servobus.families.yzaim.axis import ABS, ADDRESS, INC, R, YzaimAxis
 from servobus.protocols.modbus import codec as C
-from servobus.protocols.modbus.client import ModbusClient
+from servobus.protocols.modbus.client import AsyncModbusClient
 from servobus.protocols.modbus.params import REACHABLE_PARAMS
 
 #: One status read: output_enable 0x01 .. motor_speed 0x10 (and on to the position 0x17
@@ -44,7 +44,7 @@ def check_address(address: object) -> int:
     return value
 
 
-class ModbusAxis(YzaimAxis[ModbusClient]):
+class ModbusAxis(YzaimAxis[AsyncModbusClient]):
     """One YZ-AIM motor on a Modbus RTU line."""
 
     protocol_name = "modbus"

@@ -18,7 +18,7 @@ offset and alarm). A front built on a core that was noted already replaces it
 bus (whose cores all have id 0) each give their own trace.
 
 Time: a drive's simulated time runs at wall-clock rate from a fixed offset
-(servobus.sim.realtime); the offset is ``monotonic() - drive.time`` at the first read of the
+(servobus.sim.wall_clock); the offset is ``monotonic() - drive.time`` at the first read of the
 drive and stays fixed, so sample times only ever grow (the drive lags the wall clock by at
 most one clock tick, 4 ms: samples may be stamped up to that much late).
 """

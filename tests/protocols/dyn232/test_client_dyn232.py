@@ -27,6 +27,7 @@ from servobus.errors import (
 from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, DriveConfig, ServoMode
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.link.eeprom_guard import EepromGuard, EepromWearWarning
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232.axis import Dyn232Axis
@@ -153,9 +154,9 @@ async def test_motion_is_sent_exactly_once_on_a_faulty_line() -> None:
         await ax.turn(100)
         await ax.write_param("on_range", 20)
         await ax.set_origin()
-        sizes = [len(c.encode(0, f, v)) for f, v in ((c.HostFunction.GO_ABSOLUTE_POS, 1250),
-                 (c.HostFunction.TURN_CONST_SPEED, 100), (c.HostFunction.SET_POS_ON_RANGE, 20),
-                 (c.HostFunction.SET_ORIGIN, 0))]
+        sizes = [len(c.encode(0, f, v)) for f, v in ((DmmFunction.GO_ABSOLUTE_POS, 1250),
+                 (DmmFunction.TURN_CONST_SPEED, 100), (c.HostFunction.SET_POS_ON_RANGE, 20),
+                 (DmmFunction.SET_ORIGIN, 0))]
         assert b.wire.tx - before == sum(sizes)  # one packet each, never re-sent
         assert b.client.stats.sent == 5  # the gear read and the four packets
 

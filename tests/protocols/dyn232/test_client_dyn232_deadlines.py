@@ -22,6 +22,7 @@ from dyn232_rig import PATHS, REPEATS, assert_gives_up_on_time, check_window, fa
 
 from servobus.axis import connect, connect_async
 from servobus.errors import DriveTimeout
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232.client import DEFAULT_TURNAROUND_S, AsyncDyn232Client
 from servobus.transport.base import Direction
@@ -33,7 +34,7 @@ DEADLINE_S = 0.3
 ABSENT_ID = 9  # no drive has it: its requests get silence
 SIM_ONE_DRIVE = "sim://dyn2?fast=1&ids=0"  # one virtual drive, id 0 (not ABSENT_ID)
 NO_DRAIN = 0.0  # late_reply_s: no late-reply drain between the repeated runs
-STATUS_REQUEST_LEN = len(c.encode(0, c.HostFunction.READ_DRIVE_STATUS))
+STATUS_REQUEST_LEN = len(c.encode(0, DmmFunction.READ_DRIVE_STATUS))
 #: 8N1: start bit + 8 data bits + stop bit per byte (the manual's 38400 8N1 line).
 BITS_PER_BYTE = 1 + 8 + 1
 #: Documented in servobus.protocols.dyn232.client: "turnaround_s (default 25 ms ...)".

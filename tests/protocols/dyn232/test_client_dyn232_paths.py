@@ -15,6 +15,7 @@ import pytest
 from dyn232_rig import PATHS, assert_gives_up_on_time, rig
 
 from servobus.errors import ChecksumError, DriveTimeout
+from servobus.families.dmm.vocabulary import DmmFunction as DF
 from servobus.protocols.dyn232 import codec as c
 from servobus.transport.base import Direction, set_receiver
 from servobus.transport.pair import Fault, open_pair
@@ -48,7 +49,7 @@ async def test_every_reply_corrupt_raises_checksum_error(path: str) -> None:
         with pytest.raises(ChecksumError):
             await r.axis(0).position()
         assert r.client.stats.checksum_errors == 3
-        assert r.wire.tx == 3 * len(c.encode(0, H.GENERAL_READ, c.GeneralReadSelector.POSITION))
+        assert r.wire.tx == 3 * len(c.encode(0, DF.GENERAL_READ, c.GeneralReadSelector.POSITION))
 
 
 async def test_dropped_replies_are_retried(path: str) -> None:
@@ -86,8 +87,8 @@ async def test_motion_is_sent_exactly_once(path: str) -> None:
         await ax.write_param("on_range", 20)
         await ax.set_origin()
         assert time.monotonic() - t0 < 15.0  # nothing waited for a reply (30 s deadline)
-        sizes = [len(c.encode(0, f, v)) for f, v in ((H.GO_ABSOLUTE_POS, 5000),
-                 (H.TURN_CONST_SPEED, 100), (H.SET_POS_ON_RANGE, 20), (H.SET_ORIGIN, 0))]
+        sizes = [len(c.encode(0, f, v)) for f, v in ((DF.GO_ABSOLUTE_POS, 5000),
+                 (DF.TURN_CONST_SPEED, 100), (H.SET_POS_ON_RANGE, 20), (DF.SET_ORIGIN, 0))]
         assert r.wire.tx - before == sum(sizes)  # one packet each, never re-sent
         assert r.client.stats.sent - sent_before == 4 and r.client.stats.retries == 0
 

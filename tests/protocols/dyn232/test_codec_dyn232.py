@@ -7,19 +7,20 @@ from hypothesis import assume, given
 from hypothesis import strategies as st
 
 from servobus.errors import ArgumentRangeError, ChecksumError, FramingError
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.protocols.dyn232 import codec as c
 
 H = c.HostFunction
 
 # (drive id, function, value, bytes) from section 7.6 examples 1-6 and 7.2.6
 GOLDEN = [
-    (3, H.SET_ORIGIN, 0, "03 80 80 83"),  # example 1
-    (3, H.GO_ABSOLUTE_POS, 0, "03 81 80 84"),  # example 2
-    (3, H.GO_RELATIVE_POS, 120, "03 a3 80 f8 9e"),  # example 3
-    (3, H.GO_RELATIVE_POS, -120, "03 a3 ff 88 ad"),  # example 4
-    (2, H.TURN_CONST_SPEED, 60, "02 8a bc c8"),  # example 5
-    (2, H.TURN_CONST_SPEED, -60, "02 8a c4 d0"),  # example 6
-    (8, H.TURN_CONST_SPEED, 50, "08 8a b2 c4"),  # 7.2.6 checksum example
+    (3, DmmFunction.SET_ORIGIN, 0, "03 80 80 83"),  # example 1
+    (3, DmmFunction.GO_ABSOLUTE_POS, 0, "03 81 80 84"),  # example 2
+    (3, DmmFunction.GO_RELATIVE_POS, 120, "03 a3 80 f8 9e"),  # example 3
+    (3, DmmFunction.GO_RELATIVE_POS, -120, "03 a3 ff 88 ad"),  # example 4
+    (2, DmmFunction.TURN_CONST_SPEED, 60, "02 8a bc c8"),  # example 5
+    (2, DmmFunction.TURN_CONST_SPEED, -60, "02 8a c4 d0"),  # example 6
+    (8, DmmFunction.TURN_CONST_SPEED, 50, "08 8a b2 c4"),  # 7.2.6 checksum example
 ]
 
 
@@ -38,9 +39,9 @@ def test_const_speed_742_erratum() -> None:
     # 7.4.2 writes 1400 = 0x578 as B2 = 1000 0101, B1 = 1111 1000: that splits the hex
     # digits, not 7-bit groups, and would decode to 760. The 7-bit grouping of examples 1-6,
     # Send_Package and Cal_SignValue gives B2 = 0x8a. The -120 example there is right.
-    assert c.encode(0, H.TURN_CONST_SPEED, 1400)[2:4] == bytes([0x8A, 0xF8])
-    assert c.Packet(0, H.TURN_CONST_SPEED, bytes([0x05, 0x78])).value == 760
-    assert c.encode(0, H.TURN_CONST_SPEED, -120)[2:4] == bytes([0b11111111, 0b10001000])
+    assert c.encode(0, DmmFunction.TURN_CONST_SPEED, 1400)[2:4] == bytes([0x8A, 0xF8])
+    assert c.Packet(0, DmmFunction.TURN_CONST_SPEED, bytes([0x05, 0x78])).value == 760
+    assert c.encode(0, DmmFunction.TURN_CONST_SPEED, -120)[2:4] == bytes([0b11111111, 0b10001000])
 
 
 def test_checksum_rule_from_notes() -> None:
@@ -59,7 +60,7 @@ def test_checksum_rule_from_notes() -> None:
     ],
 )
 def test_boundaries_use_fewest_bytes(value: int, n: int) -> None:
-    raw = c.encode(1, H.GO_ABSOLUTE_POS, value)
+    raw = c.encode(1, DmmFunction.GO_ABSOLUTE_POS, value)
     assert len(raw) == n + 3
     assert (raw[1] >> 5) & 3 == n - 1
     assert c.decode(raw).value == value
@@ -68,7 +69,7 @@ def test_boundaries_use_fewest_bytes(value: int, n: int) -> None:
 @pytest.mark.parametrize("value", [134_217_728, -134_217_729, 1 << 40])
 def test_out_of_28_bit_range_is_refused(value: int) -> None:
     with pytest.raises(ArgumentRangeError):
-        c.encode(1, H.GO_ABSOLUTE_POS, value)
+        c.encode(1, DmmFunction.GO_ABSOLUTE_POS, value)
 
 
 def test_gear_16384_needs_three_bytes() -> None:
@@ -107,13 +108,13 @@ def test_malformed_packets(hexbytes: str) -> None:
 def test_reply_functions() -> None:
     assert c.reply_function(H.READ_MAIN_GAIN) is c.DriveFunction.IS_MAIN_GAIN
     assert c.reply_function(H.READ_GEAR_NUMBER) is c.DriveFunction.IS_GEAR_NUMBER
-    assert c.reply_function(H.READ_DRIVE_ID) is c.DriveFunction.IS_DRIVE_ID
-    assert c.reply_function(H.GENERAL_READ, 0x1B) is c.DriveFunction.IS_ABS_POS32
-    assert c.reply_function(H.GENERAL_READ, 0x1D) is c.DriveFunction.IS_SPEED
-    assert c.reply_function(H.GENERAL_READ, 0x1E) is c.DriveFunction.IS_TRQ_CURRENT
+    assert c.reply_function(DmmFunction.READ_DRIVE_ID) is c.DriveFunction.IS_DRIVE_ID
+    assert c.reply_function(DmmFunction.GENERAL_READ, 0x1B) is c.DriveFunction.IS_ABS_POS32
+    assert c.reply_function(DmmFunction.GENERAL_READ, 0x1D) is c.DriveFunction.IS_SPEED
+    assert c.reply_function(DmmFunction.GENERAL_READ, 0x1E) is c.DriveFunction.IS_TRQ_CURRENT
     for silent in (0x1C, 0x20, 0x21, 0x00):
-        assert c.reply_function(H.GENERAL_READ, silent) is None
-    assert c.reply_function(H.GO_ABSOLUTE_POS) is None
+        assert c.reply_function(DmmFunction.GENERAL_READ, silent) is None
+    assert c.reply_function(DmmFunction.GO_ABSOLUTE_POS) is None
     assert c.PARAM_FUNCTIONS["gear_num"] == (H.SET_GEAR_NUMBER, H.READ_GEAR_NUMBER)
     assert len(c.PARAM_FUNCTIONS) == 8
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232.device import Dyn232Line
 from servobus.sim.dmm.drive import VirtualDrive
@@ -27,7 +28,7 @@ def _state(line: Dyn232Line) -> list[tuple[object, ...]]:
 packets = st.builds(
     lambda i, f, v, corrupt: (lambda raw: raw[:-1] + bytes([raw[-1] ^ 0x01]) if corrupt
                               else raw)(c.encode(i, f, v)),
-    st.sampled_from(IDS), st.sampled_from(list(c.HostFunction)),
+    st.sampled_from(IDS), st.sampled_from(c.HOST_FUNCTIONS),
     st.one_of(st.integers(-70, 140), st.sampled_from([0x1B, 0x1C, 0x1D, 0x1E, 0x20, 0x21,
                                                         500, 4096, 16384, 20_000])),
     st.booleans(),
@@ -47,7 +48,7 @@ def test_fast_path_replies_and_state_match_the_framed_path(seq: list[bytes]) -> 
 
 def test_repeated_request_is_served_from_the_cache_with_fresh_values() -> None:
     line = _line()
-    poll = c.encode(2, c.HostFunction.GENERAL_READ, int(c.GeneralReadSelector.POSITION))
+    poll = c.encode(2, DmmFunction.GENERAL_READ, int(c.GeneralReadSelector.POSITION))
     first = c.decode(line.handle_whole(poll)).reply_value()
     line.drives[1].move_relative(1000)
     line.drives[1].advance(1.0)

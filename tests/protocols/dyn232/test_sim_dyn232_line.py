@@ -11,6 +11,7 @@ from servobus.errors import ArgumentRangeError
 from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, DriveConfig, DriveStatus
+from servobus.families.dmm.vocabulary import DmmFunction as DF
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232.device import Dyn232Line, wrap28
 from servobus.protocols.dyn232.inprocess import open_sim_stream, open_sim_url, parse_sim_url
@@ -40,7 +41,7 @@ def ask_one(line: Dyn232Line, drive_id: int, fn: c.HostFunction, value: int = 0)
 
 
 def status(line: Dyn232Line, drive_id: int) -> DriveStatus:
-    reply = ask_one(line, drive_id, H.READ_DRIVE_STATUS)
+    reply = ask_one(line, drive_id, DF.READ_DRIVE_STATUS)
     assert reply.function == D.IS_STATUS
     return DriveStatus.from_byte(reply.reply_value())
 
@@ -58,20 +59,20 @@ def test_example_5_and_6_constant_speed_bytes() -> None:
     drive = line.drives[0]
     assert line.receive(bytes.fromhex("028abcc8")) == b""  # +60 rpm
     drive.advance(0.5)
-    assert ask_one(line, 2, H.GENERAL_READ, GR.SPEED).reply_value() == 60
+    assert ask_one(line, 2, DF.GENERAL_READ, GR.SPEED).reply_value() == 60
     assert line.receive(bytes.fromhex("028ac4d0")) == b""  # -60 rpm
     drive.advance(0.5)
-    reply = ask_one(line, 2, H.GENERAL_READ, GR.SPEED)
+    reply = ask_one(line, 2, DF.GENERAL_READ, GR.SPEED)
     assert (reply.drive_id, reply.function, reply.reply_value()) == (2, D.IS_SPEED, -60)
 
 
 def test_example_1_set_origin_bytes() -> None:
     line = make_line(3)
-    line.receive(c.encode(3, H.GO_RELATIVE_POS, 1000))
+    line.receive(c.encode(3, DF.GO_RELATIVE_POS, 1000))
     line.drives[0].advance(1.0)
     assert line.drives[0].position != 0
     assert line.receive(bytes.fromhex("03808083")) == b""
-    assert ask_one(line, 3, H.GENERAL_READ, GR.POSITION).reply_value() == 0
+    assert ask_one(line, 3, DF.GENERAL_READ, GR.POSITION).reply_value() == 0
 
 
 # ---------------------------------------------------------------- parameters
@@ -121,22 +122,22 @@ def test_parameter_reply_is_one_unsigned_byte() -> None:
 def test_config_write_read_and_free_bit() -> None:
     line = make_line(1)
     free = DriveConfig(free=True).to_byte()
-    line.receive(c.encode(1, H.SET_DRIVE_CONFIG, free))
-    reply = ask_one(line, 1, H.READ_DRIVE_CONFIG)
+    line.receive(c.encode(1, DF.SET_DRIVE_CONFIG, free))
+    reply = ask_one(line, 1, DF.READ_DRIVE_CONFIG)
     assert reply.function == D.IS_CONFIG
     assert DriveConfig.from_byte(reply.reply_value()).free
     assert status(line, 1).servo_free
-    line.receive(c.encode(1, H.GO_RELATIVE_POS, 1000))  # ignored while free
+    line.receive(c.encode(1, DF.GO_RELATIVE_POS, 1000))  # ignored while free
     line.drives[0].advance(0.5)
     assert line.drives[0].position == 0
-    line.receive(c.encode(1, H.SET_DRIVE_CONFIG, 0))
+    line.receive(c.encode(1, DF.SET_DRIVE_CONFIG, 0))
     assert not status(line, 1).servo_free
 
 
 def test_enable_disable_and_reset_selectors_send_nothing() -> None:
     line = make_line(1)
     for sel in (GR.DISABLE, GR.ENABLE, GR.RESET):
-        assert line.receive(c.encode(1, H.GENERAL_READ, sel)) == b""
+        assert line.receive(c.encode(1, DF.GENERAL_READ, sel)) == b""
         if sel is GR.DISABLE:
             assert status(line, 1).servo_free
         else:
@@ -146,18 +147,18 @@ def test_enable_disable_and_reset_selectors_send_nothing() -> None:
 def test_reset_selector_clears_position_and_keeps_eeprom() -> None:
     line = make_line(1)
     line.receive(c.encode(1, H.SET_MAIN_GAIN, 77))
-    line.receive(c.encode(1, H.GO_RELATIVE_POS, 500))
+    line.receive(c.encode(1, DF.GO_RELATIVE_POS, 500))
     line.drives[0].advance(0.5)
     assert line.drives[0].position != 0
-    line.receive(c.encode(1, H.GENERAL_READ, GR.RESET))
-    assert ask_one(line, 1, H.GENERAL_READ, GR.POSITION).reply_value() == 0
+    line.receive(c.encode(1, DF.GENERAL_READ, GR.RESET))
+    assert ask_one(line, 1, DF.GENERAL_READ, GR.POSITION).reply_value() == 0
     assert ask_one(line, 1, H.READ_MAIN_GAIN).reply_value() == 77
 
 
 def test_status_bits_while_moving_then_on_position() -> None:
     line = make_line(1)
     assert status(line, 1) == DriveStatus(on_position=True, motion_busy=False)
-    line.receive(c.encode(1, H.GO_RELATIVE_POS, 20_000))
+    line.receive(c.encode(1, DF.GO_RELATIVE_POS, 20_000))
     line.drives[0].advance(0.01)
     moving = status(line, 1)
     assert moving.motion_busy and not moving.on_position
@@ -170,36 +171,36 @@ def test_status_bits_while_moving_then_on_position() -> None:
 def test_absolute_move_uses_gear_ratio() -> None:
     line = make_line(1)
     line.receive(c.encode(1, H.SET_GEAR_NUMBER, 2048))
-    line.receive(c.encode(1, H.GO_ABSOLUTE_POS, 1000))
+    line.receive(c.encode(1, DF.GO_ABSOLUTE_POS, 1000))
     line.drives[0].advance(2.0)
     expected = round(U.command_to_counts(1000, 2048))
-    assert ask_one(line, 1, H.GENERAL_READ, GR.POSITION).reply_value() == expected
+    assert ask_one(line, 1, DF.GENERAL_READ, GR.POSITION).reply_value() == expected
 
 
 def test_read_id_and_assign_id_take_effect_at_once_and_persist() -> None:
     line = make_line(0)
-    assert ask_one(line, 0, H.READ_DRIVE_ID).reply_value() == 0
-    assert line.receive(c.encode(0, H.ASSIGN_DRIVE_ID, 12)) == b""
-    assert ask(line, 0, H.READ_DRIVE_ID) == []  # old id: silence at once
-    reply = ask_one(line, 12, H.READ_DRIVE_ID)
+    assert ask_one(line, 0, DF.READ_DRIVE_ID).reply_value() == 0
+    assert line.receive(c.encode(0, DF.ASSIGN_DRIVE_ID, 12)) == b""
+    assert ask(line, 0, DF.READ_DRIVE_ID) == []  # old id: silence at once
+    reply = ask_one(line, 12, DF.READ_DRIVE_ID)
     assert (reply.drive_id, reply.function, reply.reply_value()) == (12, D.IS_DRIVE_ID, 12)
-    line.receive(c.encode(12, H.GENERAL_READ, GR.RESET))  # power cycle
-    assert ask_one(line, 12, H.READ_DRIVE_ID).drive_id == 12
+    line.receive(c.encode(12, DF.GENERAL_READ, GR.RESET))  # power cycle
+    assert ask_one(line, 12, DF.READ_DRIVE_ID).drive_id == 12
 
 
 def test_assign_id_outside_0_63_is_ignored() -> None:
     line = make_line(4)
-    line.receive(c.encode(4, H.ASSIGN_DRIVE_ID, 100))
-    assert ask_one(line, 4, H.READ_DRIVE_ID).reply_value() == 4
+    line.receive(c.encode(4, DF.ASSIGN_DRIVE_ID, 100))
+    assert ask_one(line, 4, DF.READ_DRIVE_ID).reply_value() == 4
 
 
 def test_id_persists_across_simulator_restart(tmp_path: object) -> None:
     path = f"{tmp_path}/eeprom.json"
     line = Dyn232Line([VirtualDrive(1, eeprom=EepromStore(path, key="1"))])
-    line.receive(c.encode(1, H.ASSIGN_DRIVE_ID, 9))
+    line.receive(c.encode(1, DF.ASSIGN_DRIVE_ID, 9))
     line.receive(c.encode(9, H.SET_INT_GAIN, 33))
     again = Dyn232Line([VirtualDrive(1, eeprom=EepromStore(path, key="1"))])
-    assert ask(again, 1, H.READ_DRIVE_ID) == []
+    assert ask(again, 1, DF.READ_DRIVE_ID) == []
     assert ask_one(again, 9, H.READ_INT_GAIN).reply_value() == 33
 
 
@@ -207,37 +208,37 @@ def test_id_persists_across_simulator_restart(tmp_path: object) -> None:
 def test_absent_ids_stay_silent() -> None:
     line = make_line(1, 2, 3)
     for drive_id in (0, 4, 63):
-        for fn in (H.READ_DRIVE_STATUS, H.READ_DRIVE_ID, H.READ_MAIN_GAIN):
+        for fn in (DF.READ_DRIVE_STATUS, DF.READ_DRIVE_ID, H.READ_MAIN_GAIN):
             assert line.receive(c.encode(drive_id, fn)) == b""
-        assert line.receive(c.encode(drive_id, H.GENERAL_READ, GR.POSITION)) == b""
+        assert line.receive(c.encode(drive_id, DF.GENERAL_READ, GR.POSITION)) == b""
 
 
 def test_each_drive_answers_with_its_own_id() -> None:
     line = make_line(1, 2, 3)
     for drive_id in (1, 2, 3):
-        assert ask_one(line, drive_id, H.READ_DRIVE_ID).drive_id == drive_id
+        assert ask_one(line, drive_id, DF.READ_DRIVE_ID).drive_id == drive_id
 
 
 def test_broadcast_commands_reach_every_drive() -> None:
     line = make_line(1, 2, 3)
     assert line.receive(c.encode(c.BROADCAST_ID, H.SET_SPEED_GAIN, 99)) == b""
-    line.receive(c.encode(c.BROADCAST_ID, H.TURN_CONST_SPEED, 100))
+    line.receive(c.encode(c.BROADCAST_ID, DF.TURN_CONST_SPEED, 100))
     for d in line.drives:
         d.advance(0.5)
     for drive_id in (1, 2, 3):
         assert ask_one(line, drive_id, H.READ_SPEED_GAIN).reply_value() == 99
-        assert ask_one(line, drive_id, H.GENERAL_READ, GR.SPEED).reply_value() == 100
+        assert ask_one(line, drive_id, DF.GENERAL_READ, GR.SPEED).reply_value() == 100
 
 
 def test_broadcast_read_single_drive_answers_with_own_id() -> None:
     line = make_line(17)
-    reply = ask_one(line, c.BROADCAST_ID, H.READ_DRIVE_ID)
+    reply = ask_one(line, c.BROADCAST_ID, DF.READ_DRIVE_ID)
     assert (reply.drive_id, reply.reply_value()) == (17, 17)
 
 
 def test_broadcast_read_with_several_drives_collides_into_silence() -> None:
     line = make_line(1, 2)
-    assert line.receive(c.encode(c.BROADCAST_ID, H.READ_DRIVE_ID)) == b""
+    assert line.receive(c.encode(c.BROADCAST_ID, DF.READ_DRIVE_ID)) == b""
     assert line.collisions == 1
 
 
@@ -245,7 +246,7 @@ def test_linear_line_words_go_to_the_drives() -> None:
     """Example 7 over broadcast: X, Y, Z = ids 1, 2, 3 start moving (status b5 busy)."""
     line = make_line(1, 2, 3)
     for word in (100, 200, 0, 3):
-        assert line.receive(c.encode(c.BROADCAST_ID, H.MAKE_LINEAR_LINE, word)) == b""
+        assert line.receive(c.encode(c.BROADCAST_ID, DF.MAKE_LINEAR_LINE, word)) == b""
     for d in line.drives:
         d.advance(0.002)
     assert status(line, 1).motion_busy and status(line, 2).motion_busy
@@ -258,25 +259,25 @@ def test_linear_line_words_go_to_the_drives() -> None:
 def test_circular_arc_words_are_accepted_silently() -> None:
     line = make_line(1, 2, 3)
     for word in (-100, 0, 100, 0, 1):
-        assert line.receive(c.encode(c.BROADCAST_ID, H.MAKE_CIRCULAR_ARC, word)) == b""
+        assert line.receive(c.encode(c.BROADCAST_ID, DF.MAKE_CIRCULAR_ARC, word)) == b""
     assert line.packets == 5
 
 
 def test_for_motor_define_is_ignored() -> None:
     line = make_line(1)
     before = (line.drives[0].eeprom.writes.copy(), line.drives[0].read_config())
-    assert line.receive(c.encode(1, H.FOR_MOTOR_DEFINE, 5)) == b""
+    assert line.receive(c.encode(1, DF.FOR_MOTOR_DEFINE, 5)) == b""
     assert (line.drives[0].eeprom.writes, line.drives[0].read_config()) == before
 
 
 def test_unknown_general_read_selector_is_silent() -> None:
     line = make_line(1)
-    assert line.receive(c.encode(1, H.GENERAL_READ, 0x1F)) == b""
+    assert line.receive(c.encode(1, DF.GENERAL_READ, 0x1F)) == b""
 
 
 def test_torque_read_uses_is_trq_current() -> None:
     line = make_line(1)
-    reply = ask_one(line, 1, H.GENERAL_READ, GR.TORQUE)
+    reply = ask_one(line, 1, DF.GENERAL_READ, GR.TORQUE)
     assert (reply.function, reply.reply_value()) == (D.IS_TRQ_CURRENT,
                                                      line.drives[0].torque_current)
 
@@ -287,14 +288,14 @@ def test_every_read_function_answers_with_its_is_code() -> None:
         if spec.reply is not None:
             assert ask_one(line, 6, spec.function).function == spec.reply, spec.function
     for selector, reply_fn in c.GENERAL_READ_REPLIES.items():
-        assert ask_one(line, 6, H.GENERAL_READ, selector).function == reply_fn
+        assert ask_one(line, 6, DF.GENERAL_READ, selector).function == reply_fn
 
 
 def test_no_reply_functions_never_answer() -> None:
     line = make_line(6)
     for spec in c.HOST_SPECS.values():
-        if spec.reply is None and spec.function is not H.GENERAL_READ:
-            value = 0 if spec.function is not H.ASSIGN_DRIVE_ID else 6
+        if spec.reply is None and spec.function is not DF.GENERAL_READ:
+            value = 0 if spec.function is not DF.ASSIGN_DRIVE_ID else 6
             value = max(spec.minimum, min(spec.maximum, value))
             assert line.receive(c.encode(6, spec.function, value)) == b"", spec.function
 
@@ -302,7 +303,7 @@ def test_no_reply_functions_never_answer() -> None:
 # ---------------------------------------------------------------- framing and checksum
 def test_bad_checksum_not_executed_and_reported_once() -> None:
     line = make_line(1, 2)
-    bad = bytearray(c.encode(1, H.GO_RELATIVE_POS, 5000))
+    bad = bytearray(c.encode(1, DF.GO_RELATIVE_POS, 5000))
     bad[-1] ^= 0x01
     assert line.receive(bytes(bad)) == b""
     line.drives[0].advance(0.5)
@@ -326,7 +327,7 @@ def test_bad_checksum_on_broadcast_marks_every_drive() -> None:
 
 def test_any_chunking_gives_the_same_replies() -> None:
     stream = b"".join(c.encode(i, fn) for i in (1, 2) for fn in
-                      (H.READ_DRIVE_ID, H.READ_GEAR_NUMBER, H.READ_DRIVE_STATUS))
+                      (DF.READ_DRIVE_ID, H.READ_GEAR_NUMBER, DF.READ_DRIVE_STATUS))
     whole = make_line(1, 2).receive(stream)
     line = make_line(1, 2)
     split = b"".join(line.receive(stream[i : i + 1]) for i in range(len(stream)))
@@ -335,8 +336,8 @@ def test_any_chunking_gives_the_same_replies() -> None:
 
 def test_garbage_between_packets_is_skipped() -> None:
     line = make_line(1)
-    out = line.receive(b"\xff\xfe" + c.encode(1, H.READ_DRIVE_ID)[:2] +
-                       c.encode(1, H.READ_DRIVE_ID) + b"\x99")
+    out = line.receive(b"\xff\xfe" + c.encode(1, DF.READ_DRIVE_ID)[:2] +
+                       c.encode(1, DF.READ_DRIVE_ID) + b"\x99")
     assert c.Framer().feed(out) == [c.Packet(1, D.IS_DRIVE_ID, bytes([1]))]
     assert line.framing_errors >= 1
     assert status(line, 1).alarm is AlarmCode.NONE  # framing errors are not checksum errors
@@ -377,7 +378,7 @@ def test_inprocess_stream_fast() -> None:
         traced: list[object] = []
         stream.add_trace(lambda d, b, t: traced.append((d, b)))
         assert [d.drive_id for d in stream.drives] == [1, 2]
-        got = await _round_trip(stream, c.encode(2, H.READ_DRIVE_ID))
+        got = await _round_trip(stream, c.encode(2, DF.READ_DRIVE_ID))
         assert c.decode(got) == c.Packet(2, D.IS_DRIVE_ID, bytes([2]))
         assert len(traced) == 2
         await stream.close()
@@ -391,7 +392,7 @@ def test_inprocess_stream_paced_round_trip_takes_wire_time() -> None:
     async def run() -> None:
         stream = open_sim_stream(ids=(0,), paced=True)
         t = time.monotonic()
-        got = await _round_trip(stream, c.encode(0, H.READ_DRIVE_STATUS))
+        got = await _round_trip(stream, c.encode(0, DF.READ_DRIVE_STATUS))
         elapsed = time.monotonic() - t
         assert len(got) == 4
         assert elapsed >= 8 * BYTE_TIME_S  # 4 + 4 bytes at 38400 8N1 >= 2.08 ms

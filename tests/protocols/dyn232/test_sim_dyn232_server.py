@@ -16,10 +16,12 @@ import serial
 from subprocess_rig import read_line, stop_process
 
 from servobus.errors import ArgumentRangeError
+from servobus.families.dmm.vocabulary import DmmFunction as DF
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232.pacing import BYTE_TIME_S
-from servobus.protocols.dyn232.server import Dyn232Server, parse_listen_url
+from servobus.protocols.dyn232.server import Dyn232Server
 from servobus.sim.dmm.drive import VirtualDrive
+from servobus.sim.line_server import parse_listen_url
 
 pytestmark = pytest.mark.slow  # real processes or seconds of wall-clock motion
 
@@ -96,13 +98,13 @@ def test_tcp_line_with_pyserial_socket_url() -> None:
         ser = serial.serial_for_url(f"socket://127.0.0.1:{port}", timeout=0.3)
         try:
             for drive_id in (1, 2, 3):
-                (reply,) = transact(ser, c.encode(drive_id, H.READ_DRIVE_ID))
+                (reply,) = transact(ser, c.encode(drive_id, DF.READ_DRIVE_ID))
                 assert (reply.drive_id, reply.function, reply.reply_value()) == (
                     drive_id, D.IS_DRIVE_ID, drive_id)
-            assert transact(ser, c.encode(5, H.READ_DRIVE_ID)) == []  # absent: silent
-            ser.write(c.encode(2, H.GO_RELATIVE_POS, 100))
+            assert transact(ser, c.encode(5, DF.READ_DRIVE_ID)) == []  # absent: silent
+            ser.write(c.encode(2, DF.GO_RELATIVE_POS, 100))
             assert ser.read(16) == b""  # motion commands get no reply
-            (pos,) = transact(ser, c.encode(2, H.GENERAL_READ, GR.POSITION))
+            (pos,) = transact(ser, c.encode(2, DF.GENERAL_READ, GR.POSITION))
             assert pos.function == D.IS_ABS_POS32
         finally:
             ser.close()
@@ -113,7 +115,7 @@ def test_paced_round_trip_takes_wire_time_and_fast_is_much_faster() -> None:
     """Paced: no round trip is ever shorter than the wire allows. Fast: some round trip is
     (a rate that is possible, not one this machine must keep: how much faster is a benchmark
     figure); the fast run stops at the first such round trip, so idle it is one or two."""
-    request = c.encode(0, H.READ_DRIVE_STATUS)
+    request = c.encode(0, DF.READ_DRIVE_STATUS)
     wire_s = 8 * BYTE_TIME_S  # 4 + 4 bytes at 38400 8N1 = 2.08 ms
     with sim() as p, socket.create_connection(("127.0.0.1", p.tcp_port()), timeout=5) as sock:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
@@ -146,13 +148,13 @@ def test_state_file_keeps_id_and_parameters_across_restart(tmp_path: Path) -> No
     state = str(tmp_path / "eeprom.json")
     with sim("--ids", "1", "--fast", "--state", state) as p:
         with socket.create_connection(("127.0.0.1", p.tcp_port()), timeout=5) as sock:
-            sock.sendall(c.encode(1, H.SET_MAIN_GAIN, 55) + c.encode(1, H.ASSIGN_DRIVE_ID, 9))
-            round_trip_s(sock, c.encode(9, H.READ_DRIVE_ID), 4)  # both writes executed
+            sock.sendall(c.encode(1, H.SET_MAIN_GAIN, 55) + c.encode(1, DF.ASSIGN_DRIVE_ID, 9))
+            round_trip_s(sock, c.encode(9, DF.READ_DRIVE_ID), 4)  # both writes executed
         assert p.stop() == 0
     with sim("--ids", "1", "--fast", "--state", state) as p:
         ser = serial.serial_for_url(f"socket://127.0.0.1:{p.tcp_port()}", timeout=0.3)
         try:
-            assert transact(ser, c.encode(1, H.READ_DRIVE_ID)) == []
+            assert transact(ser, c.encode(1, DF.READ_DRIVE_ID)) == []
             (gain,) = transact(ser, c.encode(9, H.READ_MAIN_GAIN))
             assert (gain.drive_id, gain.reply_value()) == (9, 55)
         finally:
@@ -210,7 +212,7 @@ def test_several_clients_each_get_their_own_replies_and_tap_sees_all() -> None:
         r1, w1 = await asyncio.open_connection(host, port)
         r2, w2 = await asyncio.open_connection(host, port)
         await _until(lambda: server.tap_count == 1)  # the tap is accepted: it sees everything
-        req1, req2 = c.encode(1, H.READ_DRIVE_ID), c.encode(2, H.READ_DRIVE_ID)
+        req1, req2 = c.encode(1, DF.READ_DRIVE_ID), c.encode(2, DF.READ_DRIVE_ID)
         w1.write(req1[:2])  # half a packet from client 1 ...
         w2.write(req2)  # ... does not corrupt client 2's packet
         await w1.drain()
@@ -245,7 +247,7 @@ def test_paced_tap_orders_bytes_as_on_the_wire() -> None:
         tap_r, tap_w = await asyncio.open_connection(host, tap_port)
         r, w = await asyncio.open_connection(host, port)
         await _until(lambda: server.tap_count == 1)
-        req = c.encode(0, H.READ_DRIVE_ID) + c.encode(0, H.READ_DRIVE_CONFIG)
+        req = c.encode(0, DF.READ_DRIVE_ID) + c.encode(0, DF.READ_DRIVE_CONFIG)
         t = time.monotonic()
         w.write(req)
         replies = await _read_packets(r, 2)

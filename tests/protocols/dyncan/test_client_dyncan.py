@@ -14,6 +14,7 @@ from servobus.axis.base import AsyncAxis
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveError, DriveTimeout
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, DriveConfig
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan import commands as cmds
 from servobus.protocols.dyncan.axis import open_can_axis
@@ -134,7 +135,7 @@ async def test_drive_error_ff_fails_the_read_or_the_next_call() -> None:
     async with harness(1) as h:
         ax = h.axis(1)
         # a foreign/corrupted request that skipped the client's checks
-        await h.client.port.send((1 << 5) | c.Function.TURN_CONST_SPEED,
+        await h.client.port.send((1 << 5) | DmmFunction.TURN_CONST_SPEED,
                                  (30_000).to_bytes(2, "big"))
         with pytest.raises(DriveError) as info:  # raised by the next call once it has arrived
             await wait_until_async(lambda: _false(ax.status()), timeout=10,
@@ -187,7 +188,7 @@ async def test_position_direct_stream_fixed_period() -> None:
         t = loop.time()
         stats = await h.client.stream_position_direct({1: [10] * 20, 2: [-5] * 10}, 0.005)
         elapsed = loop.time() - t
-        assert stats.ticks == 20 and stats.frames == 30
+        assert stats.cycles == 20 and stats.frames == 30
         assert elapsed >= 19 * 0.005
         await wait_until_async(lambda: h.network.stats.frames >= 30, poll=0.002, timeout=10,
                                what="30 frames at the nodes")

@@ -13,6 +13,7 @@ import can
 import pytest
 
 from servobus.axis import connect
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.protocols.dyncan import codec as c
 from servobus.sim.socketcand_hub import (
     RAWMODE_SETTLE_S,
@@ -63,7 +64,7 @@ def test_python_can_socketcand_client_raw(server: int) -> None:
         bus.send(can.Message(arbitration_id=ident, data=data, is_extended_id=False))
         reply = recv_id(bus, ident)
         assert c.decode(reply.arbitration_id, reply.data).fields() == (10, 4096, 4000)
-        ident, data = c.encode(c.request(1, c.Function.SS_FREQUENCY, 60))  # > 50
+        ident, data = c.encode(c.request(1, DmmFunction.SS_FREQUENCY, 60))  # > 50
         bus.send(can.Message(arbitration_id=ident, data=data, is_extended_id=False))
         err = recv_id(bus, (1 << 5) | c.Function.DRIVE_ERROR)
         assert bytes(err.data) == b"\xff"

@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 
 from servobus.errors import ArgumentRangeError, FramingError
 from servobus.families.dmm import units as U
+from servobus.families.dmm.vocabulary import DmmFunction as DF
 from servobus.protocols.dyncan import codec as c
 
 F = c.Function
@@ -15,34 +16,34 @@ F = c.Function
 # (frame built by the codec, identifier, data hex) - hand-computed: id = drive << 5 | FC,
 # data big-endian two's complement (docs/dyncan.md).
 GOLDEN: list[tuple[c.Frame, int, str]] = [
-    (c.request(1, F.SET_ORIGIN, 0xFF), 0x020, "ff"),
-    (c.request(1, F.SET_ORIGIN), 0x020, ""),
-    (c.request(1, F.GO_ABSOLUTE_POS, 4096), 0x021, "10 00"),
-    (c.request(1, F.GO_ABSOLUTE_POS, -1), 0x021, "ff"),
-    (c.request(1, F.GO_ABSOLUTE_POS, 134_217_727), 0x021, "07 ff ff ff"),
-    (c.request(1, F.GO_ABSOLUTE_POS, -134_217_728), 0x021, "f8 00 00 00"),
-    (c.request(0, F.MAKE_LINEAR_LINE, 200), 0x002, "00 c8"),
-    (c.request(2, F.GO_RELATIVE_POS, -120), 0x043, "88"),
-    (c.request(2, F.GO_RELATIVE_POS, 128), 0x043, "00 80"),
-    (c.request(0, F.MAKE_CIRCULAR_ARC, -1000), 0x004, "fc 18"),
-    (c.request(1, F.ASSIGN_DRIVE_ID, 5), 0x025, "05"),
-    (c.request(5, F.READ_DRIVE_ID), 0x0A6, ""),
-    (c.reply(5, F.READ_DRIVE_ID, 5), 0x0A6, "05"),
-    (c.request(3, F.SET_DRIVE_CONFIG, 0x24), 0x067, "24"),
-    (c.request(3, F.READ_DRIVE_CONFIG), 0x068, ""),
-    (c.reply(3, F.READ_DRIVE_CONFIG, 0x24), 0x068, "24"),
-    (c.request(3, F.READ_DRIVE_STATUS), 0x069, ""),
-    (c.reply(3, F.READ_DRIVE_STATUS, 0x21), 0x069, "21"),
-    (c.request(2, F.TURN_CONST_SPEED, 20_000), 0x04A, "4e 20"),
-    (c.request(2, F.TURN_CONST_SPEED, -60), 0x04A, "c4"),
-    (c.request(2, F.SQUARE_WAVE, 4096), 0x04B, "10 00"),
-    (c.request(2, F.SIN_WAVE, 1024), 0x04C, "04 00"),
-    (c.request(2, F.SS_FREQUENCY, 50), 0x04D, "32"),
-    (c.request(1, F.GENERAL_READ, 0x1B), 0x02E, "1b"),
-    (c.reply(1, F.GENERAL_READ, 65_536), 0x02E, "01 00 00"),
-    (c.request(1, F.GENERAL_READ, 0x1E), 0x02E, "1e"),
-    (c.reply(1, F.GENERAL_READ, -157), 0x02E, "ff 63"),  # torque example (docs/dyncan.md)
-    (c.Frame(1, F.FOR_MOTOR_DEFINE), 0x02F, ""),
+    (c.request(1, DF.SET_ORIGIN, 0xFF), 0x020, "ff"),
+    (c.request(1, DF.SET_ORIGIN), 0x020, ""),
+    (c.request(1, DF.GO_ABSOLUTE_POS, 4096), 0x021, "10 00"),
+    (c.request(1, DF.GO_ABSOLUTE_POS, -1), 0x021, "ff"),
+    (c.request(1, DF.GO_ABSOLUTE_POS, 134_217_727), 0x021, "07 ff ff ff"),
+    (c.request(1, DF.GO_ABSOLUTE_POS, -134_217_728), 0x021, "f8 00 00 00"),
+    (c.request(0, DF.MAKE_LINEAR_LINE, 200), 0x002, "00 c8"),
+    (c.request(2, DF.GO_RELATIVE_POS, -120), 0x043, "88"),
+    (c.request(2, DF.GO_RELATIVE_POS, 128), 0x043, "00 80"),
+    (c.request(0, DF.MAKE_CIRCULAR_ARC, -1000), 0x004, "fc 18"),
+    (c.request(1, DF.ASSIGN_DRIVE_ID, 5), 0x025, "05"),
+    (c.request(5, DF.READ_DRIVE_ID), 0x0A6, ""),
+    (c.reply(5, DF.READ_DRIVE_ID, 5), 0x0A6, "05"),
+    (c.request(3, DF.SET_DRIVE_CONFIG, 0x24), 0x067, "24"),
+    (c.request(3, DF.READ_DRIVE_CONFIG), 0x068, ""),
+    (c.reply(3, DF.READ_DRIVE_CONFIG, 0x24), 0x068, "24"),
+    (c.request(3, DF.READ_DRIVE_STATUS), 0x069, ""),
+    (c.reply(3, DF.READ_DRIVE_STATUS, 0x21), 0x069, "21"),
+    (c.request(2, DF.TURN_CONST_SPEED, 20_000), 0x04A, "4e 20"),
+    (c.request(2, DF.TURN_CONST_SPEED, -60), 0x04A, "c4"),
+    (c.request(2, DF.SQUARE_WAVE, 4096), 0x04B, "10 00"),
+    (c.request(2, DF.SIN_WAVE, 1024), 0x04C, "04 00"),
+    (c.request(2, DF.SS_FREQUENCY, 50), 0x04D, "32"),
+    (c.request(1, DF.GENERAL_READ, 0x1B), 0x02E, "1b"),
+    (c.reply(1, DF.GENERAL_READ, 65_536), 0x02E, "01 00 00"),
+    (c.request(1, DF.GENERAL_READ, 0x1E), 0x02E, "1e"),
+    (c.reply(1, DF.GENERAL_READ, -157), 0x02E, "ff 63"),  # torque example (docs/dyncan.md)
+    (c.Frame(1, DF.FOR_MOTOR_DEFINE), 0x02F, ""),
     (c.request(1, F.SET_PARAM_GROUP1, fields=(40, 0, 20, 127)), 0x030, "28 00 14 7f"),
     (c.request(1, F.SET_PARAM_GROUP2, fields=(48, 30)), 0x031, "30 1e"),
     (c.request(1, F.SET_PARAM_GROUP3, fields=(10, 16_384, 4095)), 0x032, "0a 40 00 0f ff"),
@@ -102,11 +103,11 @@ def test_table_lengths_match_section5() -> None:
     assert s[F.SET_PARAM_GROUP3].sent == (5, 5)
     assert s[F.READ_PARAM_GROUP3].returned == (5, 5)
     assert s[F.READ_PARAM_GROUP1].returned == (4, 4)
-    assert s[F.TURN_CONST_SPEED].sent == (1, 2)
-    assert s[F.SQUARE_WAVE].sent == (1, 3)
-    assert s[F.GENERAL_READ].returned == (1, 4)
+    assert s[DF.TURN_CONST_SPEED].sent == (1, 2)
+    assert s[DF.SQUARE_WAVE].sent == (1, 3)
+    assert s[DF.GENERAL_READ].returned == (1, 4)
     assert s[F.ECHO].sent == s[F.ECHO].returned == (4, 4)
-    assert s[F.SET_ORIGIN].sent == (0, 1)
+    assert s[DF.SET_ORIGIN].sent == (0, 1)
     assert not s[F.SYNC_TRIGGER].expects_reply
 
 
@@ -128,15 +129,15 @@ def test_errors() -> None:
     with pytest.raises(ArgumentRangeError):
         c.arbitration_id(64, 1)
     with pytest.raises(ArgumentRangeError):
-        c.request(1, F.TURN_CONST_SPEED, 40_000)  # does not fit 2 bytes
+        c.request(1, DF.TURN_CONST_SPEED, 40_000)  # does not fit 2 bytes
     with pytest.raises(ArgumentRangeError):
         c.request(1, F.SET_PARAM_GROUP3, fields=(10, 70_000, 0))
 
 
 def test_describe_guesses_direction() -> None:
-    assert c.describe(c.request(1, F.READ_DRIVE_STATUS)) == "host -> id 1: READ_DRIVE_STATUS"
-    assert c.describe(c.reply(1, F.READ_DRIVE_STATUS, 0x21)).startswith("drive id 1 -> host")
-    assert "POSITION" in c.describe(c.request(1, F.GENERAL_READ, 0x1B))
+    assert c.describe(c.request(1, DF.READ_DRIVE_STATUS)) == "host -> id 1: READ_DRIVE_STATUS"
+    assert c.describe(c.reply(1, DF.READ_DRIVE_STATUS, 0x21)).startswith("drive id 1 -> host")
+    assert "POSITION" in c.describe(c.request(1, DF.GENERAL_READ, 0x1B))
     assert "RELATIVE" in c.describe(c.request(0, F.SYNC_TRIGGER, 0xEE))
     assert "line_num=unchanged" in c.describe(c.request(1, F.SET_PARAM_GROUP3,
                                                         fields=(10, 0, 0)))
@@ -145,7 +146,7 @@ def test_describe_guesses_direction() -> None:
 
 @given(st.integers(c.VALUE_MIN, c.VALUE_MAX), st.integers(1, 63))
 def test_position_roundtrip(value: int, drive_id: int) -> None:
-    ident, data = c.encode(c.request(drive_id, F.GO_RELATIVE_POS, value))
+    ident, data = c.encode(c.request(drive_id, DF.GO_RELATIVE_POS, value))
     assert 1 <= len(data) <= 4
     assert c.decode(ident, data).value == value
     # fewest bytes

@@ -7,6 +7,7 @@ import pytest
 from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, DriveStatus
+from servobus.families.dmm.vocabulary import DmmFunction as DF
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan.device import DynCanNetwork
 from servobus.sim.dmm.drive import CONTROL_HZ, VirtualDrive
@@ -29,21 +30,21 @@ def sig(value: int, n: int) -> bytes:
 
 # Every range the manual lists, with the first value outside it on each side.
 DRIVE_ERROR_CASES = [
-    (F.GO_ABSOLUTE_POS, sig(c.VALUE_MAX + 1, 4)),
-    (F.GO_ABSOLUTE_POS, sig(c.VALUE_MIN - 1, 4)),
-    (F.GO_RELATIVE_POS, sig(c.VALUE_MAX + 1, 4)),
-    (F.MAKE_LINEAR_LINE, sig(c.VALUE_MIN - 1, 4)),
-    (F.MAKE_CIRCULAR_ARC, sig(c.VALUE_MAX + 1, 4)),
+    (DF.GO_ABSOLUTE_POS, sig(c.VALUE_MAX + 1, 4)),
+    (DF.GO_ABSOLUTE_POS, sig(c.VALUE_MIN - 1, 4)),
+    (DF.GO_RELATIVE_POS, sig(c.VALUE_MAX + 1, 4)),
+    (DF.MAKE_LINEAR_LINE, sig(c.VALUE_MIN - 1, 4)),
+    (DF.MAKE_CIRCULAR_ARC, sig(c.VALUE_MAX + 1, 4)),
     (F.GO_ABSOLUTE_POS_SYNC, sig(c.VALUE_MAX + 1, 4)),
     (F.GO_RELATIVE_POS_SYNC, sig(c.VALUE_MIN - 1, 4)),
-    (F.TURN_CONST_SPEED, sig(20_001, 2)),
-    (F.TURN_CONST_SPEED, sig(-20_001, 2)),
-    (F.SQUARE_WAVE, sig(4_097, 2)),
-    (F.SQUARE_WAVE, sig(-1, 1)),
-    (F.SIN_WAVE, sig(4_097, 3)),
-    (F.SIN_WAVE, sig(-1, 2)),
-    (F.SS_FREQUENCY, sig(51, 1)),
-    (F.SS_FREQUENCY, sig(-1, 1)),
+    (DF.TURN_CONST_SPEED, sig(20_001, 2)),
+    (DF.TURN_CONST_SPEED, sig(-20_001, 2)),
+    (DF.SQUARE_WAVE, sig(4_097, 2)),
+    (DF.SQUARE_WAVE, sig(-1, 1)),
+    (DF.SIN_WAVE, sig(4_097, 3)),
+    (DF.SIN_WAVE, sig(-1, 2)),
+    (DF.SS_FREQUENCY, sig(51, 1)),
+    (DF.SS_FREQUENCY, sig(-1, 1)),
     (F.SET_PARAM_GROUP1, bytes([128, 0, 0, 0])),
     (F.SET_PARAM_GROUP1, bytes([0, 0, 0, 255])),
     (F.SET_PARAM_GROUP2, bytes([0, 128])),
@@ -52,8 +53,8 @@ DRIVE_ERROR_CASES = [
     (F.SET_PARAM_GROUP3, bytes([0]) + (16_385).to_bytes(2, "big") + bytes(2)),
     (F.SET_PARAM_GROUP3, bytes(3) + (499).to_bytes(2, "big")),
     (F.SET_PARAM_GROUP3, bytes(3) + (4_096).to_bytes(2, "big")),
-    (F.ASSIGN_DRIVE_ID, bytes([65])),
-    (F.ASSIGN_DRIVE_ID, bytes([255])),
+    (DF.ASSIGN_DRIVE_ID, bytes([65])),
+    (DF.ASSIGN_DRIVE_ID, bytes([255])),
 ]
 
 
@@ -67,16 +68,16 @@ def test_drive_error_ff_for_every_listed_range(fn: F, data: bytes) -> None:
 
 
 BOUNDARY_OK = [
-    (F.GO_ABSOLUTE_POS, sig(c.VALUE_MAX, 4)),
-    (F.TURN_CONST_SPEED, sig(-20_000, 2)),
-    (F.SQUARE_WAVE, sig(4_096, 2)),
-    (F.SIN_WAVE, sig(0, 1)),
-    (F.SS_FREQUENCY, sig(50, 1)),
+    (DF.GO_ABSOLUTE_POS, sig(c.VALUE_MAX, 4)),
+    (DF.TURN_CONST_SPEED, sig(-20_000, 2)),
+    (DF.SQUARE_WAVE, sig(4_096, 2)),
+    (DF.SIN_WAVE, sig(0, 1)),
+    (DF.SS_FREQUENCY, sig(50, 1)),
     (F.SET_PARAM_GROUP1, bytes([127, 1, 0, 0])),
     (F.SET_PARAM_GROUP3, bytes([1]) + (16_384).to_bytes(2, "big") + (4_095).to_bytes(2, "big")),
     (F.SET_PARAM_GROUP3, bytes([0]) + (500).to_bytes(2, "big") + (500).to_bytes(2, "big")),
-    (F.ASSIGN_DRIVE_ID, bytes([64])),  # inside 0..64: no error (not applied: see module)
-    (F.ASSIGN_DRIVE_ID, bytes([0])),
+    (DF.ASSIGN_DRIVE_ID, bytes([64])),  # inside 0..64: no error (not applied: see module)
+    (DF.ASSIGN_DRIVE_ID, bytes([0])),
     (F.POSITION_DIRECT, sig(16_385, 2)),  # PD: no Drive Error listed -> ignored
 ]
 
@@ -133,16 +134,16 @@ def test_sync_trigger_broadcast_starts_axes_in_the_same_control_period() -> None
 
 def test_broadcast_read_answers_on_own_identifiers() -> None:
     n = net(4, 5)
-    replies = n.handle(c.request(0, F.READ_DRIVE_ID))
+    replies = n.handle(c.request(0, DF.READ_DRIVE_ID))
     assert sorted((r.arbitration_id, r.data) for r in replies) == [
         ((4 << 5) | 6, b"\x04"), ((5 << 5) | 6, b"\x05")]
 
 
 def test_assign_and_read_id() -> None:
     n = net(1)
-    assert n.handle(c.request(1, F.ASSIGN_DRIVE_ID, 9)) == []
-    assert n.handle(c.request(1, F.READ_DRIVE_ID)) == []
-    assert n.handle(c.request(9, F.READ_DRIVE_ID)) == [c.reply(9, F.READ_DRIVE_ID, 9)]
+    assert n.handle(c.request(1, DF.ASSIGN_DRIVE_ID, 9)) == []
+    assert n.handle(c.request(1, DF.READ_DRIVE_ID)) == []
+    assert n.handle(c.request(9, DF.READ_DRIVE_ID)) == [c.reply(9, DF.READ_DRIVE_ID, 9)]
 
 
 def test_diagnostic_counter_increments_and_wraps() -> None:
@@ -161,41 +162,41 @@ def test_echo() -> None:
 def test_set_origin_zero_or_one_byte() -> None:
     n = net(1)
     d = n.drives[0]
-    n.handle(c.request(1, F.GO_RELATIVE_POS, 100))
+    n.handle(c.request(1, DF.GO_RELATIVE_POS, 100))
     d.advance(0.5)
     assert d.position != 0
-    n.handle(raw(1, F.SET_ORIGIN, b""))
+    n.handle(raw(1, DF.SET_ORIGIN, b""))
     assert d.position == 0
-    n.handle(c.request(1, F.GO_RELATIVE_POS, 100))
+    n.handle(c.request(1, DF.GO_RELATIVE_POS, 100))
     d.advance(0.5)
-    n.handle(raw(1, F.SET_ORIGIN, b"\x12"))  # not 0xFF: ignored
+    n.handle(raw(1, DF.SET_ORIGIN, b"\x12"))  # not 0xFF: ignored
     assert d.position != 0
-    n.handle(raw(1, F.SET_ORIGIN, b"\xff"))
+    n.handle(raw(1, DF.SET_ORIGIN, b"\xff"))
     assert d.position == 0
 
 
 def test_servo_disable_and_status() -> None:
     n = net(1)
     n.handle(c.request(1, F.SERVO_DISABLE, c.ServoCommand.DISABLE))
-    (st,) = n.handle(c.request(1, F.READ_DRIVE_STATUS))
+    (st,) = n.handle(c.request(1, DF.READ_DRIVE_STATUS))
     assert DriveStatus.from_byte(st.data[0]).servo_free
     n.handle(c.request(1, F.SERVO_DISABLE, c.ServoCommand.ENABLE))
-    (st,) = n.handle(c.request(1, F.READ_DRIVE_STATUS))
+    (st,) = n.handle(c.request(1, DF.READ_DRIVE_STATUS))
     assert not DriveStatus.from_byte(st.data[0]).servo_free
 
 
 def test_speed_position_and_general_read() -> None:
     n = net(1)
     d = n.drives[0]
-    n.handle(c.request(1, F.TURN_CONST_SPEED, 600))
+    n.handle(c.request(1, DF.TURN_CONST_SPEED, 600))
     d.advance(0.5)
     (sp,) = n.handle(c.request(1, F.READ_MOTOR_SPEED))
     assert len(sp.data) == 2 and sp.value == round(d.speed_rpm) and sp.value > 500
-    (pos,) = n.handle(c.request(1, F.GENERAL_READ, 0x1B))
-    assert pos.function == F.GENERAL_READ and pos.value == d.position > 0
-    (tq,) = n.handle(c.request(1, F.GENERAL_READ, 0x1E))
+    (pos,) = n.handle(c.request(1, DF.GENERAL_READ, 0x1B))
+    assert pos.function == DF.GENERAL_READ and pos.value == d.position > 0
+    (tq,) = n.handle(c.request(1, DF.GENERAL_READ, 0x1E))
     assert -700 <= tq.value <= 700
-    assert n.handle(c.request(1, F.GENERAL_READ, 0x55)) == []  # unknown selector
+    assert n.handle(c.request(1, DF.GENERAL_READ, 0x55)) == []  # unknown selector
 
 
 def test_position_direct_moves() -> None:
@@ -209,7 +210,7 @@ def test_position_direct_moves() -> None:
 def test_malformed_lengths_are_ignored() -> None:
     n = net(1)
     assert n.handle(raw(1, F.SET_PARAM_GROUP3, b"\x01\x02")) == []
-    assert n.handle(raw(1, F.READ_DRIVE_STATUS, b"\x00")) == []
+    assert n.handle(raw(1, DF.READ_DRIVE_STATUS, b"\x00")) == []
     assert n.stats.malformed == 2
 
 
@@ -223,10 +224,10 @@ def test_alarm_push_ee() -> None:
 def test_torque_scale_700_peak_and_ccw_positive() -> None:
     n = net(1)
     d = n.drives[0]
-    n.handle(c.request(1, F.TURN_CONST_SPEED, 3000))
+    n.handle(c.request(1, DF.TURN_CONST_SPEED, 3000))
     d.advance(0.01)  # accelerating CW: current positive (CW) in the core
     assert d.current_a > 0
-    (tq,) = n.handle(c.request(1, F.GENERAL_READ, 0x1E))
+    (tq,) = n.handle(c.request(1, DF.GENERAL_READ, 0x1E))
     assert tq.value < 0  # section 6: negative reading = torque applied CW
     assert tq.value == round(-d.current_a / d.model.peak_current_a * U.CAN_TORQUE_FULL_SCALE)
 
@@ -245,7 +246,7 @@ def test_group2_saves_to_eeprom_only_first_ten_times() -> None:
 
 # ---------------------------------------------------------------------- issue 13 deviations
 @pytest.mark.parametrize(("function", "dummies"), [
-    (F.READ_DRIVE_CONFIG, 1), (F.READ_PARAM_GROUP1, 1), (F.READ_PARAM_GROUP2, 1),
+    (DF.READ_DRIVE_CONFIG, 1), (F.READ_PARAM_GROUP1, 1), (F.READ_PARAM_GROUP2, 1),
     (F.READ_PARAM_GROUP3, 2), (F.READ_MOTOR_SPEED, 2), (F.DIAGNOSTIC_COUNTER, 1),
 ])
 def test_dyncan_5_reads_with_the_total_data_dummy_bytes_are_answered(function: F,

@@ -1,4 +1,4 @@
-"""Real-time scheduling (SCHED_FIFO) for the threads whose timing is the product: Class 1.
+"""Real-time thread priority (SCHED_FIFO) for the threads whose timing is the product: Class 1.
 
 Decision (issue 22), measured with benchmarks/bench_enip.py on a 2-core machine at load
 9-12: 16 virtual adapters x RPI 5 ms, p99 interval error at the scanner's socket 7.3 ms
@@ -21,7 +21,7 @@ from __future__ import annotations
 import logging
 import os
 
-log = logging.getLogger("servobus.realtime")
+log = logging.getLogger("servobus.thread_priority")
 
 #: SCHED_FIFO priority servobus asks for (1-99; above the default 0 of normal threads,
 #: below the kernel's own threads at 50 and the usual audio/IRQ threads).
