@@ -13,15 +13,12 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import sys
 import time
-from pathlib import Path
 
 import pytest
 from dyn232_rig import PATHS, rig
 
-# benchmarks/ is a top-level package of the repository, not installed with servobus.
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root: benchmarks/
+# benchmarks/ is a package of the repository (not installed): pytest's pythonpath has the root.
 from benchmarks.stale_reads import StaleCount, dyn232_stale, dyncan_stale
 from servobus.errors import ConnectionLost, DriveTimeout
 from servobus.protocols.dyncan import codec as cc

@@ -16,14 +16,11 @@ random profile of benchmarks.stale_reads on Modbus and EasyCan.
 from __future__ import annotations
 
 import asyncio
-import sys
-from pathlib import Path
 
 import pytest
 from dyn232_rig import PATHS
 
-# benchmarks/ is a top-level package of the repository, not installed with servobus.
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root: benchmarks/
+# benchmarks/ is a package of the repository (not installed): pytest's pythonpath has the root.
 from benchmarks.stale_reads import (
     _Counter,
     _serve_dyn232,

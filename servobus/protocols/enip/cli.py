@@ -27,7 +27,8 @@ import click
 from servobus import fastloop
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
-from servobus.cli.open_axis import emit_json, note, open_axis
+from servobus.cli.open_axis import open_axis
+from servobus.cli.output import emit_json, note
 from servobus.cli.param_types import Seconds
 from servobus.cli.sim_cmd import add_sim_command
 from servobus.cli.sim_control import control_option, start_control

@@ -1,4 +1,6 @@
-"""The parameter backup file of ``servobus params --save/--load/--diff`` (pure, no drive I/O).
+"""The parameter backup file of ``servobus params --save/--load/--diff`` and of the GUI
+(pure, no drive I/O). A family-level format: the family's table validates every value, so
+it sits below the front ends that read and write it.
 
 Format (JSON, UTF-8), version 1::
 
