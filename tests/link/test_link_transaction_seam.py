@@ -1,6 +1,6 @@
 """Both DMM clients on the one TransactionManager, seen through their public seam.
 
-The manager's rules are tested on a scripted medium (test_axis_transaction.py) and each
+The manager's rules are tested on a scripted medium (test_link_transaction.py) and each
 client's protocol rules in its own tests; here: both clients expose the manager and its one
 stats class, refuse a request built by the other protocol before sending anything, and DYN
 CAN's protocol-specific replies (Drive Error 0xFF in flight, alarm push) land in the shared

@@ -61,7 +61,7 @@ async def test_dropped_replies_are_retried(path: str) -> None:
 
 async def test_dropped_reply_raises_drive_timeout_within_deadline(path: str) -> None:
     # No late-reply drain: each repeated run must be the same call, not one that first waits
-    # for the replies the previous run still owes (test_client_abuse_stale tests the drain).
+    # for the replies the previous run still owes (test_link_abuse_stale tests the drain).
     async with rig(push=PATHS[path], timeout=DEADLINE_S, retries=1, late_reply_s=0.0) as r:
         r.faults.set_rate(Direction.RX, Fault.DROP, 1.0)
         ax = r.axis(0)

@@ -61,7 +61,7 @@ async def _first_read_ends(axis: ModbusAxis | Dyn232Axis, how: str) -> None:
 
 
 #: (protocol, how the first read ends); DYN232M's client-deadline path is
-#: test_client_abuse_stale's.
+#: test_link_abuse_stale's.
 CASES = [("modbus", "caller timeout"), ("modbus", "client deadline"),
          ("dyn232", "caller timeout")]
 

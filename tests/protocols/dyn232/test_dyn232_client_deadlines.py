@@ -10,7 +10,7 @@ makes a run slower, a late timer is late every time). See ``assert_gives_up_on_t
 The repeated runs read the same register again after a timeout, which would first wait for
 the late reply the timed-out attempts still owe (``late_reply_s``, the late-reply drain):
 these tests turn the drain off (``late_reply_s=0``) to time the attempts alone; the drain's
-own bound is timed in tests/test_client_abuse_stale.py.
+own bound is timed in tests/link/test_link_abuse_stale.py.
 """
 
 from __future__ import annotations
