@@ -121,3 +121,10 @@ class NotSupported(ServobusError):
     def __init__(self, message: str, family: str = "") -> None:
         super().__init__(message)
         self.family = family
+
+
+class JsonRefused(ServobusError, ValueError):
+    """Text from outside (a GUI request or message, an MQTT command) that is not JSON the
+    server accepts: not UTF-8, not JSON, too large, nested too deep, or a number that is no
+    finite double (``1e400``, a 400-digit integer, ``NaN``). Nothing of it was used; the
+    message says what is wrong (servobus.bounded_json). Also a ``ValueError``."""

@@ -9,7 +9,8 @@ nothing named: the built-in virtual machine (two DMM axes on RS-485, a YZ-AIM on
 Decision: Ctrl-C and SIGTERM are how a server is meant to end, so they end ``servobus gui``
 normally (exit 0, one line on stdout saying every axis was stopped), not with an ``error:``
 line and 130 like a command cut short; an axis that did not confirm its stop is an error
-(exit 2) naming it.
+(exit 2) naming it. The machine's and the GUI's events (a link lost or back, a possible
+power loss, an acknowledgement) go to stderr, one line each (servobus.cli.event_log).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import click
 
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
+from servobus.cli.event_log import log_events
 from servobus.cli.failures import CliError
 
 SHUTDOWN_NOTE = "every axis was stopped and the GUI server closed"
@@ -80,6 +82,7 @@ def gui(ctx: CliContext, gui_url: str | None, machine: str | None, one_id: int |
         url = None
     options = ServeOptions(url=url, ids=ids, host=host, port=port, token=token,
                            open_browser=not no_browser, machine=machine)
+    log_events("servobus.machine", "servobus.gui")  # links lost and back, power losses
     outcome = serve(options, lambda line: click.echo(line))
     failed = {i: e for i, e in (outcome.halted or {}).items() if e is not None}
     if failed:

@@ -3,8 +3,11 @@
 Topics (``<m>`` the machine's name, ``<a>`` an axis's name)::
 
     servobus/<m>/status        "online" / "offline" (retained; "offline" is the last will)
+    servobus/<m>/link          JSON when a link goes down or comes back (QoS 1, not retained)
     servobus/<m>/<a>/state     JSON every 1/rate s: position, speed, current, unit, moving,
-                               enabled, in_position, alarm (code), alarm_text, ok, error, time
+                               enabled, in_position, alarm (code), alarm_text, ok, error,
+                               online, last_good, power_lost, power_lost_reason,
+                               interrupted, time
     servobus/<m>/<a>/alarm     JSON {"code", "text", "time"} when it changes (retained)
     servobus/<m>/<a>/cmd       commands (only with --mqtt-commands; servobus.gateway.mqtt_gate)
     servobus/<m>/<a>/reply     {"id", "ok", "code", "error"} for each command
@@ -18,6 +21,12 @@ QoS 1. Commands are only taken when the gateway itself logs in to the broker wit
 name and password: the broker's authentication and its ACL on ``.../cmd`` say who may
 command; the gateway checks each command like an OPC UA call (servobus.gateway.commands), as user
 ``mqtt:<its broker user>``. A lost broker is retried every :data:`RECONNECT_S` seconds.
+
+Link messages (issue 29): one per link change, as the OPC UA LinkEventType event; not
+retained (one topic serves every link of the machine, and a retained message would keep
+only the last link's; the state messages carry each axis's ``online`` for a late
+subscriber). While the broker is away they wait, at most :data:`MAX_PENDING_LINK_EVENTS`
+(the oldest go first), and go out with their own ``time`` when it is back.
 """
 
 from __future__ import annotations
@@ -29,6 +38,7 @@ import logging
 import math
 import secrets
 import ssl
+from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import unquote, urlparse
@@ -36,8 +46,10 @@ from urllib.parse import unquote, urlparse
 import aiomqtt
 from paho.mqtt.subscribeoptions import SubscribeOptions
 
-from servobus.errors import ArgumentRangeError
+from servobus import bounded_json
+from servobus.errors import ArgumentRangeError, JsonRefused
 from servobus.gateway.commands import Commander, Refused
+from servobus.gateway.link_events import LinkEvent
 from servobus.gateway.mqtt_gate import DEFAULT_MAX_AGE_S, CommandGate
 from servobus.gateway.sampler import Sample, Sampler
 from servobus.gateway.source import Machine
@@ -47,6 +59,7 @@ log = logging.getLogger(__name__)
 DEFAULT_MQTT_RATE_HZ = 5.0
 RECONNECT_S = 2.0
 BAD_TOPIC_CHARS = set("+#/\0")
+MAX_PENDING_LINK_EVENTS = 100
 
 
 @dataclass(frozen=True)
@@ -96,7 +109,7 @@ def check_topic_name(kind: str, name: str) -> None:
 
 
 def state_json(sample: Sample, unit: str) -> bytes:
-    st = sample.status
+    st, h = sample.status, sample.health
 
     def num(x: float | None) -> float | None:
         return None if x is None or not math.isfinite(x) else x
@@ -107,7 +120,21 @@ def state_json(sample: Sample, unit: str) -> bytes:
         "moving": st.moving if st else None, "enabled": st.enabled if st else None,
         "in_position": st.in_position if st else None,
         "alarm": st.alarm_code if st else None, "alarm_text": st.alarm_text if st else None,
-        "ok": sample.ok, "error": sample.error or None, "time": round(sample.time, 3),
+        "ok": sample.ok, "error": sample.error or None, "online": h.online,
+        "last_good": None if h.last_good is None else round(h.last_good, 3),
+        "power_lost": h.power_lost, "power_lost_reason": h.power_lost_reason,
+        "interrupted": h.interrupted, "time": round(sample.time, 3),
+    }
+    return json.dumps(body, separators=(",", ":")).encode()
+
+
+def link_json(event: LinkEvent) -> bytes:
+    body: dict[str, object] = {
+        "url": event.url, "axes": list(event.axes), "online": event.online,
+        "reason": event.reason or None,
+        "last_good": None if event.last_good is None else round(event.last_good, 3),
+        "power_lost": list(event.power_lost), "interrupted": list(event.interrupted),
+        "time": round(event.time, 3),
     }
     return json.dumps(body, separators=(",", ":")).encode()
 
@@ -133,6 +160,14 @@ class MqttGateway:
         self.published = 0
         self.connected = asyncio.Event()
         self._alarm: dict[str, tuple[int, bool]] = {}
+        self._links: deque[LinkEvent] = deque(maxlen=MAX_PENDING_LINK_EVENTS)
+        self._link_wake = asyncio.Event()
+        sampler.link_listeners.append(self.on_link)
+
+    def on_link(self, event: LinkEvent) -> None:
+        """Sampler link listener: the event waits for the session's link task."""
+        self._links.append(event)
+        self._link_wake.set()
 
     def _tls(self) -> ssl.SSLContext | None:
         o = self.options
@@ -172,7 +207,8 @@ class MqttGateway:
         self._alarm.clear()
         log.info("MQTT: publishing %s/... to %s:%s%s", self.base, self.broker.host,
                  self.broker.port, " (commands on)" if self.options.commands else "")
-        tasks = [asyncio.create_task(self._publish_loop(client))]
+        tasks = [asyncio.create_task(self._publish_loop(client)),
+                 asyncio.create_task(self._link_loop(client))]
         if self.options.commands:
             # MQTT 5 "retain as published": a retained command keeps its flag on the way
             # to a live subscriber too, so it is refused now and not only on a replay
@@ -228,6 +264,22 @@ class MqttGateway:
         if info.rc != 0:  # the connection is gone: let aiomqtt raise and reconnect
             await client.publish(topic, payload)
 
+    async def _link_loop(self, client: aiomqtt.Client) -> None:
+        """Each link event once, QoS 1; one that could not be sent waits for the next
+        session."""
+        if self._links:
+            self._link_wake.set()
+        while True:
+            await self._link_wake.wait()
+            self._link_wake.clear()
+            while self._links:
+                event = self._links.popleft()
+                try:
+                    await client.publish(f"{self.base}/link", link_json(event), qos=1)
+                except BaseException:  # the broker is gone (or we stop): keep it for later
+                    self._links.appendleft(event)
+                    raise
+
     async def _alarm_change(self, client: aiomqtt.Client, sample: Sample) -> None:
         st = sample.status
         if not sample.ok or st is None:
@@ -270,8 +322,8 @@ class MqttGateway:
 
 def _peek_id(payload: bytes) -> str | None:
     try:
-        data = json.loads(payload)
-    except (ValueError, UnicodeDecodeError):
+        data = bounded_json.loads(payload)
+    except JsonRefused:
         return None
     ident = data.get("id") if isinstance(data, dict) else None
     return ident[:128] if isinstance(ident, str) else None

@@ -2,8 +2,9 @@
 
 Decisions (docs/gateway.md "MQTT commands"): a command is a JSON object
 ``{"id": "...", "ts": <unix seconds>, "cmd": "move_relative", "value": 1.5}``. A motion
-command (MOTION) must carry ``id`` (1-128 characters) and ``ts``; a stop may leave them
-out. Refused, never run, and answered on ``.../reply``:
+command (MOTION, ``ack`` included: it allows motion again after a possible power loss)
+must carry ``id`` (1-128 characters) and ``ts``; a stop may leave them out. Refused, never
+run, and answered on ``.../reply``:
 
 * a retained message (the broker would replay it to every new subscription);
 * an id seen before (QoS 1 redelivers a message after a reconnect) - ids are remembered
@@ -12,7 +13,8 @@ out. Refused, never run, and answered on ``.../reply``:
   (bounded memory: more than 10,000 commands in 10 s is not a control program);
 * ``ts`` older than ``max_age`` (default 5 s) or more than :data:`MAX_FUTURE_S` ahead of
   this computer's clock (the sender's clock must be synchronised, NTP);
-* a payload that is not such an object, or larger than :data:`MAX_PAYLOAD` bytes.
+* a payload that is not such an object, or larger than :data:`MAX_PAYLOAD` bytes, nested
+  deeper than 32 levels or holding a number beyond a double's range (servobus.bounded_json).
 
 ``set_speed`` is a lease (docs/gateway.md "MQTT commands"): it takes ``ttl`` (seconds,
 default 0.5, above 0 and at most 1; BadOutOfRange beyond, checked with the OPC UA
@@ -25,12 +27,13 @@ not tell a subscriber who published, so a command may name its sender in ``clien
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from collections import OrderedDict
 from dataclasses import dataclass
 
+from servobus import bounded_json
+from servobus.errors import JsonRefused
 from servobus.gateway.commands import AXIS_COMMANDS, MOTION, Command, Refused
 from servobus.machine.lease import DEFAULT_TTL_S
 
@@ -61,10 +64,10 @@ class CommandGate:
             raise Refused("BadRequestNotAllowed", "a retained command is never run")
         if len(payload) > MAX_PAYLOAD:
             raise Refused("BadRequestTooLarge", f"a command has at most {MAX_PAYLOAD} bytes")
-        try:
-            data = json.loads(payload)
-        except (ValueError, UnicodeDecodeError):
-            raise Refused("BadDecodingError", "a command is a JSON object") from None
+        try:  # nesting and numbers bounded (servobus.bounded_json): nothing here can overflow
+            data = bounded_json.loads(payload)
+        except JsonRefused as exc:
+            raise Refused("BadDecodingError", f"a command is a JSON object: {exc}") from None
         if not isinstance(data, dict):
             raise Refused("BadDecodingError", "a command is a JSON object")
         name = data.get("cmd")

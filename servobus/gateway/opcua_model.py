@@ -16,17 +16,22 @@ the standard names finds what it expects::
                   ParameterSet          (DI)
                     ActualPosition      (Robotics)   Double, axis unit, EngineeringUnits, EURange
                     ActualSpeed         (Robotics)   Double, axis unit per second
-                    ActualCurrent, Enabled, Moving, InPosition, AlarmCode, AlarmText,
-                    Online, LastError   (servobus)
+                    ActualCurrent, Enabled, Moving, InPosition, AlarmCode, AlarmText
+                                        (servobus)   readings: Bad while they cannot be read
+                    Online, LastError, PowerLost, PowerLostReason, Interrupted
+                                        (servobus)   the link's health: always Good
                   Identification        (DI)         Manufacturer, Model (family), Protocol,
                                                      DeviceAddress (link and drive id)
                   MoveAbsolute(Double), MoveRelative(Double), SetSpeed(Double, Ttl
-                  Double), Stop(), Enable(), Disable(), ResetAlarm()  (servobus)
+                  Double), Stop(), Enable(), Disable(), ResetAlarm(), Acknowledge()
+                                        (servobus)
               StopAll()                 (servobus)
 
 Node ids are strings in the servobus namespace (``<machine>.<axis>.ActualPosition``), so
 they stay the same from one start to the next. Alarms are events of AxisAlarmEventType
-(servobus namespace, a BaseEventType) emitted by the axis object.
+(servobus namespace, a BaseEventType) emitted by the axis object; a link going down or
+coming back is an event of LinkEventType emitted by the machine object (one per link, not
+per axis).
 """
 
 from __future__ import annotations
@@ -56,6 +61,18 @@ STATE_VARIABLES: dict[str, tuple[ua.VariantType, object]] = {
     "AlarmText": (ua.VariantType.String, ""),
 }
 
+#: The health of an axis's link (issue 29, docs/gateway.md "Recovery"): name -> variant
+#: type. Known to the gateway whether the drive answers or not, so always Good. No
+#: "LastGood" (decision): it would change with every sample; a Bad reading carries the time
+#: it was last good as its SourceTimestamp.
+HEALTH_VARIABLES: dict[str, ua.VariantType] = {
+    "Online": ua.VariantType.Boolean,
+    "LastError": ua.VariantType.String,
+    "PowerLost": ua.VariantType.Boolean,
+    "PowerLostReason": ua.VariantType.String,
+    "Interrupted": ua.VariantType.String,
+}
+
 #: SetSpeed's description: a lease, renewed by calling again (docs/gateway.md "SetSpeed").
 SET_SPEED_HELP = ("constant speed in the axis unit per second (0 stops); it ends Ttl seconds "
                   "after the last call unless called again (renew it), and when the session "
@@ -72,6 +89,7 @@ AXIS_METHODS: dict[str, tuple[str, tuple[tuple[str, str], ...]]] = {
     "Enable": ("enable", ()),
     "Disable": ("disable", ()),
     "ResetAlarm": ("reset_alarm", ()),
+    "Acknowledge": ("ack", ()),  # the machine axis's acknowledge(): nothing is sent
 }
 
 #: ``handler(axis, command, arguments)``: the method's Double arguments in order.
@@ -82,7 +100,8 @@ MethodHandler = Callable[[str, str, tuple[float, ...]], Awaitable[ua.StatusCode]
 class AxisNodes:
     axis: MachineAxis
     node: Node
-    variables: dict[str, Node] = field(default_factory=dict)
+    variables: dict[str, Node] = field(default_factory=dict)  # readings
+    health: dict[str, Node] = field(default_factory=dict)  # HEALTH_VARIABLES
 
 
 @dataclass
@@ -189,6 +208,10 @@ async def _add_axis(folder: Node, ns: Namespaces, m: str, axis: MachineAxis,
             var = await params.add_variable(ua.NodeId(f"{a}.{name}", ns.servobus),
                                             qn(ns.servobus, name), initial, vtype)
         out.variables[name] = var
+    for name, vtype in HEALTH_VARIABLES.items():
+        out.health[name] = await params.add_variable(
+            ua.NodeId(f"{a}.{name}", ns.servobus), qn(ns.servobus, name),
+            ua.get_default_value(vtype), vtype)
     for method, (command, arguments) in AXIS_METHODS.items():
         inputs = [method_argument(name, description) for name, description in arguments]
         await obj.add_method(ua.NodeId(f"{a}.{method}", ns.servobus), qn(ns.servobus, method),

@@ -1,4 +1,4 @@
-"""The gateway's OPC UA server (asyncua): security, users, values and alarm events.
+"""The gateway's OPC UA server (asyncua): security, users, values, alarm and link events.
 
 Security (decision, docs/gateway.md "Security"):
 
@@ -21,6 +21,14 @@ go of the leases it holds. A session closes on CloseSession, on a lost connectio
 keeps a session with subscriptions open for the client to come back, until the session
 timeout) and on its timeout; a half-open connection closes nothing, so a SetSpeed's own
 ``Ttl`` (at most 1 s) is what ends the motion of a client that went silent.
+
+Recovery (issue 29, decision, docs/gateway.md "Recovery"): while an axis cannot be read its
+readings carry a Bad status and, as SourceTimestamp, the time they were last good (the
+machine axis's ``last_good``), with no value (OPC UA: a Bad value is to be ignored, Part 4
+7.7.1); they are Good again with the next good read, the server never restarts. Offline:
+BadCommunicationError, or BadNoCommunication while the axis was never read. The link's
+health variables stay Good. A link going down or back is one LinkEventType event emitted
+by the machine object.
 """
 
 from __future__ import annotations
@@ -32,6 +40,7 @@ import datetime
 import logging
 import math
 import socket
+from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,10 +56,11 @@ from asyncua.server.user_managers import UserManager
 
 from servobus.errors import ArgumentRangeError
 from servobus.gateway.commands import Command, Commander, Refused
+from servobus.gateway.link_events import LinkEvent
 from servobus.gateway.opcua_model import SERVOBUS_URI, AxisNodes, build_model
 from servobus.gateway.sampler import Sample
 from servobus.gateway.source import Machine
-from servobus.gateway.users import LoginBudget, Users
+from servobus.gateway.users import Admission, LoginBudget, Users
 from servobus.transport.address import is_loopback
 
 log = logging.getLogger(__name__)
@@ -63,8 +73,14 @@ BUFFER_BYTES = 65_535
 PENDING_ACTIVATION_S = 10.0
 MAX_SUBSCRIPTIONS = 200
 MAX_ITEM_QUEUE = 1_000
+#: Link events waiting for the update task (bounded: a link flapping faster than the
+#: events go out loses its oldest ones, never the memory).
+MAX_PENDING_LINK_EVENTS = 100
 _caller: contextvars.ContextVar[GatewaySession | None] = contextvars.ContextVar(
     "opcua_caller", default=None)
+#: The address of the client whose session asyncua is activating ("" when unknown).
+_login_peer: contextvars.ContextVar[str] = contextvars.ContextVar("opcua_login_peer",
+                                                                  default="")
 ADMIN_REQUESTS = {ua.NodeId(i) for i in (
     ua.ObjectIds.AddNodesRequest_Encoding_DefaultBinary,
     ua.ObjectIds.DeleteNodesRequest_Encoding_DefaultBinary,
@@ -104,6 +120,24 @@ class GatewaySession(InternalSession):  # type: ignore[misc]
         results: list[ua.CallMethodResult] = await super().call(params)
         return results
 
+    def activate_session(self, params: ua.ActivateSessionParameters,
+                         peer_certificate: bytes | None) -> ua.ActivateSessionResult:
+        """asyncua's activation, which calls the user manager's ``get_user`` synchronously,
+        with the client's address in :data:`_login_peer` (FileUsers reads it there).
+
+        The address (decision): asyncua names an external session after its connection's
+        peer (``transport.get_extra_info("peername")``); a client that re-activates its
+        session over a new connection (OPC UA reconnect) counts against the address it
+        created the session from, which needs that session's secret token.
+        """
+        token = _login_peer.set(peer_host(self.name))
+        try:
+            result: ua.ActivateSessionResult = super().activate_session(params,
+                                                                         peer_certificate)
+            return result
+        finally:
+            _login_peer.reset(token)
+
     async def close_session(self, delete_subs: bool = True) -> None:
         closed = self.state == SessionState.Closed
         await super().close_session(delete_subs)
@@ -131,7 +165,9 @@ class FileUsers(UserManager):  # type: ignore[misc]
     """Anonymous sessions are read-only users; a name and password must be in the file.
 
     asyncua calls :meth:`get_user` on the event loop and waits for it, so each password check
-    (a scrypt hash) stalls the loop: ``budget`` refuses logins beyond its rate unhashed."""
+    (a scrypt hash) stalls the loop: ``budget`` refuses logins beyond its rates unhashed, per
+    peer address and in all (servobus.gateway.users.LoginBudget). asyncua passes get_user no
+    session and no address: the peer is the one :class:`GatewaySession` sets around it."""
 
     def __init__(self, users: Users, budget: LoginBudget | None = None) -> None:
         self.users = users
@@ -141,14 +177,35 @@ class FileUsers(UserManager):  # type: ignore[misc]
                  certificate: Any = None) -> User | None:
         if username is None:  # certificate tokens are not offered: anonymous
             return User(role=UserRole.Anonymous)
-        if not self.budget.take():
-            log.warning("OPC UA login refused for user %r: more than %g password checks a "
-                        "second", username, self.budget.per_second)
+        peer = _login_peer.get()
+        admission = self.budget.take(peer)
+        if admission is not Admission.CHECK:
+            if self.budget.announce:  # one line per spell, not one per try
+                log.warning("OPC UA logins from %s refused unchecked (user %r): %s",
+                            peer or "an unknown address", username,
+                            _SPENT[admission].format(b=self.budget))
             return None
         if self.users.verify(username, password):
+            self.budget.refund(peer)
             return User(role=UserRole.User, name=username)
-        log.warning("OPC UA login refused for user %r", username)
+        log.warning("OPC UA login refused for user %r from %s: wrong name or password",
+                    username, peer or "an unknown address")
         return None
+
+
+_SPENT = {
+    Admission.PEER_SPENT: "more than {b.peer_burst} wrong passwords from this address "
+                          "(then one every {b.peer_interval_s:g} s)",
+    Admission.ALL_SPENT: "more than {b.per_second:g} password checks a second in all",
+}
+
+
+def peer_host(name: object) -> str:
+    """The host of asyncua's peer name (the socket's ``peername``: (host, port, ...)), or
+    ""."""
+    if isinstance(name, tuple | list) and name and isinstance(name[0], str):
+        return name[0]
+    return ""
 
 
 def parse_endpoint(url: str) -> tuple[str, int]:
@@ -190,11 +247,15 @@ class OpcUaGateway:
         self.server = Server(iserver=GatewayServer(FileUsers(options.users or Users()),
                                                    self._session_closed))
         self.axes: dict[str, AxisNodes] = {}
+        self.device: Any = None  # the machine's object: it emits the link events
         self._pending: dict[str, Sample] = {}
+        self._links: deque[LinkEvent] = deque(maxlen=MAX_PENDING_LINK_EVENTS)
         self._wake = asyncio.Event()
-        self._last: dict[tuple[str, str], tuple[Any, bool]] = {}
+        self._last: dict[tuple[str, str], tuple[object, ...]] = {}
         self._alarm: dict[str, int] = {}
+        self._health: dict[str, tuple[object, ...]] = {}
         self._events: dict[str, Any] = {}
+        self._link_event: Any = None
         self.notifications = 0  # value writes that changed something (for the benchmark)
 
     @property
@@ -217,12 +278,13 @@ class OpcUaGateway:
         s.set_identity_tokens([ua.AnonymousIdentityToken, ua.UserNameIdentityToken])
         policies = await self._security()
         s.set_security_policy(policies, permission_ruleset=GatewayRules())
-        _, self.axes = await build_model(s, self.machine, self.source, self._call)
+        self.device, self.axes = await build_model(s, self.machine, self.source, self._call)
         waiting = ua.DataValue(StatusCode=ua.StatusCode(ua.StatusCodes.BadWaitingForInitialData))
         for nodes in self.axes.values():  # until the first sample of the axis
-            for node in nodes.variables.values():
+            for node in (*nodes.variables.values(), *nodes.health.values()):
                 await s.write_attribute_value(node.nodeid, waiting)
         await self._alarm_events()
+        await self._link_events()
         await s.start()
         if s.bserver is not None:
             self.port = s.bserver.port
@@ -262,6 +324,16 @@ class OpcUaGateway:
         for name, nodes in self.axes.items():
             self._events[name] = await s.get_event_generator(etype, nodes.node)
 
+    async def _link_events(self) -> None:
+        s = self.server
+        ns = await s.get_namespace_index(SERVOBUS_URI)
+        etype = await s.create_custom_event_type(
+            ns, "LinkEventType", ua.ObjectIds.BaseEventType,
+            [("LinkUrl", ua.VariantType.String), ("AxisNames", ua.VariantType.String),
+             ("Online", ua.VariantType.Boolean), ("Reason", ua.VariantType.String),
+             ("PowerLost", ua.VariantType.String)])
+        self._link_event = await s.get_event_generator(etype, self.device)
+
     async def stop(self) -> None:
         # asyncua's stop waits for its clock task's 1 s sleep; end that task first
         clock = getattr(self.server.iserver, "time_task", None)
@@ -295,6 +367,12 @@ class OpcUaGateway:
         self._pending[sample.axis] = sample
         self._wake.set()
 
+    def on_link(self, event: LinkEvent) -> None:
+        """Sampler link listener: the event waits for :meth:`run_updates` (after the values
+        of the same round)."""
+        self._links.append(event)
+        self._wake.set()
+
     async def run_updates(self) -> None:
         while True:
             await self._wake.wait()
@@ -305,6 +383,12 @@ class OpcUaGateway:
                     await self._apply(sample)
                 except Exception:  # one bad update must not end the updates
                     log.exception("OPC UA update of axis %s failed", sample.axis)
+            while self._links:
+                event = self._links.popleft()
+                try:
+                    await self._raise_link_event(event)
+                except Exception:
+                    log.exception("OPC UA event of link %s failed", event.url)
 
     async def _apply(self, sample: Sample) -> None:
         nodes = self.axes.get(sample.axis)
@@ -321,29 +405,53 @@ class OpcUaGateway:
         for name, node in nodes.variables.items():
             if name in values or not sample.ok:
                 await self._write((sample.axis, name), node, values.get(name), sample)
+        await self._apply_health(nodes, sample)
         if sample.ok and st is not None and self._alarm.get(sample.axis, 0) != st.alarm_code:
             self._alarm[sample.axis] = st.alarm_code
             await self._raise_event(sample.axis, st.alarm_code, st.alarm_text)
 
     async def _write(self, key: tuple[str, str], node: Any, value: object, sample: Sample
                      ) -> None:
-        """Write when the value or its Good/Bad changed; ``key`` (axis, variable) names the
-        node cheaply (hashing asyncua's NodeId per value and sample cost more)."""
-        state = (value, sample.ok)
+        """A reading, written when its value or its status changed; ``key`` (axis,
+        variable) names the node cheaply (hashing asyncua's NodeId per value and sample cost
+        more). Bad: no value, the status the sample names, and the time the axis was last
+        good as SourceTimestamp (none while it never was)."""
+        last_good = sample.health.last_good
+        state = (True, value) if sample.ok else (False, sample.code, last_good)
         if self._last.get(key) == state:
             return
-        before = self._last.get(key)
         self._last[key] = state
         if sample.ok:
             dv = ua.DataValue(ua.Variant(value, _variant_type(value)),
                               SourceTimestamp=_utc(sample.time))
         else:
-            if before is not None and not before[1]:
-                return
-            dv = ua.DataValue(StatusCode=ua.StatusCode(ua.StatusCodes.BadCommunicationError),
-                              SourceTimestamp=_utc(sample.time))
+            dv = ua.DataValue(StatusCode=_status(sample.code),
+                              SourceTimestamp=None if last_good is None else _utc(last_good))
         self.notifications += 1
         await self.server.write_attribute_value(node.nodeid, dv)
+
+    async def _apply_health(self, nodes: AxisNodes, sample: Sample) -> None:
+        """The health variables: always Good, each written when it changed (most samples
+        change none: one comparison). ``last_good`` changes with every good read and is
+        not among them: a Bad reading's SourceTimestamp carries it."""
+        h = sample.health
+        error = "" if sample.ok else sample.error
+        key = (h.online, h.power_lost, h.power_lost_reason, h.interrupted, error)
+        if self._health.get(sample.axis) == key:
+            return
+        self._health[sample.axis] = key
+        health: dict[str, object] = {
+            "Online": h.online, "LastError": error, "PowerLost": h.power_lost,
+            "PowerLostReason": h.power_lost_reason or "", "Interrupted": h.interrupted or "",
+        }
+        for name, node in nodes.health.items():
+            value = health[name]
+            if self._last.get((sample.axis, name)) == (value,):
+                continue
+            self._last[(sample.axis, name)] = (value,)
+            self.notifications += 1
+            await self.server.write_attribute_value(node.nodeid, ua.DataValue(
+                ua.Variant(value, _variant_type(value)), SourceTimestamp=_utc(sample.time)))
 
     async def _raise_event(self, axis: str, code: int, text: str) -> None:
         gen = self._events[axis]
@@ -355,6 +463,19 @@ class OpcUaGateway:
             f"axis {axis}: alarm {code} {text}" if code else f"axis {axis}: alarm cleared")
         await gen.trigger()
         log.warning("axis %s: %s", axis, gen.event.Message.Text)
+
+    async def _raise_link_event(self, event: LinkEvent) -> None:
+        """One event per link change; the machine's own log line is its line."""
+        gen = self._link_event
+        gen.event.LinkUrl = event.url
+        gen.event.AxisNames = ", ".join(event.axes)
+        gen.event.Online = event.online
+        gen.event.Reason = event.reason
+        gen.event.PowerLost = ", ".join(event.power_lost)
+        gen.event.Severity = 100 if event.online and not event.power_lost else \
+            500 if event.online else 700
+        gen.event.Message = ua.LocalizedText(event.message)
+        await gen.trigger(time_attr=_utc(event.time))
 
 
 def _variant_type(value: object) -> ua.VariantType:

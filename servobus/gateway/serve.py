@@ -54,6 +54,7 @@ class Gateway:
         self.commander = Commander(machine)
         self.opcua = OpcUaGateway(machine, self.commander, options.opcua, source)
         self.sampler.listeners.append(self.opcua.on_sample)
+        self.sampler.link_listeners.append(self.opcua.on_link)
         self.mqtt = (MqttGateway(machine, self.sampler, self.commander, options.mqtt)
                      if options.mqtt else None)
         self.tasks: list[asyncio.Task[None]] = []

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import time
 
 from starlette.requests import Request
@@ -38,17 +39,17 @@ async def info(request: Request) -> Response:
 @api
 async def axes(request: Request) -> Response:
     gui = state(request)
-    return JSONResponse([{"identity": h.identity(), "status": gui.monitor.snapshots[i]}
+    now = time.time()
+    return JSONResponse([{"identity": h.identity(), "status": gui.monitor.view(i, now)}
                          for i, h in gui.fleet.handles.items()])
 
 
 async def _refresh(request: Request, axis_id: int) -> dict[str, object]:
     """A status read right after a command (the page sees the effect at once)."""
     gui = state(request)
-    try:
-        return await gui.monitor.read(gui.fleet.get(axis_id))
-    except Exception:  # the periodic monitor reports link problems
-        return gui.monitor.snapshots[axis_id]
+    with contextlib.suppress(Exception):  # the periodic monitor reports link problems
+        await gui.monitor.read(gui.fleet.get(axis_id))
+    return gui.monitor.view(axis_id)
 
 
 @api
@@ -128,6 +129,22 @@ async def wave(request: Request) -> Response:
 
 
 @api
+async def acknowledge(request: Request) -> Response:
+    """A person has seen the axis's power-loss flag and interrupted motion (issue 29): the
+    machine axis's ``acknowledge()`` clears both and motion is allowed again. Nothing is
+    sent to the drive. A JSON POST like every command (the Guard's token and CSRF rules)."""
+    h = handle(request)
+    await body(request)
+    m = h.machine_axis
+    if m is not None:
+        what = m.power_lost_reason or m.interrupted
+        await m.acknowledge()
+        if what is not None:
+            state(request).monitor.acknowledged(h.id, what)
+    return ok(status=state(request).monitor.view(h.id))
+
+
+@api
 async def stop_all(request: Request) -> Response:
     results = await state(request).stop_all()
     return ok(axes={str(k): v for k, v in results.items()},
@@ -157,6 +174,7 @@ ROUTES = [
     Route("/api/axes/{axis}/move", move, methods=["POST"]),
     Route("/api/axes/{axis}/turn", turn, methods=["POST"]),
     Route("/api/axes/{axis}/wave", wave, methods=["POST"]),
+    Route("/api/axes/{axis}/acknowledge", acknowledge, methods=["POST"]),
     Route("/api/stop_all", stop_all, methods=["POST"]),
     Route("/api/diagnostics", diagnostics),
 ]

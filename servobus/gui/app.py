@@ -1,8 +1,10 @@
 """The GUI's ASGI application: static page, REST API, WebSocket, behind the Guard.
 
 ``create_app(url, ids, token=...)`` opens the drives when the server starts (lifespan) and,
-when it stops, stops every axis and closes the connection. Every request passes the Guard
-(servobus.gui.auth), then the body limit (servobus.gui.limits).
+when it stops, stops every axis and closes the connection. Every request runs in its own
+error boundary (servobus.gui.boundary) and passes the Guard (servobus.gui.auth), the body
+limit (servobus.gui.limits) and the fair limits per page (servobus.gui.fair), in that
+order.
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ from starlette.staticfiles import StaticFiles
 
 from servobus.gui import api_axes, api_io, api_params, ws
 from servobus.gui.auth import Guard
+from servobus.gui.boundary import ErrorBoundary
+from servobus.gui.fair import RequestCaps
 from servobus.gui.fleet import Fleet
 from servobus.gui.jog import LEASE_S
 from servobus.gui.limits import BodyLimit
@@ -61,5 +65,6 @@ def create_app(url: str | None = None, ids: Sequence[int] | None = None, *,
         *api_io.ROUTES,
         WebSocketRoute("/ws", ws.endpoint),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
-    ], lifespan=lifespan, middleware=[Middleware(Guard, token=token), Middleware(BodyLimit)])
+    ], lifespan=lifespan, middleware=[Middleware(ErrorBoundary), Middleware(Guard, token=token),
+                                      Middleware(BodyLimit), Middleware(RequestCaps)])
     return app

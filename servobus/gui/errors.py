@@ -11,6 +11,7 @@ from servobus.errors import (
     DriveTimeout,
     NotSupported,
     OwnerError,
+    PowerLostError,
     ServobusError,
 )
 from servobus.families.params_file import ParamsFileError
@@ -19,6 +20,7 @@ from servobus.families.params_file import ParamsFileError
 STATUS: tuple[tuple[type[BaseException], int], ...] = (
     (NotSupported, 501),
     (OwnerError, 409),  # another page or client holds the axis
+    (PowerLostError, 409),  # acknowledge the possible power loss first
     (ParamsFileError, 400),
     (ArgumentRangeError, 400),
     (DriveAlarm, 409),

@@ -12,15 +12,17 @@ A machine (:meth:`Fleet.open_machine`, servobus.machine): every axis of every li
 keyed 1..n in file order (drive ids repeat across links, so the GUI's axis number is the
 axis's place in the file), named as in the file, with its unit and limits in the identity
 and its position/speed in that unit in every status. Links open with ``retry=True``: an
-axis whose link is down shows its link error and comes back when the link does (reload the
-page for its identity). A jog or constant speed never passes a soft limit (its lease's
-target stops there); the machine's guard still watches for motion from outside (a wave
-run from another program).
+axis whose link is down shows its link error and comes back when the link does (the page
+then asks for its identity again); a link that drops later is reopened by the machine, and
+:meth:`Fleet.trace_links` hooks the traffic log onto every link opened since. A jog or
+constant speed never passes a soft limit (its lease's target stops there); the machine's
+guard still watches for motion from outside (a wave run from another program).
 """
 
 from __future__ import annotations
 
 import inspect
+import weakref
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -120,6 +122,20 @@ class AxisHandle:
             **named,
         }
 
+    def recovery(self) -> dict[str, object]:
+        """What the machine knows of the axis's link and drive (issue 29, docs/gui.md):
+        ``online``, ``last_good`` (``time.time()`` of its last good call, None before
+        one), ``interrupted`` (the motion the drop cut short, never re-sent),
+        ``power_lost`` and its reason, ``checking`` (a reopened link checked for a power
+        loss). Read live at each status, not from the last poll."""
+        m = self.machine_axis
+        if m is None:  # a fleet built from plain Axes: no machine to ask
+            return {"online": True, "last_good": None, "interrupted": None,
+                    "power_lost": False, "power_lost_reason": None, "checking": False}
+        return {"online": m.online, "last_good": m.last_good, "interrupted": m.interrupted,
+                "power_lost": m.power_lost, "power_lost_reason": m.power_lost_reason,
+                "checking": m.checking}
+
     def link(self) -> dict[str, object]:
         return {"gui": self.stats.as_dict(), "client": client_counters(self.axis)}
 
@@ -135,6 +151,22 @@ class Fleet:
         self.traffic = traffic
         self.machine = machine
         self.machine_file = machine is not None and machine_file
+        #: Link owners whose traffic reaches ``traffic``: those open now were hooked by
+        #: whoever opened the fleet (open_machine, open, the gateway's bridge).
+        self._traced: weakref.WeakSet[AsyncAxis] = weakref.WeakSet(
+            link.owner for link in (machine.links if machine is not None else ())
+            if link.owner is not None)
+
+    async def trace_links(self) -> None:
+        """Hook the traffic log onto every link opened since (after start-up, or reopened
+        after a drop: a fresh Axis), so Diagnostics keeps showing its traffic."""
+        if self.machine is None:
+            return
+        for link in self.machine.links:
+            owner = link.owner
+            if owner is not None and owner not in self._traced:
+                self._traced.add(owner)
+                await owner.add_trace(self.traffic.hook)
 
     @classmethod
     async def open_machine(cls, path: str | Path | None = None) -> Fleet:

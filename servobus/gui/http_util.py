@@ -9,7 +9,8 @@ from collections.abc import Awaitable, Callable
 from starlette.requests import Request
 from starlette.responses import JSONResponse, Response
 
-from servobus.errors import ArgumentRangeError
+from servobus import bounded_json
+from servobus.errors import ArgumentRangeError, JsonRefused
 from servobus.gui import limits
 from servobus.gui.errors import error_response
 from servobus.gui.fleet import AxisHandle
@@ -33,11 +34,11 @@ def handle(request: Request) -> AxisHandle:
 
 
 async def body(request: Request) -> dict[str, object]:
-    """The JSON object of the body (bounded in size and nesting: servobus.gui.limits)."""
+    """The JSON object of the body (bounded: servobus.gui.limits, servobus.bounded_json)."""
     try:
-        doc = limits.loads(await request.body())
-    except limits.JsonRefused as exc:
-        raise ArgumentRangeError(f"the request body is {exc}") from None
+        doc = bounded_json.loads(await request.body(), max_bytes=limits.MAX_BODY_BYTES)
+    except JsonRefused as exc:
+        raise ArgumentRangeError(f"the request body is refused: {exc}") from None
     if not isinstance(doc, dict):
         raise ArgumentRangeError("the request body must be a JSON object")
     return doc

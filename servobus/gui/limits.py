@@ -1,4 +1,4 @@
-"""Bounded inputs of the GUI server: request bodies, WebSocket messages, JSON nesting.
+"""Bounded inputs of the GUI server: request bodies, WebSocket messages, JSON.
 
 Decisions (the GUI moves machines; a big or hostile input must not stall its jogs):
 
@@ -11,61 +11,25 @@ Decisions (the GUI moves machines; a big or hostile input must not stall its jog
   configuration of a few hundred bytes); a larger one closes the socket with code 1009
   ("message too big", RFC 6455). uvicorn enforces it on the wire (:data:`UVICORN_LIMITS`),
   the app checks it again.
-* JSON nested deeper than :data:`MAX_DEPTH` is refused (400, or an ``error`` message on the
-  WebSocket) before it is parsed: no parse recurses, and the depth is found by C-speed
-  passes over the text (:func:`depth`), so a maximal input costs the loop a few
-  milliseconds (``benchmarks/bench_gui.py`` prints the stall).
+* JSON is read by :func:`servobus.bounded_json.loads` (shared with the gateway): nested
+  deeper than 32 levels, numbers beyond a double's range, ``NaN``/``Infinity`` and text
+  that is not JSON are refused (400, or an ``error`` message on the WebSocket) before
+  anything uses them; the nesting is checked before the text is parsed, so a maximal input
+  costs the loop a few milliseconds (``benchmarks/bench_gui.py`` prints the stall).
 """
 
 from __future__ import annotations
 
-import itertools
 import json
-import re
 
 from servobus.gui.auth import ASGIApp, Message, Receive, Scope, Send
 
 MAX_BODY_BYTES = 64 * 1024
 MAX_MESSAGE_BYTES = 16 * 1024
-MAX_DEPTH = 32
 CLOSE_TOO_BIG = 1009
 #: uvicorn's own limits (servobus.gui.server): WebSocket frames, HTTP header block.
 UVICORN_LIMITS: dict[str, int] = {"ws_max_size": MAX_MESSAGE_BYTES,
                                   "h11_max_incomplete_event_size": 64 * 1024}
-
-_STRING = re.compile(r'"[^"\\]*(?:\\.[^"\\]*)*"', re.DOTALL)
-_NOT_BRACKET = re.compile(r"[^\[\]{}]+")
-_STEP = {"[": 1, "{": 1, "]": -1, "}": -1}
-
-
-class JsonRefused(ValueError):
-    """The text is not JSON the GUI accepts (syntax, nesting); the message says why."""
-
-
-def depth(text: str) -> int:
-    """The deepest nesting of arrays and objects in JSON ``text`` (strings skipped)."""
-    brackets = _NOT_BRACKET.sub("", _STRING.sub("", text))
-    return max(itertools.accumulate(map(_STEP.__getitem__, brackets)), default=0)
-
-
-def loads(text: str | bytes) -> object:
-    """``json.loads`` with the nesting bounded first; JsonRefused says what is wrong."""
-    if isinstance(text, bytes | bytearray):
-        try:
-            text = text.decode("utf-8")
-        except UnicodeDecodeError:
-            raise JsonRefused("not JSON: not UTF-8 text") from None
-    if depth(text) > MAX_DEPTH:
-        raise JsonRefused(f"JSON nested deeper than {MAX_DEPTH} levels")
-    try:
-        return json.loads(text)
-    except (ValueError, RecursionError) as exc:
-        raise JsonRefused(f"not JSON: {exc}") from None
-
-
-def excerpt(text: str, size: int = 40) -> str:
-    """The start of a message, to name it in an error."""
-    return text if len(text) <= size else text[:size] + "..."
 
 
 class BodyLimit:

@@ -41,6 +41,8 @@ ACK_GIVE_UP_S = 1.0  # a frame unanswered this long no longer holds the next one
 MAX_IN_FLIGHT = 2
 AUTO_GRACE_S = 0.25  # auto mode free-runs after window + this without a trigger
 LATE_AXIS_S = 0.5  # a capture waits at most this long for a slower axis's samples
+#: Channels of one page's scope (a cap per page, servobus.gui.fair): one session per page,
+#: a new configuration replaces the last one and its sampler subscriptions.
 MAX_CHANNELS = 8
 MIN_WINDOW_S = 0.005
 WIDTH_RANGE = (50, 4000)
@@ -71,8 +73,11 @@ class ScopeSettings:
     def parse(cls, doc: Mapping[str, object], axes: Collection[int]) -> ScopeSettings:
         """From the page's JSON; ValueError says what is wrong."""
         raw = doc.get("channels")
-        if not isinstance(raw, list) or not 1 <= len(raw) <= MAX_CHANNELS:
-            raise ValueError(f"1 to {MAX_CHANNELS} channels, got {raw!r}")
+        if not isinstance(raw, list):
+            raise ValueError(f"channels: a list of 1 to {MAX_CHANNELS} {{axis, signal}}")
+        if not 1 <= len(raw) <= MAX_CHANNELS:
+            raise ValueError(f"a page's scope shows 1 to {MAX_CHANNELS} channels, "
+                             f"got {len(raw)}")
         channels = []
         for c in raw:
             if not isinstance(c, dict):

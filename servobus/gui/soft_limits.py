@@ -11,18 +11,25 @@ leased: the drive runs them until the host stops them (Off, Stop, STOP ALL, the 
 shutdown); docs/safety.md.
 
 Either motion is refused (OwnerError) while a lease of any owner runs on the axis: it
-would fight the streamed targets. Stop it first.
+would fight the streamed targets. Stop it first. Both are refused (PowerLostError) while
+the machine axis's possible power loss is not acknowledged (issue 29).
 """
 
 from __future__ import annotations
 
-from servobus.errors import LimitError, OwnerError
+from servobus.errors import LimitError, OwnerError, PowerLostError
 from servobus.gui.fleet import AxisHandle
 
 
 def check_free(handle: AxisHandle, what: str) -> None:
-    """OwnerError when a jog or constant speed runs on the axis."""
+    """OwnerError when a jog or constant speed runs on the axis; PowerLostError while a
+    possible power loss is not acknowledged (the machine refuses its own motion then, and
+    these commands reach the Axis directly)."""
     m = handle.machine_axis
+    if m is not None and m.power_lost:
+        raise PowerLostError(f"axis {m.name}: {what} refused: the drive may have lost power "
+                             f"({m.power_lost_reason}); acknowledge it first, nothing was "
+                             "sent")
     lease = m.lease if m is not None else None
     if m is not None and lease is not None:
         raise OwnerError(f"axis {m.name}: {what} refused: {lease.owner} holds the axis "

@@ -5,11 +5,12 @@ Messages from the page (JSON): ``jog`` {axis, rpm} (repeated while the button is
 ``POST /api/axes/N/turn`` {rpm, page}, repeated while it is on), ``turn_stop`` {axis},
 ``stop_all``, ``scope`` {settings}, ``scope_run`` {running},
 ``scope_arm``, ``scope_csv``, ``ack`` {seq}, ``io_watch`` {axis or null}. To the page:
-``hello``, ``status`` (every :data:`STATUS_PERIOD_S`), ``io`` (the watched axis's virtual
-outputs and state, as often), ``scope_state``, ``csv``, ``error`` (``message``; ``request``:
-the type of the message it answers, ``received``: that message's start), ``stopped`` (JSON)
-and scope frames (binary, servobus.gui.frames). Message sizes and JSON nesting are bounded
-(servobus.gui.limits).
+``hello``, ``status`` (every :data:`STATUS_PERIOD_S`; each axis as StatusMonitor.view
+gives it: its last values with their age and the machine's live link state, issue 29),
+``io`` (the watched axis's virtual outputs and state, as often), ``scope_state``, ``csv``,
+``error`` (``message``; ``request``: the type of the message it answers, ``received``: that
+message's start), ``stopped`` (JSON) and scope frames (binary, servobus.gui.frames).
+Message sizes and JSON nesting are bounded (servobus.gui.limits).
 
 The page owns its jogs and constant speeds as ``page N`` (N: ``hello``'s ``owner``;
 servobus.gui.jog). ``status`` carries ``jog`` (axis -> rpm of every running lease),
@@ -26,13 +27,15 @@ import itertools
 import json
 import logging
 import math
+import time
 from collections.abc import Awaitable, Callable, Mapping
 from typing import Any
 
-from starlette.websockets import WebSocket, WebSocketDisconnect
+from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketState
 
+from servobus import bounded_json
 from servobus.errors import ServobusError
-from servobus.gui import limits
+from servobus.gui import fair, limits
 from servobus.gui.api_io import snapshot
 from servobus.gui.jog import page_owner
 from servobus.gui.scope_session import ScopeSession, ScopeSettings
@@ -66,9 +69,10 @@ class PageLink:
             gui = self.gui
             active = gui.jog.active()
             mine = page_owner(self.owner)
+            now = time.time()
             await self.send_json({
                 "type": "status",
-                "axes": [_finite(s) for s in gui.monitor.snapshots.values()],
+                "axes": [_finite(gui.monitor.view(i, now)) for i in gui.monitor.snapshots],
                 "jog": {str(k): v["rpm"] for k, v in active.items()},
                 "leases": {str(k): {**v, "mine": v["owner"] == mine}
                            for k, v in active.items()},
@@ -131,7 +135,8 @@ class PageLink:
 
         Every bad message gets an ``error`` naming that message (its type, and its start
         in ``received``) and the session goes on; only one over the size limit closes the
-        socket (1009, servobus.gui.limits).
+        socket (1009, servobus.gui.limits). A message whose handling fails unexpectedly (a
+        bug) is answered with an ``error`` too, and logged in one line (servobus.gui.boundary).
         """
         text = message.get("text")
         data = message.get("bytes")
@@ -145,14 +150,33 @@ class PageLink:
             return True
         kind = ""
         try:
-            doc = limits.loads(text)
+            doc = bounded_json.loads(text, max_bytes=limits.MAX_MESSAGE_BYTES)
             if not isinstance(doc, dict):
                 raise ValueError("a message is a JSON object")
             kind = str(doc.get("type", ""))
             await self.handle(doc)
         except (ValueError, ServobusError) as exc:
-            await self.refuse(str(exc), kind, limits.excerpt(text))
+            await self.refuse(str(exc), kind, bounded_json.excerpt(text))
+        except WebSocketDisconnect:
+            raise
+        except Exception as exc:  # this message's boundary: a bug fails it, not the page
+            if self.ws.application_state != WebSocketState.CONNECTED:
+                raise  # the socket is gone: the page ends
+            log.error("GUI WebSocket message %r of page %d failed: %s: %s", kind[:40],
+                      self.owner, type(exc).__name__, bounded_json.excerpt(str(exc), 300))
+            log.debug("GUI WebSocket message failed", exc_info=True)
+            await self.refuse(f"internal error ({type(exc).__name__}); the page and the "
+                              "server go on", kind, bounded_json.excerpt(text))
         return True
+
+    async def turn_away(self) -> None:
+        """One page more than :data:`servobus.gui.fair.MAX_PAGES`: told why, then closed
+        with 1013 ("try again later"); the page's own reconnection tries again."""
+        text = f"the GUI serves at most {fair.MAX_PAGES} pages at once: close one"
+        with contextlib.suppress(WebSocketDisconnect, RuntimeError, OSError):
+            await self.ws.accept()
+            await self.send_json({"type": "error", "message": text, "request": ""})
+            await self.ws.close(fair.CLOSE_TRY_AGAIN_LATER, text)
 
     async def refuse(self, text: str, kind: str, received: str) -> None:
         await self.send_json({"type": "error", "message": text, "request": kind,
@@ -160,13 +184,17 @@ class PageLink:
 
     async def serve(self) -> None:
         gui = self.gui
-        await self.ws.accept()
-        gui.sessions.add(self.session)
-        gui.jog.pages.add(self.owner)
-        tasks = [asyncio.create_task(_quietly(self.push_status)),
-                 asyncio.create_task(_quietly(self.session.run)),
-                 asyncio.create_task(_quietly(self.push_io))]
+        if len(gui.sessions) >= fair.MAX_PAGES:
+            await self.turn_away()
+            return
+        gui.sessions.add(self.session)  # before any await: pages opening at once count too
+        tasks: list[asyncio.Task[None]] = []
         try:
+            await self.ws.accept()
+            gui.jog.pages.add(self.owner)
+            tasks = [asyncio.create_task(_quietly(self.push_status)),
+                     asyncio.create_task(_quietly(self.session.run)),
+                     asyncio.create_task(_quietly(self.push_io))]
             await self.send_json({"type": "hello", "owner": self.owner, "url": gui.fleet.url,
                                   "axes": [h.identity() for h in gui.fleet.handles.values()]})
             while True:

@@ -88,6 +88,9 @@ class AsyncMachineAxis:
         self._last_good: float | None = None
         self._last_counts: int | None = None
         self._moving = False  # a motion was commanded and not yet seen to end
+        #: Motion commands sent so far: a status read that began before the last one may
+        #: be answered before the drive starts it, so its "not moving" clears nothing.
+        self._commands = 0
         self._silent = 0  # calls in a row that timed out
         self._silent_since = 0.0  # time.monotonic() of the first of them
         self._interrupted: str | None = None
@@ -238,6 +241,7 @@ class AsyncMachineAxis:
         resumed; a motion that ran is reported in ``interrupted``, a lease ends."""
         self.axis = None
         self.last_error = err
+        before = self._interrupted  # a drop during the reopen: the same interruption
         lease = self._lease
         running = lease is not None and lease.alive
         if running and lease is not None:
@@ -249,7 +253,7 @@ class AsyncMachineAxis:
         elif self._moving:
             self._interrupted = "a commanded motion may not have finished"
         self._moving = False
-        if self._interrupted is not None:
+        if self._interrupted is not None and self._interrupted != before:
             log.warning("axis %s: motion interrupted by the link drop: %s; it is not "
                         "re-sent", self.name, self._interrupted)
 
@@ -301,11 +305,21 @@ class AsyncMachineAxis:
         self._interrupted = None
         return core
 
-    def _seen(self, counts: int | None = None, status: AxisStatus | None = None) -> None:
+    def _seen(self, counts: int | None = None, status: AxisStatus | None = None,
+              since: int | None = None) -> None:
+        """A read's result; ``since``: ``_commands`` when the read began. A status read
+        that was in flight while a motion command went out (a front end polls while it
+        moves the axis) says nothing of that motion: it must not clear ``_moving``, or a
+        drop right after the command would not count as an interrupted motion."""
         if counts is not None:
             self._last_counts = counts
-        if status is not None and not status.moving:
+        if status is not None and not status.moving and since == self._commands:
             self._moving = False
+
+    def _commanded(self) -> None:
+        """A motion command goes out now."""
+        self._commands += 1
+        self._moving = True
 
     @property
     def scale(self) -> Scale:
@@ -350,16 +364,18 @@ class AsyncMachineAxis:
             return self.scale.from_rpm(await self.core().speed())
 
     async def status(self) -> AxisStatus:
+        since = self._commands
         with self._watch():
             status = await self.core().status()
-        self._seen(status=status)
+        self._seen(status=status, since=since)
         return status
 
     async def readings(self) -> tuple[float, float, AxisStatus]:
         """Position and speed in user units and the status (see ``AsyncAxis.readings``)."""
+        since = self._commands
         with self._watch():
             position, speed, status = await self.core().readings()
-        self._seen(position, status)
+        self._seen(position, status, since)
         return self.to_user(position), self.scale.from_rpm(speed), status
 
     # ------------------------------------------------------------- motion
@@ -391,7 +407,7 @@ class AsyncMachineAxis:
     async def _move(self, send: Callable[[AsyncAxis], Awaitable[None]]) -> None:
         """A motion command, sent once (never re-sent, whatever happens to the link)."""
         core = self._motion()
-        self._moving = True
+        self._commanded()
         with self._watch():
             await send(core)
 
@@ -487,7 +503,7 @@ class AsyncMachineAxis:
             return self.to_user(counts)
 
         async def send(target: float) -> None:
-            self._moving = True
+            self._commanded()
             with self._watch():
                 await core.stream_to(self.to_counts(target), abs(self.scale.to_rpm(lease.speed)))
 
@@ -576,9 +592,10 @@ class AsyncMachineAxis:
 
     async def wait_idle(self, timeout: float | None = None) -> AxisStatus:
         core = self.core()
+        since = self._commands
         with self._watch():
             status = await (core.wait_idle() if timeout is None else core.wait_idle(timeout))
-        self._seen(status=status)
+        self._seen(status=status, since=since)
         return status
 
     async def apply_origin(self) -> None:

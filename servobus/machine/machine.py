@@ -344,7 +344,7 @@ class AsyncMachine:
         async def start_group(members: list[AsyncMachineAxis]) -> float:
             lead = members[0]
             for m in members:
-                m._moving = True
+                m._commanded()
             with lead._watch():
                 await lead.core().sync_move_to([(m.core(), counts[m.name]) for m in members])
             return time.perf_counter()

@@ -290,3 +290,10 @@ def test_no_star_import_and_no_module_getattr() -> None:
         bad += [(where, "__getattr__") for node in tree.body
                 if isinstance(node, ast.FunctionDef) and node.name == "__getattr__"]
     assert bad == []
+
+
+def test_bounded_json_imports_only_the_errors() -> None:
+    """The JSON reader both front ends share (GUI, gateway) sits beside ``errors``: any
+    layer may use it."""
+    found = {name for name in imports(ROOT / "bounded_json.py") if name.startswith("servobus")}
+    assert found == {"servobus.errors", "servobus.errors.JsonRefused"}

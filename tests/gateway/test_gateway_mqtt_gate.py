@@ -31,6 +31,17 @@ def refused(gate: CommandGate, payload: bytes, *, retained: bool = False,
     return exc.value.code
 
 
+def test_ack_needs_an_id_and_a_fresh_timestamp_as_motion_does() -> None:
+    """ack allows motion again: a replayed or late one must never acknowledge a power
+    loss its sender did not see (docs/gateway.md "Recovery")."""
+    gate = CommandGate(max_age_s=5)
+    assert refused(gate, msg(cmd="ack")) == "BadInvalidArgument"
+    assert refused(gate, msg(id="k0", ts=NOW - 60, cmd="ack")) == "BadInvalidTimestamp"
+    ok = gate.admit("x", msg(id="k1", ts=NOW, cmd="ack"), False, NOW)
+    assert (ok.command.name, ok.command.value) == ("ack", None)
+    assert refused(gate, msg(id="k1", ts=NOW, cmd="ack")) == "BadRequestNotAllowed"
+
+
 def test_a_motion_command_runs_once() -> None:
     gate = CommandGate(max_age_s=5)
     ok = gate.admit("x", msg(id="a1", ts=NOW - 1, cmd="move_relative", value=2), False, NOW)
@@ -152,6 +163,9 @@ async def test_set_speed_is_a_lease_of_its_client_with_a_checked_ttl() -> None:
                 msg(id="s5", ts=NOW, cmd="set_speed", value=3, client=""),
                 msg(id="s6", ts=NOW, cmd="set_speed", value=3, client="c" * 65)):
         assert refused(gate, bad) == "BadInvalidArgument"
+    # NaN is no JSON number: refused while parsing (servobus.bounded_json)
+    assert refused(gate, msg(id="s9", ts=NOW, cmd="set_speed", value=3, ttl=float("nan"))) \
+        == "BadDecodingError"
     # the range is the commander's, as for OPC UA's Ttl; nothing reaches an axis
     machine = FakeMachine()
     commander = Commander(machine)  # type: ignore[arg-type]
@@ -159,8 +173,6 @@ async def test_set_speed_is_a_lease_of_its_client_with_a_checked_ttl() -> None:
                            "BadOutOfRange"),
                           (msg(id="s8", ts=NOW, cmd="set_speed", value=3, ttl=0),
                            "BadOutOfRange"),
-                          (msg(id="s9", ts=NOW, cmd="set_speed", value=3, ttl=float("nan")),
-                           "BadInvalidArgument"),
                           (msg(id="s10", ts=NOW, cmd="move_relative", value=3, ttl=0.5),
                            "BadInvalidArgument")):
         accepted = gate.admit("a0", payload, False, NOW)
@@ -168,3 +180,50 @@ async def test_set_speed_is_a_lease_of_its_client_with_a_checked_ttl() -> None:
             await commander.run("mqtt:gateway", accepted.command, "mqtt", accepted.owner)
         assert exc.value.code == code, payload
     assert machine.log == []
+
+
+HUGE = "9" * 400
+CMD = '"id": "h1", "cmd": "move_relative"'
+BEYOND = {
+    "400-digit ts": f'{{{CMD}, "ts": {HUGE}, "value": 1}}',
+    "400-digit value": f'{{{CMD}, "ts": {NOW}, "value": {HUGE}}}',
+    "-400-digit value": f'{{{CMD}, "ts": {NOW}, "value": -{HUGE}}}',
+    "1e400 value": f'{{{CMD}, "ts": {NOW}, "value": 1e400}}',
+    "-1e999 ts": f'{{{CMD}, "ts": -1e999, "value": 1}}',
+    "Infinity ttl": f'{{{CMD}, "ts": {NOW}, "value": 1, "ttl": Infinity}}',
+    "1000-deep value": f'{{{CMD}, "ts": {NOW}, "value": {"[" * 1000}{"]" * 1000}}}',
+    "1000-deep": "[" * 1000 + "]" * 1000,
+}
+
+
+@pytest.mark.parametrize("payload", BEYOND.values(), ids=BEYOND.keys())
+def test_numbers_beyond_a_double_and_deep_nesting_are_refused_typed(payload: str) -> None:
+    """Before issue 30 these raised OverflowError or RecursionError out of the gate."""
+    gate = CommandGate(max_age_s=5)
+    assert refused(gate, payload.encode()) == "BadDecodingError"
+    assert gate.admit("x", msg(id="h1", ts=NOW, cmd="move_relative", value=1), False, NOW).id
+
+
+class Published:
+    """What the gateway publishes (an aiomqtt client's publish, recorded)."""
+
+    def __init__(self) -> None:
+        self.messages: list[tuple[str, dict[str, Any]]] = []
+
+    async def publish(self, topic: str, payload: bytes, **options: object) -> None:
+        self.messages.append((topic, json.loads(payload)))
+
+
+@pytest.mark.parametrize("payload", BEYOND.values(), ids=BEYOND.keys())
+async def test_the_command_handler_answers_them_on_reply(payload: str) -> None:
+    """The handler (the one that reads the broker's messages) answers each such command on
+    ``.../reply`` and nothing reaches an axis."""
+    machine = FakeMachine()
+    sampler = Sampler(machine, 10)  # type: ignore[arg-type]
+    gw = MqttGateway(machine, sampler, Commander(machine),  # type: ignore[arg-type]
+                     MqttOptions("mqtt://u:p@127.0.0.1:1884", commands=True))
+    client = Published()
+    await gw._command(client, "a0", payload.encode(), False)  # type: ignore[arg-type]
+    [(topic, reply)] = client.messages
+    assert topic.endswith("/a0/reply") and reply["ok"] is False
+    assert reply["code"] == "BadDecodingError" and machine.log == []

@@ -72,7 +72,7 @@ async def test_axes_are_browsed_with_their_units_and_limits(gateway: RunningGate
                     ).StatusCode.is_good()
         methods = {(await m.read_browse_name()).Name for m in await axes["x"].get_methods()}
         assert methods == {"MoveAbsolute", "MoveRelative", "SetSpeed", "Stop", "Enable",
-                           "Disable", "ResetAlarm"}
+                           "Disable", "ResetAlarm", "Acknowledge"}
 
 
 async def test_anonymous_is_read_only(gateway: RunningGateway) -> None:

@@ -439,6 +439,23 @@ def test_a_sampler_that_stops_shows_why_on_the_page(broken_sampler_server: str,
                                            "return e && e.textContent"),
                        timeout=10, what="the sampler's error on the page")
     assert "A3 sampling stopped: RuntimeError: poll bug" in shown
-    color = browser.find_element(By.CSS_SELECTOR, "#scope-status .sampler-error"
-                                 ).value_of_css_property("color")
-    assert color != browser.find_element(By.ID, "scope-status").value_of_css_property("color")
+    # in one script: the status line is redrawn at every scope_state (a found element goes
+    # stale between two WebDriver calls)
+    error, line = js(browser, "const c = (s) => getComputedStyle(document.querySelector(s))"
+                              ".color; return [c('#scope-status .sampler-error'),"
+                              " c('#scope-status')];")
+    assert error != line
+
+
+def test_the_page_names_itself_on_its_requests(page: WebDriver) -> None:
+    """The page's fetches carry X-Servobus-Page, its WebSocket's number, so the server counts
+    them against this page's own limits (servobus/gui/fair.py, issue 30)."""
+    js(page, "window.__headers = []; const original = window.fetch;"
+             "window.fetch = (path, init) => { window.__headers.push(init.headers);"
+             " return original(path, init); };")
+    try:
+        tab(page, "diag")  # the diagnostics panel polls the server
+        seen = wait_until(lambda: js(page, "return window.__headers"), what="a request")
+        assert seen[0].get("X-Servobus-Page") == str(js(page, "return window.servobus.owner"))
+    finally:
+        page.refresh()  # the page's own fetch back for the next test

@@ -106,7 +106,7 @@ def test_typed_values_and_out_of_range_are_400_and_nothing_is_sent(client: TestC
         r = client.post(path, json=doc)
         assert r.status_code == 400, (path, doc, r.status_code, r.text)
         assert r.json()["error"], (path, doc)
-    # JSON's own overflow: 1e999 as a bare number is read as infinity
+    # JSON's own overflow: 1e999 as a bare number is beyond a double (servobus.bounded_json)
     for path, text in [("/api/axes/1/move", '{"value": 1e999, "unit": "rev"}'),
                        ("/api/axes/1/turn", '{"rpm": 1e999}'),
                        ("/api/axes/1/tuning/step", '{"distance": 1e999, "unit": "rev"}'),
@@ -123,7 +123,10 @@ def test_the_websocket_jog_refuses_the_same_and_sends_nothing(client: TestClient
             ws.send_json({"type": "jog", "axis": 1, "rpm": rpm})
             while (doc := ws.receive_json())["type"] != "error":
                 pass  # status pushes come in between
-            assert "rpm" in doc["message"] or "jog speed" in doc["message"], doc
+            if rpm == 1e999:  # json.dumps writes Infinity: refused while parsing (issue 30)
+                assert "Infinity is not a JSON number" in doc["message"], doc
+            else:
+                assert "rpm" in doc["message"] or "jog speed" in doc["message"], doc
     assert sent_since(client, before) == []
     assert gui(client).jog.active() == {}  # no lease was taken
 

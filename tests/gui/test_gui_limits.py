@@ -22,8 +22,9 @@ from starlette.testclient import TestClient
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect as ws_connect
 
+from servobus.bounded_json import MAX_DEPTH
 from servobus.gui.app import create_app
-from servobus.gui.limits import CLOSE_TOO_BIG, MAX_BODY_BYTES, MAX_DEPTH, MAX_MESSAGE_BYTES
+from servobus.gui.limits import CLOSE_TOO_BIG, MAX_BODY_BYTES, MAX_MESSAGE_BYTES
 from servobus.gui.server import bind, uvicorn_config
 
 pytestmark = pytest.mark.timeout(60)
@@ -165,7 +166,12 @@ def client() -> Iterator[TestClient]:
     ('{"value": ' + "[" * 5000 + "]" * 5000 + "}", "nested deeper"),
     ("{nope", "not JSON"),
     (json.dumps([1, 2]), "must be a JSON object"),
-], ids=["50000-deep", "just-too-deep", "5000-deep-value", "not-json", "not-an-object"])
+    ('{"value": 1e400}', "beyond a double's range"),
+    ('{"value": ' + "9" * 400 + "}", "beyond a double's range"),
+    ('{"value": -1e999}', "beyond a double's range"),
+    ('{"value": NaN}', "NaN is not a JSON number"),
+], ids=["50000-deep", "just-too-deep", "5000-deep-value", "not-json", "not-an-object",
+        "1e400", "400-digits", "-1e999", "NaN"])
 def test_deep_or_bad_json_is_400_naming_the_problem(client: TestClient, body: str,
                                                      text: str) -> None:
     r = client.post("/api/axes/1/move", content=body,
@@ -201,6 +207,9 @@ def test_every_bad_message_is_answered_naming_it_and_the_session_goes_on(
         deep = next_error(ws)
         assert deep["request"] == "" and "nested deeper" in deep["message"]
         assert deep["received"].startswith("[[[[") and len(deep["received"]) < 50
+        ws.send_text('{"type": "jog", "axis": 1, "rpm": ' + "9" * 400 + "}")
+        huge = next_error(ws)
+        assert huge["request"] == "" and "beyond a double's range" in huge["message"]
         ws.send_bytes(b"\x00\x01")
         assert "binary" in next_error(ws)["message"]
         ws.send_text(json.dumps({"type": "stop_all"}))  # the session is still there

@@ -8,17 +8,15 @@ import asyncio
 import contextlib
 import json
 import logging
-import socket
 import subprocess
-import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import machine_rig
 import pytest
 from conftest import wait_until_async
+from drive_process_rig import SIMS, free_port, sim_url, start_sim
+from drive_process_rig import procs as procs  # the fixture, for this module
 from machine_rig import write_machine
-from subprocess_rig import read_line, stop_process
 
 from servobus import connect
 from servobus.axis import registry
@@ -33,12 +31,6 @@ from servobus.machine import open_machine, open_machine_async
 from servobus.machine.machine import RETRY_MAX_S, RETRY_S, AsyncMachine, backoff
 
 SIMULATED_S = 60.0
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def allowed_tries(seconds: float) -> int:
@@ -137,39 +129,30 @@ async def test_after_close_every_call_is_a_servobus_error(tmp_path: Path) -> Non
             call()
 
 
+async def test_a_status_read_in_flight_during_a_move_does_not_hide_the_motion(
+        tmp_path: Path) -> None:
+    """A front end polls while it moves the axis: a status read sent before the move and
+    answered "not moving" must not make a drop right after the move look like no motion
+    ran (the gateway's restart test lost the power-loss flag that way)."""
+    # paced like the wire: the status reply comes after the move has been handed over
+    path = write_machine(tmp_path, '[axes.a]\nurl = "sim://dyn232"\nid = 1\nunit = "rev"\n')
+    machine = await open_machine_async(path)
+    try:
+        axis = machine["a"]
+        core = axis.core()
+        read = asyncio.create_task(axis.status())
+        await asyncio.sleep(0)  # one loop turn: the status request goes out first
+        await axis.move_to(20.0)  # no read first: the move follows the status request
+        assert not (await read).moving  # answered before the drive took the move
+        axis.went_offline(MachineLinkError("the link dropped"))  # as the machine does
+        assert axis.interrupted == "a commanded motion may not have finished"
+        await core.stop()
+        await core.close()
+    finally:
+        await machine.close()
+
+
 # ------------------------------------------------------------ virtual drives in processes
-#: protocol -> (servobus sim arguments, drive URL); {port} is the fixed free port.
-SIMS = {
-    "dyn232": (["dyn232", "--listen", "tcp://127.0.0.1:{port}", "--ids", "1", "--fast"],
-               "dyn232+socket://127.0.0.1:{port}"),
-    "dyncan": (["dyncan", "--socketcand", "127.0.0.1:{port}", "--ids", "1"],
-               "dyncan+socketcand://127.0.0.1:{port}"),
-    "easycan": (["easycan", "--socketcand", "127.0.0.1:{port}", "--ids", "1"],
-                "easycan+socketcand://127.0.0.1:{port}"),
-    "enip": (["enip", "--tcp-port", "{port}", "--udp-port", "0"], "enip://127.0.0.1:{port}"),
-    "modbus": (["modbus", "--listen", "tcp://127.0.0.1:{port}", "--ids", "1"],
-               "modbus+socket://127.0.0.1:{port}"),
-}
-
-
-def start_sim(protocol: str, port: int) -> subprocess.Popen[str]:
-    args = [a.format(port=port) for a in SIMS[protocol][0]]
-    proc = subprocess.Popen([sys.executable, "-m", "servobus", "sim", *args,
-                             "--duration", "300"],  # a safety net only
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    while "listening on" not in read_line(proc):
-        pass
-    return proc
-
-
-@pytest.fixture
-def procs() -> Iterator[list[subprocess.Popen[str]]]:
-    started: list[subprocess.Popen[str]] = []
-    yield started
-    for proc in started:
-        stop_process(proc)
-
-
 async def offline(machine: AsyncMachine, name: str) -> bool:
     """Reads (as the GUI and the gateway poll) until the axis is offline."""
     axis = machine[name]
@@ -184,7 +167,7 @@ async def test_a_restarted_drive_comes_back_online(
         protocol: str, tmp_path: Path, procs: list[subprocess.Popen[str]]) -> None:
     port = free_port()
     procs.append(start_sim(protocol, port))
-    url = SIMS[protocol][1].format(port=port)
+    url = sim_url(protocol, port)
     path = write_machine(tmp_path, f'[axes.a]\nurl = "{url}"\nid = 1\nunit = "rev"\n')
     machine = await open_machine_async(path, retry=True)
     try:

@@ -1,6 +1,7 @@
 // Motion panel: servo on/off, jog while held, moves in counts/rev/deg, constant speed, waves.
 import { api } from "./net.js";
 import { $, $$, axisLabel, el, fieldError, fmt, message, readField, readFields } from "./util.js";
+import { gateReason, seenText } from "./gate.js";
 
 // The page renews its jog / constant speed this often; the server's lease ends one not
 // renewed within its ttl (0.5 s), in the drive too (servobus.gui.jog, docs/gui.md).
@@ -34,7 +35,9 @@ export class MotionPanel {
     window.addEventListener("blur", () => this.jogEnd());
     document.addEventListener("visibilitychange", () => { if (document.hidden) this.jogEnd(); });
     ctx.onSelect(() => { this.jogEnd(); this.renderSelection(); });
+    ctx.onIdentity(() => this.renderSelection());
     ctx.onStatus(() => { this.renderReadout(); this.watchLeases(); });
+    ctx.onTick(() => this.renderReadout());
     // a refused jog or renewal (another page holds the axis, at soft limit, it ended):
     // said on the page, and the button no longer shows it held
     ctx.link.on("error", (doc) => {
@@ -45,6 +48,8 @@ export class MotionPanel {
   }
 
   url(path) { return `/api/axes/${this.ctx.selected}${path}`; }
+
+  say(text, kind = "") { message(this.msg, text, kind); }
 
   // ``field``: where a refusal of the server (range, soft limits) is shown as well.
   async run(path, body, what, field = null) {
@@ -72,6 +77,7 @@ export class MotionPanel {
   bindJog(button, sign) {
     const start = (ev) => {
       ev.preventDefault();
+      if (button.matches(":disabled")) return;  // no server, axis offline, power loss (gate.js)
       button.setPointerCapture?.(ev.pointerId);
       button.classList.add("held");
       this.jogStart(sign);
@@ -84,6 +90,8 @@ export class MotionPanel {
 
   jogStart(sign) {
     this.jogEnd();
+    const why = gateReason(this.ctx, "motion");
+    if (why) { message(this.msg, `jog: not sent: ${why}`, "error"); return; }
     const speed = readField($("#jog-rpm"));
     if (speed === null) { this.refused("jog"); return; }
     const rpm = sign * speed;
@@ -187,6 +195,8 @@ export class MotionPanel {
   renderReadout() {
     const s = this.ctx.status.get(this.ctx.selected) || {};
     const box = $("#motion-readout");
+    const stale = this.ctx.isStale(s);
+    box.classList.toggle("stale", stale);
     const item = (k, v, big = true) => el("div", {}, el("span", { class: "k", text: k }),
       el("span", { class: big ? "big" : "", text: v }));
     box.replaceChildren(
@@ -195,7 +205,7 @@ export class MotionPanel {
       item("revolutions", s.revolutions === undefined ? "–" : s.revolutions.toFixed(4)),
       item("speed", s.unit !== undefined ? `${fmt(s.user_speed)} ${s.speed_unit}` : `${fmt(s.speed)} rpm`),
       item("current", `${fmt(s.current)} A`),
-      item("state", s.link ? "link error" : s.alarm_code ? `ALARM ${s.alarm_code}` :
+      item("state", stale ? seenText(this.ctx, s) : s.link ? "link error" : s.alarm_code ? `ALARM ${s.alarm_code}` :
         `${s.enabled ? "enabled" : "disabled"}${s.moving ? ", moving" : ""}${s.in_position ? ", in position" : ""}`, false));
   }
 }

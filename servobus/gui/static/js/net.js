@@ -1,6 +1,9 @@
 // REST and WebSocket to the servobus GUI server (same origin; token from the page URL).
 
 const TOKEN = new URLSearchParams(location.search).get("token");
+// This page's WebSocket number (hello's owner): its requests count against its own limits
+// on the server (servobus/gui/fair.py), not against every page of this computer.
+let PAGE = null;
 
 export class ApiError extends Error {
   constructor(message, status = 0) { super(message); this.status = status; }
@@ -10,13 +13,19 @@ export class ApiError extends Error {
 export async function api(path, body) {
   const headers = {};
   if (TOKEN) headers["X-Servobus-Token"] = TOKEN;
+  if (PAGE !== null) headers["X-Servobus-Page"] = String(PAGE);
   const init = { headers, credentials: "same-origin" };
   if (body !== undefined) {
     init.method = "POST";
     headers["Content-Type"] = "application/json";
     init.body = JSON.stringify(body);
   }
-  const res = await fetch(path, init);
+  let res;
+  try {
+    res = await fetch(path, init);
+  } catch {  // the browser's "Failed to fetch": say what it means
+    throw new ApiError("no answer from the servobus GUI server (is it running?)", 0);
+  }
   let doc = null;
   try { doc = await res.json(); } catch { /* not JSON */ }
   if (!res.ok) throw new ApiError((doc && doc.error) || `${res.status} ${res.statusText}`, res.status);
@@ -39,7 +48,8 @@ export class Link {
     this.handlers.get(type).push(fn);
   }
   onState(fn) { this.stateListeners.push(fn); }
-  setState(state) { for (const fn of this.stateListeners) fn(state); }
+  // state: "connecting", "live" or "down"; why: the server's reason when it closed the socket
+  setState(state, why = "") { for (const fn of this.stateListeners) fn(state, why); }
   connect() {
     const proto = location.protocol === "https:" ? "wss" : "ws";
     const q = TOKEN ? `?token=${encodeURIComponent(TOKEN)}` : "";
@@ -48,14 +58,15 @@ export class Link {
     this.ws = ws;
     this.setState("connecting");
     ws.onopen = () => { this.retry = 250; this.setState("live"); };
-    ws.onclose = () => {
-      this.setState("down");
+    ws.onclose = (ev) => {
+      this.setState("down", ev.reason || "");
       setTimeout(() => this.connect(), this.retry);
       this.retry = Math.min(this.retry * 2, 4000);
     };
     ws.onmessage = (ev) => {
       if (typeof ev.data !== "string") { if (this.binary) this.binary(ev.data); return; }
       const doc = JSON.parse(ev.data);
+      if (doc.type === "hello") PAGE = doc.owner;
       for (const fn of this.handlers.get(doc.type) || []) fn(doc);
     };
   }
