@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import functools
 import sys
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -59,13 +60,19 @@ def _imported(path: Path, own: str, is_package: bool) -> Iterable[str]:
 def module_edges() -> dict[str, set[str]]:
     """Module -> the servobus modules it imports (itself and its own parents left out: a
     package ``__init__`` is loaded on the way to any of its modules)."""
+    return {name: set(targets) for name, targets in _module_edges().items()}
+
+
+@functools.cache
+def _module_edges() -> dict[str, frozenset[str]]:
+    """The sources are read once per process (the tests ask several times)."""
     known = modules()
-    edges: dict[str, set[str]] = {}
+    edges: dict[str, frozenset[str]] = {}
     for name, path in known.items():
         targets = {_resolve(t, known) for t in _imported(path, name, path.name == "__init__.py")
                    if t == "servobus" or t.startswith("servobus.")}
-        edges[name] = {t for t in targets if t and t != name
-                       and not name.startswith(t + ".")}
+        edges[name] = frozenset(t for t in targets if t and t != name
+                                and not name.startswith(t + "."))
     return edges
 
 
