@@ -38,8 +38,8 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from servobus.axis.types import AxisStatus
 from servobus.errors import NotSupported
-from servobus.families.base import AxisStatus
 from servobus.gateway.commands import status_name
 from servobus.gateway.link_events import LinkListener, LinkWatch
 from servobus.gateway.source import Machine, MachineAxis

@@ -11,7 +11,7 @@ from collections.abc import Mapping
 from typing import Protocol
 
 from servobus.axis.base import AsyncAxis
-from servobus.families.base import AxisStatus, Family
+from servobus.axis.types import AxisStatus, Family
 from servobus.machine.lease import Lease
 
 

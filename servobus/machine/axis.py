@@ -52,7 +52,7 @@ from servobus.machine.units import Scale
 
 if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis
-    from servobus.families.base import AxisStatus, Family
+    from servobus.axis.types import AxisStatus, Family
 
 log = logging.getLogger(__name__)
 

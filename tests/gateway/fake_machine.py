@@ -9,8 +9,8 @@ import time
 from collections.abc import Mapping
 
 from servobus.axis.base import AsyncAxis
+from servobus.axis.types import AxisStatus, Family
 from servobus.errors import ConnectionLost, LimitError, MachineLinkError, PowerLostError
-from servobus.families.base import AxisStatus, Family
 
 
 class FakeAxis:
