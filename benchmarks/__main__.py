@@ -16,11 +16,15 @@ from benchmarks import verdict
 
 
 def main(argv: list[str]) -> int:
-    """Optional arguments select benchmarks by substring of their module name."""
+    """Arguments before the first option select benchmarks by substring of their module
+    name; the options after them are the benchmarks' own (``faults --seconds 20``: their
+    values select nothing)."""
     names = sorted(m.name for m in pkgutil.iter_modules(benchmarks.__path__)
                    if m.name.startswith("bench_"))
-    if argv:
-        names = [n for n in names if any(a in n for a in argv)]
+    first_option = next((i for i, a in enumerate(argv) if a.startswith("-")), len(argv))
+    selectors = argv[:first_option]
+    if selectors:
+        names = [n for n in names if any(a in n for a in selectors)]
     for name in names:
         try:
             module = importlib.import_module(f"benchmarks.{name}")

@@ -27,6 +27,7 @@ from benchmarks.breakdown import Breakdown, loops, print_all, profile_async, run
 from benchmarks.verdict import mark, percent, summary
 from servobus.axis import connect_async
 from servobus.families.dmm import params as P
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232.axis import Dyn232Axis
 from servobus.protocols.dyn232.client import AsyncDyn232Client
@@ -236,7 +237,7 @@ def bench_tcp_round_trips() -> float:
     sim = [sys.executable, "-m", "servobus", "sim", "dyn232",
            "--fast", "--listen", "tcp://127.0.0.1:0", "--duration", "900"]
     echo = [sys.executable, "-c", _ECHO_SERVER, "900"]
-    request = c.encode(0, c.HostFunction.READ_DRIVE_STATUS, 0)
+    request = c.encode(0, DmmFunction.READ_DRIVE_STATUS, 0)
     reply_len = len(c.encode_reply(0, c.DriveFunction.IS_STATUS, 0))
     reply = c.encode_reply(0, c.DriveFunction.IS_STATUS, 0)
     canned = [sys.executable, "-c", _REPLY_SERVER, "900", reply.hex()]

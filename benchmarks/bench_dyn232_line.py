@@ -23,6 +23,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 from benchmarks.verdict import mark, percent, summary
+from servobus.families.dmm.vocabulary import DmmFunction as DF
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232.device import Dyn232Line
 from servobus.protocols.dyn232.inprocess import open_sim_stream
@@ -89,7 +90,7 @@ def reply_len(request: bytes, port: int) -> int:
 
 
 def bench_paced_tcp() -> float:
-    request = c.encode(0, H.GENERAL_READ, GR.POSITION)
+    request = c.encode(0, DF.GENERAL_READ, GR.POSITION)
     with server([*CLI, "sim", "dyn232", "--duration", "60"]) as (pid, port):
         n_reply = reply_len(request, port)
         with socket.create_connection(("127.0.0.1", port)) as sock:
@@ -112,7 +113,7 @@ def bench_paced_tcp() -> float:
 
 async def _inprocess() -> float:
     stream = open_sim_stream(ids=(0,), paced=True)
-    request = c.encode(0, H.GENERAL_READ, GR.POSITION)
+    request = c.encode(0, DF.GENERAL_READ, GR.POSITION)
     try:
         await stream.write(request)
         n_reply = len(await stream.read())
@@ -149,7 +150,7 @@ def _trips(port: int, request: bytes, n_reply: int) -> float:
 
 
 def bench_fast_tcp() -> float:
-    request = c.encode(0, H.READ_DRIVE_STATUS)
+    request = c.encode(0, DF.READ_DRIVE_STATUS)
     with server([*CLI, "sim", "dyn232", "--fast", "--duration", "60"]) as (_, port):
         ours = _trips(port, request, 4)
     with server([sys.executable, "-c", ECHO, "60"]) as (_, port):
@@ -162,8 +163,8 @@ def bench_fast_tcp() -> float:
 
 def bench_line_receive() -> float:
     line = Dyn232Line([VirtualDrive(i) for i in (1, 2, 3)])
-    packets = [c.encode(2, H.GENERAL_READ, GR.POSITION), c.encode(1, H.READ_DRIVE_STATUS),
-               c.encode(3, H.READ_MAIN_GAIN), c.encode(9, H.READ_DRIVE_ID)]
+    packets = [c.encode(2, DF.GENERAL_READ, GR.POSITION), c.encode(1, DF.READ_DRIVE_STATUS),
+               c.encode(3, H.READ_MAIN_GAIN), c.encode(9, DF.READ_DRIVE_ID)]
     blob = b"".join(packets) * 250
     t0, n = time.perf_counter(), 0
     while time.perf_counter() - t0 < 1.0:

@@ -23,6 +23,7 @@ import can
 from benchmarks.breakdown import Breakdown, loops, print_all, profile_async, profile_sync, run_on
 from benchmarks.can_floor import floor_round_trips
 from benchmarks.verdict import mark, percent, summary
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan.axis import DynCanAxis
 from servobus.protocols.dyncan.client import open_can_client
@@ -74,7 +75,7 @@ def node_thread(channel: str, ids: tuple[int, ...],
 
 def raw_round_trips(channel: str, n: int) -> float:
     bus = can.Bus(interface="virtual", channel=channel)
-    ident, data = c.encode(c.request(1, c.Function.READ_DRIVE_STATUS))
+    ident, data = c.encode(c.request(1, DmmFunction.READ_DRIVE_STATUS))
     msg = can.Message(arbitration_id=ident, data=data, is_extended_id=False)
     try:
         for _ in range(50):  # warm-up
@@ -95,7 +96,7 @@ async def python_can_asyncio_round_trips(channel: str, n: int) -> float:
     bus = can.Bus(interface="virtual", channel=channel)
     reader = can.AsyncBufferedReader()
     notifier = can.Notifier(bus, [reader], timeout=0.1, loop=asyncio.get_running_loop())
-    ident, data = c.encode(c.request(1, c.Function.READ_DRIVE_STATUS))
+    ident, data = c.encode(c.request(1, DmmFunction.READ_DRIVE_STATUS))
     msg = can.Message(arbitration_id=ident, data=data, is_extended_id=False)
     try:
         for _ in range(50):
@@ -139,7 +140,7 @@ async def client_breakdown(channel: str, label: str) -> Breakdown:
 
 def raw_breakdown(channel: str) -> Breakdown:
     bus = can.Bus(interface="virtual", channel=channel)
-    ident, data = c.encode(c.request(1, c.Function.READ_DRIVE_STATUS))
+    ident, data = c.encode(c.request(1, DmmFunction.READ_DRIVE_STATUS))
     msg = can.Message(arbitration_id=ident, data=data, is_extended_id=False)
 
     def once() -> None:
@@ -158,7 +159,7 @@ def bench_transactions() -> tuple[float, float, float, float, dict[str, float]]:
     channel = "servobus-bench-dyncan-rt"
     raw = aio = floor = ours = 0.0
     n = ROUND_TRIPS // ROUNDS
-    ident, data = c.encode(c.request(1, c.Function.READ_DRIVE_STATUS))
+    ident, data = c.encode(c.request(1, DmmFunction.READ_DRIVE_STATUS))
     fast = {name: 0.0 for name, _ in loops()[1:]}
     with node_thread(channel, (1,)):
         for _ in range(ROUNDS):
@@ -178,7 +179,7 @@ async def _stream(channel: str) -> tuple[float, int, int]:
         t = time.perf_counter()
         stats = await client.stream_position_direct(
             {i: [PD_STEP] * ticks for i in range(1, STREAM_AXES + 1)}, 1 / STREAM_HZ)
-        return time.perf_counter() - t, stats.frames, stats.late_ticks
+        return time.perf_counter() - t, stats.frames, stats.late_cycles
     finally:
         await client.close()
 

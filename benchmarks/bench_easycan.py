@@ -41,7 +41,7 @@ from servobus.protocols.easycan.functions import BITRATE, POSITION_BYTES
 from servobus.protocols.easycan.messages import ReadRequest
 from servobus.protocols.easycan.server import serve
 from servobus.protocols.easycan.sync import SyncGroup
-from servobus.sim.realtime import RealtimeClock
+from servobus.sim.wall_clock import RealtimeClock
 from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.transport.can_bus import AsyncCanBus, BitTiming
 

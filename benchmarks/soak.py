@@ -198,7 +198,8 @@ def state_fuzz() -> Result:
     from pathlib import Path
 
     from servobus.families.dmm import params as P
-    from servobus.sim.eeprom import StateFile, StateFileError, parse_state
+    from servobus.sim.core.state_file import StateFile, StateFileError, parse_state
+    from servobus.sim.dmm.eeprom import DMM_STATE
 
     rng = random.Random(8)
     valid = json.dumps({str(i): {"drive_id": i, "params": P.defaults(), "config": 5,
@@ -225,13 +226,13 @@ def state_fuzz() -> Result:
                     path = Path(tmp) / f"s{n}.json"
                     path.write_bytes(raw)
                     try:
-                        StateFile(path)
+                        StateFile(path, DMM_STATE)
                     except StateFileError:
                         if path.read_bytes() != raw:
                             other += 1  # a refused file must never be rewritten
                         raise
                 else:
-                    parse_state(bytes(raw), "fuzz.json")
+                    parse_state(bytes(raw), "fuzz.json", DMM_STATE)
                 accepted += 1
             except StateFileError as exc:
                 refused += 1

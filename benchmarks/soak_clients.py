@@ -20,6 +20,7 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyncan import codec as cc
 
@@ -88,7 +89,7 @@ def attack_process(name: str, port: int, seconds: float) -> subprocess.Popen[byt
 
 # ---------------------------------------------------------------- DYN232M (sim dyn232)
 def dyn2_status(drive_id: int) -> bytes:
-    return c.encode(drive_id, H.READ_DRIVE_STATUS)
+    return c.encode(drive_id, DmmFunction.READ_DRIVE_STATUS)
 
 
 @dataclass
@@ -267,7 +268,7 @@ def select_many(socks: list[socket.socket], timeout: float
 
 
 # ---------------------------------------------------------------- socketcand (sim dyncan)
-def can_send_text(drive_id: int, function: cc.Function = cc.Function.READ_DRIVE_STATUS) -> str:
+def can_send_text(drive_id: int, function: cc.Function = DmmFunction.READ_DRIVE_STATUS) -> str:
     ident, data = cc.encode(cc.request(drive_id, function))
     return f"< send {ident:03X} {len(data):X} {' '.join(f'{b:02X}' for b in data)} >".replace(
         "  ", " ")
@@ -306,7 +307,7 @@ def can_prober(port: int, drive_id: int, seconds: float, deadline_s: float,
     """One status read at a time on ``drive_id``; other frames on the bus are skipped."""
     out = Latency()
     request = can_send_text(drive_id).encode()
-    ident, _ = cc.encode(cc.request(drive_id, cc.Function.READ_DRIVE_STATUS))
+    ident, _ = cc.encode(cc.request(drive_id, DmmFunction.READ_DRIVE_STATUS))
     marker = f"< frame {ident:03X} ".encode()
     end = time.monotonic() + seconds
     sock = can_session(port)

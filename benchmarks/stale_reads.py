@@ -39,7 +39,7 @@ from servobus.protocols.easycan.axis import EasyCanAxis
 from servobus.protocols.easycan.client import AsyncEasyCanClient
 from servobus.protocols.modbus import codec as mc
 from servobus.protocols.modbus.axis import ModbusAxis
-from servobus.protocols.modbus.client import ModbusClient
+from servobus.protocols.modbus.client import AsyncModbusClient
 from servobus.transport.base import Direction
 from servobus.transport.can_bus import CanFrame, FrameReceiver, FrameTraceHook
 from servobus.transport.pair import Fault, Manipulator, PairStream, open_pair
@@ -133,7 +133,7 @@ def _dyncan_answer(arbitration_id: int, data: bytes, counter: _Counter
     request = cc.decode(arbitration_id, data)
     if not cc.expects_reply(request):
         return None
-    answer = cc.reply(request.drive_id, cc.Function(request.function), counter.next())
+    answer = cc.reply(request.drive_id, cc.function_of(request.function), counter.next())
     return answer.arbitration_id, answer.data
 
 
@@ -251,7 +251,7 @@ async def modbus_stale(reads: int, *, push: bool = True, seed: int = SEED,
     host, device = open_pair(faults, push=push)
     counter = _Counter()
     server = asyncio.create_task(_serve_modbus(device, counter))
-    client = ModbusClient(host, **client_kw)
+    client = AsyncModbusClient(host, **client_kw)
     axis = ModbusAxis(client, DRIVE_ID)
     t0 = time.monotonic()
     try:

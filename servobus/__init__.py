@@ -1,4 +1,4 @@
-"""servobus: codecs, clients, virtual drives and tools for DMM servo drives."""
+"""servobus: codecs, clients, virtual drives and tools for industrial servo drives (DMM, YZ-AIM)."""
 
 from servobus.errors import (
     ArgumentRangeError,
@@ -17,7 +17,7 @@ from servobus.errors import (
     ServobusError,
 )
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 # ``import servobus`` stays light (about 2 ms; the Axis and asyncio take about 50 ms more,
 # `python -X importtime`), so connect/connect_async load on first use. Checkers see the

@@ -128,3 +128,9 @@ class JsonRefused(ServobusError, ValueError):
     server accepts: not UTF-8, not JSON, too large, nested too deep, or a number that is no
     finite double (``1e400``, a 400-digit integer, ``NaN``). Nothing of it was used; the
     message says what is wrong (servobus.bounded_json). Also a ``ValueError``."""
+
+
+class GatewayConflict(ServobusError):
+    """Another live gateway already serves these MQTT topics (the same ``--mqtt-prefix`` and
+    machine name on the same broker): this one did not take them over and the other goes
+    on serving. The message names the other and what to do."""

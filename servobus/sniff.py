@@ -2,7 +2,7 @@
 
 Protocol-free: the event types every protocol's decoder yields, the two decoder shapes
 (a byte stream on a serial line; frames on a CAN bus) and the parsers of what a person
-types. Each protocol package declares its decoder in ``DECODERS`` (name -> "module:object");
+types. Each protocol's spec names its decoder (``ProtocolSpec.decoder``, "module:object");
 :func:`decoders` finds them through the registry.
 """
 
@@ -77,7 +77,7 @@ class StreamDecoder(Protocol):
 
 
 class Decoder(Protocol):
-    """What a protocol declares in ``DECODERS``."""
+    """What a protocol's spec names as its ``decoder``."""
 
     name: str
     medium: str  # BYTES or CAN
@@ -93,7 +93,7 @@ S = TypeVar("S")
 
 
 class ByteDecoder(Generic[S]):
-    """The ``DECODERS`` entry of a protocol on a byte stream (serial line, TCP capture):
+    """The decoder of a protocol on a byte stream (serial line, TCP capture):
     ``make()`` gives a new stream decoder; CAN frames are not its medium."""
 
     medium = BYTES
@@ -109,7 +109,7 @@ class ByteDecoder(Generic[S]):
 
 
 class CanDecoder:
-    """The ``DECODERS`` entry of a protocol on CAN: ``frame(arbitration_id, data)`` decodes
+    """The decoder of a protocol on CAN: ``frame(arbitration_id, data)`` decodes
     one frame; there is no byte stream to feed."""
 
     medium = CAN

@@ -43,8 +43,12 @@ def start_sim(protocol: str, port: int) -> subprocess.Popen[str]:
     proc = subprocess.Popen([sys.executable, "-m", "servobus", "sim", *args,
                              "--duration", "300"],  # a safety net only
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    while "listening on" not in read_line(proc):
-        pass
+    try:
+        while "listening on" not in read_line(proc):
+            pass
+    except BaseException:
+        stop_process(proc)
+        raise
     return proc
 
 

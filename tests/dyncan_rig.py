@@ -17,7 +17,7 @@ from servobus.protocols.dyncan.client import AsyncDynCanClient, open_can_client
 from servobus.protocols.dyncan.device import DynCanNetwork
 from servobus.protocols.dyncan.server import serve
 from servobus.sim.dmm.drive import VirtualDrive
-from servobus.sim.realtime import RealtimeClock
+from servobus.sim.wall_clock import RealtimeClock
 from servobus.transport.can_bus import AsyncCanBus
 
 _channels = itertools.count()

@@ -15,7 +15,7 @@ from contextlib import asynccontextmanager
 from typing import Any
 
 from servobus.protocols.modbus.axis import ModbusAxis
-from servobus.protocols.modbus.client import ModbusClient
+from servobus.protocols.modbus.client import AsyncModbusClient
 from servobus.protocols.modbus.device import ModbusLine
 from servobus.protocols.modbus.inprocess import make_motors
 from servobus.protocols.modbus.pacing import RtuLineRunner
@@ -43,7 +43,7 @@ class Rig:
                             if d is Direction.TX else None)
         self.wire = TraceRecorder()  # the host end's bytes both ways, with times
         self.host.add_trace(self.wire)
-        self.client = ModbusClient(self.host, **client_kw)
+        self.client = AsyncModbusClient(self.host, **client_kw)
         self.trace = TraceRecorder()
         self.client.add_trace(self.trace)
 

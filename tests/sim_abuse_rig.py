@@ -20,6 +20,7 @@ from collections.abc import Iterator
 import pytest
 from subprocess_rig import read_line, stop_process
 
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyncan import codec as cc
 
@@ -128,7 +129,7 @@ def assert_served(times: list[float]) -> None:
 
 # ---------------------------------------------------------------- DYN232M
 def dyn2_status(drive_id: int) -> bytes:
-    return c.encode(drive_id, c.HostFunction.READ_DRIVE_STATUS)
+    return c.encode(drive_id, DmmFunction.READ_DRIVE_STATUS)
 
 
 def dyn2_latencies(port: int, drive_id: int, count: int, deadline_s: float,
@@ -199,7 +200,7 @@ class Flood:
 
 
 # ---------------------------------------------------------------- socketcand
-def can_send(drive_id: int, function: cc.Function = cc.Function.READ_DRIVE_STATUS) -> bytes:
+def can_send(drive_id: int, function: cc.Function = DmmFunction.READ_DRIVE_STATUS) -> bytes:
     ident, data = cc.encode(cc.request(drive_id, function))
     fields = [f"{ident:03X}", f"{len(data):X}", *(f"{b:02X}" for b in data)]
     return f"< send {' '.join(fields)} >".encode()
@@ -249,7 +250,7 @@ def drain(sock: socket.socket) -> None:
 def can_latencies(port: int, drive_id: int, count: int, deadline_s: float,
                   period_s: float = 0.02) -> list[float]:
     """``count`` status reads on ``drive_id``, other bus traffic skipped; inf = a miss."""
-    ident, _ = cc.encode(cc.request(drive_id, cc.Function.READ_DRIVE_STATUS))
+    ident, _ = cc.encode(cc.request(drive_id, DmmFunction.READ_DRIVE_STATUS))
     marker = f"< frame {ident:03X} ".encode()
     out = []
     sock = can_session(port)

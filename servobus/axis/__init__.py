@@ -1,4 +1,6 @@
-"""Host-side drivers: pure make_* commands, one async core per protocol, sync facades."""
+"""The vendor-neutral Axis API: AsyncAxis, the sync facade Axis, connect(); its value types
+(types.py). It names no family and no protocol: the families write their profiles on it
+(servobus.families.<f>.axis), the registry finds the protocols."""
 
 from servobus.axis.base import AsyncAxis
 from servobus.axis.connect import connect, connect_async

@@ -37,8 +37,9 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from types import TracebackType
 
-from servobus.axis import checks
+from servobus import checks
 from servobus.axis.capture import Capture, CaptureSource
+from servobus.axis.types import AxisStatus, Family, ParamInfo, StreamProfile
 from servobus.axis.virtual_io import VirtualIo, VirtualIoSource
 from servobus.errors import (
     ArgumentRangeError,
@@ -48,7 +49,6 @@ from servobus.errors import (
     MoveFailed,
     NotSupported,
 )
-from servobus.families.base import AxisStatus, Family, ParamInfo, StreamProfile
 from servobus.transport.base import Direction
 
 log = logging.getLogger(__name__)
@@ -312,7 +312,7 @@ class AsyncAxis(ABC):
             axis._check_move(counts, relative=False)
 
     #: Where :meth:`trace_buffer` reads; set by the in-process virtual drives
-    #: (servobus.sim.capture), None on a link to a drive that keeps no trace.
+    #: (servobus.sim.core.capture), None on a link to a drive that keeps no trace.
     capture_source: CaptureSource | None = None
 
     async def trace_buffer(self) -> Capture:

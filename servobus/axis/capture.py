@@ -3,7 +3,7 @@
 ``AsyncAxis.trace_buffer()`` returns the samples a drive took on its own clock since the
 previous call, as one :class:`Capture` in the Axis units. Drives that keep no such trace
 raise NotSupported, and a scope polls the Axis instead. The in-process virtual drives
-(``sim://``) record every control period (4 kHz) through :mod:`servobus.sim.capture`.
+(``sim://``) record every control period (4 kHz) through :mod:`servobus.sim.core.capture`.
 
 Decisions (no manual defines a host-side trace format):
 

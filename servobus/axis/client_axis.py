@@ -2,7 +2,7 @@
 
 The client (one serial line, CAN bus or socket) may serve several axes: the first axis owns
 it and closes it, ``sibling`` axes share it (and the virtual drives' trace and I/O sources)
-without owning it. CommandAxis (DMM) and RegisterAxis (YZ-AIM) build on this.
+without owning it. CommandAxis (DMM) and YzaimAxis (YZ-AIM) build on this.
 """
 
 from __future__ import annotations

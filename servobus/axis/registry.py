@@ -8,13 +8,12 @@ parameters, family), each target a ``"module:attribute"`` string imported when u
     async def opener(url: DriveUrl, *, drive_id: int | None, **options) -> AsyncAxis
 
 Providers are every subpackage of :mod:`servobus.protocols` (its ``__init__`` stays light:
-it declares ``SPEC`` and imports nothing heavy), the simulator's ``servobus.sim.schemes``
-(``sim://``; a host client never imports the simulator unless a ``sim://`` URL is opened),
-and third-party packages through the ``servobus.schemes`` entry-point group (each entry
-point names a provider module). A provider without ``SPEC`` may declare the tables
-directly (``SCHEMES: Mapping[str, str]`` scheme -> opener, ``SIM``, ``DECODERS``,
-``PARAMS``, ``FAMILIES``, ``SHORTCUTS``, ``CLI = "module:register"``): ``sim://`` does,
-and so may older third-party providers. The empty scheme ``""`` is the bare serial port
+it declares ``SPEC`` and imports nothing heavy) and third-party packages through the
+``servobus.schemes`` entry-point group (each entry point names a module declaring ``SPEC``;
+one without is skipped, with one warning). ``sim://`` is the registry's own scheme
+(:data:`BUILTIN_SCHEMES`, the simulator's ``servobus.sim.schemes``: a host client never
+imports the simulator unless a ``sim://`` URL is opened); it opens the virtual drive a
+spec's ``sim`` names. The empty scheme ``""`` is the bare serial port
 (``/dev/ttyUSB0``, ``COM3``); pyserial URL schemes (``socket``, ``loop`` ...) are claimed by
 the protocol that serves bare serial ports, in its spec's ``serial_schemes``: they open, but
 an error message lists servobus's own schemes only (``schemes``), and an unknown scheme
@@ -25,8 +24,9 @@ from __future__ import annotations
 
 import difflib
 import importlib
+import logging
 import pkgutil
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Awaitable, Callable
 from importlib.metadata import entry_points
 from typing import TYPE_CHECKING, Any, cast
 
@@ -37,9 +37,12 @@ if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis
     from servobus.axis.url import DriveUrl
 
+log = logging.getLogger(__name__)
+
 Opener = Callable[..., Awaitable["AsyncAxis"]]
 
-BUILTIN_PROVIDERS: tuple[str, ...] = ("servobus.sim.schemes",)
+#: Schemes of no protocol: ``sim://<name>`` opens the virtual drive a spec's ``sim`` names.
+BUILTIN_SCHEMES: dict[str, str] = {"sim": "servobus.sim.schemes:open_axis"}
 PROTOCOL_PACKAGE = "servobus.protocols"
 ENTRY_POINT_GROUP = "servobus.schemes"
 
@@ -52,15 +55,14 @@ def register(scheme: str, target: str) -> None:
 
 
 def _provider_modules() -> list[str]:
-    names = list(BUILTIN_PROVIDERS)
     package = importlib.import_module(PROTOCOL_PACKAGE)
-    names += [f"{PROTOCOL_PACKAGE}.{m.name}" for m in pkgutil.iter_modules(package.__path__)
+    names = [f"{PROTOCOL_PACKAGE}.{m.name}" for m in pkgutil.iter_modules(package.__path__)
               if m.ispkg]
     names += [ep.value for ep in entry_points(group=ENTRY_POINT_GROUP)]
     return names
 
 
-#: The tables a ProtocolSpec fills, by the name a provider without SPEC declares them.
+#: The tables the shared layers ask for, each derived from every ProtocolSpec.
 _FROM_SPEC: dict[str, Callable[[ProtocolSpec], dict[str, str]]] = {
     "SCHEMES": lambda spec: dict.fromkeys(spec.schemes, spec.opener),
     "SERIAL_SCHEMES": lambda spec: dict.fromkeys(spec.serial_schemes, spec.opener),
@@ -87,52 +89,42 @@ def specs() -> dict[str, ProtocolSpec]:
         found: dict[str, ProtocolSpec] = {}
         for name in _provider_modules():
             spec = _spec_of(importlib.import_module(name))
-            if spec is not None:
-                found.setdefault(spec.name, spec)
+            if spec is None:
+                log.warning("servobus provider %s declares no ProtocolSpec SPEC: skipped", name)
+                continue
+            found.setdefault(spec.name, spec)
         _specs = found
     return _specs
 
 
 def provided(attribute: str) -> dict[str, str]:
-    """One table (``SCHEMES``, ``SIM``, ``DECODERS`` ...) merged over every provider, first
-    wins: from each protocol's spec, or as a provider without one declares it."""
+    """One table (``SCHEMES``, ``SIM``, ``DECODERS`` ...) merged over every protocol's spec,
+    first wins."""
     table = _tables.get(attribute)
     if table is None:
         table = {}
-        for name in _provider_modules():
-            module = importlib.import_module(name)
-            spec = _spec_of(module)
-            if spec is not None and attribute in _FROM_SPEC:
-                declared: Mapping[str, str] = _FROM_SPEC[attribute](spec)
-            else:
-                declared = cast(Mapping[str, str], getattr(module, attribute, {}))
-            for key, target in declared.items():
+        for spec in specs().values():
+            for key, target in _FROM_SPEC[attribute](spec).items():
                 table.setdefault(key.lower(), target)
         _tables[attribute] = table
     return table
 
 
 def provided_list(attribute: str) -> list[str]:
-    """Single values a provider declares (``CLI``: ``"module:register"``), in provider order."""
-    found: list[str] = []
-    for name in _provider_modules():
-        module = importlib.import_module(name)
-        spec = _spec_of(module)
-        value = getattr(spec, attribute.lower(), None) if spec is not None else getattr(
-            module, attribute, None)
-        if isinstance(value, str):
-            found.append(value)
-    return found
+    """The single value of every spec that has one (``CLI``: ``"module:register"``), in
+    provider order."""
+    found = [getattr(spec, attribute.lower()) for spec in specs().values()]
+    return [value for value in found if isinstance(value, str)]
 
 
 def schemes() -> dict[str, str]:
     """Every known scheme -> its opener target (providers are imported once, lightly)."""
-    return {**provided("SERIAL_SCHEMES"), **provided("SCHEMES"), **_extra}
+    return {**provided("SERIAL_SCHEMES"), **provided("SCHEMES"), **BUILTIN_SCHEMES, **_extra}
 
 
 def own_schemes() -> list[str]:
     """servobus's own schemes (not the pyserial URLs a serial protocol also takes), sorted."""
-    return sorted({*provided("SCHEMES"), *_extra} - {""})
+    return sorted({*provided("SCHEMES"), *BUILTIN_SCHEMES, *_extra} - {""})
 
 
 def load(target: str) -> Any:

@@ -24,7 +24,6 @@ import contextlib
 import functools
 import inspect
 import threading
-import warnings
 from collections.abc import Callable, Coroutine, Iterable, Mapping, Sequence
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, ParamSpec, Protocol, TypeVar
@@ -36,8 +35,8 @@ from servobus.errors import ClosedError, ConnectionLost
 if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis, AxisTraceHook
     from servobus.axis.capture import Capture
+    from servobus.axis.types import AxisStatus, Family, ParamInfo, StreamProfile
     from servobus.axis.virtual_io import VirtualIo
-    from servobus.families.base import AxisStatus, Family, ParamInfo, StreamProfile
 
 T = TypeVar("T")
 P = ParamSpec("P")
@@ -197,19 +196,6 @@ class Axis:
         (``axis.extra.config()`` on a DMM drive over DYN232M); untyped: they depend on the
         protocol. AttributeError for a method this protocol does not have."""
         return self._extra
-
-    if not TYPE_CHECKING:
-        def __getattr__(self, name: str) -> Any:
-            """Deprecated (one release): ``axis.config()`` for ``axis.extra.config()``.
-
-            Hidden from type checkers, so a misspelt Axis method stays a checker error."""
-            if name.startswith("_"):
-                raise AttributeError(name)
-            attr = getattr(self._extra, name)
-            warnings.warn(f"Axis.{name}: a protocol's own method; use axis.extra.{name} "
-                          "(the attribute fallback goes in the next release)",
-                          DeprecationWarning, stacklevel=2)
-            return attr
 
     # ------------------------------------------------------------- identity
     @property

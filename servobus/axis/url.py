@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from urllib.parse import parse_qsl
 
-from servobus.axis import checks
+from servobus.axis.options import connect_options
 from servobus.errors import ArgumentRangeError
 
 #: RFC 3986 scheme syntax; one letter is a Windows drive (``C:``), not a scheme.
@@ -121,7 +121,7 @@ def merge_options(url: DriveUrl, keywords: dict[str, object],
     """Keyword options override URL query options; both are checked against ``types``.
 
     Unknown names raise ArgumentRangeError listing the known ones, and every value is checked
-    (:func:`servobus.axis.checks.connect_options`), before anything is opened.
+    (:func:`servobus.axis.options.connect_options`), before anything is opened.
     """
     known = ", ".join(sorted(types)) or "none"
     merged: dict[str, object] = {}
@@ -141,5 +141,23 @@ def merge_options(url: DriveUrl, keywords: dict[str, object],
         if name not in types:
             raise ArgumentRangeError(f"unknown connect option {name!r}; known: {known}")
         merged[name] = value
-    checks.connect_options(merged, types)
+    connect_options(merged, types)
     return merged
+
+
+def can_spec(url: DriveUrl) -> tuple[str, dict[str, str]]:
+    """``INTERFACE:CHANNEL`` for python-can, and the socketcand bus name if the URL gives one.
+
+    ``<scheme>+<interface>://<channel>``; for socketcand the channel is ``host:port[/can0]``
+    (the CAN protocols' URLs: DYN CAN and EasyCan).
+    """
+    if not url.transport:
+        s = url.scheme
+        raise ArgumentRangeError(
+            f"{url.raw!r} names no CAN interface: use {s}+<interface>://<channel>, "
+            f"e.g. {s}+pcan://PCAN_USBBUS1 or {s}+socketcand://127.0.0.1:29536/can0")
+    channel = url.target
+    if url.transport == "socketcand" and "/" in channel:
+        address, _, bus = channel.partition("/")
+        return f"socketcand:{address}", ({"channel": bus} if bus else {})
+    return f"{url.transport}:{channel}", {}

@@ -29,7 +29,7 @@ from servobus.errors import DriveAlarm, DriveTimeout, MoveFailed
 
 if TYPE_CHECKING:
     from servobus.axis.sync import Axis
-    from servobus.families.base import AxisStatus
+    from servobus.axis.types import AxisStatus
 
 #: How long a motor must stand still, not in position, before a waited move counts as
 #: stopped off its target (far longer than the instant between a send and the start).
@@ -88,3 +88,13 @@ def check_arrival(who: str, drive_id: int, status: AxisStatus, position: int,
                          f"target {target}: outside its in-position window of +-{window} "
                          "counts (blocked, too weak, or stopped by another program?)",
                          drive_id=drive_id, position=position, target=target)
+
+
+def read_status(axis: Axis) -> AxisStatus:
+    """The status, also of a drive that pushed its alarm: such an alarm is raised once, by
+    the next call (DriveAlarm without the code); the status read after it names the code."""
+    try:
+        status: AxisStatus = axis.status()
+    except DriveAlarm:
+        status = axis.status()
+    return status

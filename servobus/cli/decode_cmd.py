@@ -27,8 +27,8 @@ import click
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.failures import EXIT_DIFFERENT, CliError, one_line
-from servobus.cli.open_axis import emit_json, note
 from servobus.cli.open_failures import check_reachable, open_failure
+from servobus.cli.output import emit_json, note
 from servobus.cli.param_types import Seconds
 from servobus.sniff import (
     BYTES,

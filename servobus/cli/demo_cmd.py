@@ -30,13 +30,14 @@ from servobus.cli.drive_cmds import render_status, status_record
 from servobus.cli.failures import EXIT_FAULT, CliError
 from servobus.cli.hold import TTL_S, owner
 from servobus.cli.motion_guard import stop_on_interrupt
-from servobus.cli.open_axis import console, emit_json, open_drive_machine
+from servobus.cli.open_axis import open_drive_machine
+from servobus.cli.output import console, emit_json
 from servobus.cli.params_cmd import params_table
 from servobus.errors import DriveAlarm, DriveTimeout
 
 if TYPE_CHECKING:
     from servobus.axis.sync import Axis
-    from servobus.families.base import AxisStatus
+    from servobus.axis.types import AxisStatus
     from servobus.machine import Machine, MachineAxis
 
 POLL_S = 0.1

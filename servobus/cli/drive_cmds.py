@@ -30,25 +30,20 @@ import click
 from rich.console import Console
 
 from servobus.cli import machine_cli
-from servobus.cli.arrival import check_arrival, check_ready, wait_arrival
+from servobus.cli.arrival import check_arrival, check_ready, read_status, wait_arrival
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.failures import EXIT_FAULT, CliError
-from servobus.cli.hold import Held, hold_speed
+from servobus.cli.hold import hold_speed, speed_words
 from servobus.cli.motion_guard import stop_on_interrupt
-from servobus.cli.open_axis import (
-    connection_label,
-    emit,
-    kv_text,
-    open_axis,
-    open_drive_machine,
-)
+from servobus.cli.open_axis import connection_label, open_axis, open_drive_machine
+from servobus.cli.output import emit, following_words, kv_text
 from servobus.cli.param_types import Seconds
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveTimeout, NotSupported
 
 if TYPE_CHECKING:
     from servobus.axis.sync import Axis
-    from servobus.families.base import AxisStatus
+    from servobus.axis.types import AxisStatus
 
     _TargetType: TypeAlias = click.ParamType[tuple[float, str]]
 else:
@@ -148,13 +143,6 @@ def alarm_words(code: object, text: object, latched: object) -> str:
     return f"{code} {text}" + (" (latched)" if latched else " (notice, not latched)")
 
 
-def following_words(value: object, unit: str) -> str:
-    """The following error as ``status`` shows it (None: the drive reports none)."""
-    if not isinstance(value, int | float):
-        return "not reported by this drive"
-    return f"{value:.1f} {unit}" if unit == "counts" else f"{value:.4f} {unit}"
-
-
 def render_status(con: Console, record: dict[str, object], title: str) -> None:
     top: dict[str, object] = {}
     for key, value in record.items():
@@ -180,16 +168,6 @@ def alarm_error(axis: Axis, status: AxisStatus) -> DriveAlarm | CliError:
     return CliError(f"{what} (a notice, not latched)",
                     "the drive keeps working; the notice goes once its cause is gone",
                     EXIT_FAULT)
-
-
-def read_status(axis: Axis) -> AxisStatus:
-    """The status, also of a drive that pushed its alarm: such an alarm is raised once, by
-    the next call (DriveAlarm without the code); the status read after it names the code."""
-    try:
-        status: AxisStatus = axis.status()
-    except DriveAlarm:
-        status = axis.status()
-    return status
 
 
 @click.command("status", cls=ServobusCommand)
@@ -320,15 +298,6 @@ def check_lease_rpm(axis: Axis, rpm: int) -> None:
         raise ArgumentRangeError(f"speed {rpm} rpm is outside the -{top}..{top} rpm the "
                                  f"drive's profile runs ({axis.family.title} over "
                                  f"{axis.protocol}, its max_speed)")
-
-
-def speed_words(speed: str, held: Held) -> str:
-    """What a ``speed`` command did, in one line."""
-    if held.why == "continuous":
-        return f"turning at {speed} (continuous: open-ended, `servobus stop` stops it)"
-    if held.why == "stopped":
-        return "stopping"
-    return f"turned at {speed} for {held.seconds:.2f} s, then stopped"
 
 
 @click.command("move", cls=ServobusCommand)

@@ -15,7 +15,7 @@ from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.failures import EXIT_FAULT, CliError
 from servobus.cli.one_axis import open_one, status_when
-from servobus.cli.open_axis import emit
+from servobus.cli.output import emit
 from servobus.cli.param_types import Seconds
 from servobus.errors import DriveAlarm
 

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import click
 
-from servobus.cli.params_file import ParamsFileError
 from servobus.errors import (
     ArgumentRangeError,
     DriveAlarm,
@@ -33,6 +32,7 @@ from servobus.errors import (
     ServobusError,
     UnknownScheme,
 )
+from servobus.families.params_file import ParamsFileError
 
 EXIT_OK = 0
 EXIT_FAULT = 1  # the drive reports a fault (DriveAlarm, DriveError), a move failed (MoveFailed)

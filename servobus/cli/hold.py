@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING
 
 from servobus.cli.failures import EXIT_FAULT, CliError
 from servobus.cli.motion_guard import stop_on_interrupt
-from servobus.cli.open_axis import note
+from servobus.cli.output import note
 
 if TYPE_CHECKING:
     from servobus.machine import MachineAxis
@@ -101,3 +101,12 @@ def _resting_at_limit(axis: MachineAxis, limit: float | None) -> bool:
         return False
     near = abs(axis.to_user(max(core.counts_per_rev / 1024, core.position_window())))
     return abs(axis.position() - limit) <= near and not axis.status().moving
+
+
+def speed_words(speed: str, held: Held) -> str:
+    """What a ``speed`` command did, in one line."""
+    if held.why == "continuous":
+        return f"turning at {speed} (continuous: open-ended, `servobus stop` stops it)"
+    if held.why == "stopped":
+        return "stopping"
+    return f"turned at {speed} for {held.seconds:.2f} s, then stopped"

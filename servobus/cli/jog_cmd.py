@@ -38,7 +38,8 @@ from servobus.cli.failures import EXIT_FAULT, CliError
 from servobus.cli.hold import RENEW_S, TTL_S
 from servobus.cli.jog_keys import MINUS, PLUS, QUIT, KeySource, TerminalKeys
 from servobus.cli.motion_guard import stop_on_interrupt
-from servobus.cli.open_axis import emit, note, open_drive_machine
+from servobus.cli.open_axis import open_drive_machine
+from servobus.cli.output import emit, note
 from servobus.cli.param_types import Seconds
 from servobus.errors import LimitError
 

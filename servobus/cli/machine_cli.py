@@ -36,7 +36,7 @@ from rich.console import Console
 
 from servobus.cli.context import CliContext
 from servobus.cli.failures import EXIT_FAULT, CliError
-from servobus.cli.open_axis import emit, kv_text, note
+from servobus.cli.output import emit, following_words, kv_text, note
 from servobus.errors import DriveAlarm
 
 if TYPE_CHECKING:
@@ -150,8 +150,6 @@ def status(ctx: CliContext) -> None:
         with open_machine_axis(ctx) as axis:
             record = axis_record(axis)
             title = f"status of {label(axis)}"
-        from servobus.cli.drive_cmds import following_words
-
         shown = {**record, "following_error": following_words(record.get("following_error"),
                                                               axis.unit)}
         emit(ctx, record, lambda con: con.print(kv_text(title, shown), markup=False))
@@ -245,8 +243,7 @@ def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: f
          confirm: bool = False) -> None:
     """``move`` on a machine axis; ``--wait``/``--confirm`` checked as on one drive
     (servobus.cli.arrival)."""
-    from servobus.cli.arrival import check_arrival, check_ready, wait_arrival
-    from servobus.cli.drive_cmds import read_status
+    from servobus.cli.arrival import check_arrival, check_ready, read_status, wait_arrival
     from servobus.cli.motion_guard import stop_on_interrupt
     from servobus.cli.move_profile import apply_profile
     from servobus.machine import parse_quantity
@@ -314,8 +311,7 @@ def _confirmed_move(axis: MachineAxis, core: Axis, user: float, relative: bool,
 
 
 def speed(ctx: CliContext, value: float, for_s: float | None) -> None:
-    from servobus.cli.drive_cmds import speed_words
-    from servobus.cli.hold import hold_speed
+    from servobus.cli.hold import hold_speed, speed_words
 
     with open_machine_axis(ctx) as axis:
         unit = axis.speed_unit

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from servobus.cli.open_axis import note
+from servobus.cli.output import note
 
 if TYPE_CHECKING:
     from servobus.machine import MachineAxis

@@ -21,7 +21,7 @@ from servobus.cli.open_axis import open_axis
 from servobus.errors import DriveTimeout
 
 if TYPE_CHECKING:
-    from servobus.families.base import AxisStatus
+    from servobus.axis.types import AxisStatus
 
 #: Seconds between status reads while a command waits for the drive to show a change.
 POLL_S = 0.05

@@ -1,23 +1,20 @@
-"""Shared plumbing of the drive commands: open the Axis the global options name, print results.
+"""Shared plumbing of the drive commands: open the Axis the global options name.
 
 Every command goes through :func:`open_axis`, so ``--url`` (and its shortcuts ``--port`` and
 ``--can``), ``--id``, ``--baud`` and ``--timeout`` mean the same thing on every protocol.
+Printing the results is :mod:`servobus.cli.output`'s.
 """
 
 from __future__ import annotations
 
-import json
-import sys
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Iterator
 from contextlib import contextmanager, suppress
-from typing import TYPE_CHECKING, Any
-
-import click
-from rich.console import Console
+from typing import TYPE_CHECKING
 
 from servobus.axis.url import parse_url
 from servobus.cli.context import CliContext
 from servobus.cli.open_failures import check_reachable, open_failure
+from servobus.cli.output import note
 from servobus.errors import ArgumentRangeError, MachineFileError, MachineLinkError, NotSupported
 
 if TYPE_CHECKING:
@@ -126,40 +123,3 @@ def connection_label(ctx: CliContext, axis: Axis | None = None) -> str:
     label = f"{ctx.url}, id {drive if drive is not None else 'default'}"
     address = axis.id_address if axis is not None else None
     return label if address is None or address in ctx.url else f"{label} at {address}"
-
-
-def console(err: bool = False) -> Console:
-    """A rich console on the *current* stdout/stderr (so click's CliRunner captures it)."""
-    return Console(file=sys.stderr if err else sys.stdout, highlight=False, soft_wrap=True)
-
-
-def emit_json(data: object) -> None:
-    click.echo(json.dumps(data, indent=None, sort_keys=False))
-
-
-def emit(ctx: CliContext, data: object, render: Callable[[Console], None]) -> None:
-    """``--json``: dump ``data``; otherwise let ``render`` draw on a rich console."""
-    if ctx.json:
-        emit_json(data)
-    else:
-        render(console())
-
-
-def kv_text(title: str, rows: Mapping[str, Any]) -> str:
-    """A titled two-column block (plain text: no padding, no markup surprises)."""
-    width = max((len(k) for k in rows), default=0) + 2
-    return "\n".join([title, *(f"  {k:<{width}}{_fmt(v)}" for k, v in rows.items())])
-
-
-def _fmt(value: object) -> str:
-    """yes/no for a flag, ``none`` for a value the drive does not have (never ``None``)."""
-    if isinstance(value, bool):
-        return "yes" if value else "no"
-    if value is None:
-        return "none"
-    return str(value)
-
-
-def note(message: str) -> None:
-    """A remark for humans on stderr; never mixes into --json output."""
-    click.echo(message, err=True)

@@ -23,7 +23,7 @@ from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.failures import EXIT_FAULT, CliError
 from servobus.cli.motion_guard import stop_on_interrupt
 from servobus.cli.one_axis import POLL_S, Opened, open_one
-from servobus.cli.open_axis import emit
+from servobus.cli.output import emit
 from servobus.cli.param_types import Seconds
 from servobus.errors import DriveTimeout
 

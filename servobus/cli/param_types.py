@@ -10,7 +10,7 @@ import click
 from servobus.cli.context import CliContext
 
 if TYPE_CHECKING:
-    from servobus.families.base import Family
+    from servobus.axis.types import Family
 
 if TYPE_CHECKING:  # click >= 8.4 types are generic; older ones are not subscriptable at runtime
     _FloatType: TypeAlias = click.ParamType[float]

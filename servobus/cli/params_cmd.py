@@ -16,14 +16,15 @@ import click
 from rich.console import Console
 from rich.table import Table
 
-from servobus.cli import params_file as PF
+from servobus.axis.types import Family
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.failures import EXIT_DIFFERENT, EXIT_FAULT, CliError
-from servobus.cli.open_axis import console, emit, emit_json, note, open_axis
+from servobus.cli.open_axis import open_axis
+from servobus.cli.output import console, emit, emit_json, note
 from servobus.cli.param_types import ReachableParam, family_for, reachable_help
 from servobus.families import family
-from servobus.families.base import Family
+from servobus.families import params_file as PF
 
 if TYPE_CHECKING:
     from servobus.axis.sync import Axis

@@ -28,7 +28,8 @@ from rich.progress import (
 
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
-from servobus.cli.open_axis import connection_label, console, emit, note, open_axis
+from servobus.cli.open_axis import connection_label, open_axis
+from servobus.cli.output import console, emit, note
 from servobus.cli.param_types import Seconds
 
 MAX_ID = 255

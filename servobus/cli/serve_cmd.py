@@ -51,6 +51,12 @@ EXISTING = click.Path(dir_okay=False, exists=True, path_type=Path)
 @click.option("--mqtt-ca", type=EXISTING, default=None, help="CA certificate of the broker (TLS)")
 @click.option("--mqtt-cert", type=EXISTING, default=None, help="client certificate (TLS)")
 @click.option("--mqtt-key", type=EXISTING, default=None, help="client key (TLS)")
+@click.option("--mqtt-prefix", default="servobus", show_default=True, metavar="PREFIX",
+              help="first topic level(s): topics are PREFIX/<machine>/...")
+@click.option("--gateway-id", default=None, metavar="ID",
+              help="this gateway's name on the broker and in OPC UA: MQTT client id "
+                   "servobus-ID, ApplicationUri urn:servobus:gateway:ID "
+                   "[default: the machine's name]")
 @click.option("--gui", is_flag=True, help="serve the web GUI from this process too")
 @click.option("--gui-port", type=click.IntRange(0, 65535), default=8080, show_default=True,
               help="port of the GUI on 127.0.0.1")
@@ -59,7 +65,8 @@ def serve(ctx: CliContext, machine_path: Path | None, endpoint: str, users_path:
           cert: Path | None, key: Path | None, rate: float, mqtt_url: str | None,
           mqtt_rate: float, mqtt_commands: bool, mqtt_user: str | None,
           mqtt_password_file: Path | None, mqtt_ca: Path | None, mqtt_cert: Path | None,
-          mqtt_key: Path | None, gui: bool, gui_port: int) -> None:
+          mqtt_key: Path | None, mqtt_prefix: str, gateway_id: str | None, gui: bool,
+          gui_port: int) -> None:
     """Serve a machine to OPC UA clients and an MQTT broker until Ctrl-C.
 
     Anonymous OPC UA clients may browse, read and subscribe; methods that command an axis
@@ -79,11 +86,12 @@ def serve(ctx: CliContext, machine_path: Path | None, endpoint: str, users_path:
     if mqtt_commands and mqtt_url is None:
         raise click.UsageError("--mqtt-commands needs --mqtt")
     parse_endpoint(endpoint)
+    check_identity(mqtt_prefix, gateway_id)
     users = Users.load(users_path) if users_path is not None else None
     stem = machine_path.stem if machine_path is not None else "servobus"
     opcua = OpcUaOptions(endpoint=endpoint, users=users, cert=cert, key=key,
                          cert_dir=machine_path.parent if machine_path else None,
-                         cert_stem=stem)
+                         cert_stem=stem, gateway_id=gateway_id)
     mqtt = None
     if mqtt_url is not None:
         password = os.environ.get(MQTT_PASSWORD_ENV)
@@ -92,13 +100,27 @@ def serve(ctx: CliContext, machine_path: Path | None, endpoint: str, users_path:
             password = lines[0] if lines else ""
         mqtt = MqttOptions(url=mqtt_url, username=mqtt_user, password=password,
                            commands=mqtt_commands, rate_hz=mqtt_rate, ca=mqtt_ca,
-                           cert=mqtt_cert, key=mqtt_key)
+                           cert=mqtt_cert, key=mqtt_key, prefix=mqtt_prefix,
+                           gateway_id=gateway_id)
     options = GatewayOptions(opcua=opcua, mqtt=mqtt, rate_hz=rate,
                              gui_port=gui_port if gui else None, own_process=True)
     _log_events()
     name = asyncio.run(open_and_serve(
         machine_path, options, lambda line: click.echo(line, err=line.startswith("warning:"))))
     raise Interrupted("Ctrl-C" if name == "SIGINT" else name, SHUTDOWN_NOTE)
+
+
+def check_identity(prefix: str, ident: str | None) -> None:
+    """--mqtt-prefix and --gateway-id, checked before anything starts (a usage error)."""
+    from servobus.errors import ArgumentRangeError
+    from servobus.gateway.identity import check_prefix, gateway_id
+
+    try:
+        check_prefix(prefix)
+        if ident is not None:
+            gateway_id("", ident)
+    except ArgumentRangeError as exc:
+        raise click.UsageError(str(exc)) from None
 
 
 def _log_events() -> None:

@@ -38,7 +38,8 @@ import click
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.failures import Interrupted, describe
-from servobus.cli.open_axis import note, open_axis
+from servobus.cli.open_axis import open_axis
+from servobus.cli.output import note
 from servobus.errors import ServobusError
 
 HISTORY_ENV = "SERVOBUS_HISTORY"

@@ -4,7 +4,7 @@
     ...
     start_control(control, drives)       # on the server's running event loop, once it is up
 
-The control channel (servobus.sim.control, docs/sim-control.md) then serves the same drives:
+The control channel (servobus.sim.dmm.control, docs/sim-control.md) then serves the same drives:
 JP3 inputs and outputs, the internal state and faults on demand. It prints
 ``control on tcp://HOST:PORT`` on stdout (port 0 picks a free one).
 """
@@ -17,11 +17,11 @@ from typing import Any, TypeVar
 import click
 
 from servobus.errors import ArgumentRangeError
-from servobus.sim.control import DriveControl
 from servobus.sim.control_server import ControlServer, print_endpoint
+from servobus.sim.dmm.control import DriveControl
 from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.line_server import parse_listen_url
-from servobus.sim.realtime import RealtimeClock
+from servobus.sim.wall_clock import RealtimeClock
 
 F = TypeVar("F", bound=Callable[..., Any])
 

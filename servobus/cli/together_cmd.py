@@ -22,7 +22,7 @@ from servobus.cli import machine_cli
 from servobus.cli.context import CliContext
 from servobus.cli.motion_guard import stop_on_interrupt
 from servobus.cli.move_profile import apply_profile
-from servobus.cli.open_axis import emit
+from servobus.cli.output import emit
 
 if TYPE_CHECKING:
     from servobus.machine import Machine

@@ -9,7 +9,7 @@ import importlib
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from servobus.families.base import Family
+    from servobus.axis.types import Family
 
 FAMILIES: dict[str, str] = {
     "dmm-dyn2": "servobus.families.dmm.family:DYN2",

@@ -12,6 +12,15 @@ Decisions (docs/gateway.md "Commands"):
   here, MoveRelative by the machine (it knows the position), both as BadOutOfRange;
 * an offline axis answers BadCommunicationError at once; a command never waits longer than
   :data:`COMMAND_DEADLINE_S` and is never re-sent;
+* ``ack`` (OPC UA ``Acknowledge``) is the machine axis's ``acknowledge()``: a person or
+  program has seen a possible power loss and an interrupted motion (docs/machine.md
+  "Recovery"), and motion is allowed again. Nothing is sent to the drive, but it re-arms
+  motion, so it needs a user as the motion methods do (MQTT: an ``id`` and ``ts`` too, so a
+  replayed or late ack never acknowledges a power loss its sender did not see). Refused
+  while the axis is offline and while its reopened link is checked for a power loss
+  (BadCommunicationError, "try again"): an acknowledgement only covers what can be seen;
+* a motion refused because of an unacknowledged power loss (PowerLostError) is
+  BadInvalidState, as a drive in alarm;
 * ``set_speed`` is a lease of the axis (servobus.machine.lease, docs/safety.md) held by the
   command's *owner* (an OPC UA session, an MQTT client) for ``ttl`` seconds (above 0, at
   most 1: BadOutOfRange beyond) after each call; calling again renews it. Another owner's
@@ -36,6 +45,7 @@ from servobus.errors import (
     DriveTimeout,
     NotSupported,
     OwnerError,
+    PowerLostError,
     ServobusError,
 )
 from servobus.gateway.source import Machine, MachineAxis
@@ -49,10 +59,11 @@ COMMAND_DEADLINE_S = 5.0
 #: Command name -> takes a value. The OPC UA method names are the CamelCase of these.
 AXIS_COMMANDS: dict[str, bool] = {
     "move_absolute": True, "move_relative": True, "set_speed": True, "stop": False,
-    "enable": False, "disable": False, "reset_alarm": False,
+    "enable": False, "disable": False, "reset_alarm": False, "ack": False,
 }
-#: Commands that start a motion (MQTT requires an id and a timestamp on these).
-MOTION = frozenset({"move_absolute", "move_relative", "set_speed", "enable", "reset_alarm"})
+#: Commands that start a motion or allow it again (MQTT requires an id and a timestamp).
+MOTION = frozenset({"move_absolute", "move_relative", "set_speed", "enable", "reset_alarm",
+                    "ack"})
 
 
 class Refused(Exception):
@@ -68,7 +79,7 @@ def status_name(exc: BaseException) -> str:
     """The OPC UA status code name for a failure of a drive call."""
     if isinstance(exc, ArgumentRangeError):  # LimitError included
         return "BadOutOfRange"
-    if isinstance(exc, DriveAlarm):
+    if isinstance(exc, DriveAlarm | PowerLostError):
         return "BadInvalidState"
     if isinstance(exc, DriveTimeout | TimeoutError):
         return "BadTimeout"
@@ -123,6 +134,10 @@ class Commander:
         check_ttl(command)
         if not axis.online:
             raise Refused("BadCommunicationError", f"axis {axis.name} is offline")
+        if command.name == "ack" and axis.checking:
+            raise Refused("BadCommunicationError",
+                          f"axis {axis.name}: its link is back and being checked for a power "
+                          "loss; nothing was acknowledged, try again")
         return axis
 
     async def run(self, user: str | None, command: Command, via: str,
@@ -168,7 +183,7 @@ class Commander:
             return
         calls: dict[str, Callable[[], Awaitable[None]]] = {
             "stop": axis.stop, "enable": axis.enable, "disable": axis.disable,
-            "reset_alarm": axis.reset,
+            "reset_alarm": axis.reset, "ack": axis.acknowledge,
         }
         if command.name in calls:
             await calls[command.name]()

@@ -3,8 +3,12 @@
 Topics (``<m>`` the machine's name, ``<a>`` an axis's name)::
 
     servobus/<m>/status        "online" / "offline" (retained; "offline" is the last will)
+    servobus/<m>/link          JSON when a link goes down or comes back (QoS 1, not retained)
+    servobus/<m>/status/seq    the birth sequence and heartbeat (servobus.gateway.mqtt_presence)
     servobus/<m>/<a>/state     JSON every 1/rate s: position, speed, current, unit, moving,
-                               enabled, in_position, alarm (code), alarm_text, ok, error, time
+                               enabled, in_position, alarm (code), alarm_text, ok, error,
+                               online, last_good, power_lost, power_lost_reason,
+                               interrupted, time
     servobus/<m>/<a>/alarm     JSON {"code", "text", "time"} when it changes (retained)
     servobus/<m>/<a>/cmd       commands (only with --mqtt-commands; servobus.gateway.mqtt_gate)
     servobus/<m>/<a>/reply     {"id", "ok", "code", "error"} for each command
@@ -18,6 +22,19 @@ QoS 1. Commands are only taken when the gateway itself logs in to the broker wit
 name and password: the broker's authentication and its ACL on ``.../cmd`` say who may
 command; the gateway checks each command like an OPC UA call (servobus.gateway.commands), as user
 ``mqtt:<its broker user>``. A lost broker is retried every :data:`RECONNECT_S` seconds.
+
+Link messages (issue 29): one per link change, as the OPC UA LinkEventType event; not
+retained (one topic serves every link of the machine, and a retained message would keep
+only the last link's; the state messages carry each axis's ``online`` for a late
+subscriber). While the broker is away they wait, at most :data:`MAX_PENDING_LINK_EVENTS`
+(the oldest go first), and go out with their own ``time`` when it is back.
+``servobus`` is the default prefix (``--mqtt-prefix``).
+
+Identity (issue 30, servobus.gateway.mqtt_presence): one client id per gateway,
+``servobus-<gateway id>``; before each connection a probe looks for a live rival on the same
+topics and the gateway does not take them over from one (at start it refuses to start).
+Error boundary: each command is answered, an unexpected error as BadInternalError with one
+log line; the command loop and the gateway go on.
 """
 
 from __future__ import annotations
@@ -27,8 +44,8 @@ import contextlib
 import json
 import logging
 import math
-import secrets
 import ssl
+from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import unquote, urlparse
@@ -39,7 +56,10 @@ from paho.mqtt.subscribeoptions import SubscribeOptions
 from servobus import bounded_json
 from servobus.errors import ArgumentRangeError, JsonRefused
 from servobus.gateway.commands import Commander, Refused
+from servobus.gateway.identity import DEFAULT_PREFIX, check_prefix, gateway_id
+from servobus.gateway.link_events import LinkEvent
 from servobus.gateway.mqtt_gate import DEFAULT_MAX_AGE_S, CommandGate
+from servobus.gateway.mqtt_presence import Presence
 from servobus.gateway.sampler import Sample, Sampler
 from servobus.gateway.source import Machine
 
@@ -48,6 +68,7 @@ log = logging.getLogger(__name__)
 DEFAULT_MQTT_RATE_HZ = 5.0
 RECONNECT_S = 2.0
 BAD_TOPIC_CHARS = set("+#/\0")
+MAX_PENDING_LINK_EVENTS = 100
 
 
 @dataclass(frozen=True)
@@ -62,7 +83,8 @@ class MqttOptions:
     key: Path | None = None
     insecure: bool = False
     max_age_s: float = DEFAULT_MAX_AGE_S
-    prefix: str = "servobus"
+    prefix: str = DEFAULT_PREFIX
+    gateway_id: str | None = None  # None: the machine's name (servobus.gateway.identity)
 
 
 @dataclass(frozen=True)
@@ -97,7 +119,7 @@ def check_topic_name(kind: str, name: str) -> None:
 
 
 def state_json(sample: Sample, unit: str) -> bytes:
-    st = sample.status
+    st, h = sample.status, sample.health
 
     def num(x: float | None) -> float | None:
         return None if x is None or not math.isfinite(x) else x
@@ -108,7 +130,21 @@ def state_json(sample: Sample, unit: str) -> bytes:
         "moving": st.moving if st else None, "enabled": st.enabled if st else None,
         "in_position": st.in_position if st else None,
         "alarm": st.alarm_code if st else None, "alarm_text": st.alarm_text if st else None,
-        "ok": sample.ok, "error": sample.error or None, "time": round(sample.time, 3),
+        "ok": sample.ok, "error": sample.error or None, "online": h.online,
+        "last_good": None if h.last_good is None else round(h.last_good, 3),
+        "power_lost": h.power_lost, "power_lost_reason": h.power_lost_reason,
+        "interrupted": h.interrupted, "time": round(sample.time, 3),
+    }
+    return json.dumps(body, separators=(",", ":")).encode()
+
+
+def link_json(event: LinkEvent) -> bytes:
+    body: dict[str, object] = {
+        "url": event.url, "axes": list(event.axes), "online": event.online,
+        "reason": event.reason or None,
+        "last_good": None if event.last_good is None else round(event.last_good, 3),
+        "power_lost": list(event.power_lost), "interrupted": list(event.interrupted),
+        "time": round(event.time, 3),
     }
     return json.dumps(body, separators=(",", ":")).encode()
 
@@ -130,36 +166,38 @@ class MqttGateway:
             raise ArgumentRangeError("--mqtt-commands needs the broker's authentication: "
                                      "give --mqtt-user and a password")
         self.gate = CommandGate(options.max_age_s)
-        self.base = f"{options.prefix}/{machine.name}"
+        self.base = f"{check_prefix(options.prefix)}/{machine.name}"
+        self.presence = Presence(self.base, gateway_id(machine.name, options.gateway_id))
+        self._rival_told = self._blind_told = False  # one log line a spell
         self.published = 0
         self.connected = asyncio.Event()
         self._alarm: dict[str, tuple[int, bool]] = {}
+        self._links: deque[LinkEvent] = deque(maxlen=MAX_PENDING_LINK_EVENTS)
+        self._link_wake = asyncio.Event()
+        sampler.link_listeners.append(self.on_link)
+
+    def on_link(self, event: LinkEvent) -> None:
+        """Sampler link listener: the event waits for the session's link task."""
+        self._links.append(event)
+        self._link_wake.set()
 
     def _tls(self) -> ssl.SSLContext | None:
-        o = self.options
-        if not (self.broker.tls or o.ca or o.cert):
-            return None
-        ctx = ssl.create_default_context(cafile=str(o.ca) if o.ca else None)
-        if o.cert:
-            ctx.load_cert_chain(str(o.cert), str(o.key) if o.key else None)
-        if o.insecure:
-            ctx.check_hostname = False
-            ctx.verify_mode = ssl.CERT_NONE
-        return ctx
+        return tls_context(self.options, self.broker)
 
-    def client(self) -> aiomqtt.Client:
-        return aiomqtt.Client(
-            self.broker.host, self.broker.port, username=self.username, password=self.password,
-            identifier=f"servobus-{self.machine.name}-{secrets.token_hex(4)}",
-            will=aiomqtt.Will(f"{self.base}/status", b"offline", qos=1, retain=True),
-            tls_context=self._tls(), timeout=5.0, keepalive=10,
-            protocol=(aiomqtt.ProtocolVersion.V5 if self.options.commands
-                      else aiomqtt.ProtocolVersion.V311))
+    def client(self, probe: bool = False) -> aiomqtt.Client:
+        """The gateway's connection (its client id, its will), or a probe's."""
+        p = self.presence
+        return broker_client(self.options, p.probe_id() if probe else p.client_id,
+                             None if probe else p.will())
 
     async def run(self) -> None:
-        """Publish until cancelled; reconnects after a lost broker."""
+        """Publish until cancelled; reconnects after a lost broker. GatewayConflict when a
+        live gateway serves the topics before this one ever did."""
         while True:
             try:
+                if not await self.claim():
+                    await asyncio.sleep(RECONNECT_S)
+                    continue
                 async with self.client() as client:
                     await self._session(client)
             except aiomqtt.MqttError as exc:
@@ -169,17 +207,19 @@ class MqttGateway:
                 await asyncio.sleep(RECONNECT_S)
 
     async def _session(self, client: aiomqtt.Client) -> None:
-        await client.publish(f"{self.base}/status", b"online", qos=1, retain=True)
+        await self.presence.birth(client)
         self._alarm.clear()
         log.info("MQTT: publishing %s/... to %s:%s%s", self.base, self.broker.host,
                  self.broker.port, " (commands on)" if self.options.commands else "")
-        tasks = [asyncio.create_task(self._publish_loop(client))]
+        tasks = [asyncio.create_task(self._publish_loop(client)),
+                 asyncio.create_task(self._link_loop(client))]
         if self.options.commands:
             # MQTT 5 "retain as published": a retained command keeps its flag on the way
             # to a live subscriber too, so it is refused now and not only on a replay
             await client.subscribe(f"{self.base}/+/cmd", options=SubscribeOptions(
                 qos=1, retainAsPublished=True))
             tasks.append(asyncio.create_task(self._command_loop(client)))
+        tasks.append(asyncio.create_task(self.presence.beat(client)))
         self.connected.set()
         try:
             done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_EXCEPTION)
@@ -229,6 +269,22 @@ class MqttGateway:
         if info.rc != 0:  # the connection is gone: let aiomqtt raise and reconnect
             await client.publish(topic, payload)
 
+    async def _link_loop(self, client: aiomqtt.Client) -> None:
+        """Each link event once, QoS 1; one that could not be sent waits for the next
+        session."""
+        if self._links:
+            self._link_wake.set()
+        while True:
+            await self._link_wake.wait()
+            self._link_wake.clear()
+            while self._links:
+                event = self._links.popleft()
+                try:
+                    await client.publish(f"{self.base}/link", link_json(event), qos=1)
+                except BaseException:  # the broker is gone (or we stop): keep it for later
+                    self._links.appendleft(event)
+                    raise
+
     async def _alarm_change(self, client: aiomqtt.Client, sample: Sample) -> None:
         st = sample.status
         if not sample.ok or st is None:
@@ -249,7 +305,7 @@ class MqttGateway:
             axis = parts[2]
             payload = message.payload if isinstance(message.payload, bytes) else \
                 str(message.payload).encode()
-            await self._command(client, axis, payload, bool(message.retain))
+            await self._answer(client, axis, payload, bool(message.retain))
 
     async def _command(self, client: aiomqtt.Client, axis: str, payload: bytes,
                        retained: bool) -> None:
@@ -267,6 +323,84 @@ class MqttGateway:
                             exc.code, exc.message)
             reply = {"id": ident, "ok": False, "code": exc.code, "error": exc.message}
         await client.publish(f"{self.base}/{axis}/reply", json.dumps(reply).encode(), qos=1)
+
+    async def _answer(self, client: aiomqtt.Client, axis: str, payload: bytes,
+                      retained: bool) -> None:
+        """One command in its own error boundary: an unexpected error is answered
+        BadInternalError with one log line, and the next command is read. A lost broker
+        (MqttError) still ends the session, to reconnect."""
+        try:
+            await self._command(client, axis, payload, retained)
+        except (aiomqtt.MqttError, asyncio.CancelledError):
+            raise
+        except Exception as exc:
+            log.error("mqtt: command on %s/%s/cmd failed unexpectedly: %s: %s", self.base,
+                      axis, type(exc).__name__, exc)
+            reply = {"id": _peek_id(payload), "ok": False, "code": "BadInternalError",
+                     "error": f"internal error ({type(exc).__name__}), in the gateway's log"}
+            await client.publish(f"{self.base}/{axis}/reply", json.dumps(reply).encode(),
+                                 qos=1)
+
+    async def claim(self) -> bool:
+        """Probe the broker before taking the client id: True when the topics are free
+        (the next birth's number taken); False, one log line a spell, while a live gateway
+        serves them after this one did; GatewayConflict when this one never served them."""
+        seen = await self.presence.probe(self.client(probe=True))
+        if not seen.checked and not self._blind_told:
+            log.warning("MQTT: the broker refused this gateway's subscription to %s/status/#: "
+                        "connecting without looking for a rival gateway on these topics",
+                        self.base)
+        self._blind_told = not seen.checked
+        if self.presence.free(seen):
+            self._rival_told = False
+            return True
+        conflict = self.presence.conflict(seen, f"{self.broker.host}:{self.broker.port}")
+        if self.presence.births == 0:
+            raise conflict
+        if not self._rival_told:
+            self._rival_told = True
+            log.error("%s; checking again every %g s", conflict, RECONNECT_S)
+        return False
+
+
+def tls_context(o: MqttOptions, broker: Broker) -> ssl.SSLContext | None:
+    if not (broker.tls or o.ca or o.cert):
+        return None
+    ctx = ssl.create_default_context(cafile=str(o.ca) if o.ca else None)
+    if o.cert:
+        ctx.load_cert_chain(str(o.cert), str(o.key) if o.key else None)
+    if o.insecure:
+        ctx.check_hostname = False
+        ctx.verify_mode = ssl.CERT_NONE
+    return ctx
+
+
+def broker_client(options: MqttOptions, identifier: str,
+                  will: aiomqtt.Will | None) -> aiomqtt.Client:
+    """A connection to the options' broker with the gateway's login."""
+    broker = parse_broker(options.url)
+    return aiomqtt.Client(
+        broker.host, broker.port, username=options.username or broker.username,
+        password=options.password or broker.password, identifier=identifier, will=will,
+        tls_context=tls_context(options, broker), timeout=5.0, keepalive=10,
+        protocol=(aiomqtt.ProtocolVersion.V5 if options.commands
+                  else aiomqtt.ProtocolVersion.V311))
+
+
+async def check_topics_free(options: MqttOptions, machine_name: str) -> None:
+    """Before the machine is opened: GatewayConflict when a live gateway serves its topics.
+    A broker that cannot be reached now is no refusal (the gateway checks again each time
+    it connects)."""
+    check_topic_name("machine", machine_name)
+    base = f"{check_prefix(options.prefix)}/{machine_name}"
+    presence = Presence(base, gateway_id(machine_name, options.gateway_id))
+    try:
+        seen = await presence.probe(broker_client(options, presence.probe_id(), None))
+    except aiomqtt.MqttError:
+        return
+    if not presence.free(seen):
+        broker = parse_broker(options.url)
+        raise presence.conflict(seen, f"{broker.host}:{broker.port}")
 
 
 def _peek_id(payload: bytes) -> str | None:

@@ -2,8 +2,9 @@
 
 Decisions (docs/gateway.md "MQTT commands"): a command is a JSON object
 ``{"id": "...", "ts": <unix seconds>, "cmd": "move_relative", "value": 1.5}``. A motion
-command (MOTION) must carry ``id`` (1-128 characters) and ``ts``; a stop may leave them
-out. Refused, never run, and answered on ``.../reply``:
+command (MOTION, ``ack`` included: it allows motion again after a possible power loss)
+must carry ``id`` (1-128 characters) and ``ts``; a stop may leave them out. Refused, never
+run, and answered on ``.../reply``:
 
 * a retained message (the broker would replay it to every new subscription);
 * an id seen before (QoS 1 redelivers a message after a reconnect) - ids are remembered
@@ -107,7 +108,9 @@ class CommandGate:
             if len(self._seen) >= MAX_IDS:
                 raise Refused("BadTooManyOperations", "too many commands: try again later")
             self._seen[ident] = now
-        command = Command(axis, name, None if value is None else float(value),
+        # a value on a command that takes none is ignored: a stop runs whatever it carries
+        number = float(value) if AXIS_COMMANDS[name] and value is not None else None
+        command = Command(axis, name, number,
                           None if ttl is None else float(ttl))
         return Accepted(command, ident, "mqtt" if client is None else f"mqtt:{client}")
 

@@ -16,17 +16,26 @@ the standard names finds what it expects::
                   ParameterSet          (DI)
                     ActualPosition      (Robotics)   Double, axis unit, EngineeringUnits, EURange
                     ActualSpeed         (Robotics)   Double, axis unit per second
-                    ActualCurrent, Enabled, Moving, InPosition, AlarmCode, AlarmText,
-                    Online, LastError   (servobus)
+                    ActualCurrent, Enabled, Moving, InPosition, AlarmCode, AlarmText
+                                        (servobus)   readings: Bad while they cannot be read
+                    Online, LastError, PowerLost, PowerLostReason, Interrupted
+                                        (servobus)   the link's health: always Good
                   Identification        (DI)         Manufacturer, Model (family), Protocol,
                                                      DeviceAddress (link and drive id)
                   MoveAbsolute(Double), MoveRelative(Double), SetSpeed(Double, Ttl
-                  Double), Stop(), Enable(), Disable(), ResetAlarm()  (servobus)
+                  Double), Stop(), Enable(), Disable(), ResetAlarm(), Acknowledge()
+                                        (servobus)
               StopAll()                 (servobus)
 
-Node ids are strings in the servobus namespace (``<machine>.<axis>.ActualPosition``), so
-they stay the same from one start to the next. Alarms are events of AxisAlarmEventType
-(servobus namespace, a BaseEventType) emitted by the axis object.
+Node ids are strings in the gateway's own namespace, ``urn:servobus:gateway:<gateway id>``
+(``<machine>.<axis>.ActualPosition``), so they stay the same from one start to the next and
+an aggregating server keeps the nodes of many gateways apart; browse names and types live
+in the servobus namespace, ``urn:servobus:gateway``, the same in every gateway
+(servobus.gateway.identity). Alarms are events of AxisAlarmEventType (servobus namespace,
+a BaseEventType) emitted by the axis object; a link going down or coming back is an event
+of LinkEventType emitted by the machine object (one per link, not per axis). A method runs
+only when called on its own object (its axis, or the machine for StopAll); on any other
+object it answers BadMethodInvalid and nothing runs.
 """
 
 from __future__ import annotations
@@ -38,12 +47,13 @@ from dataclasses import dataclass, field
 from asyncua import Node, Server, ua
 
 from servobus import __version__
+from servobus.gateway.identity import TYPES_URI, application_uri
 from servobus.gateway.source import Machine, MachineAxis, family_name, family_title
 from servobus.gateway.units import eu_information
 
 DI_URI = "http://opcfoundation.org/UA/DI/"
 ROBOTICS_URI = "http://opcfoundation.org/UA/Robotics/"
-SERVOBUS_URI = "urn:servobus:gateway"
+SERVOBUS_URI = TYPES_URI  # browse names and types; node ids: the gateway's own namespace
 MANUFACTURER = "servobus"
 
 #: ParameterSet variables of the servobus namespace: name -> (variant type, initial value).
@@ -54,6 +64,18 @@ STATE_VARIABLES: dict[str, tuple[ua.VariantType, object]] = {
     "InPosition": (ua.VariantType.Boolean, False),
     "AlarmCode": (ua.VariantType.Int32, 0),
     "AlarmText": (ua.VariantType.String, ""),
+}
+
+#: The health of an axis's link (issue 29, docs/gateway.md "Recovery"): name -> variant
+#: type. Known to the gateway whether the drive answers or not, so always Good. No
+#: "LastGood" (decision): it would change with every sample; a Bad reading carries the time
+#: it was last good as its SourceTimestamp.
+HEALTH_VARIABLES: dict[str, ua.VariantType] = {
+    "Online": ua.VariantType.Boolean,
+    "LastError": ua.VariantType.String,
+    "PowerLost": ua.VariantType.Boolean,
+    "PowerLostReason": ua.VariantType.String,
+    "Interrupted": ua.VariantType.String,
 }
 
 #: SetSpeed's description: a lease, renewed by calling again (docs/gateway.md "SetSpeed").
@@ -72,6 +94,7 @@ AXIS_METHODS: dict[str, tuple[str, tuple[tuple[str, str], ...]]] = {
     "Enable": ("enable", ()),
     "Disable": ("disable", ()),
     "ResetAlarm": ("reset_alarm", ()),
+    "Acknowledge": ("ack", ()),  # the machine axis's acknowledge(): nothing is sent
 }
 
 #: ``handler(axis, command, arguments)``: the method's Double arguments in order.
@@ -82,24 +105,27 @@ MethodHandler = Callable[[str, str, tuple[float, ...]], Awaitable[ua.StatusCode]
 class AxisNodes:
     axis: MachineAxis
     node: Node
-    variables: dict[str, Node] = field(default_factory=dict)
+    variables: dict[str, Node] = field(default_factory=dict)  # readings
+    health: dict[str, Node] = field(default_factory=dict)  # HEALTH_VARIABLES
 
 
 @dataclass
 class Namespaces:
     di: int
     robotics: int
-    servobus: int
+    servobus: int  # browse names and types (shared by every gateway)
+    nodes: int  # node ids (this gateway's own namespace)
 
 
 def qn(ns: int, name: str) -> ua.QualifiedName:
     return ua.QualifiedName(name, ns)
 
 
-async def register_namespaces(server: Server) -> Namespaces:
+async def register_namespaces(server: Server, nodes_uri: str) -> Namespaces:
     return Namespaces(await server.register_namespace(DI_URI),
                       await server.register_namespace(ROBOTICS_URI),
-                      await server.register_namespace(SERVOBUS_URI))
+                      await server.register_namespace(SERVOBUS_URI),
+                      await server.register_namespace(nodes_uri))
 
 
 def method_argument(name: str, description: str) -> ua.Argument:
@@ -113,10 +139,10 @@ def method_argument(name: str, description: str) -> ua.Argument:
 
 async def add_identification(parent: Node, ns: Namespaces, nid: str,
                              fields: dict[str, str]) -> Node:
-    ident = await parent.add_object(ua.NodeId(f"{nid}.Identification", ns.servobus),
+    ident = await parent.add_object(ua.NodeId(f"{nid}.Identification", ns.nodes),
                                     qn(ns.di, "Identification"))
     for key, value in fields.items():
-        await ident.add_property(ua.NodeId(f"{nid}.Identification.{key}", ns.servobus),
+        await ident.add_property(ua.NodeId(f"{nid}.Identification.{key}", ns.nodes),
                                  qn(ns.di, key), value, ua.VariantType.String)
     return ident
 
@@ -136,28 +162,35 @@ async def add_analog(parent: Node, ns_name: int, ns_id: int, nid: str, name: str
 
 
 async def build_model(server: Server, machine: Machine, source: str,
-                      handler: MethodHandler) -> tuple[Node, dict[str, AxisNodes]]:
-    """Add the machine's nodes; methods call ``handler(axis, command, arguments)``."""
-    ns = await register_namespaces(server)
+                      handler: MethodHandler, nodes_uri: str | None = None
+                      ) -> tuple[Node, dict[str, AxisNodes]]:
+    """Add the machine's nodes, their ids in ``nodes_uri`` (default: the machine's name as
+    gateway id); methods call ``handler(axis, command, arguments)``."""
+    nodes_uri = nodes_uri or application_uri(machine.name)
+    ns = await register_namespaces(server, nodes_uri)
     m = machine.name
     objects = server.nodes.objects
-    device_set = await objects.add_folder(ua.NodeId("DeviceSet", ns.servobus),
+    device_set = await objects.add_folder(ua.NodeId("DeviceSet", ns.nodes),
                                           qn(ns.di, "DeviceSet"))
-    system = await device_set.add_object(ua.NodeId("MotionDeviceSystem", ns.servobus),
+    system = await device_set.add_object(ua.NodeId("MotionDeviceSystem", ns.nodes),
                                          qn(ns.robotics, "MotionDeviceSystem"))
-    devices = await system.add_folder(ua.NodeId("MotionDevices", ns.servobus),
+    devices = await system.add_folder(ua.NodeId("MotionDevices", ns.nodes),
                                       qn(ns.robotics, "MotionDevices"))
-    device = await devices.add_object(ua.NodeId(m, ns.servobus), qn(ns.servobus, m))
+    device = await devices.add_object(ua.NodeId(m, ns.nodes), qn(ns.servobus, m))
     await add_identification(device, ns, m, {
         "Manufacturer": MANUFACTURER, "Model": "servobus machine", "ProductInstanceUri":
-        f"{SERVOBUS_URI}:{m}", "SoftwareRevision": __version__, "SerialNumber": source})
-    axes_folder = await device.add_folder(ua.NodeId(f"{m}.Axes", ns.servobus),
+        nodes_uri, "SoftwareRevision": __version__, "SerialNumber": source})
+    axes_folder = await device.add_folder(ua.NodeId(f"{m}.Axes", ns.nodes),
                                           qn(ns.robotics, "Axes"))
 
-    async def stop_all(parent: ua.NodeId) -> ua.StatusCode:
+    async def stop_all(parent: ua.NodeId, *args: ua.Variant) -> ua.StatusCode:
+        if parent != device.nodeid:
+            return ua.StatusCode(ua.StatusCodes.BadMethodInvalid)
+        if args:
+            return ua.StatusCode(ua.StatusCodes.BadTooManyArguments)
         return await handler("", "stop_all", ())
 
-    await device.add_method(ua.NodeId(f"{m}.StopAll", ns.servobus), qn(ns.servobus, "StopAll"),
+    await device.add_method(ua.NodeId(f"{m}.StopAll", ns.nodes), qn(ns.servobus, "StopAll"),
                             stop_all, [], [])
     nodes: dict[str, AxisNodes] = {}
     for name, axis in machine.axes.items():
@@ -168,46 +201,57 @@ async def build_model(server: Server, machine: Machine, source: str,
 async def _add_axis(folder: Node, ns: Namespaces, m: str, axis: MachineAxis,
                     handler: MethodHandler) -> AxisNodes:
     a = f"{m}.{axis.name}"
-    obj = await folder.add_object(ua.NodeId(a, ns.servobus), qn(ns.servobus, axis.name))
+    obj = await folder.add_object(ua.NodeId(a, ns.nodes), qn(ns.servobus, axis.name))
     await add_identification(obj, ns, a, {
         "Manufacturer": family_title(axis), "Model": family_name(axis),
         "Protocol": str(axis.protocol), "DeviceAddress": f"{axis.url} id {axis.drive_id}"})
-    params = await obj.add_object(ua.NodeId(f"{a}.ParameterSet", ns.servobus),
+    params = await obj.add_object(ua.NodeId(f"{a}.ParameterSet", ns.nodes),
                                   qn(ns.di, "ParameterSet"))
     out = AxisNodes(axis, obj)
     out.variables["ActualPosition"] = await add_analog(
-        params, ns.robotics, ns.servobus, f"{a}.ActualPosition", "ActualPosition", axis.unit,
+        params, ns.robotics, ns.nodes, f"{a}.ActualPosition", "ActualPosition", axis.unit,
         axis.limits)
     out.variables["ActualSpeed"] = await add_analog(
-        params, ns.robotics, ns.servobus, f"{a}.ActualSpeed", "ActualSpeed", axis.speed_unit,
+        params, ns.robotics, ns.nodes, f"{a}.ActualSpeed", "ActualSpeed", axis.speed_unit,
         None)
     for name, (vtype, initial) in STATE_VARIABLES.items():
         if name == "ActualCurrent":
-            var = await add_analog(params, ns.servobus, ns.servobus, f"{a}.{name}", name, "A",
+            var = await add_analog(params, ns.servobus, ns.nodes, f"{a}.{name}", name, "A",
                                    None)
         else:
-            var = await params.add_variable(ua.NodeId(f"{a}.{name}", ns.servobus),
+            var = await params.add_variable(ua.NodeId(f"{a}.{name}", ns.nodes),
                                             qn(ns.servobus, name), initial, vtype)
         out.variables[name] = var
+    for name, vtype in HEALTH_VARIABLES.items():
+        out.health[name] = await params.add_variable(
+            ua.NodeId(f"{a}.{name}", ns.nodes), qn(ns.servobus, name),
+            ua.get_default_value(vtype), vtype)
     for method, (command, arguments) in AXIS_METHODS.items():
         inputs = [method_argument(name, description) for name, description in arguments]
-        await obj.add_method(ua.NodeId(f"{a}.{method}", ns.servobus), qn(ns.servobus, method),
-                             _method(handler, axis.name, command, len(arguments)), inputs, [])
+        await obj.add_method(ua.NodeId(f"{a}.{method}", ns.nodes), qn(ns.servobus, method),
+                             _method(handler, axis.name, command, len(arguments), obj.nodeid),
+                             inputs, [])
     return out
 
 
-def _method(handler: MethodHandler, axis: str, command: str,
-            count: int) -> Callable[..., Awaitable[ua.StatusCode]]:
-    """asyncua does not check a call's arguments against the method's: check them here."""
+def _method(handler: MethodHandler, axis: str, command: str, count: int,
+            owner: ua.NodeId) -> Callable[..., Awaitable[ua.StatusCode]]:
+    """asyncua checks neither a call's object nor its arguments against the method's: a
+    call on another object than ``owner`` (the method's axis) is BadMethodInvalid (Part 4,
+    "the method id does not refer to a method for the specified object") and runs nothing;
+    the arguments are checked here."""
     async def call(parent: ua.NodeId, *args: ua.Variant) -> ua.StatusCode:
+        if parent != owner:
+            return ua.StatusCode(ua.StatusCodes.BadMethodInvalid)
         if len(args) < count:
             return ua.StatusCode(ua.StatusCodes.BadArgumentsMissing)
         if len(args) > count:
             return ua.StatusCode(ua.StatusCodes.BadTooManyArguments)
         values = []
         for arg in args:
-            if not isinstance(arg.Value, float | int) or isinstance(arg.Value, bool):
+            value = getattr(arg, "Value", arg)
+            if not isinstance(value, float | int) or isinstance(value, bool):
                 return ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
-            values.append(float(arg.Value))
+            values.append(float(value))
         return await handler(axis, command, tuple(values))
     return call

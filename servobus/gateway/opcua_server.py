@@ -1,4 +1,4 @@
-"""The gateway's OPC UA server (asyncua): security, users, values and alarm events.
+"""The gateway's OPC UA server (asyncua): security, users, values, alarm and link events.
 
 Security (decision, docs/gateway.md "Security"):
 
@@ -21,6 +21,14 @@ go of the leases it holds. A session closes on CloseSession, on a lost connectio
 keeps a session with subscriptions open for the client to come back, until the session
 timeout) and on its timeout; a half-open connection closes nothing, so a SetSpeed's own
 ``Ttl`` (at most 1 s) is what ends the motion of a client that went silent.
+
+Recovery (issue 29, decision, docs/gateway.md "Recovery"): while an axis cannot be read its
+readings carry a Bad status and, as SourceTimestamp, the time they were last good (the
+machine axis's ``last_good``), with no value (OPC UA: a Bad value is to be ignored, Part 4
+7.7.1); they are Good again with the next good read, the server never restarts. Offline:
+BadCommunicationError, or BadNoCommunication while the axis was never read. The link's
+health variables stay Good. A link going down or back is one LinkEventType event emitted
+by the machine object.
 """
 
 from __future__ import annotations
@@ -32,6 +40,7 @@ import datetime
 import logging
 import math
 import socket
+from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,6 +56,9 @@ from asyncua.server.user_managers import UserManager
 
 from servobus.errors import ArgumentRangeError
 from servobus.gateway.commands import Command, Commander, Refused
+from servobus.gateway.identity import application_uri, gateway_id
+from servobus.gateway.link_events import LinkEvent
+from servobus.gateway.opcua_limits import LimitedSession, SessionRoom, apply_limits
 from servobus.gateway.opcua_model import SERVOBUS_URI, AxisNodes, build_model
 from servobus.gateway.sampler import Sample
 from servobus.gateway.source import Machine
@@ -63,6 +75,9 @@ BUFFER_BYTES = 65_535
 PENDING_ACTIVATION_S = 10.0
 MAX_SUBSCRIPTIONS = 200
 MAX_ITEM_QUEUE = 1_000
+#: Link events waiting for the update task (bounded: a link flapping faster than the
+#: events go out loses its oldest ones, never the memory).
+MAX_PENDING_LINK_EVENTS = 100
 _caller: contextvars.ContextVar[GatewaySession | None] = contextvars.ContextVar(
     "opcua_caller", default=None)
 #: The address of the client whose session asyncua is activating ("" when unknown).
@@ -88,8 +103,9 @@ class GatewayRules:
 SessionGone = Callable[[str], Awaitable[None]]
 
 
-class GatewaySession(InternalSession):  # type: ignore[misc]
-    """A client's session: the owner of the leases its SetSpeed calls hold."""
+class GatewaySession(LimitedSession):
+    """A client's session: the owner of the leases its SetSpeed calls hold, with the caps
+    on its subscriptions and monitored items (servobus.gateway.opcua_limits)."""
 
     on_close: SessionGone | None = None
     _owner: str | None = None
@@ -138,9 +154,12 @@ class GatewayServer(InternalServer):  # type: ignore[misc]
     def __init__(self, user_manager: UserManager, on_close: SessionGone) -> None:
         super().__init__(user_manager=user_manager)
         self.on_session_close = on_close
+        self.session_room = SessionRoom()
 
     def create_session(self, name: str, user: User | None = None,
                        external: bool = False) -> InternalSession:
+        if external:  # MaxSessions, in all and per client address
+            self.session_room.check(self._external_sessions.values(), name, peer_host)
         session = GatewaySession(self, self.aspace, self.subscription_service, name,
                                  user=User(role=UserRole.Anonymous) if user is None else user,
                                  external=external)
@@ -214,6 +233,7 @@ class OpcUaOptions:
     key: Path | None = None
     cert_dir: Path | None = None
     cert_stem: str = "servobus"
+    gateway_id: str | None = None  # None: the machine's name (servobus.gateway.identity)
 
 
 def _status(code: str) -> ua.StatusCode:
@@ -230,15 +250,21 @@ class OpcUaGateway:
         self.options = options
         self.source = source
         self.host, self.port = parse_endpoint(options.endpoint)
+        self.gateway_id = gateway_id(machine.name, options.gateway_id)
+        self.application_uri = application_uri(self.gateway_id)
         self.loopback = is_loopback(self.host)
         self.server = Server(iserver=GatewayServer(FileUsers(options.users or Users()),
                                                    self._session_closed))
         self.axes: dict[str, AxisNodes] = {}
+        self.device: Any = None  # the machine's object: it emits the link events
         self._pending: dict[str, Sample] = {}
+        self._links: deque[LinkEvent] = deque(maxlen=MAX_PENDING_LINK_EVENTS)
         self._wake = asyncio.Event()
-        self._last: dict[tuple[str, str], tuple[Any, bool]] = {}
+        self._last: dict[tuple[str, str], tuple[object, ...]] = {}
         self._alarm: dict[str, int] = {}
+        self._health: dict[str, tuple[object, ...]] = {}
         self._events: dict[str, Any] = {}
+        self._link_event: Any = None
         self.notifications = 0  # value writes that changed something (for the benchmark)
 
     @property
@@ -255,18 +281,21 @@ class OpcUaGateway:
         s.iserver.max_pending_activation_seconds = PENDING_ACTIVATION_S
         s.iserver.max_subscriptions = MAX_SUBSCRIPTIONS
         s.iserver.max_monitored_item_queue_size = MAX_ITEM_QUEUE
+        await apply_limits(s)
         s.set_endpoint(f"opc.tcp://{self.host}:{self.port}")
         s.set_server_name(f"servobus gateway {self.machine.name}")
-        await s.set_application_uri(f"{SERVOBUS_URI}:{self.machine.name}")
+        await s.set_application_uri(self.application_uri)
         s.set_identity_tokens([ua.AnonymousIdentityToken, ua.UserNameIdentityToken])
         policies = await self._security()
         s.set_security_policy(policies, permission_ruleset=GatewayRules())
-        _, self.axes = await build_model(s, self.machine, self.source, self._call)
+        self.device, self.axes = await build_model(s, self.machine, self.source, self._call,
+                                         self.application_uri)
         waiting = ua.DataValue(StatusCode=ua.StatusCode(ua.StatusCodes.BadWaitingForInitialData))
         for nodes in self.axes.values():  # until the first sample of the axis
-            for node in nodes.variables.values():
+            for node in (*nodes.variables.values(), *nodes.health.values()):
                 await s.write_attribute_value(node.nodeid, waiting)
         await self._alarm_events()
+        await self._link_events()
         await s.start()
         if s.bserver is not None:
             self.port = s.bserver.port
@@ -286,7 +315,7 @@ class OpcUaGateway:
             cert = folder / f"{o.cert_stem}.opcua-cert.der"
             key = folder / f"{o.cert_stem}.opcua-key.pem"
             await setup_self_signed_certificate(
-                key, cert, f"{SERVOBUS_URI}:{self.machine.name}", socket.gethostname(),
+                key, cert, self.application_uri, socket.gethostname(),
                 [ExtendedKeyUsageOID.SERVER_AUTH], {"commonName": "servobus gateway"})
             key.chmod(0o600)
         await self.server.load_certificate(str(cert))
@@ -306,6 +335,16 @@ class OpcUaGateway:
         for name, nodes in self.axes.items():
             self._events[name] = await s.get_event_generator(etype, nodes.node)
 
+    async def _link_events(self) -> None:
+        s = self.server
+        ns = await s.get_namespace_index(SERVOBUS_URI)
+        etype = await s.create_custom_event_type(
+            ns, "LinkEventType", ua.ObjectIds.BaseEventType,
+            [("LinkUrl", ua.VariantType.String), ("AxisNames", ua.VariantType.String),
+             ("Online", ua.VariantType.Boolean), ("Reason", ua.VariantType.String),
+             ("PowerLost", ua.VariantType.String)])
+        self._link_event = await s.get_event_generator(etype, self.device)
+
     async def stop(self) -> None:
         # asyncua's stop waits for its clock task's 1 s sleep; end that task first
         clock = getattr(self.server.iserver, "time_task", None)
@@ -319,6 +358,17 @@ class OpcUaGateway:
     # ---------------------------------------------------------------- methods
     async def _call(self, axis: str, command: str, arguments: tuple[float, ...]
                     ) -> ua.StatusCode:
+        """A method call in its own error boundary: an unexpected error is BadInternalError
+        and one log line; the server goes on."""
+        try:
+            return await self._run_call(axis, command, arguments)
+        except Exception as exc:
+            log.error("opcua: %s %s on axis %r failed unexpectedly: %s: %s", command,
+                      arguments, axis, type(exc).__name__, exc)
+            return ua.StatusCode(ua.StatusCodes.BadInternalError)
+
+    async def _run_call(self, axis: str, command: str, arguments: tuple[float, ...]
+                        ) -> ua.StatusCode:
         session = _caller.get()
         user = session.user if session is not None else None
         name = user.name if user is not None and user.role == UserRole.User else None
@@ -339,6 +389,12 @@ class OpcUaGateway:
         self._pending[sample.axis] = sample
         self._wake.set()
 
+    def on_link(self, event: LinkEvent) -> None:
+        """Sampler link listener: the event waits for :meth:`run_updates` (after the values
+        of the same round)."""
+        self._links.append(event)
+        self._wake.set()
+
     async def run_updates(self) -> None:
         while True:
             await self._wake.wait()
@@ -349,6 +405,12 @@ class OpcUaGateway:
                     await self._apply(sample)
                 except Exception:  # one bad update must not end the updates
                     log.exception("OPC UA update of axis %s failed", sample.axis)
+            while self._links:
+                event = self._links.popleft()
+                try:
+                    await self._raise_link_event(event)
+                except Exception:
+                    log.exception("OPC UA event of link %s failed", event.url)
 
     async def _apply(self, sample: Sample) -> None:
         nodes = self.axes.get(sample.axis)
@@ -365,29 +427,53 @@ class OpcUaGateway:
         for name, node in nodes.variables.items():
             if name in values or not sample.ok:
                 await self._write((sample.axis, name), node, values.get(name), sample)
+        await self._apply_health(nodes, sample)
         if sample.ok and st is not None and self._alarm.get(sample.axis, 0) != st.alarm_code:
             self._alarm[sample.axis] = st.alarm_code
             await self._raise_event(sample.axis, st.alarm_code, st.alarm_text)
 
     async def _write(self, key: tuple[str, str], node: Any, value: object, sample: Sample
                      ) -> None:
-        """Write when the value or its Good/Bad changed; ``key`` (axis, variable) names the
-        node cheaply (hashing asyncua's NodeId per value and sample cost more)."""
-        state = (value, sample.ok)
+        """A reading, written when its value or its status changed; ``key`` (axis,
+        variable) names the node cheaply (hashing asyncua's NodeId per value and sample cost
+        more). Bad: no value, the status the sample names, and the time the axis was last
+        good as SourceTimestamp (none while it never was)."""
+        last_good = sample.health.last_good
+        state = (True, value) if sample.ok else (False, sample.code, last_good)
         if self._last.get(key) == state:
             return
-        before = self._last.get(key)
         self._last[key] = state
         if sample.ok:
             dv = ua.DataValue(ua.Variant(value, _variant_type(value)),
                               SourceTimestamp=_utc(sample.time))
         else:
-            if before is not None and not before[1]:
-                return
-            dv = ua.DataValue(StatusCode=ua.StatusCode(ua.StatusCodes.BadCommunicationError),
-                              SourceTimestamp=_utc(sample.time))
+            dv = ua.DataValue(StatusCode=_status(sample.code),
+                              SourceTimestamp=None if last_good is None else _utc(last_good))
         self.notifications += 1
         await self.server.write_attribute_value(node.nodeid, dv)
+
+    async def _apply_health(self, nodes: AxisNodes, sample: Sample) -> None:
+        """The health variables: always Good, each written when it changed (most samples
+        change none: one comparison). ``last_good`` changes with every good read and is
+        not among them: a Bad reading's SourceTimestamp carries it."""
+        h = sample.health
+        error = "" if sample.ok else sample.error
+        key = (h.online, h.power_lost, h.power_lost_reason, h.interrupted, error)
+        if self._health.get(sample.axis) == key:
+            return
+        self._health[sample.axis] = key
+        health: dict[str, object] = {
+            "Online": h.online, "LastError": error, "PowerLost": h.power_lost,
+            "PowerLostReason": h.power_lost_reason or "", "Interrupted": h.interrupted or "",
+        }
+        for name, node in nodes.health.items():
+            value = health[name]
+            if self._last.get((sample.axis, name)) == (value,):
+                continue
+            self._last[(sample.axis, name)] = (value,)
+            self.notifications += 1
+            await self.server.write_attribute_value(node.nodeid, ua.DataValue(
+                ua.Variant(value, _variant_type(value)), SourceTimestamp=_utc(sample.time)))
 
     async def _raise_event(self, axis: str, code: int, text: str) -> None:
         gen = self._events[axis]
@@ -399,6 +485,19 @@ class OpcUaGateway:
             f"axis {axis}: alarm {code} {text}" if code else f"axis {axis}: alarm cleared")
         await gen.trigger()
         log.warning("axis %s: %s", axis, gen.event.Message.Text)
+
+    async def _raise_link_event(self, event: LinkEvent) -> None:
+        """One event per link change; the machine's own log line is its line."""
+        gen = self._link_event
+        gen.event.LinkUrl = event.url
+        gen.event.AxisNames = ", ".join(event.axes)
+        gen.event.Online = event.online
+        gen.event.Reason = event.reason
+        gen.event.PowerLost = ", ".join(event.power_lost)
+        gen.event.Severity = 100 if event.online and not event.power_lost else \
+            500 if event.online else 700
+        gen.event.Message = ua.LocalizedText(event.message)
+        await gen.trigger(time_attr=_utc(event.time))
 
 
 def _variant_type(value: object) -> ua.VariantType:

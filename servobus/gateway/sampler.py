@@ -20,7 +20,13 @@ a Bad sample with the error's text once :data:`BAD_AFTER` rounds in a row have f
 offline axis at once): one lost answer on a busy link leaves the last good sample
 standing rather than flapping every value to Bad and back. The sampling goes on and the
 next good read makes the axis good again. A change between good and bad is logged in one
-line.
+line, except where the axis went offline or came back online: the machine logs that, once
+per link (decision: one line per event, not one per axis more).
+
+Every sample also carries the axis's :class:`Health` (online, the time of its last good
+call, a power loss or an interrupted motion waiting for an acknowledgement: docs/machine.md
+"Recovery"), and after each round the link's :class:`~servobus.gateway.link_events.LinkWatch`
+tells whether the link went down or came back (one event each, never one per retry).
 """
 
 from __future__ import annotations
@@ -32,8 +38,10 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from servobus.axis.types import AxisStatus
 from servobus.errors import NotSupported
-from servobus.families.base import AxisStatus
+from servobus.gateway.commands import status_name
+from servobus.gateway.link_events import LinkListener, LinkWatch
 from servobus.gateway.source import Machine, MachineAxis
 
 log = logging.getLogger(__name__)
@@ -50,8 +58,27 @@ ROUND_WEIGHT = 0.2
 
 
 @dataclass(frozen=True)
+class Health:
+    """What the machine knows of an axis beside its readings (issue 29): is its link up,
+    when did a call on it last succeed (``time.time()``), and what waits for an
+    acknowledgement (a possible power loss, an interrupted motion)."""
+
+    online: bool = True
+    last_good: float | None = None
+    power_lost: bool = False
+    power_lost_reason: str | None = None
+    interrupted: str | None = None
+
+
+def health_of(axis: MachineAxis) -> Health:
+    return Health(axis.online, axis.last_good, axis.power_lost, axis.power_lost_reason,
+                  axis.interrupted)
+
+
+@dataclass(frozen=True)
 class Sample:
-    """One axis at one time (wall clock, seconds); ``ok`` False carries ``error``."""
+    """One axis at one time (wall clock, seconds); ``ok`` False carries ``error`` and
+    ``code``, the OPC UA status code name its values carry."""
 
     axis: str
     time: float
@@ -61,6 +88,15 @@ class Sample:
     speed: float = math.nan
     current: float | None = None
     status: AxisStatus | None = None
+    health: Health = Health()
+    code: str = "Good"
+
+
+def offline_code(last_good: float | None) -> str:
+    """The status of an offline axis's values (decision, docs/gateway.md "Recovery"):
+    BadCommunicationError once it has been read, BadNoCommunication ("defined, but not
+    established, and there is no last known value") while it never was."""
+    return "BadCommunicationError" if last_good is not None else "BadNoCommunication"
 
 
 Listener = Callable[[Sample], None]
@@ -114,6 +150,8 @@ class Sampler:
         self._failures: dict[str, int] = {}
         self.first_round = asyncio.Event()
         self._first_pending = set(self.links)
+        self.watch = LinkWatch()
+        self.link_listeners: list[LinkListener] = []
 
     async def run(self) -> None:
         """Sample until cancelled."""
@@ -128,13 +166,15 @@ class Sampler:
         except asyncio.CancelledError:
             raise
         except TimeoutError as exc:
-            return Sample(axis.name, time.time(), False, str(exc) or "no answer in time")
+            return _failed(axis, str(exc) or "no answer in time", "BadTimeout")
         except Exception as exc:  # any failure of the link or drive is a Bad sample
-            return Sample(axis.name, time.time(), False, f"{type(exc).__name__}: {exc}")
+            return _failed(axis, f"{type(exc).__name__}: {exc}", status_name(exc))
 
     async def _read(self, axis: MachineAxis) -> Sample:
         if not axis.online:
-            return Sample(axis.name, time.time(), False, OFFLINE)
+            why = axis.last_error
+            return _failed(axis, OFFLINE if why is None else f"{OFFLINE}: {why}",
+                           offline_code(axis.last_good))
         readings = getattr(axis, "readings", None)  # one request fewer where it exists
         if readings is not None:
             (position, speed, status), current = await asyncio.gather(
@@ -142,7 +182,8 @@ class Sampler:
         else:
             position, speed, status, current = await asyncio.gather(
                 axis.position(), axis.speed(), axis.status(), self._current(axis))
-        return Sample(axis.name, time.time(), True, "", position, speed, current, status)
+        return Sample(axis.name, time.time(), True, "", position, speed, current, status,
+                      health_of(axis))
 
     async def _current(self, axis: MachineAxis) -> float | None:
         raw = axis.axis
@@ -156,25 +197,29 @@ class Sampler:
 
     def _publish(self, sample: Sample) -> None:
         before = self.latest.get(sample.axis)
+        offline = not sample.health.online
         if sample.ok:
             self._failures[sample.axis] = 0
         else:
             failures = self._failures[sample.axis] = self._failures.get(sample.axis, 0) + 1
-            if (before is not None and before.ok and failures < BAD_AFTER
-                    and sample.error != OFFLINE):
+            if before is not None and before.ok and failures < BAD_AFTER and not offline:
                 return  # a lost answer: the last good sample stands
         if before is None or before.ok != sample.ok:
-            if sample.ok:
-                if before is not None:
-                    log.info("axis %s: readings are back", sample.axis)
-            else:
-                log.warning("axis %s: no readings: %s", sample.axis, sample.error)
+            _log_change(before, sample)
         self.latest[sample.axis] = sample
         for listener in self.listeners:
             try:
                 listener(sample)
             except Exception:
                 log.exception("sample listener failed")
+
+    def _watch_link(self, url: str, axes: list[MachineAxis]) -> None:
+        for event in self.watch.observe(url, axes):
+            for listener in self.link_listeners:
+                try:
+                    listener(event)
+                except Exception:
+                    log.exception("link listener failed")
 
     async def _link_loop(self, url: str, axes: list[MachineAxis]) -> None:
         period = 1.0 / self.rate_hz
@@ -185,6 +230,7 @@ class Sampler:
             start = loop.time()
             for sample in await asyncio.gather(*(self.sample_once(a) for a in axes)):
                 self._publish(sample)
+            self._watch_link(url, axes)
             end = loop.time()
             if url in self._first_pending:
                 self._first_pending.discard(url)
@@ -200,3 +246,17 @@ class Sampler:
                 self.achieved_hz[url] = rounds / (end - since)
                 rounds, since = 0, end
             await asyncio.sleep(rest)
+
+
+def _failed(axis: MachineAxis, error: str, code: str) -> Sample:
+    return Sample(axis.name, time.time(), False, error, health=health_of(axis), code=code)
+
+
+def _log_change(before: Sample | None, sample: Sample) -> None:
+    """One line when an axis's readings turn Bad or Good, unless the axis went offline or
+    came back online: the machine's own line about its link says that."""
+    if sample.ok:
+        if before is not None and before.health.online:
+            log.info("axis %s: readings are back", sample.axis)
+    elif sample.health.online:
+        log.warning("axis %s: no readings: %s", sample.axis, sample.error)

@@ -23,7 +23,7 @@ from pathlib import Path
 
 from servobus.gateway.commands import Commander
 from servobus.gateway.heap import freeze_startup_heap
-from servobus.gateway.mqtt import MqttGateway, MqttOptions
+from servobus.gateway.mqtt import MqttGateway, MqttOptions, check_topics_free
 from servobus.gateway.opcua_server import OpcUaGateway, OpcUaOptions
 from servobus.gateway.sampler import DEFAULT_RATE_HZ, Sampler
 from servobus.gateway.source import Machine
@@ -54,6 +54,7 @@ class Gateway:
         self.commander = Commander(machine)
         self.opcua = OpcUaGateway(machine, self.commander, options.opcua, source)
         self.sampler.listeners.append(self.opcua.on_sample)
+        self.sampler.link_listeners.append(self.opcua.on_link)
         self.mqtt = (MqttGateway(machine, self.sampler, self.commander, options.mqtt)
                      if options.mqtt else None)
         self.tasks: list[asyncio.Task[None]] = []
@@ -135,7 +136,7 @@ async def serve_machine(machine: Machine, options: GatewayOptions, say: Say,
                else " (read-only: no --users)"))
         if gateway.mqtt is not None:
             say(f"servobus serve: mqtt {gateway.mqtt.broker.host}:{gateway.mqtt.broker.port} "
-                f"topics {gateway.mqtt.base}/...")
+                f"topics {gateway.mqtt.base}/... client id {gateway.mqtt.presence.client_id}")
         say("servobus serve: ready. Ctrl-C stops every axis and the gateway.")
         waiter = asyncio.create_task(stop.wait())
         failed = asyncio.create_task(gateway.wait_failed())
@@ -159,6 +160,16 @@ async def serve_machine(machine: Machine, options: GatewayOptions, say: Say,
 async def open_and_serve(path: Path | None, options: GatewayOptions, say: Say) -> str:
     from servobus.machine import open_machine_async
 
+    if options.mqtt is not None:  # a live gateway on these topics: refuse before any link opens
+        await check_topics_free(options.mqtt, machine_name(path))
     machine = await open_machine_async(path, retry=True)
     source = str(path) if path is not None else "built-in virtual machine"
     return await serve_machine(machine, options, say, source)
+
+
+def machine_name(path: Path | None) -> str:
+    """The machine's name from its file (or the built-in machine's), nothing opened."""
+    from servobus.machine.builtin import builtin_spec
+    from servobus.machine.config import load_machine_file
+
+    return (builtin_spec() if path is None else load_machine_file(path)).name

@@ -1,7 +1,7 @@
 """REST: the Parameters panel (table, write, backup download, restore/diff upload) and
 the Tuning panel (step test, gains apply/revert).
 
-Backups are the file of ``servobus params --save`` (servobus.cli.params_file), so a file
+Backups are the file of ``servobus params --save`` (servobus.families.params_file), so a file
 saved here loads on the command line and back. A restore first shows what would change
 (``apply: false``: a diff against the drive, with the EEPROM writes it would cost), then
 writes only the values that differ and reads them back.
@@ -13,9 +13,9 @@ from starlette.requests import Request
 from starlette.responses import JSONResponse, Response
 from starlette.routing import Route
 
-from servobus.cli import params_file as PF
+from servobus.axis.types import ParamInfo, Storage
 from servobus.errors import ArgumentRangeError
-from servobus.families.base import ParamInfo, Storage
+from servobus.families import params_file as PF
 from servobus.gui import tuning
 from servobus.gui.fleet import AxisHandle
 from servobus.gui.http_util import api, body, handle, integer, number, ok, state

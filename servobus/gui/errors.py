@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from starlette.responses import JSONResponse
 
-from servobus.cli.params_file import ParamsFileError
 from servobus.errors import (
     ArgumentRangeError,
     ConnectionLost,
@@ -15,6 +14,7 @@ from servobus.errors import (
     PowerLostError,
     ServobusError,
 )
+from servobus.families.params_file import ParamsFileError
 
 #: Most specific first.
 STATUS: tuple[tuple[type[BaseException], int], ...] = (

@@ -2,8 +2,9 @@
 
 ``transaction`` the one transaction policy (deadlines, retries, lanes, pacing, dead links),
 ``late_replies`` the replies owed by timed-out attempts, ``eeprom_guard`` the EEPROM wear
-guard, ``stats`` the counters, ``can`` what the CAN clients share (the python-can channel
-of a URL, the receive loop), ``opening`` a client on an open medium (closed again when
+guard, ``stats`` the counters, ``can`` and ``stream`` the bases of the CAN and the
+byte-stream clients (the medium, the receive loop, closing), ``opening`` a client on an
+open medium (closed again when
 the client refuses its options). A link knows no protocol and no simulator; it moves nothing
 itself (``servobus.transport`` does).
 """

@@ -1,5 +1,6 @@
-"""What the CAN clients share (DYN CAN and EasyCan): the python-can channel a drive URL
-names, and a client base that owns the bus, its receive loop and closing.
+"""What the CAN clients share (DYN CAN and EasyCan): a client base that owns the bus, its
+receive loop and closing (the python-can channel a drive URL names:
+:func:`servobus.axis.url.can_spec`).
 
 Like python-can's ``BusABC.recv`` calling ``_recv_internal``, :class:`CanClient` runs the
 generic part once - frames pushed by the port (or read in a loop where the port cannot
@@ -12,38 +13,18 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from collections.abc import Hashable
-from typing import TYPE_CHECKING, Generic, TypeVar
+from typing import Generic, TypeVar
 
-from servobus.errors import ArgumentRangeError, ConnectionLost
+from servobus.errors import ConnectionLost
 from servobus.link.eeprom_guard import EepromGuard
 from servobus.link.late_replies import LateReplies
 from servobus.link.stats import TransactionStats
 from servobus.link.transaction import LinkTraceHook, TransactionManager
 from servobus.transport.can_bus import CanFrame, FramePort, set_receiver
 
-if TYPE_CHECKING:
-    from servobus.axis.url import DriveUrl
-
 K = TypeVar("K", bound=Hashable)  # what a reply is matched on
 P = TypeVar("P")  # a request as the bus takes it
 V = TypeVar("V")  # a reply as the receive path hands it over
-
-
-def can_spec(url: DriveUrl) -> tuple[str, dict[str, str]]:
-    """``INTERFACE:CHANNEL`` for python-can, and the socketcand bus name if the URL gives one.
-
-    ``<scheme>+<interface>://<channel>``; for socketcand the channel is ``host:port[/can0]``.
-    """
-    if not url.transport:
-        s = url.scheme
-        raise ArgumentRangeError(
-            f"{url.raw!r} names no CAN interface: use {s}+<interface>://<channel>, "
-            f"e.g. {s}+pcan://PCAN_USBBUS1 or {s}+socketcand://127.0.0.1:29536/can0")
-    channel = url.target
-    if url.transport == "socketcand" and "/" in channel:
-        address, _, bus = channel.partition("/")
-        return f"socketcand:{address}", ({"channel": bus} if bus else {})
-    return f"{url.transport}:{channel}", {}
 
 
 class CanClient(Generic[K, P, V]):

@@ -3,8 +3,7 @@
 :class:`TransactionStats` counts one link's transactions (all drives on it; the
 :class:`~servobus.link.transaction.TransactionManager` keeps them). :class:`StreamStats`
 counts one cyclic stream of set-points (DYN CAN Position Direct, EasyCan synchronised
-motion): the one class for both since issue 19, with DYN CAN's earlier names kept as
-read-only aliases for one release.
+motion).
 """
 
 from __future__ import annotations
@@ -38,13 +37,3 @@ class StreamStats:
     skipped: int = 0  # cycles dropped because the host was more than a cycle behind
     max_lateness_s: float = 0.0
     elapsed_s: float = 0.0
-
-    @property
-    def ticks(self) -> int:
-        """DYN CAN's earlier name of :attr:`cycles` (kept for one release)."""
-        return self.cycles
-
-    @property
-    def late_ticks(self) -> int:
-        """DYN CAN's earlier name of :attr:`late_cycles` (kept for one release)."""
-        return self.late_cycles

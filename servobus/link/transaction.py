@@ -74,7 +74,7 @@ import time
 from collections.abc import Awaitable, Callable, Hashable, Iterable
 from typing import Generic, TypeVar
 
-from servobus.axis import checks
+from servobus import checks
 from servobus.errors import (
     ChecksumError,
     ConnectionLost,

@@ -44,6 +44,7 @@ from servobus.errors import (
     NotSupported,
     OwnerError,
     PowerLostError,
+    ServobusError,
 )
 from servobus.machine.config import AxisSpec
 from servobus.machine.lease import DEFAULT_TTL_S, Lease, check_speed, check_ttl, stream
@@ -51,7 +52,7 @@ from servobus.machine.units import Scale
 
 if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis
-    from servobus.families.base import AxisStatus, Family
+    from servobus.axis.types import AxisStatus, Family
 
 log = logging.getLogger(__name__)
 
@@ -87,7 +88,13 @@ class AsyncMachineAxis:
         self.on_drop: DropHandler | None = None
         self._last_good: float | None = None
         self._last_counts: int | None = None
+        #: The last position read before the link dropped, kept for the power check until it
+        #: ran (reads on the reopened link - a GUI's poll - must not replace it first).
+        self._counts_at_drop: int | None = None
         self._moving = False  # a motion was commanded and not yet seen to end
+        #: Motion commands sent so far: a status read that began before the last one may
+        #: be answered before the drive starts it, so its "not moving" clears nothing.
+        self._commands = 0
         self._silent = 0  # calls in a row that timed out
         self._silent_since = 0.0  # time.monotonic() of the first of them
         self._interrupted: str | None = None
@@ -186,7 +193,12 @@ class AsyncMachineAxis:
 
     async def acknowledge(self) -> None:
         """A person or program has seen the power loss (and the interrupted motion): the
-        flags clear and motion is allowed again. Nothing is sent."""
+        flags clear and motion is allowed again. Nothing is sent. Refused
+        (MachineLinkError) while a reopened link is being checked for a power loss: the
+        check may still flag what the caller has not seen."""
+        if self.checking:
+            raise MachineLinkError(f"axis {self.name}: its link is back and being checked for "
+                                   "a power loss; nothing was acknowledged, try again")
         if self._power_lost is not None or self._interrupted is not None:
             log.warning("axis %s: acknowledged (%s)", self.name,
                         self._power_lost or self._interrupted)
@@ -239,20 +251,24 @@ class AsyncMachineAxis:
         resumed; a motion that ran is reported in ``interrupted``, a lease ends."""
         self.axis = None
         self.last_error = err
+        if self._counts_at_drop is None:  # a link that drops again before its check keeps it
+            self._counts_at_drop = self._last_counts
         lease = self._lease
         running = lease is not None and lease.alive
+        interrupted = None
         if running and lease is not None:
             lease.ended = "link dropped"
             if lease.task is not None and lease.task is not asyncio.current_task():
                 lease.task.cancel()  # its own task ends by itself on the failed read
-            self._interrupted = f"the {lease.owner} motion at {lease.speed:g} " \
-                                f"{self.speed_unit} (lease) stopped being sent"
+            interrupted = f"the {lease.owner} motion at {lease.speed:g} " \
+                          f"{self.speed_unit} (lease) stopped being sent"
         elif self._moving:
-            self._interrupted = "a commanded motion may not have finished"
+            interrupted = "a commanded motion may not have finished"
         self._moving = False
-        if self._interrupted is not None:
+        if interrupted is not None:  # one line when it happens, not at every later drop
+            self._interrupted = interrupted
             log.warning("axis %s: motion interrupted by the link drop: %s; it is not "
-                        "re-sent", self.name, self._interrupted)
+                        "re-sent", self.name, interrupted)
 
     async def mark_power(self) -> None:
         """Leave the machine's token in the drive's power-cleared cell, where it has one;
@@ -266,8 +282,23 @@ class AsyncMachineAxis:
 
     async def check_power(self) -> None:
         """After the link came back: did the drive lose power meanwhile? The cell where
-        the family has one (DYN5), else the position (docs/machine.md)."""
+        the family has one (DYN5), else the position (docs/machine.md). A check the drive
+        does not answer (a timeout, an error; not a dropped link) cannot tell: the axis is
+        flagged, its position unverified, and the error raised. (Decision, issue 29's fault
+        run: a check that timed out on a loaded host let a drive restart pass unflagged,
+        and its stale reference flagged the next, harmless drop.)"""
         core = self.core()
+        try:
+            await self._check_power(core)
+        except MachineLinkError:
+            raise  # dropped again: the next reopen checks
+        except ServobusError as exc:
+            self._counts_at_drop = None
+            self.flag_power_lost(f"the check after the link came back got no answer ({exc}): "
+                                 "the position is unverified")
+            raise
+
+    async def _check_power(self, core: AsyncAxis) -> None:
         with self._watch():
             marker = await core.power_marker()
         if marker is not None:
@@ -276,15 +307,16 @@ class AsyncMachineAxis:
                                      f"token {POWER_TOKEN} left there: power cycle or Reset")
             with self._watch():
                 await core.power_marker(POWER_TOKEN)
+            self._counts_at_drop = None
             return
+        with self._watch():
+            counts = await core.position()  # read either way: it proves the link answers
+        before, self._counts_at_drop = self._counts_at_drop, None
+        self._seen(counts)
         if self._interrupted is not None:
             self.flag_power_lost("a motion was interrupted and the family keeps no mark "
                                  "of a power cycle: the position is unverified")
             return
-        with self._watch():
-            counts = await core.position()
-        before = self._last_counts
-        self._last_counts = counts
         if before is not None and abs(counts - before) > core.counts_per_rev * JUMP_REVS:
             self.flag_power_lost(f"the position moved from {before} to {counts} counts "
                                  "while the link was down")
@@ -302,11 +334,21 @@ class AsyncMachineAxis:
         self._interrupted = None
         return core
 
-    def _seen(self, counts: int | None = None, status: AxisStatus | None = None) -> None:
+    def _seen(self, counts: int | None = None, status: AxisStatus | None = None,
+              since: int | None = None) -> None:
+        """A read's result; ``since``: ``_commands`` when the read began. A status read
+        that was in flight while a motion command went out (a front end polls while it
+        moves the axis) says nothing of that motion: it must not clear ``_moving``, or a
+        drop right after the command would not count as an interrupted motion."""
         if counts is not None:
             self._last_counts = counts
-        if status is not None and not status.moving:
+        if status is not None and not status.moving and since == self._commands:
             self._moving = False
+
+    def _commanded(self) -> None:
+        """A motion command goes out now."""
+        self._commands += 1
+        self._moving = True
 
     @property
     def scale(self) -> Scale:
@@ -351,16 +393,18 @@ class AsyncMachineAxis:
             return self.scale.from_rpm(await self.core().speed())
 
     async def status(self) -> AxisStatus:
+        since = self._commands
         with self._watch():
             status = await self.core().status()
-        self._seen(status=status)
+        self._seen(status=status, since=since)
         return status
 
     async def readings(self) -> tuple[float, float, AxisStatus]:
         """Position and speed in user units and the status (see ``AsyncAxis.readings``)."""
+        since = self._commands
         with self._watch():
             position, speed, status = await self.core().readings()
-        self._seen(position, status)
+        self._seen(position, status, since)
         return self.to_user(position), self.scale.from_rpm(speed), status
 
     # ------------------------------------------------------------- motion
@@ -370,7 +414,7 @@ class AsyncMachineAxis:
         self.check_target(target)
         counts = self.to_counts(target)
         await self._end_lease("replaced by a move")
-        await self._move(lambda core: core.move_to(counts, wait=wait, timeout=timeout))
+        await self._move(lambda core: core.move_to(counts, wait=wait, timeout=timeout), wait)
 
     async def move_by(self, distance: float, *, wait: bool = False,
                       timeout: float | None = None) -> None:
@@ -387,14 +431,18 @@ class AsyncMachineAxis:
             self.check_target(await self.position() + distance)
         counts = self.to_counts(distance)
         await self._end_lease("replaced by a move")
-        await self._move(lambda core: core.move_by(counts, wait=wait, timeout=timeout))
+        await self._move(lambda core: core.move_by(counts, wait=wait, timeout=timeout), wait)
 
-    async def _move(self, send: Callable[[AsyncAxis], Awaitable[None]]) -> None:
-        """A motion command, sent once (never re-sent, whatever happens to the link)."""
+    async def _move(self, send: Callable[[AsyncAxis], Awaitable[None]],
+                    waited: bool = False) -> None:
+        """A motion command, sent once (never re-sent, whatever happens to the link);
+        ``waited``: ``send`` returns once the motion ended (a later drop interrupts nothing)."""
         core = self._motion()
-        self._moving = True
+        self._commanded()
         with self._watch():
             await send(core)
+        if waited:
+            self._moving = False
 
     async def turn(self, speed: float | None = None, *, owner: str = "api",
                    ttl: float = DEFAULT_TTL_S) -> None:
@@ -488,7 +536,7 @@ class AsyncMachineAxis:
             return self.to_user(counts)
 
         async def send(target: float) -> None:
-            self._moving = True
+            self._commanded()
             with self._watch():
                 await core.stream_to(self.to_counts(target), abs(self.scale.to_rpm(lease.speed)))
 
@@ -607,9 +655,10 @@ class AsyncMachineAxis:
 
     async def wait_idle(self, timeout: float | None = None) -> AxisStatus:
         core = self.core()
+        since = self._commands
         with self._watch():
             status = await (core.wait_idle() if timeout is None else core.wait_idle(timeout))
-        self._seen(status=status)
+        self._seen(status=status, since=since)
         return status
 
     async def apply_origin(self) -> None:

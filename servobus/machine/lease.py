@@ -32,8 +32,8 @@ import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 
+from servobus.axis.types import StreamProfile
 from servobus.errors import ArgumentRangeError, DriveTimeout
-from servobus.families.base import StreamProfile
 
 log = logging.getLogger(__name__)
 

@@ -27,6 +27,12 @@ class Link:
         self.axes = list(axes)
         self.source = source
         self.owner: AsyncAxis | None = None
+        #: When the link last came back, and how many times in a row it dropped again
+        #: within STABLE_S of that (AsyncMachine._recover).
+        self.up_since = 0.0
+        self.quick_drops = 0
+        #: True while a reopened link's first reads run: a drop then fails the try quietly.
+        self.verifying = False
 
     @property
     def online(self) -> bool:

@@ -20,9 +20,13 @@ Recovery (issue 29, docs/machine.md "Recovery"), whatever ``retry`` says: a link
 ConnectionLost) takes its axes offline and is reopened with :func:`backoff` - the first try
 at once, then after :data:`RETRY_S`, doubling to at most :data:`RETRY_MAX_S` between tries,
 slept on the injected ``sleep`` (a test runs simulated minutes). One log line when a link
-goes down, one when it is back; tries in between log at debug level only. Nothing is
-resumed: no motion is re-sent, leases end, ``origin`` is never applied again; after the
-link is back each axis is checked for a power loss (AsyncMachineAxis.check_power).
+goes down, one when it is back; tries in between log at debug level only. A try counts
+only when the link also answers its first reads (the power check, or a status read on a
+link that never opened): a peer that accepts a connection and hangs up at once fails the
+try quietly, and a link that drops again within :data:`STABLE_S` is not retried at once.
+Nothing is resumed: no motion is re-sent, leases end, ``origin`` is never applied again;
+after the link is back each axis is checked for a power loss
+(AsyncMachineAxis.check_power).
 
 ``close()`` stops every axis first (servobus.axis.halt.halt), then closes the links. Any
 call after it raises ClosedError.
@@ -59,15 +63,23 @@ log = logging.getLogger(__name__)
 #: Reconnect backoff: the first try at once, then after RETRY_S, doubling to RETRY_MAX_S.
 RETRY_S = 0.1
 RETRY_MAX_S = 2.0
+#: A link that drops again within STABLE_S of coming back is not retried at once: its first
+#: try waits RETRY_S, doubled for each such drop in a row (at most RETRY_MAX_S), so whatever
+#: a peer does, a link is not reopened in a tight loop. (Decision, the fault run of issue
+#: 29: a peer that accepted a connection and hung up - a port forward whose drive is off -
+#: was reopened in a tight loop, two log lines per turn; a try now also has to pass its
+#: first reads, _verify.)
+STABLE_S = 1.0
 
 Sleep = Callable[[float], Awaitable[None]]
 
 
-def backoff(*, at_once: bool = True) -> Iterator[float]:
-    """Seconds to wait before each reconnect try: 0 (``at_once``), 0.1, 0.2 ... 2, 2 ..."""
+def backoff(*, at_once: bool = True, first: float = RETRY_S) -> Iterator[float]:
+    """Seconds to wait before each reconnect try: 0 (``at_once``), 0.1 (``first``), 0.2 ...
+    2, 2 ..."""
     if at_once:
         yield 0.0
-    delay = RETRY_S
+    delay = first
     while True:
         yield delay
         delay = min(delay * 2, RETRY_MAX_S)
@@ -186,9 +198,11 @@ class AsyncMachine:
 
     async def _opened(self, link: Link) -> None:
         """A link is open: watch its transport, leave the power token (where the family
-        keeps one)."""
+        keeps one). A link that dropped again meanwhile is left to its own reopen."""
         for axis in link.axes:
-            core = axis.core()
+            core = axis.axis
+            if core is None:
+                return
             core.on_link_lost(functools.partial(self._link_signal, asyncio.get_running_loop(),
                                                 link, core))
             with contextlib.suppress(ServobusError):  # MachineLinkError: dropped again
@@ -198,7 +212,13 @@ class AsyncMachine:
         task = asyncio.ensure_future(coro)
         task.set_name(name)
         self._retries.add(task)
-        task.add_done_callback(self._retries.discard)
+        task.add_done_callback(self._task_done)
+
+    def _task_done(self, task: asyncio.Task[None]) -> None:
+        """A reopen task ended: one line if it failed (never asyncio's 'never retrieved')."""
+        self._retries.discard(task)
+        if not task.cancelled() and task.exception() is not None:
+            log.warning("%s: %s failed: %s", self.source, task.get_name(), task.exception())
 
     # ------------------------------------------------------------- recovery
     def _axis_dropped(self, axis: AsyncMachineAxis, err: BaseException) -> None:
@@ -218,16 +238,25 @@ class AsyncMachine:
         if self._closed or core is None or core not in link.cores():
             return  # closed, already offline, or a signal of a link reopened since
         cause = err.__cause__ if isinstance(err, MachineLinkError) and err.__cause__ else err
-        log.warning("%s: link %s is down (%s); reopening it", self.source, link.url, cause)
         cores = link.take_offline(err if isinstance(err, MachineLinkError) else
                                   MachineLinkError(f"the link {link.url} is down: {err}"))
+        if link.verifying:  # a reopen try whose first reads failed: _reconnect goes on
+            log.debug("%s: link %s dropped again at once (%s)", self.source, link.url, cause)
+            self._spawn(_close(cores), f"machine-close {link.url}")
+            return
+        log.warning("%s: link %s is down (%s); reopening it", self.source, link.url, cause)
         self._spawn(self._recover(link, cores), f"machine-reopen {link.url}")
 
     async def _recover(self, link: Link, cores: Sequence[AsyncAxis]) -> None:
-        for core in reversed(cores):  # siblings first, the owner last
-            with contextlib.suppress(Exception):
-                await core.close()
-        await self._reconnect(link, backoff(at_once=True), first=False)
+        await _close(cores)
+        if time.monotonic() - link.up_since < STABLE_S:  # it came back and dropped at once
+            link.quick_drops += 1
+            first = min(RETRY_S * 2 ** (link.quick_drops - 1), RETRY_MAX_S)
+            delays = backoff(at_once=False, first=first)
+        else:
+            link.quick_drops = 0
+            delays = backoff()
+        await self._reconnect(link, delays, first=False)
 
     async def _reconnect(self, link: Link, delays: Iterator[float], *, first: bool) -> None:
         """Try to open ``link`` after each delay until it opens or the machine closes.
@@ -255,14 +284,35 @@ class AsyncMachine:
                 continue
             if self._closed:
                 return
+            if not await self._verify(link, first):
+                continue  # it hung up at once: the try failed (logged at debug level)
             log.warning("%s: link %s is online", self.source, link.url)
+            link.up_since = time.monotonic()
             if first:
                 for axis in link.axes:
                     axis.skip_origin()
-            else:  # before the token is left again
-                await self._check_power(link)
             await self._opened(link)
             return
+
+    async def _verify(self, link: Link, first: bool) -> bool:
+        """A link just opened answers: its power check (before the token is left again), or
+        on a link that never opened a status read of each axis. False when it dropped
+        again meanwhile."""
+        link.verifying = True
+        try:
+            if not first:
+                await self._check_power(link)
+            else:
+                for axis in link.axes:
+                    try:
+                        await axis.status()
+                    except MachineLinkError:
+                        break
+                    except ServobusError as exc:  # no answer: not a link failure
+                        log.debug("axis %s: first read: %s", axis.name, exc)
+        finally:
+            link.verifying = False
+        return link.online
 
     async def _check_power(self, link: Link) -> None:
         """Every axis of a reopened link: a power loss meanwhile? Motion waits for it."""
@@ -272,7 +322,7 @@ class AsyncMachine:
                     await axis.check_power()
                 except MachineLinkError:
                     return  # dropped again: the next reopen checks
-                except ServobusError as exc:  # no answer: a later answer tells (SILENT_CALLS)
+                except ServobusError as exc:  # no answer: flagged (check_power)
                     log.debug("axis %s: power check after reopening: %s", axis.name, exc)
         finally:
             for axis in link.axes:
@@ -344,7 +394,7 @@ class AsyncMachine:
         async def start_group(members: list[AsyncMachineAxis]) -> float:
             lead = members[0]
             for m in members:
-                m._moving = True
+                m._commanded()
             with lead._watch():
                 await lead.core().sync_move_to([(m.core(), counts[m.name]) for m in members])
             return time.perf_counter()
@@ -411,6 +461,12 @@ class AsyncMachine:
 
     def __repr__(self) -> str:
         return f"<AsyncMachine {self.name} axes {', '.join(self._axes)}>"
+
+
+async def _close(cores: Sequence[AsyncAxis]) -> None:
+    for core in reversed(cores):  # siblings first, the owner last
+        with contextlib.suppress(Exception):
+            await core.close()
 
 
 def _retryable(exc: BaseException) -> bool:

@@ -21,7 +21,7 @@ from servobus.machine.machine import (
 )
 
 if TYPE_CHECKING:
-    from servobus.families.base import AxisStatus, Family
+    from servobus.axis.types import AxisStatus, Family
     from servobus.machine.axis import AsyncMachineAxis
 
 

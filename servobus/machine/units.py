@@ -11,8 +11,8 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
+from servobus.axis.types import round_counts
 from servobus.errors import ArgumentRangeError
-from servobus.families.base import round_counts
 
 _QUANTITY = re.compile(r"^([-+]?(?:\d+(?:\.\d*)?|\.\d+)(?:e[-+]?\d+)?)\s*([a-z]*)$")
 _ALIASES = {"": "", "count": "counts", "counts": "counts", "mm": "mm", "deg": "deg",

@@ -8,7 +8,7 @@ import socket
 from typing import Any
 
 from servobus.errors import ConnectionLost, DriveTimeout
-from servobus.sim.control import ControlError, Reply
+from servobus.sim.dmm.control import ControlError, Reply
 from servobus.sim.line_server import parse_listen_url
 
 DEFAULT_TIMEOUT_S = 5.0

@@ -25,7 +25,7 @@ import sys
 from typing import Any, TextIO
 
 from servobus.sim import server_limits as lim
-from servobus.sim.control import COMMANDS, DriveControl, Reply
+from servobus.sim.dmm.control import COMMANDS, DriveControl, Reply
 from servobus.sim.line_server import DEFAULT_HOST, format_tcp_url
 
 MAX_LINE = 4096  # bytes of one request line

@@ -1,15 +1,15 @@
 """``sim://<protocol>``: in-process virtual drives of any protocol (docs/axis.md).
 
-The scheme is registered here, in the simulator, so a host client never imports the
-simulator unless a ``sim://`` URL is opened. Each protocol package names the opener of its
-in-process virtual drive in its ``SIM`` table (``sim://dyn232``, ``sim://dyncan``, ...).
+The registry names this module for the scheme (``BUILTIN_SCHEMES``), so a host client never
+imports the simulator unless a ``sim://`` URL is opened. Each protocol's spec names the
+opener of its in-process virtual drive (``sim``: ``sim://dyn232``, ``sim://dyncan``, ...).
 
 Options every protocol's virtual drive takes: ``ids=1,2,3`` (default: the id asked for, else
 the protocol's factory id), ``fast=1`` (no wire pacing), ``state=FILE`` (EEPROM kept in a
 JSON file), ``model=NAME`` (motor/drive model).
 
 Every ``sim://`` axis reads its virtual drives' 4 kHz trace with ``trace_buffer()``
-(servobus.sim.capture), whatever the protocol; the axes of the DMM families reach their
+(servobus.sim.core.capture), whatever the protocol; the axes of the DMM families reach their
 drives' JP3 inputs and outputs with ``virtual_io()`` (servobus.sim.dmm.virtual_io).
 """
 
@@ -20,14 +20,13 @@ from typing import TYPE_CHECKING, Any
 from servobus.axis import registry
 from servobus.axis.url import DriveUrl
 from servobus.errors import ArgumentRangeError
-from servobus.sim import capture
+from servobus.sim.core import capture
 from servobus.sim.dmm import virtual_io
 from servobus.sim.dmm.drive import VirtualDrive
 
 if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis
 
-SCHEMES: dict[str, str] = {"sim": "servobus.sim.schemes:open_axis"}
 DEFAULT_PROTOCOL = "dyn232"
 
 

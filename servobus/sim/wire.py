@@ -34,7 +34,7 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Generic, TypeVar
 
-from servobus.sim.realtime import Clocked, RealtimeClock
+from servobus.sim.wall_clock import Clocked, RealtimeClock
 from servobus.transport.base import Direction, TraceHook
 
 COARSE_S = 0.0015  # epoll-based loops round timeouts up to 1 ms (+ wake-up jitter)

@@ -1,5 +1,6 @@
-"""Transports move bytes or frames only; they know nothing about packets' meaning."""
+"""Transports move bytes or frames only; they know nothing about packets' meaning.
 
-from servobus.transport.base import ByteStream, Direction, TraceHook
-
-__all__ = ["ByteStream", "Direction", "TraceHook"]
+``base`` (ByteStream, Direction, TraceHook), ``serial_stream``, ``tcp_stream``, ``pair`` (the
+in-process pair with fault injection), ``buffered``, ``can_bus`` (python-can and frame ports),
+``trace``, ``address`` (is_loopback).
+"""

@@ -33,7 +33,7 @@ from servobus.transport.base import Direction
 
 SOCKETCAND_DEFAULT_CHANNEL = "can0"
 NOTIFIER_POLL_S = 0.1  # python-can Notifier recv timeout: bounds close() latency
-#: How long opening a socketcand bus waits for the daemon's TCP port (issue 29).
+#: How long opening a socketcand bus waits for the daemon to accept and greet (issue 29).
 SOCKETCAND_CONNECT_S = 5.0
 
 
@@ -174,27 +174,49 @@ def parse_can_spec(spec: str, **options: Any) -> dict[str, Any]:
 def open_bus(spec: str, **options: Any) -> Any:
     """Blocking: ``can.Bus(**parse_can_spec(spec, **options))``.
 
-    socketcand: the daemon's TCP port is tried once first (:func:`_reach_socketcand`)."""
+    socketcand: the daemon is tried once first (:func:`_reach_socketcand`). A bus python-can
+    cannot open (no such interface or channel, a missing driver library, the OS without
+    CAN sockets) is a ConnectionLost naming it (decision: a CAN adapter plugged in later may
+    open then, as a serial port may; python-can's own errors are not servobus's types)."""
     import can  # lazy: python-can is only needed for CAN work
 
     kwargs = parse_can_spec(spec, **options)
     if kwargs["interface"] == "socketcand":
         _reach_socketcand(kwargs["host"], kwargs["port"])
-    return can.Bus(**kwargs)
+    try:
+        return can.Bus(**kwargs)
+    except (OSError, can.CanError) as exc:
+        raise ConnectionLost(f"cannot open CAN bus {spec}: {exc}") from exc
 
 
-def _reach_socketcand(host: str, port: int, timeout: float = SOCKETCAND_CONNECT_S) -> None:
-    """ConnectionLost at once when nothing accepts at ``host:port`` (within ``timeout``).
+def _reach_socketcand(host: str, port: int, timeout: float | None = None) -> None:
+    """ConnectionLost within ``timeout`` (default :data:`SOCKETCAND_CONNECT_S`) when nothing
+    at ``host:port`` greets as a socketcand daemon does (``< hi >`` on connect).
 
     Decision (issue 29): python-can's socketcand client retries ``connect`` in a tight loop
     for 10 s, logging one warning per try (~255,000 lines), and then raises a bare
-    TimeoutError. One plain connection first turns "nothing listens" into one typed error
-    within the connect timeout; the daemon sees a client that hangs up before ``open``. A
-    daemon that goes away between this try and python-can's own is the narrow case left
-    to python-can's loop."""
+    TimeoutError; and once connected it waits for the greeting with no timeout at all, so a
+    peer that accepts and says nothing (a hung daemon, another service on that port) held
+    ``connect()`` for ever. One plain connection first, waiting for the greeting, turns both
+    into one typed error within the connect timeout; the daemon sees a client that hangs up
+    before ``open``. A daemon that goes away between this try and python-can's own is the
+    narrow case left to python-can."""
+    greeting = b"< hi >"
+    timeout = SOCKETCAND_CONNECT_S if timeout is None else timeout
+    deadline = time.monotonic() + timeout
     try:
-        with socket.create_connection((host, port), timeout=timeout):
-            pass
+        with socket.create_connection((host, port), timeout=timeout) as sock:
+            heard = b""
+            while greeting not in heard:
+                sock.settimeout(max(deadline - time.monotonic(), 0.001))
+                data = sock.recv(64)
+                if not data:
+                    raise ConnectionLost(f"cannot reach socketcand at {host}:{port}: it "
+                                         "closed the connection before its greeting")
+                heard = (heard + data)[-64:]
+    except TimeoutError as exc:
+        raise ConnectionLost(f"cannot reach socketcand at {host}:{port}: no greeting within "
+                             f"{timeout:g} s") from exc
     except OSError as exc:
         raise ConnectionLost(f"cannot reach socketcand at {host}:{port}: "
                              f"{exc.strerror or exc}") from exc

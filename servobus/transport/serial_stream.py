@@ -17,7 +17,7 @@ from typing import Any
 
 import serial
 
-from servobus.errors import ConnectionLost, ServobusError
+from servobus.errors import ConnectionLost
 from servobus.transport.base import Direction
 from servobus.transport.buffered import BufferedInput
 
@@ -58,7 +58,9 @@ class SerialStream(BufferedInput):
         try:
             port = await loop.run_in_executor(None, _open)
         except (serial.SerialException, ValueError, OSError) as exc:
-            raise ServobusError(f"cannot open {url!r}: {exc}") from exc
+            # absent, busy, or a URL pyserial does not know: the port cannot be reached
+            # (typed as a lost link: a USB adapter plugged in later opens then)
+            raise ConnectionLost(f"cannot open {url!r}: {exc}") from exc
         return cls(port, loop)
 
     # ------------------------------------------------------------- reader thread

@@ -1,27 +1,33 @@
 """The layering rules of docs/architecture.md, checked on the source (imports only).
 
-A protocol never imports another protocol; the shared layers (axis, cli, families,
-transport, sim, link) never import a protocol by name; a host client never imports the
-simulator; ``transport/`` imports nothing above it; ``link/`` imports no simulator and, of
-the Axis layer, only its argument checks and the drive URL.
+A protocol never imports another protocol, nor a front end (cli, gui, machine, gateway);
+the shared layers never import a protocol by name; a host client never imports the
+simulator; ``transport/`` imports nothing above it, ``link/`` nothing of the Axis and above,
+``checks`` nothing but the errors; ``axis/`` names no family; no import cycle between
+modules or packages (tools/import_graph.py, whose picture docs/architecture.md carries); no
+module only re-exports another.
 """
 
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
 
 import servobus
+from tools import import_graph as graph
 
 ROOT = Path(servobus.__file__).parent
-SHARED = ("axis", "cli", "families", "transport", "sim", "gui", "link", "machine")
+SHARED = ("axis", "cli", "families", "transport", "sim", "gui", "link", "machine", "gateway")
 #: Everything above transport/: it moves bytes and frames and knows none of these.
 ABOVE_TRANSPORT = ("sim", "axis", "protocols", "families", "cli", "gui", "link", "sniff",
-                   "machine")
-#: What link/ may take from the Axis layer (argument checks, the drive URL's type).
-LINK_FROM_AXIS = ("servobus.axis.checks", "servobus.axis.url")
+                   "machine", "gateway")
+#: Everything above link/: the rules of a conversation know no Axis, family or protocol.
+ABOVE_LINK = ("axis", "protocols", "families", "sim", "cli", "gui", "machine", "gateway",
+              "sniff")
+FRONT_ENDS = ("cli", "gui", "machine", "gateway")
 CLIENT_MODULES = ("client.py", "opener.py", "commands.py", "codec.py")
 
 
@@ -112,31 +118,41 @@ def test_transport_imports_nothing_above_it() -> None:
     assert found == set()
 
 
-def test_link_imports_no_protocol_and_no_simulator() -> None:
+def test_link_sits_below_the_axis() -> None:
+    """Issue 31: link/ took the argument checks (servobus.checks) and the drive URL's CAN
+    channel (axis.url.can_spec) from below, so no arrow points back up to axis/."""
     bad = [(path.name, name) for path in sources(ROOT / "link") for name in imports(path)
-           if above(name, ("protocols", "sim", "cli", "gui", "families"))
-           or (above(name, ("axis",)) and name != "servobus.axis"  # its submodules count
-               and not name.startswith(LINK_FROM_AXIS))]
+           if above(name, ABOVE_LINK)]
     assert bad == []
 
 
-def test_axis_holds_no_client_plumbing() -> None:
-    """axis/ is the API: the transaction plumbing lives in link/ (issue 19); the old
-    modules are one-release aliases that only re-export it."""
-    for name in ("transaction", "late_replies", "eeprom_guard"):
-        names = imports(ROOT / "axis" / f"{name}.py")
-        assert names and all(n.startswith("servobus.link.") for n in names), name
+def test_the_argument_checks_sit_below_the_link() -> None:
+    names = [n for n in imports(ROOT / "checks.py") if n.startswith("servobus")]
+    assert names and all(n.startswith("servobus.errors") for n in names)
 
 
-def test_old_simulator_paths_are_aliases() -> None:
-    """Issue 19 moved the virtual drives into sim/dmm/ and sim/yzaim/; the public names keep
-    their old import paths for one release (docs examples use them)."""
-    from servobus.sim import drive, yzaim_motor
-    from servobus.sim.dmm.drive import VirtualDrive
-    from servobus.sim.yzaim.motor import YzaimMotor
+def test_the_axis_names_no_family() -> None:
+    """axis/ is the API (its value types in axis/types.py); the families write their Axis
+    profiles on it, never the other way round."""
+    bad = [(path.name, name) for path in sources(ROOT / "axis") for name in imports(path)
+           if above(name, ("families",))]
+    assert bad == []
 
-    assert drive.VirtualDrive is VirtualDrive
-    assert yzaim_motor.YzaimMotor is YzaimMotor
+
+#: Issue 31 item 2 turns each protocol's CLI commands into data on its ProtocolSpec; until
+#: then a protocol's cli.py (and only it) registers them with servobus.cli's helpers
+#: (sim_cmd, sim_control, open_axis, output). Nothing else in a protocol names a front end.
+FRONT_END_ALLOWED = re.compile(r"protocols/[a-z0-9_]+/cli\.py")
+
+
+@pytest.mark.parametrize("protocol", protocols())
+def test_a_protocol_sits_below_the_front_ends(protocol: str) -> None:
+    found = [(str(path.relative_to(ROOT)), name)
+             for path in sources(ROOT / "protocols" / protocol) for name in imports(path)
+             if above(name, FRONT_ENDS)]
+    bad = [(where, name) for where, name in found
+           if not (FRONT_END_ALLOWED.fullmatch(where) and above(name, ("cli",)))]
+    assert bad == []
 
 
 SIM_FAMILIES = ("dmm", "yzaim")
@@ -177,7 +193,7 @@ def test_every_protocol_package_has_the_same_module_names(protocol: str) -> None
 
 def defines_an_axis(path: Path) -> list[str]:
     """Classes in ``path`` deriving AsyncAxis or one of its servobus subclasses (by name:
-    ``...Axis`` bases, CommandAxis, RegisterAxis)."""
+    ``...Axis`` bases, CommandAxis, YzaimAxis)."""
     found: list[str] = []
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
         if isinstance(node, ast.ClassDef):
@@ -197,34 +213,83 @@ def test_no_axis_class_lives_in_a_client_module(protocol: str) -> None:
     assert defines_an_axis(ROOT / "protocols" / protocol / "axis.py") != []  # the rule bites
 
 
-def test_moved_axis_classes_keep_their_old_path() -> None:
-    """One-release aliases (issue 19): the Axis classes left dyn232/dyncan client.py."""
-    from servobus.protocols.dyn232 import axis as dyn232_axis
-    from servobus.protocols.dyn232 import client as dyn232_client
-    from servobus.protocols.dyncan import axis as dyncan_axis
-    from servobus.protocols.dyncan import client as dyncan_client
-
-    assert dyn232_client.Dyn232Axis is dyn232_axis.Dyn232Axis
-    assert dyncan_client.DynCanAxis is dyncan_axis.DynCanAxis
-    assert dyncan_client.open_can_axis is dyncan_axis.open_can_axis
-
-
-def test_old_family_paths_are_aliases() -> None:
-    """Issue 19 made every family a package; the old flat modules stay one release."""
-    from servobus.families import dyn5, dyn5_family, yzaim, yzaim_family
-    from servobus.families.dyn5 import family as dyn5_new
-    from servobus.families.dyn5 import params
-    from servobus.families.yzaim import family as yzaim_new
-    from servobus.families.yzaim import registers
-
-    assert dyn5_family.DYN5 is dyn5_new.DYN5 and yzaim_family.YZAIM is yzaim_new.YZAIM
-    assert dyn5.INSTANCES is params.INSTANCES and yzaim.REGISTERS is registers.REGISTERS
-
-
-def test_every_family_is_a_package_with_a_family_module() -> None:
+def test_every_family_is_one_package_with_its_family_and_its_axis() -> None:
+    """Issue 31: a family is one place - its tables, family.py (the Family) and axis.py (its
+    Axis profile over a few wire hooks); a protocol's axis.py gives the hooks only."""
     packages = [p for p in (ROOT / "families").iterdir() if (p / "__init__.py").is_file()]
     assert {p.name for p in packages} == {"dmm", "dyn5", "yzaim"}
-    assert all((p / "family.py").is_file() for p in packages)
+    assert all((p / "family.py").is_file() and (p / "axis.py").is_file() for p in packages)
+
+
+# ---------------------------------------------------------------- cycles and the picture
+def test_the_cycle_finder_bites() -> None:
+    assert graph.cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert graph.cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_no_import_cycle_between_modules() -> None:
+    """Every import counts, lazy and TYPE_CHECKING ones too: a cycle is one in the design."""
+    assert graph.cycles(graph.module_edges()) == []
+
+
+def test_no_import_cycle_between_packages() -> None:
+    assert graph.cycles(graph.package_edges()) == []
+
+
+def test_the_picture_in_the_docs_is_the_code() -> None:
+    """docs/architecture.md shows the package graph the code has; when this fails, paste the
+    output of ``python -m tools.import_graph`` over the Mermaid block there."""
+    text = (ROOT.parent / "docs" / "architecture.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"^```mermaid\n.*?^```$", text, re.M | re.S)
+    assert blocks == [graph.mermaid()]
+
+
+# ---------------------------------------------------------------- one shape
+def re_exports_only(tree: ast.Module) -> bool:
+    """A module whose statements (docstring, ``__future__`` and ``__all__`` aside) are all
+    imports from one other module: an alias of that module."""
+    origins: set[str] = set()
+    for node in tree.body:
+        if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant):
+            continue
+        if isinstance(node, ast.ImportFrom) and node.module == "__future__":
+            continue
+        if isinstance(node, ast.Assign) and [ast.unparse(t) for t in node.targets] == [
+                "__all__"]:
+            continue
+        if isinstance(node, ast.ImportFrom):
+            origins.add(node.module or "")
+        elif isinstance(node, ast.Import):
+            origins.update(a.name for a in node.names)
+        else:
+            return False
+    return len(origins) == 1
+
+
+def test_the_alias_finder_bites() -> None:
+    assert re_exports_only(ast.parse('"""Moved."""\nfrom a.b import C, D\n__all__ = ["C"]\n'))
+    assert not re_exports_only(ast.parse("from a import b\nfrom c import d\n"))
+    assert not re_exports_only(ast.parse("from a import b\n\nX = b.y\n"))
+
+
+def old_names_kept(path: Path) -> list[str]:
+    """How ``path`` keeps an old name alive: it only re-exports another module, it
+    star-imports (``import *``), or it has a module ``__getattr__``."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    found = ["re-exports only"] if re_exports_only(tree) else []
+    found += ["import *" for node in ast.walk(tree)
+              if isinstance(node, ast.ImportFrom) and any(a.name == "*" for a in node.names)]
+    found += ["__getattr__" for node in tree.body
+              if isinstance(node, ast.FunctionDef) and node.name == "__getattr__"]
+    return found
+
+
+def test_no_alias_module_no_star_import_no_module_getattr() -> None:
+    """Issue 31 removed the one-release aliases; none come back, in none of the three ways
+    an old name stays alive."""
+    bad = [(str(path.relative_to(ROOT)), how) for path in sources(ROOT)
+           for how in old_names_kept(path)]
+    assert bad == []
 
 
 def test_bounded_json_imports_only_the_errors() -> None:

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from servobus.axis import checks
+from servobus import checks
 from servobus.errors import ArgumentRangeError
 
 

@@ -14,8 +14,8 @@ from conftest import wait_until
 
 from servobus.axis import Axis, connect, registry
 from servobus.axis.capture import STATUS_BITS
+from servobus.axis.types import AxisStatus
 from servobus.errors import ArgumentRangeError, DriveTimeout, NotSupported
-from servobus.families.base import AxisStatus
 
 #: Every protocol's in-process virtual drive, one drive with id DRIVE: from the registry,
 #: so a protocol whose ProtocolSpec names a ``sim`` is in the contract (``fast=1`` drops the

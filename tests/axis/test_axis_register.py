@@ -1,11 +1,10 @@
-"""RegisterAxis, the YZ-AIM mapping both wires share, on a register dict instead of a wire:
+"""YzaimAxis, the YZ-AIM mapping both wires share, on a register dict instead of a wire:
 what is written for each Axis call, the remembered target, the cruise speed and ping."""
 
 from __future__ import annotations
 
 import pytest
 
-from servobus.axis.register_axis import FALLBACK_CRUISE_RPM, RegisterAxis
 from servobus.errors import (
     ArgumentRangeError,
     DriveError,
@@ -14,6 +13,7 @@ from servobus.errors import (
     MotionRefused,
 )
 from servobus.families.yzaim import registers as Y
+from servobus.families.yzaim.axis import FALLBACK_CRUISE_RPM, YzaimAxis
 from servobus.protocols.easycan.axis import EasyCanAxis
 from servobus.protocols.modbus.axis import ModbusAxis
 
@@ -36,7 +36,7 @@ class Wire:
         self.closed += 1
 
 
-class FakeAxis(RegisterAxis[Wire]):
+class FakeAxis(YzaimAxis[Wire]):
     protocol_name = "fake"
     reachable_params = ("target_speed", "special_function", "gear_numerator")
     reply_position: int | None = None  # what _write_increment's reply carries, if it does
@@ -146,11 +146,11 @@ async def test_siblings_share_the_client_and_only_the_owner_closes_it() -> None:
 
 
 def test_both_yzaim_wires_share_the_mapping() -> None:
-    """The Axis mapping stays in RegisterAxis: the wires add only their own means."""
+    """The Axis mapping stays in YzaimAxis: the wires add only their own means."""
     shared = {"turn", "status", "position", "read_param", "write_param", "assign_id", "ping",
               "_send_move_to", "_send_move_by", "sibling", "close"}
     for cls in (EasyCanAxis, ModbusAxis):
-        assert issubclass(cls, RegisterAxis)
+        assert issubclass(cls, YzaimAxis)
         assert not shared & set(vars(cls)), cls
 
 

@@ -87,8 +87,8 @@ def test_an_unknown_extra_is_an_attribute_error(axis: Axis) -> None:
         axis.move_too(5)  # type: ignore[attr-defined]
 
 
-def test_the_old_attribute_fallback_still_works_and_warns(axis: Axis) -> None:
-    """``axis.config()`` kept for one release, with a DeprecationWarning naming the new way."""
-    with pytest.warns(DeprecationWarning, match=r"axis\.extra\.config"):
-        config = axis.config()  # type: ignore[attr-defined]
-    assert config.as_dict() == axis.extra.config().as_dict()
+def test_a_protocol_method_is_reached_through_extra_only(axis: Axis) -> None:
+    """The one-release ``axis.config()`` fallback went with issue 31: ``axis.extra``."""
+    with pytest.raises(AttributeError):
+        axis.config()  # type: ignore[attr-defined]
+    assert axis.extra.config().as_dict()

@@ -11,8 +11,9 @@ from conftest import wait_until_async
 from servobus import connect_async
 from servobus.axis.capture import STATUS_BITS, Capture, status_bits
 from servobus.errors import NotSupported
-from servobus.sim.capture import IDLE_STOP_S, SimCapture
+from servobus.sim.core.capture import IDLE_STOP_S, SimCapture
 from servobus.sim.dmm.drive import VirtualDrive
+from servobus.sim.dmm.trace import DriveTrace
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -87,7 +88,7 @@ async def test_a_drive_without_a_trace_says_so() -> None:
 
 def test_recording_stops_when_nobody_reads_and_overflow_is_counted() -> None:
     drive = VirtualDrive(1)
-    source = SimCapture([drive])
+    source = SimCapture([DriveTrace(drive)])
     assert source.read(1).count == 0 and drive.period_observer is not None
     drive.advance(1.0)
     cap = source.read(1)
@@ -102,11 +103,11 @@ def test_recording_stops_when_nobody_reads_and_overflow_is_counted() -> None:
 
 
 def test_a_buffer_overflow_is_counted_as_lost(monkeypatch: pytest.MonkeyPatch) -> None:
-    from servobus.sim import capture
+    from servobus.sim.core import capture
 
     monkeypatch.setattr(capture, "CAPACITY", 1000)
     drive = VirtualDrive(1)
-    source = SimCapture([drive])
+    source = SimCapture([DriveTrace(drive)])
     source.read(1)
     drive.advance(1.0)
     cap = source.read(1)

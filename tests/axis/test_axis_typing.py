@@ -92,7 +92,7 @@ def checked(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[str]]:
 def test_connect_returns_a_typed_axis(checked: dict[str, list[str]]) -> None:
     assert checked["revealed"] == [
         'note: Revealed type is "int"',
-        'note: Revealed type is "servobus.families.base.AxisStatus"',
+        'note: Revealed type is "servobus.axis.types.AxisStatus"',
         'note: Revealed type is "dict[str, int]"',
         'note: Revealed type is "servobus.axis.sync.Axis"',
         'note: Revealed type is "Any"',

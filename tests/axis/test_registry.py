@@ -97,3 +97,22 @@ def test_a_protocol_package_loads_no_codec_or_client() -> None:
 def test_which_links_run_inline(url: str, inline: bool) -> None:
     """Issue 22: the protocols name the schemes whose axes need no loop between calls."""
     assert registry.runs_inline(parse_url(url)) is inline
+
+
+def test_sim_is_the_registrys_own_scheme() -> None:
+    """Issue 31: no provider declares loose tables any more, the simulator neither."""
+    assert registry.schemes()["sim"] == registry.BUILTIN_SCHEMES["sim"]
+    assert "sim" in registry.own_schemes()
+    assert not hasattr(registry.importlib.import_module("servobus.sim.schemes"), "SCHEMES")
+
+
+def test_a_provider_without_a_spec_is_skipped_with_one_warning(
+        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    modules = registry._provider_modules()
+    monkeypatch.setattr(registry, "_provider_modules", lambda: [*modules, "servobus.errors"])
+    monkeypatch.setattr(registry, "_specs", None)
+    monkeypatch.setattr(registry, "_tables", {})
+    assert registry.specs() == SPECS
+    assert registry.provided("FAMILIES") == {n: s.family for n, s in SPECS.items()}
+    assert [r.getMessage() for r in caplog.records] == [
+        "servobus provider servobus.errors declares no ProtocolSpec SPEC: skipped"]

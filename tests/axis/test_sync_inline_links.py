@@ -15,12 +15,13 @@ from servobus.axis.inline import ENV, InlineRunner
 from servobus.axis.sync import Axis, LoopThread
 from servobus.errors import DriveTimeout
 from servobus.families.dmm.registers import StatusBits
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.enip.server import EnipFleet, start_fleet
 
 pytestmark = pytest.mark.timeout(60)
 WAIT_S = 10.0  # generous: only a hang reaches it
-REQUEST = c.encode(0, c.HostFunction.READ_DRIVE_STATUS, 0)
+REQUEST = c.encode(0, DmmFunction.READ_DRIVE_STATUS, 0)
 
 
 def _inline(axis: Axis) -> bool:

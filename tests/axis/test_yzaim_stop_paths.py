@@ -14,8 +14,8 @@ from conftest import wait_until_async
 from servobus.axis import connect_async
 from servobus.axis.base import AsyncAxis
 from servobus.axis.halt import halt
-from servobus.axis.register_axis import RegisterAxis
 from servobus.families.yzaim import registers as Y
+from servobus.families.yzaim.axis import YzaimAxis
 from servobus.machine.machine import open_machine_async
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(60)]  # seconds of wall-clock motion
@@ -23,9 +23,9 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(60)]  # seconds of wall-cloc
 WINDOW = Y.POSITION_TOLERANCE_COUNTS
 
 
-def fresh(axis: AsyncAxis) -> RegisterAxis[Any]:
+def fresh(axis: AsyncAxis) -> YzaimAxis[Any]:
     """Another program's view of the same motor: nothing of the stopper's state."""
-    assert isinstance(axis, RegisterAxis)
+    assert isinstance(axis, YzaimAxis)
     return type(axis)(axis.client, axis.drive_id, owns_client=False)
 
 

@@ -54,3 +54,19 @@ def test_runner_reports_a_broken_benchmark_and_exits_0(monkeypatch: pytest.Monke
     assert out[0].startswith("bench_missing_module: ERROR ModuleNotFoundError")
     assert out[-1] == ("summary: 0 figure(s) with a target, 0 OK, 0 MISS; "
                        "1 benchmark(s) could not run (bench_missing_module)")
+
+
+def test_runner_options_select_nothing(monkeypatch: pytest.MonkeyPatch,
+                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """``faults --seconds 232``: the value 232 is the benchmark's, not a selector of
+    bench_dyn232_*."""
+    import pkgutil
+
+    import benchmarks.__main__ as runner
+
+    names = ["bench_dyn232_missing", "bench_faults_missing"]
+    monkeypatch.setattr(pkgutil, "iter_modules",
+                        lambda path: [type("M", (), {"name": n})() for n in names])
+    assert runner.main(["faults", "--seconds", "232"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert [line.split(":")[0] for line in out if "ERROR" in line] == ["bench_faults_missing"]

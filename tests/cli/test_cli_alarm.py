@@ -13,10 +13,10 @@ import pytest
 
 from servobus import axis as axis_package
 from servobus.axis import Axis
+from servobus.axis.types import AxisStatus
 from servobus.cli import failures as F
 from servobus.cli.main import main
-from servobus.families.base import AxisStatus
-from servobus.sim.control import DriveControl
+from servobus.sim.dmm.control import DriveControl
 
 URLS = ["sim://dyn232?fast=1", "sim://dyncan?fast=1", "sim://easycan?fast=1", "sim://enip",
         "sim://modbus?fast=1"]

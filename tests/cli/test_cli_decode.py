@@ -16,6 +16,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from servobus.cli.main import cli
+from servobus.families.dmm.vocabulary import DmmFunction as DF
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232.sniff import (
     AMBIGUOUS,
@@ -99,14 +100,14 @@ def classify(*packets: bytes) -> list[PacketEvent]:
 
 
 def test_reply_follows_read_request() -> None:
-    req, rep = classify(c.encode(3, H.READ_DRIVE_STATUS), c.encode_reply(3, D.IS_STATUS, 0x21))
+    req, rep = classify(c.encode(3, DF.READ_DRIVE_STATUS), c.encode_reply(3, D.IS_STATUS, 0x21))
     assert (req.from_drive, req.basis) == (False, CODE)
     assert (rep.from_drive, rep.basis) == (True, REPLY)
     assert "IS_STATUS = 33" in rep.text and "motion busy" in rep.text
 
 
 def test_reply_to_broadcast_read_carries_own_id() -> None:
-    _, rep = classify(c.encode(127, H.READ_DRIVE_ID), c.encode_reply(5, D.IS_DRIVE_ID, 5))
+    _, rep = classify(c.encode(127, DF.READ_DRIVE_ID), c.encode_reply(5, D.IS_DRIVE_ID, 5))
     assert rep.from_drive and rep.basis == REPLY and rep.packet.drive_id == 5
 
 
@@ -119,7 +120,7 @@ def test_overlapping_code_alone_is_ambiguous_then_resolved_by_reply() -> None:
 
 
 def test_reply_from_other_id_is_not_taken_for_the_answer() -> None:
-    _, other = classify(c.encode(3, H.READ_DRIVE_STATUS), c.encode_reply(4, D.IS_STATUS, 0))
+    _, other = classify(c.encode(3, DF.READ_DRIVE_STATUS), c.encode_reply(4, D.IS_STATUS, 0))
     assert other.basis == AMBIGUOUS
 
 
@@ -139,9 +140,9 @@ def test_direction_by_code_and_value(raw: bytes, from_drive: bool, basis: str) -
 
 @given(st.lists(st.integers(1, 30), max_size=6))
 def test_chunking_does_not_change_the_events(cuts: list[int]) -> None:
-    data = b"".join([c.encode(3, H.READ_DRIVE_STATUS), c.encode_reply(3, D.IS_STATUS, 1),
-                     b"\xff\x90", c.encode(1, H.GO_RELATIVE_POS, -5000),
-                     c.encode(2, H.GENERAL_READ, 0x1B), c.encode_reply(2, D.IS_ABS_POS32, -70000)])
+    data = b"".join([c.encode(3, DF.READ_DRIVE_STATUS), c.encode_reply(3, D.IS_STATUS, 1),
+                     b"\xff\x90", c.encode(1, DF.GO_RELATIVE_POS, -5000),
+                     c.encode(2, DF.GENERAL_READ, 0x1B), c.encode_reply(2, D.IS_ABS_POS32, -70000)])
     chunks, pos = [], 0
     for cut in cuts:
         chunks.append(data[pos:pos + cut])
@@ -152,8 +153,8 @@ def test_chunking_does_not_change_the_events(cuts: list[int]) -> None:
 
 def conversation() -> bytes:
     return b"".join([
-        c.encode(1, H.GENERAL_READ, 0x1B), c.encode_reply(1, D.IS_ABS_POS32, 65536),
-        c.encode(1, H.GO_RELATIVE_POS, -120),
+        c.encode(1, DF.GENERAL_READ, 0x1B), c.encode_reply(1, D.IS_ABS_POS32, 65536),
+        c.encode(1, DF.GO_RELATIVE_POS, -120),
         c.encode(1, H.READ_MAIN_GAIN), c.encode_reply(1, D.IS_MAIN_GAIN, 100),
     ])
 
@@ -274,7 +275,7 @@ def test_sniff_live_tap_of_the_simulator() -> None:
 def test_decode_can_frames_in_cansend_notation() -> None:
     from servobus.protocols.dyncan import codec as dyncan
 
-    ident = dyncan.arbitration_id(7, dyncan.Function.GENERAL_READ)
+    ident = dyncan.arbitration_id(7, DF.GENERAL_READ)
     code, out = run("decode", f"{ident:03x}#1b", f"{ident:03x}#00010000")
     lines = out.splitlines()
     assert code == 0 and len(lines) == 2
@@ -290,7 +291,7 @@ def test_sniff_can_bus() -> None:
     from servobus.protocols.dyncan import codec as dyncan
 
     channel = "servobus-test-sniff"
-    ident = dyncan.arbitration_id(2, dyncan.Function.GENERAL_READ)
+    ident = dyncan.arbitration_id(2, DF.GENERAL_READ)
     stop = threading.Event()
 
     def send() -> None:

@@ -22,9 +22,9 @@ import servobus.machine.links as links
 from servobus import axis as axis_package
 from servobus.axis import Axis
 from servobus.axis.base import AsyncAxis
+from servobus.axis.types import AxisStatus
 from servobus.cli import failures as F
 from servobus.cli.main import main
-from servobus.families.base import AxisStatus
 from servobus.families.dmm.registers import DriveConfig
 
 Action = Callable[[AsyncAxis], Awaitable[None]]

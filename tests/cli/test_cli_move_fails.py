@@ -18,12 +18,12 @@ import servobus.machine.links as links
 from servobus import axis as axis_package
 from servobus.axis import Axis
 from servobus.axis.base import AsyncAxis
+from servobus.axis.types import AxisStatus
 from servobus.cli import arrival
 from servobus.cli import failures as F
 from servobus.cli.arrival import check_arrival, wait_arrival
 from servobus.cli.main import main
 from servobus.errors import MoveFailed
-from servobus.families.base import AxisStatus
 
 URLS = ["sim://dyn232?fast=1", "sim://dyncan?fast=1", "sim://easycan?fast=1", "sim://enip",
         "sim://modbus?fast=1"]

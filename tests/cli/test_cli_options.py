@@ -31,6 +31,7 @@ from servobus.errors import (
     NotSupported,
     ServobusError,
 )
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.protocols.dyn232 import codec as c
 from servobus.sniff import looks_like_hex_text
 
@@ -142,10 +143,10 @@ def test_hex_text_detection() -> None:
     assert looks_like_hex_text(b"0x03,0xa3;ff:88")
     assert not looks_like_hex_text(b"")
     assert not looks_like_hex_text(b" \n")
-    assert not looks_like_hex_text(c.encode(3, c.HostFunction.GO_RELATIVE_POS, -120))
+    assert not looks_like_hex_text(c.encode(3, DmmFunction.GO_RELATIVE_POS, -120))
 
 
-@given(st.integers(0, 63), st.sampled_from(list(c.HostFunction)), st.integers(-1000, 1000))
+@given(st.integers(0, 63), st.sampled_from(c.HOST_FUNCTIONS), st.integers(-1000, 1000))
 def test_a_raw_packet_never_looks_like_hex_text(drive_id: int, function: c.HostFunction,
                                                 value: int) -> None:
     assert not looks_like_hex_text(c.encode(drive_id, function, value))

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from servobus.cli import params_file as PF
 from servobus.errors import ArgumentRangeError
+from servobus.families import params_file as PF
 from servobus.families.dmm import params as P
 
 SERVOBUS = [sys.executable, "-m", "servobus"]  # the interpreter running the tests

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
+from servobus.axis.types import Storage
 from servobus.errors import ArgumentRangeError, NotSupported
 from servobus.families import family
-from servobus.families.base import Storage
 from servobus.families.yzaim import registers as Y
 from servobus.families.yzaim.family import YZAIM, axis_status
 

@@ -1,13 +1,16 @@
 """A machine of fake axes (the shape servobus.gateway.source.Machine asks for): a link that
-can be cut, an alarm that can be raised, and a log of what was called, in order."""
+can be cut or taken offline and back (as the machine's recovery does, with ``last_good``
+and a power loss to acknowledge), an alarm that can be raised, and a log of what was
+called, in order."""
 
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping
 
 from servobus.axis.base import AsyncAxis
-from servobus.errors import ConnectionLost, LimitError
-from servobus.families.base import AxisStatus, Family
+from servobus.axis.types import AxisStatus, Family
+from servobus.errors import ConnectionLost, LimitError, MachineLinkError, PowerLostError
 
 
 class FakeAxis:
@@ -22,10 +25,36 @@ class FakeAxis:
         self.pos, self.velocity, self.alarm, self.cut = 5.0, 0.0, 0, False
         self.log = log
         self.reads = 0
+        self.last_error: BaseException | None = None
+        self.last_good: float | None = None
+        self.checking = False
+        self.interrupted: str | None = None
+        self.power_lost_reason: str | None = None
+
+    @property
+    def power_lost(self) -> bool:
+        return self.power_lost_reason is not None
 
     def _link(self) -> None:
+        if not self.online:  # as the machine axis: a call on an offline axis fails at once
+            raise MachineLinkError(f"axis {self.name} is offline ({self.url})")
         if self.cut:
             raise ConnectionLost(f"{self.url}: cable cut")
+        self.last_good = time.time()
+
+    def drop(self, why: str = "stream closed") -> None:
+        """The link went down, as the machine takes an axis offline."""
+        self.online = False
+        self.last_error = MachineLinkError(f"the link {self.url} is down: {why}")
+
+    def back(self, power_lost: str | None = None) -> None:
+        """The link is back (after the machine's power check: ``power_lost`` its reason)."""
+        self.online, self.last_error = True, None
+        self.power_lost_reason = power_lost
+
+    async def acknowledge(self) -> None:
+        self.log.append(f"{self.name} ack")
+        self.power_lost_reason = self.interrupted = None
 
     async def position(self) -> float:
         self._link()
@@ -43,6 +72,8 @@ class FakeAxis:
                           alarm_latched=bool(self.alarm), raw=0, family="fake")
 
     async def move_to(self, target: float, /) -> None:
+        if self.power_lost:  # as the machine axis: motion waits for the acknowledgement
+            raise PowerLostError(f"axis {self.name}: the drive may have lost power")
         self._link()
         if self.limits and not self.limits[0] <= target <= self.limits[1]:
             raise LimitError(f"{target} outside")

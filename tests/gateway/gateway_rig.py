@@ -59,6 +59,14 @@ def start_gateway(*args: str, env: dict[str, str] | None = None) -> RunningGatew
     return RunningGateway(proc, endpoint, lines)
 
 
+def user_client(endpoint: str) -> Client:
+    """An asyncua client that logs in as the users file's USER."""
+    client = Client(endpoint)
+    client.set_user(USER)
+    client.set_password(PASSWORD)
+    return client
+
+
 @dataclass
 class Names:
     di: int

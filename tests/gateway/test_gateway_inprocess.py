@@ -18,6 +18,7 @@ from servobus.gateway.opcua_server import OpcUaOptions
 from servobus.gateway.sampler import (
     BAD_AFTER,
     OFFLINE,
+    Health,
     Sample,
     Sampler,
     pause_after,
@@ -184,6 +185,7 @@ def test_one_lost_answer_does_not_turn_an_axis_bad() -> None:
     assert seen[-1] is lost and not sampler.latest["a0"].ok  # then Bad
     sampler._publish(good)
     assert sampler.latest["a0"] is good
-    offline = Sample("a0", 3.0, False, OFFLINE)
+    offline = Sample("a0", 3.0, False, OFFLINE, health=Health(online=False),
+                     code="BadCommunicationError")
     sampler._publish(offline)
     assert sampler.latest["a0"] is offline  # offline is Bad at once

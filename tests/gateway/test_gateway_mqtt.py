@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
 import signal
+import subprocess
+import sys
 import time
 import uuid
 from collections.abc import Iterator
@@ -129,7 +132,10 @@ async def test_a_command_runs_once_and_the_refusals_say_why(broker: int,
         assert abs(positions[-1] - (start + 1.5)) < 0.01  # moved once, not again
 
 
-async def test_a_killed_gateway_leaves_its_last_will(broker: int, tmp_path: Path) -> None:
+async def test_a_killed_gateway_leaves_its_last_will(broker: int, gateway: RunningGateway,
+                                                     tmp_path: Path) -> None:
+    """And only its own: the gateway of another machine on the broker stays online (each
+    has a client id of its own, servobus-<gateway id>)."""
     machine = tmp_path / "will.toml"
     machine.write_text('name = "will-cell"\n[axes.z]\nurl = "sim://dyn232?fast=1"\nid = 1\n'
                        'unit = "mm"\nper_rev = 5.0\n')
@@ -147,6 +153,38 @@ async def test_a_killed_gateway_leaves_its_last_will(broker: int, tmp_path: Path
     finally:
         running.stop()
     assert statuses[-1] == b"offline"
+    assert await retained_status(broker, TOPIC) == b"online"
+
+
+async def retained_status(port: int, base: str) -> bytes:
+    async with mqtt_client(port) as client:
+        await client.subscribe(f"{base}/status", qos=1)
+        got: list[bytes] = []
+
+        def first_retained(_topic: str, payload: bytes, retain: bool) -> bool:
+            if retain:
+                got.append(payload)
+            return bool(got)
+        await collect(client, first_retained)
+    return got[0]
+
+
+@pytest.mark.slow
+def test_a_second_gateway_of_the_same_machine_refuses_to_start(
+        broker: int, gateway: RunningGateway) -> None:
+    """Issue 30: it would take the first one's client id (the broker would drop the first)
+    and interleave its state on the same topics. It refuses before it opens the machine,
+    and the first one serves on."""
+    cmd = [sys.executable, "-m", "servobus", "serve", "--opcua", "opc.tcp://127.0.0.1:0",
+           "--mqtt", f"mqtt://127.0.0.1:{broker}", "--mqtt-user", "gateway"]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=60,
+                          env={**os.environ, **GATEWAY_ENV})
+    assert done.returncode == 2, done.stderr
+    assert "error: MQTT topics servobus/virtual-cell/... on broker 127.0.0.1:" in done.stderr
+    assert "served by a live gateway (gateway id virtual-cell, birth 0" in done.stderr
+    assert "ready" not in done.stdout
+    assert gateway.proc.poll() is None
+    assert asyncio.run(retained_status(broker, TOPIC)) == b"online"
 
 
 async def test_set_speed_ends_by_itself_when_its_sender_stops_sending(

@@ -12,7 +12,8 @@ import pytest
 from fake_machine import FakeMachine
 
 from servobus.errors import ArgumentRangeError
-from servobus.gateway.commands import Commander, Refused
+from servobus.gateway.commands import Command, Commander, Refused
+from servobus.gateway.identity import application_uri, check_prefix, client_id, gateway_id
 from servobus.gateway.mqtt import MqttGateway, MqttOptions, parse_broker, state_json
 from servobus.gateway.mqtt_gate import MAX_IDS, CommandGate
 from servobus.gateway.sampler import Sample, Sampler
@@ -29,6 +30,17 @@ def refused(gate: CommandGate, payload: bytes, *, retained: bool = False,
     with pytest.raises(Refused) as exc:
         gate.admit("x", payload, retained, now)
     return exc.value.code
+
+
+def test_ack_needs_an_id_and_a_fresh_timestamp_as_motion_does() -> None:
+    """ack allows motion again: a replayed or late one must never acknowledge a power
+    loss its sender did not see (docs/gateway.md "Recovery")."""
+    gate = CommandGate(max_age_s=5)
+    assert refused(gate, msg(cmd="ack")) == "BadInvalidArgument"
+    assert refused(gate, msg(id="k0", ts=NOW - 60, cmd="ack")) == "BadInvalidTimestamp"
+    ok = gate.admit("x", msg(id="k1", ts=NOW, cmd="ack"), False, NOW)
+    assert (ok.command.name, ok.command.value) == ("ack", None)
+    assert refused(gate, msg(id="k1", ts=NOW, cmd="ack")) == "BadRequestNotAllowed"
 
 
 def test_a_motion_command_runs_once() -> None:
@@ -216,3 +228,64 @@ async def test_the_command_handler_answers_them_on_reply(payload: str) -> None:
     [(topic, reply)] = client.messages
     assert topic.endswith("/a0/reply") and reply["ok"] is False
     assert reply["code"] == "BadDecodingError" and machine.log == []
+
+
+def test_a_value_on_a_command_that_takes_none_is_ignored() -> None:
+    """Found by the fuzz test (issue 30): a stop whose value was a list raised TypeError."""
+    gate = CommandGate()
+    for value in ([1], {"a": 1}, "far", 1.5, None):
+        accepted = gate.admit("x", msg(cmd="stop", value=value), False, NOW)
+        assert accepted.command == Command("x", "stop", None, None)
+
+
+def test_gateway_ids_uris_and_prefixes() -> None:
+    assert gateway_id("virtual-cell") == "virtual-cell"
+    assert gateway_id("Cell 3 / Hall B") == "Cell-3---Hall-B"  # the default made fit
+    assert gateway_id("x", "pc-7.line_2") == "pc-7.line_2"
+    for bad in ("", "a b", "a/b", "x" * 65, "\u00fc"):
+        with pytest.raises(ArgumentRangeError, match="--gateway-id"):
+            gateway_id("x", bad)
+    assert client_id("pc-7") == "servobus-pc-7"
+    assert application_uri("pc-7") == "urn:servobus:gateway:pc-7"
+    assert check_prefix("plant/line-2") == "plant/line-2"
+    for bad in ("", "a/+", "#", "a//b", "/a"):
+        with pytest.raises(ArgumentRangeError, match="--mqtt-prefix"):
+            check_prefix(bad)
+
+
+def test_serve_refuses_a_bad_gateway_id_or_prefix() -> None:
+    from click.testing import CliRunner
+
+    from servobus.cli.main import cli
+
+    result = CliRunner().invoke(cli, ["serve", "--gateway-id", "cell 3"])
+    assert result.exit_code == 2 and "--gateway-id 'cell 3'" in result.output
+    result = CliRunner().invoke(cli, ["serve", "--mqtt-prefix", "plant/#"])
+    assert result.exit_code == 2 and "--mqtt-prefix 'plant/#'" in result.output
+
+
+async def test_an_unexpected_error_in_a_command_is_answered_and_the_next_runs(
+        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    """The error boundary (issue 30): one bad command is answered BadInternalError with one
+    log line; the handler takes the next one."""
+    machine = FakeMachine()
+    sampler = Sampler(machine, 10)  # type: ignore[arg-type]
+    gw = MqttGateway(machine, sampler, Commander(machine),  # type: ignore[arg-type]
+                     MqttOptions("mqtt://u:p@127.0.0.1:1884", commands=True))
+    client = Published()
+    admit = gw.gate.admit
+
+    def broken(axis: str, payload: bytes, retained: bool, now: float | None = None) -> Any:
+        if b"boom" in payload:
+            raise RuntimeError("a bug")
+        return admit(axis, payload, retained, now)
+
+    monkeypatch.setattr(gw.gate, "admit", broken)
+    with caplog.at_level("ERROR", logger="servobus.gateway.mqtt"):
+        await gw._answer(client, "a0", msg(id="b1", cmd="boom"), False)  # type: ignore[arg-type]
+    await gw._answer(client, "a0", msg(cmd="stop"), False)  # type: ignore[arg-type]
+    assert [reply["code"] for _, reply in client.messages] == ["BadInternalError", "Good"]
+    assert client.messages[0][1]["id"] == "b1"
+    errors = [r for r in caplog.records if r.levelname == "ERROR"]
+    assert len(errors) == 1 and "RuntimeError: a bug" in errors[0].getMessage()
+    assert machine.log == ["a0 stop"]

@@ -10,7 +10,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from asyncua import Client, ua
+from asyncua import Client, Node, ua
 from asyncua.ua.uaerrors import UaStatusCodeError
 from conftest import wait_until_async
 from gateway_rig import (
@@ -72,7 +72,7 @@ async def test_axes_are_browsed_with_their_units_and_limits(gateway: RunningGate
                     ).StatusCode.is_good()
         methods = {(await m.read_browse_name()).Name for m in await axes["x"].get_methods()}
         assert methods == {"MoveAbsolute", "MoveRelative", "SetSpeed", "Stop", "Enable",
-                           "Disable", "ResetAlarm"}
+                           "Disable", "ResetAlarm", "Acknowledge"}
 
 
 async def test_anonymous_is_read_only(gateway: RunningGateway) -> None:
@@ -129,6 +129,41 @@ async def test_limits_and_arguments_are_named(gateway: RunningGateway) -> None:
             assert refused.value.code == code, (method, value)
         await axes["x"].call_method(f"{n.servobus}:Stop")  # a user may stop
         await (await machine_node(client, MACHINE)).call_method(f"{n.servobus}:StopAll")
+
+
+async def test_a_method_on_another_object_is_refused_and_moves_nothing(
+        gateway: RunningGateway) -> None:
+    """Issue 30: x.MoveAbsolute called with axis c's ObjectId, or the Server object's,
+    answered Good and moved x. Nothing moves: by the time a move of y (on x's link,
+    commanded after the refused calls) is seen, x has not moved."""
+    seen: dict[str, list[float]] = {"x": [], "y": []}
+    async with user_client(gateway.endpoint) as client:
+        n = await names(client)
+        axes = await axes_of(client, MACHINE)
+        nodes = {name: await parameter(client, axes[name], "ActualPosition")
+                 for name in ("x", "y")}
+        by_id = {node.nodeid: name for name, node in nodes.items()}
+
+        class Handler:
+            def datachange_notification(self, node: Node, value: float, data: object) -> None:
+                seen[by_id[node.nodeid]].append(value)
+
+        subscription = await client.create_subscription(20, Handler())
+        await subscription.subscribe_data_change(list(nodes.values()))
+        await wait_until_async(lambda: _true(bool(seen["x"] and seen["y"])), timeout=10,
+                               what="first positions")
+        x_before, y_before = seen["x"][-1], seen["y"][-1]
+        move = await axes["x"].get_child(f"{n.servobus}:MoveAbsolute")
+        target = x_before + 5.0 if x_before < 200.0 else x_before - 5.0
+        for obj in (axes["c"], client.get_node(ua.NodeId(ua.ObjectIds.Server))):
+            with pytest.raises(UaStatusCodeError) as refused:
+                await obj.call_method(move.nodeid, target)
+            assert refused.value.code == ua.StatusCodes.BadMethodInvalid
+        await axes["y"].call_method(f"{n.servobus}:MoveRelative", 1.0)
+        await wait_until_async(lambda: _true(abs(seen["y"][-1] - (y_before + 1.0)) < 0.01),
+                               timeout=15, what="y moved by 1 mm")
+        assert all(abs(x - x_before) < 0.01 for x in seen["x"]), seen["x"]
+        await subscription.delete()
 
 
 async def test_a_wrong_password_gets_no_session(gateway: RunningGateway) -> None:

@@ -11,7 +11,7 @@ import pytest
 from conftest import wait_until
 from starlette.testclient import TestClient
 
-from servobus.cli import params_file as PF
+from servobus.families import params_file as PF
 from servobus.gui.app import create_app
 from servobus.gui.state import GuiState
 

@@ -10,8 +10,8 @@ import pytest
 from conftest import wait_until_async
 from machine_rig import write_machine
 
+from servobus.axis.types import StreamProfile
 from servobus.errors import ArgumentRangeError, LimitError, OwnerError
-from servobus.families.base import StreamProfile
 from servobus.machine import open_machine_async
 from servobus.machine.lease import STREAM_S, Lease, check_speed, check_ttl, lead
 

@@ -1,6 +1,7 @@
 """Links that come back by themselves (issue 29): the reconnect backoff on a simulated clock,
-a link with nothing listening (typed, quiet, no busy loop), and the virtual drive killed and
-restarted under a running machine for every protocol (docs/machine.md, "Recovery")."""
+a link with nothing listening in every URL form (typed, quiet, no busy loop), a port that
+accepts and never answers, and the virtual drive killed and restarted under a running
+machine for every protocol (docs/machine.md, "Recovery")."""
 
 from __future__ import annotations
 
@@ -8,13 +9,15 @@ import asyncio
 import contextlib
 import json
 import logging
+import socket
 import subprocess
+from collections.abc import Iterator
 from pathlib import Path
 
 import machine_rig
 import pytest
 from conftest import wait_until_async
-from drive_process_rig import SIMS, free_port, start_sim
+from drive_process_rig import SIMS, free_port, sim_url, start_sim
 from drive_process_rig import procs as procs  # the fixture, for this module
 from machine_rig import write_machine
 
@@ -23,12 +26,14 @@ from servobus.axis import registry
 from servobus.errors import (
     ClosedError,
     ConnectionLost,
+    DriveTimeout,
     MachineLinkError,
     PowerLostError,
     ServobusError,
 )
 from servobus.machine import open_machine, open_machine_async
 from servobus.machine.machine import RETRY_MAX_S, RETRY_S, AsyncMachine, backoff
+from servobus.transport import can_bus
 
 SIMULATED_S = 60.0
 
@@ -86,31 +91,87 @@ async def test_60_simulated_seconds_give_the_tries_the_backoff_allows(
         await machine.close()
 
 
+#: Every URL form of every protocol with nothing behind it: a TCP port nobody listens on
+#: ({port}), a serial port that does not exist ({missing}), a CAN interface that does not
+#: exist (or an OS without CAN sockets).
+NOTHING_LISTENING = {
+    "dyn232 over TCP": "dyn232+socket://127.0.0.1:{port}",
+    "bare pyserial URL": "socket://127.0.0.1:{port}",
+    "dyn232 serial port": "dyn232://{missing}",
+    "dyncan over socketcand": "dyncan+socketcand://127.0.0.1:{port}",
+    "dyncan on socketcan": "dyncan+socketcan://nocan29",
+    "easycan over socketcand": "easycan+socketcand://127.0.0.1:{port}",
+    "easycan on socketcan": "easycan+socketcan://nocan29",
+    "enip": "enip://127.0.0.1:{port}",
+    "modbus over TCP": "modbus+socket://127.0.0.1:{port}",
+    "modbus serial port": "modbus://{missing}",
+}
+
+
+def dead_url(form: str, tmp_path: Path) -> str:
+    return NOTHING_LISTENING[form].format(port=free_port(), missing=tmp_path / "ttyNONE")
+
+
+@pytest.mark.parametrize("form", sorted(NOTHING_LISTENING))
 def test_nothing_listening_is_one_typed_error_and_quiet(
-        caplog: pytest.LogCaptureFixture) -> None:
+        form: str, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     caplog.set_level(logging.DEBUG)
-    url = f"easycan+socketcand://127.0.0.1:{free_port()}"
-    with pytest.raises(ConnectionLost, match="cannot reach socketcand"):
+    url = dead_url(form, tmp_path)
+    with pytest.raises(ServobusError) as info:
         connect(url)
-    assert [r for r in caplog.records if r.levelno >= logging.WARNING] == []
+    assert isinstance(info.value, ConnectionLost | DriveTimeout), repr(info.value)
+    assert [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING] == []
 
 
+@pytest.fixture
+def silent_port() -> Iterator[int]:
+    """A port that accepts connections and never says a word."""
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen(8)
+        yield int(server.getsockname()[1])
+
+
+@pytest.mark.parametrize("scheme", ["dyncan", "easycan"])
+def test_a_socketcand_port_that_never_greets_is_a_typed_error(
+        scheme: str, silent_port: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """python-can waits for the daemon's ``< hi >`` with no timeout: connect() hung for ever."""
+    monkeypatch.setattr(can_bus, "SOCKETCAND_CONNECT_S", 0.3)
+    with pytest.raises(ConnectionLost, match=r"no greeting within 0\.3 s"):
+        connect(f"{scheme}+socketcand://127.0.0.1:{silent_port}")
+
+
+def test_an_enip_port_that_never_answers_is_a_timeout(silent_port: int) -> None:
+    with pytest.raises(DriveTimeout, match="REGISTER_SESSION"):
+        connect(f"enip://127.0.0.1:{silent_port}?connect_timeout=0.3")
+
+
+@pytest.mark.parametrize("form", sorted(NOTHING_LISTENING))
 async def test_a_machine_waiting_for_a_dead_link_logs_once(
-        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
-    url = f"easycan+socketcand://127.0.0.1:{free_port()}"
+        form: str, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    url = dead_url(form, tmp_path)
     path = write_machine(tmp_path, f'[axes.c]\nurl = "{url}"\nid = 1\nunit = "deg"\n')
-    with pytest.raises(MachineLinkError, match="cannot reach socketcand"):
+    with pytest.raises(MachineLinkError, match="axis c: cannot open"):
         await open_machine_async(path)
     caplog.clear()
     caplog.set_level(logging.DEBUG)
-    machine = await open_machine_async(path, retry=True)
+    clock, parked, never = [0.0], asyncio.Event(), asyncio.Event()
+
+    async def sleep(seconds: float) -> None:  # the reconnect clock, simulated
+        if clock[0] + seconds > SIMULATED_S:
+            parked.set()
+            await never.wait()  # the machine's close cancels it
+        clock[0] += seconds
+        await asyncio.sleep(0)
+
+    machine = await open_machine_async(path, retry=True, sleep=sleep)
     try:
-        await wait_until_async(lambda: machine.reconnect_tries >= 5, timeout=30,
-                               what="five reconnect tries (1.5 s of backoff)")
+        await asyncio.wait_for(parked.wait(), 30)
+        assert machine.reconnect_tries == allowed_tries(SIMULATED_S) - 1  # + the first open
         with pytest.raises(MachineLinkError, match="axis c is offline"):
             await machine["c"].position()
         lines = machine_lines(caplog)
-        assert len(lines) == 1 and "cannot reach socketcand" in lines[0], lines
+        assert len(lines) == 1 and "cannot open" in lines[0], lines
     finally:
         await machine.close()
 
@@ -129,6 +190,29 @@ async def test_after_close_every_call_is_a_servobus_error(tmp_path: Path) -> Non
             call()
 
 
+async def test_a_status_read_in_flight_during_a_move_does_not_hide_the_motion(
+        tmp_path: Path) -> None:
+    """A front end polls while it moves the axis: a status read sent before the move and
+    answered "not moving" must not make a drop right after the move look like no motion
+    ran (the gateway's restart test lost the power-loss flag that way)."""
+    # paced like the wire: the status reply comes after the move has been handed over
+    path = write_machine(tmp_path, '[axes.a]\nurl = "sim://dyn232"\nid = 1\nunit = "rev"\n')
+    machine = await open_machine_async(path)
+    try:
+        axis = machine["a"]
+        core = axis.core()
+        read = asyncio.create_task(axis.status())
+        await asyncio.sleep(0)  # one loop turn: the status request goes out first
+        await axis.move_to(20.0)  # no read first: the move follows the status request
+        assert not (await read).moving  # answered before the drive took the move
+        axis.went_offline(MachineLinkError("the link dropped"))  # as the machine does
+        assert axis.interrupted == "a commanded motion may not have finished"
+        await core.stop()
+        await core.close()
+    finally:
+        await machine.close()
+
+
 # ------------------------------------------------------------ virtual drives in processes
 async def offline(machine: AsyncMachine, name: str) -> bool:
     """Reads (as the GUI and the gateway poll) until the axis is offline."""
@@ -144,7 +228,7 @@ async def test_a_restarted_drive_comes_back_online(
         protocol: str, tmp_path: Path, procs: list[subprocess.Popen[str]]) -> None:
     port = free_port()
     procs.append(start_sim(protocol, port))
-    url = SIMS[protocol][1].format(port=port)
+    url = sim_url(protocol, port)
     path = write_machine(tmp_path, f'[axes.a]\nurl = "{url}"\nid = 1\nunit = "rev"\n')
     machine = await open_machine_async(path, retry=True)
     try:

@@ -25,6 +25,7 @@ from sim_abuse_rig import (
     sim,
 )
 
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.protocols.dyncan import codec as cc
 from servobus.sim.socketcand_hub import RX_FIFO_FRAMES, SocketcandHub, parse_send
 from servobus.transport.can_bus import CanFrame
@@ -117,7 +118,7 @@ def test_half_closed_client_still_gets_its_reply(mode: list[str]) -> None:
         try:
             sock.sendall(can_send(1))
             sock.shutdown(socket.SHUT_WR)
-            ident, _ = cc.encode(cc.request(1, cc.Function.READ_DRIVE_STATUS))
+            ident, _ = cc.encode(cc.request(1, DmmFunction.READ_DRIVE_STATUS))
             expect(sock, f"< frame {ident:03X} ".encode(), 3.0)
         finally:
             sock.close()

@@ -13,8 +13,8 @@ from typing import Any
 import pytest
 
 from servobus.families.dmm.registers import AlarmCode
-from servobus.sim.control import COMMANDS, FAULTS, ControlError, DriveControl
 from servobus.sim.control_server import MAX_LINE, ControlServer
+from servobus.sim.dmm.control import COMMANDS, FAULTS, ControlError, DriveControl
 from servobus.sim.dmm.drive import VirtualDrive
 
 pytestmark = pytest.mark.timeout(30)

@@ -19,9 +19,10 @@ from conftest import wait_until
 from subprocess_rig import read_line
 
 from servobus.families.dmm.registers import ALARM_SHIFT, StatusBits
+from servobus.families.dmm.vocabulary import DmmFunction as DF
 from servobus.protocols.dyn232 import codec as c
-from servobus.sim.control import ControlError
 from servobus.sim.control_client import ControlClient
+from servobus.sim.dmm.control import ControlError
 
 pytestmark = [pytest.mark.timeout(90), pytest.mark.slow]
 H, GR = c.HostFunction, c.GeneralReadSelector
@@ -67,7 +68,7 @@ class Bench:
         return got[0].reply_value() if got else None
 
     def status(self, drive_id: int = 1) -> int:
-        value = self.ask(drive_id, H.READ_DRIVE_STATUS)
+        value = self.ask(drive_id, DF.READ_DRIVE_STATUS)
         assert value is not None, "no status reply"
         return value
 
@@ -75,7 +76,7 @@ class Bench:
         return (self.status(drive_id) & StatusBits.ALARM_MASK) >> ALARM_SHIFT
 
     def read(self, selector: GR, drive_id: int = 1) -> int:
-        value = self.ask(drive_id, H.GENERAL_READ, selector)
+        value = self.ask(drive_id, DF.GENERAL_READ, selector)
         assert value is not None
         return value
 
@@ -94,7 +95,7 @@ def bench() -> Iterator[Bench]:
 
 
 def test_4_2_analog_speed_mode_reaches_the_manuals_rpm(bench: Bench) -> None:
-    bench.send(1, H.SET_DRIVE_CONFIG, 0x08)  # b4 b3 = 1: speed servo
+    bench.send(1, DF.SET_DRIVE_CONFIG, 0x08)  # b4 b3 = 1: speed servo
     for volts, rpm in ((5.0, 3000), (-3.0, -1800)):  # the table of 4.2
         bench.ctl("analog", volts=volts)
         wait_until(lambda rpm=rpm: abs(bench.read(GR.SPEED) - rpm) <= 0.01 * abs(rpm),
@@ -105,17 +106,17 @@ def test_4_2_analog_speed_mode_reaches_the_manuals_rpm(bench: Bench) -> None:
 
 
 def test_4_1_a_pulse_train_moves_the_shaft_by_the_gear_ratio(bench: Bench) -> None:
-    bench.send(1, H.SET_DRIVE_CONFIG, 0x02)  # Pulse/Dir
+    bench.send(1, DF.SET_DRIVE_CONFIG, 0x02)  # Pulse/Dir
     bench.send(1, H.SET_GEAR_NUMBER, 500)  # 4 x 500 = 2,000 pulses per revolution
     reply = bench.ctl("pulses", count=2000, rate=20_000)  # 0.1 s
     assert reply["taken"] == 2000 and reply["format"] == "pulse_dir"
     wait_until(lambda: bench.read(GR.POSITION) == 65_536, timeout=5, what="one revolution")
-    bench.send(1, H.SET_DRIVE_CONFIG, 0x01)  # CW/CCW
+    bench.send(1, DF.SET_DRIVE_CONFIG, 0x01)  # CW/CCW
     assert bench.ctl("pulses", count=-500, seconds=0.05)["format"] == "cw_ccw"
     wait_until(lambda: bench.read(GR.POSITION) == 65_536 - 16_384, timeout=5, what="-1/4 rev")
     # a train in a format the drive does not decode: what that decoder sees (miswired)
     assert bench.ctl("pulses", count=100, format="ab")["taken"] == 0
-    bench.send(1, H.SET_DRIVE_CONFIG, 0x00)  # RS232 mode: pulses are ignored
+    bench.send(1, DF.SET_DRIVE_CONFIG, 0x00)  # RS232 mode: pulses are ignored
     assert bench.ctl("pulses", count=100)["ignored"] is True
 
 
@@ -134,13 +135,13 @@ def test_6_1_each_fault_trips_its_alarm_code_and_a_power_cycle_clears_it(
     assert outputs["alarm"] and outputs["pins"]["8"] == "low"
     bench.send(1, H.SET_MAIN_GAIN, 77)  # 6.1: ignored, not stored
     assert bench.ask(1, H.READ_MAIN_GAIN) != 77
-    bench.send(1, H.GENERAL_READ, GR.ENABLE)  # ENA / enable do not clear it
+    bench.send(1, DF.GENERAL_READ, GR.ENABLE)  # ENA / enable do not clear it
     assert bench.alarm_code() == code
     # Until the cause is gone: the surge is over and the power stage has cooled below the
     # trip level (the drive's own state says so).
     wait_until(lambda: (st := bench.ctl("state"))["temperature_c"] < 85
                and st["bus_voltage"] <= 80, timeout=30, what="the cause gone")
-    bench.send(1, H.GENERAL_READ, GR.RESET)  # the power cycle of 6.1
+    bench.send(1, DF.GENERAL_READ, GR.RESET)  # the power cycle of 6.1
     assert bench.alarm_code() == 0
     assert bench.status() & StatusBits.SERVO_FREE == 0
 
@@ -149,7 +150,7 @@ def test_6_1_an_overheated_drive_trips_again_until_it_has_cooled(bench: Bench) -
     bench.ctl("fault", fault="overheat", temperature_c=120.0)
     assert bench.alarm_code() == 3
     assert bench.ctl("state")["temperature_c"] > 85
-    bench.send(1, H.GENERAL_READ, GR.RESET)
+    bench.send(1, DF.GENERAL_READ, GR.RESET)
     wait_until(lambda: bench.alarm_code() == 3, timeout=2, what="trips again while hot")
     wait_until(lambda: bench.ctl("state")["temperature_c"] < 84, timeout=30, what="cooled")
     bench.ctl("power_cycle")
@@ -159,17 +160,17 @@ def test_6_1_an_overheated_drive_trips_again_until_it_has_cooled(bench: Bench) -
 def test_6_1_an_encoder_fault_trips_lost_phase_until_it_is_cleared(bench: Bench) -> None:
     bench.ctl("fault", fault="lost_phase", cause="encoder")
     assert bench.alarm_code() == 1
-    bench.send(1, H.GENERAL_READ, GR.RESET)
+    bench.send(1, DF.GENERAL_READ, GR.RESET)
     wait_until(lambda: bench.alarm_code() == 1, timeout=2, what="the fault is still there")
     bench.ctl("clear")
-    bench.send(1, H.GENERAL_READ, GR.RESET)
+    bench.send(1, DF.GENERAL_READ, GR.RESET)
     assert bench.alarm_code() == 0
 
 
 def test_7_3_a_blocked_shaft_trips_lost_phase_when_the_motor_must_move(bench: Bench) -> None:
     bench.ctl("fault", fault="lost_phase", cause="blocked")
     assert bench.alarm_code() == 0  # at rest nothing is wrong yet
-    bench.send(1, H.GO_RELATIVE_POS, 4096)  # 90 deg: >= 90 deg for 2 s (4.1)
+    bench.send(1, DF.GO_RELATIVE_POS, 4096)  # 90 deg: >= 90 deg for 2 s (4.1)
     wait_until(lambda: bench.alarm_code() == 1, timeout=6, what="lost phase")
     state = bench.ctl("state")
     assert state["alarm"] == "lost_phase" and state["servo"] == "free"
@@ -182,7 +183,7 @@ def test_load_step_inertia_and_following_error_are_visible_in_the_state(bench: B
                what="the servo holds the load torque")
     state = bench.ctl("state")
     assert state["world"]["load_inertia_kgm2"] == 5e-4 and state["world"]["load_torque_nm"] == 1
-    bench.send(1, H.TURN_CONST_SPEED, 1000)
+    bench.send(1, DF.TURN_CONST_SPEED, 1000)
     wait_until(lambda: abs(bench.ctl("state")["speed_rpm"] - 1000) < 20, timeout=3,
                what="1000 rpm")
     state = bench.ctl("state")
@@ -194,10 +195,10 @@ def test_load_step_inertia_and_following_error_are_visible_in_the_state(bench: B
 def test_a_supply_dip_below_24_v_powers_the_drive_off_and_on(bench: Bench) -> None:
     bench.ctl("fault", fault="over_current")
     bench.ctl("fault", fault="supply_dip", volts=10.0, seconds=0.4)
-    assert bench.ask(1, H.READ_DRIVE_STATUS, timeout=0.1) is None  # off: no answer
+    assert bench.ask(1, DF.READ_DRIVE_STATUS, timeout=0.1) is None  # off: no answer
     outputs = bench.ctl("outputs")
     assert not outputs["powered"] and set(outputs["pins"].values()) == {"high"}
-    wait_until(lambda: bench.ask(1, H.READ_DRIVE_STATUS, timeout=0.1) is not None, timeout=5,
+    wait_until(lambda: bench.ask(1, DF.READ_DRIVE_STATUS, timeout=0.1) is not None, timeout=5,
                what="back on")
     assert bench.alarm_code() == 0  # a brown-out is a power cycle
     bench.ctl("fault", fault="supply_dip", volts=30.0, seconds=0.2)  # above 24 V: running

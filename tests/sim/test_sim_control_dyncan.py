@@ -16,6 +16,7 @@ from conftest import wait_until
 from subprocess_rig import read_line
 
 from servobus.families.dmm.registers import ALARM_SHIFT, StatusBits
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.protocols.dyncan import codec as c
 from servobus.sim.control_client import ControlClient
 
@@ -61,7 +62,7 @@ class Host:
         return self.recv(c.arbitration_id(frame.drive_id, frame.function), timeout)
 
     def alarm_code(self, drive_id: int) -> int:
-        reply = self.ask(c.request(drive_id, F.READ_DRIVE_STATUS))
+        reply = self.ask(c.request(drive_id, DmmFunction.READ_DRIVE_STATUS))
         assert reply is not None
         return (reply.data[0] & StatusBits.ALARM_MASK) >> ALARM_SHIFT
 
@@ -80,12 +81,12 @@ def test_6_1_a_fault_pushes_0xee_writes_are_ignored_reads_answered_reset_clears(
             host.send(c.request(2, F.SET_PARAM_GROUP1, fields=(99, 0, 0, 0)))
             group = host.ask(c.request(2, F.READ_PARAM_GROUP1))
             assert group is not None and group.fields()[0] != 99
-            host.send(c.request(2, F.GENERAL_READ, 0x1C))  # reset = power cycle
+            host.send(c.request(2, DmmFunction.GENERAL_READ, 0x1C))  # reset = power cycle
             assert host.alarm_code(2) == 0
             # powered off for a moment: the node answers nothing, then it is back
             ctl.call("power_cycle", 2, off_s=0.5)
-            assert host.ask(c.request(2, F.READ_DRIVE_STATUS), timeout=0.2) is None
-            wait_until(lambda: host.ask(c.request(2, F.READ_DRIVE_STATUS), timeout=0.1),
+            assert host.ask(c.request(2, DmmFunction.READ_DRIVE_STATUS), timeout=0.2) is None
+            wait_until(lambda: host.ask(c.request(2, DmmFunction.READ_DRIVE_STATUS), timeout=0.1),
                        timeout=5, what="drive 2 back after the power cycle")
             assert host.alarm_code(2) == 0
     finally:

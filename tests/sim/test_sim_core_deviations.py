@@ -8,6 +8,7 @@ import pytest
 
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.protocols.dyn232 import codec as c232
 from servobus.protocols.dyn232.device import Dyn232Line
 from servobus.protocols.dyncan import codec as ccan
@@ -205,7 +206,7 @@ def test_6_1_both_front_ends_ignore_writes_during_an_alarm_and_answer_reads() ->
     line = Dyn232Line([drive232])
     drive232.trip(AlarmCode.LOST_PHASE)
     assert line.receive(c232.encode(1, H.SET_MAIN_GAIN, 60)) == b""
-    assert line.receive(c232.encode(1, H.SET_DRIVE_CONFIG, 0x04)) == b""
+    assert line.receive(c232.encode(1, DmmFunction.SET_DRIVE_CONFIG, 0x04)) == b""
     (reply,) = c232.Framer().feed(line.receive(c232.encode(1, H.READ_MAIN_GAIN, 0)))
     assert isinstance(reply, c232.Packet) and reply.value == drive232.get_param("main_gain") != 60
     assert drive232.read_config().to_byte() == 0
@@ -216,7 +217,7 @@ def test_6_1_both_front_ends_ignore_writes_during_an_alarm_and_answer_reads() ->
     net.take_outbox()
     before = drivecan.get_param("main_gain")
     assert net.handle(ccan.request(2, F.SET_PARAM_GROUP1, fields=(60, 0, 0, 0))) == []
-    assert net.handle(ccan.request(2, F.SET_DRIVE_CONFIG, 0x04)) == []
+    assert net.handle(ccan.request(2, DmmFunction.SET_DRIVE_CONFIG, 0x04)) == []
     assert net.handle(ccan.request(2, F.GO_ABSOLUTE_POS_SYNC, 1000)) == []
     (group,) = net.handle(ccan.request(2, F.READ_PARAM_GROUP1))
     assert group.fields()[0] == before

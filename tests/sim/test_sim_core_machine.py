@@ -16,7 +16,7 @@ from servobus.families.dmm.profile import (
 )
 from servobus.families.dmm.registers import AlarmCode
 from servobus.sim.dmm.drive import CONTROL_HZ, VirtualDrive
-from servobus.sim.eeprom import EEPROM_CYCLE_LIMIT, EepromStore
+from servobus.sim.dmm.eeprom import EEPROM_CYCLE_LIMIT, EepromStore
 
 DT = 1.0 / CONTROL_HZ
 

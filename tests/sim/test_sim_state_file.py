@@ -17,9 +17,11 @@ import pytest
 from sim_abuse_rig import SERVOBUS, readable, run_cli, sim
 
 from servobus.families.dmm import params as P
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.protocols.dyn232 import codec as c
+from servobus.sim.core.state_file import StateFile, StateFileError, parse_state
 from servobus.sim.dmm.drive import VirtualDrive
-from servobus.sim.eeprom import EepromStore, StateFile, StateFileError, parse_state
+from servobus.sim.dmm.eeprom import DMM_STATE, EepromStore
 
 pytestmark = [pytest.mark.timeout(60), pytest.mark.slow]
 H = c.HostFunction
@@ -89,9 +91,9 @@ def test_cli_refuses_to_start_with_one_line_and_exit_2(tmp_path: Path, case: str
 
 def test_directory_missing_parent_and_unwritable_place_are_refused(tmp_path: Path) -> None:
     with pytest.raises(StateFileError, match="is a directory"):
-        StateFile(tmp_path)
+        StateFile(tmp_path, DMM_STATE)
     with pytest.raises(StateFileError, match="does not exist - create it first"):
-        StateFile(tmp_path / "nowhere" / "state.json")
+        StateFile(tmp_path / "nowhere" / "state.json", DMM_STATE)
     if os.geteuid() == 0:  # root writes anywhere but where the kernel refuses everyone
         place = Path("/sys/servobus-state-test.json")
     else:
@@ -100,7 +102,7 @@ def test_directory_missing_parent_and_unwritable_place_are_refused(tmp_path: Pat
         locked.chmod(0o555)
         place = locked / "state.json"
     with pytest.raises(StateFileError, match="not writable"):
-        StateFile(place)
+        StateFile(place, DMM_STATE)
     assert not place.exists()
 
 
@@ -111,7 +113,7 @@ def test_read_only_file_is_refused(tmp_path: Path) -> None:
     path.write_text(json.dumps(GOOD))
     path.chmod(0o444)
     with pytest.raises(StateFileError, match="read-only"):
-        StateFile(path)
+        StateFile(path, DMM_STATE)
 
 
 def test_a_second_simulator_on_the_same_file_refuses_to_start(tmp_path: Path) -> None:
@@ -132,14 +134,15 @@ def test_a_second_simulator_on_the_same_file_refuses_to_start(tmp_path: Path) ->
 
 def test_lock_holds_between_two_opens_in_one_process_too(tmp_path: Path) -> None:
     path = tmp_path / "state.json"
-    held = StateFile(path)
+    held = StateFile(path, DMM_STATE)
     with pytest.raises(StateFileError, match="in use"):
-        StateFile(path)
+        StateFile(path, DMM_STATE)
     held.save("1", {"drive_id": 1})  # the lock moves with the rewritten file
     with pytest.raises(StateFileError, match="in use"):
-        StateFile(path)
+        StateFile(path, DMM_STATE)
     other = tmp_path / "other.json"
-    assert StateFile.shared(other) is StateFile.shared(other)  # stores of one process share
+    # stores of one process share
+    assert StateFile.shared(other, DMM_STATE) is StateFile.shared(other, DMM_STATE)
 
 
 def test_values_survive_a_restart_other_records_are_kept_and_no_tmp_is_left(
@@ -153,7 +156,7 @@ def test_values_survive_a_restart_other_records_are_kept_and_no_tmp_is_left(
     for gain in range(30, 60):
         assert drive.set_param("main_gain", gain)
     assert drive.assign_id(4)
-    records = parse_state(path.read_bytes(), str(path))
+    records = parse_state(path.read_bytes(), str(path), DMM_STATE)
     assert records["7"] == other
     assert records["1"]["params"]["main_gain"] == 59 and records["1"]["drive_id"] == 4
     assert sorted(p.name for p in tmp_path.iterdir()) == ["state.json"]
@@ -187,14 +190,14 @@ def test_kill_9_during_writes_leaves_a_valid_file_and_no_tmp_after_restart(
             with socket.create_connection(("127.0.0.1", port), timeout=5) as s:
                 writes = b"".join(c.encode(1, H.SET_MAIN_GAIN, 10 + i % 100)
                                   for i in range(2000))
-                s.sendall(c.encode(1, H.READ_DRIVE_STATUS) + writes)
+                s.sendall(c.encode(1, DmmFunction.READ_DRIVE_STATUS) + writes)
                 assert readable(s, 10.0)  # the status reply: the writes have begun
                 time.sleep(0.01 * round_)  # the kill lands at varied points of the writes
                 proc.send_signal(signal.SIGKILL)
         finally:
             proc.kill()
             proc.communicate()
-        parse_state(path.read_bytes(), str(path))  # valid after every kill
+        parse_state(path.read_bytes(), str(path), DMM_STATE)  # valid after every kill
     restarted = run_cli("sim", "dyn232", "--fast", "--ids", "1", "--state", str(path),
                         "--duration", "0.1")
     assert restarted.returncode == 0, restarted.stderr

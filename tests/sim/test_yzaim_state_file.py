@@ -11,7 +11,8 @@ import pytest
 from sim_abuse_rig import run_cli, sim
 
 from servobus.axis.connect import connect
-from servobus.sim.eeprom import EepromStore, StateFile, StateFileError
+from servobus.sim.core.state_file import StateFile, StateFileError
+from servobus.sim.dmm.eeprom import EepromStore
 from servobus.sim.yzaim.fleet import make_motors
 from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.sim.yzaim.store import YZAIM_STATE, YzaimStore

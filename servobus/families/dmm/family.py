@@ -9,7 +9,7 @@ half away from zero; the resolution is ``16384 / GEAR_NUM`` counts (4 at GEAR_NU
 
 from __future__ import annotations
 
-from servobus.families.base import AxisStatus, Family, motion_state, round_counts
+from servobus.axis.types import AxisStatus, Family, motion_state, round_counts
 from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, DriveStatus

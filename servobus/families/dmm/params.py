@@ -12,9 +12,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntEnum
 
+from servobus.axis.types import ParamInfo
+from servobus.axis.types import Storage as Storage
 from servobus.errors import ArgumentRangeError
-from servobus.families.base import ParamInfo
-from servobus.families.base import Storage as Storage
 
 
 class ParamId(IntEnum):

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from servobus.families.base import AxisStatus, Family, ParamInfo, Storage, motion_state
+from servobus.axis.types import AxisStatus, Family, ParamInfo, Storage, motion_state
 from servobus.families.dmm import params as dmm_params
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import ALARM_SHIFT, AlarmCode, StatusBits

@@ -15,7 +15,7 @@ manual, 5.2). What this module adds:
   wire, no gear conversion (the gear acts on the pulse input only, 4.7).
 * **Status**: YZ-AIM has no status word. The Axis reads output_enable 0x01, alarm_code 0x0E
   and motor_speed 0x10 (one 0x12 read on EasyCan) and, when it commanded a position,
-  the position 0x16/0x17. Decisions (servobus.families.base.motion_state, as on every
+  the position 0x16/0x17. Decisions (servobus.axis.types.motion_state, as on every
   family): *moving* = |speed| >= MOVING_RPM, or still more than the +-10 counts of 5.4a
   away from the last commanded target; *in position* = within those 10 counts of it (or
   no target commanded) and not moving; *enabled* = output_enable is 1 and
@@ -27,7 +27,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from servobus.families.base import AxisStatus, Family, ParamInfo, Storage, motion_state
+from servobus.axis.types import AxisStatus, Family, ParamInfo, Storage, motion_state
 from servobus.families.yzaim import registers as yzaim
 
 NAME = yzaim.FAMILY

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from servobus.axis.command_axis import CommandAxis, CommandSet
 from servobus.families.dmm import units as U
+from servobus.families.dmm.command_axis import CommandAxis, CommandSet
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232 import commands as cmds
 

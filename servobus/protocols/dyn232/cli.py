@@ -27,9 +27,11 @@ from servobus.cli.sim_cmd import (
 from servobus.cli.sim_control import control_option, start_control
 from servobus.families.dmm import units as U
 from servobus.protocols.dyn232.codec import FACTORY_ID
-from servobus.protocols.dyn232.server import run_server
-from servobus.sim.fleet import make_drives, parse_ids
-from servobus.sim.server_limits import log_to_stderr
+from servobus.protocols.dyn232.pacing import FINE_COARSE_S
+from servobus.protocols.dyn232.server import serve
+from servobus.sim.dmm.fleet import make_drives, parse_drive_ids
+from servobus.sim.line_server import run_in_fine_loop
+from servobus.sim.server_limits import fit_fd_limit, log_to_stderr
 
 
 @click.command("dyn232")
@@ -48,7 +50,7 @@ def sim_dyn2_cmd(listen: str | None, ids: str | None, pty: bool, fast: bool, sta
                  control: tuple[str, int] | None) -> None:
     """Virtual DYN2/DC2 drives sharing one RS485 line (DYN232M protocol)."""
     log_to_stderr()
-    drive_ids = option_value("--ids", parse_ids, ids) if ids is not None else (FACTORY_ID,)
+    drive_ids = option_value("--ids", parse_drive_ids, ids) if ids is not None else (FACTORY_ID,)
     endpoint, tap_endpoint = line_endpoints(listen, pty, tap)
     drives = make_drives(drive_ids, state=state, model=model)
     banner = sim_banner("dyn232", len(drives), "drive", model, "ids",
@@ -58,8 +60,9 @@ def sim_dyn2_cmd(listen: str | None, ids: str | None, pty: bool, fast: bool, sta
         click.echo(banner, err=True)
         start_control(control, drives)
 
-    server = run_server(drives, listen=endpoint, pty=pty, tap=tap_endpoint, paced=not fast,
-                        duration=duration, max_clients=max_clients, ready=ready)
+    server = run_in_fine_loop(serve(
+        drives, listen=endpoint, pty=pty, tap=tap_endpoint, paced=not fast, duration=duration,
+        coarse_s=FINE_COARSE_S, max_clients=fit_fd_limit(max_clients), ready=ready))
     line = server.line
     echo_stopped(f"{line.packets} packet(s)", f"{line.checksum_errors} checksum error(s)",
                  f"{line.framing_errors} framing error(s)",

@@ -4,7 +4,8 @@ Transaction rules (the manual gives none; these are servobus decisions):
 
 * The rules every protocol shares (deadline, retries, pacing, stats, trace, EEPROM guard,
   late replies, dead links) are :mod:`servobus.link.transaction`'s; ``client.transactions``
-  is the line's manager (``stats``, ``late_replies`` and ``guard`` are its). What follows
+  is the line's manager (``stats``, ``late_replies`` and ``guard`` are its), owned as on
+  every byte-stream client by :class:`servobus.link.stream.StreamClient`. What follows
   is how DYN232M applies them.
 * One transaction at a time per line (one lane): RS485 has one master and replies carry
   no sequence number; a command without a reply also waits for a transaction in progress.
@@ -57,19 +58,19 @@ import logging
 from collections.abc import Callable, Sequence
 from typing import Generic, TypeVar, cast
 
-from servobus.axis import checks
-from servobus.axis.base import AxisTraceHook
-from servobus.axis.command_axis import Request
-from servobus.errors import ArgumentRangeError, ChecksumError, ConnectionLost
+from servobus import checks
+from servobus.errors import ArgumentRangeError, ChecksumError
+from servobus.families.dmm.command_axis import Request
 from servobus.families.dmm.registers import DriveConfig, DriveStatus
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.link.eeprom_guard import EepromGuard
-from servobus.link.late_replies import DEFAULT_LATE_REPLY_S, LateReplies
-from servobus.link.stats import TransactionStats
-from servobus.link.transaction import DEFAULT_RETRIES, TransactionManager, check_call
+from servobus.link.late_replies import DEFAULT_LATE_REPLY_S
+from servobus.link.stream import StreamClient
+from servobus.link.transaction import DEFAULT_RETRIES, check_call
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232 import commands as cmds
 from servobus.protocols.dyn232.commands import Command
-from servobus.transport.base import ByteStream, Direction, set_receiver
+from servobus.transport.base import ByteStream, Direction
 
 log = logging.getLogger(__name__)
 
@@ -82,8 +83,6 @@ MAX_PLANS = 256  # cached read plans per client (reads are a handful of distinct
 #: Parsers that are pure and return frozen values: their results are memoised per value.
 _MEMO_PARSERS: frozenset[Callable[[int], object]] = frozenset(
     {DriveStatus.from_byte, DriveConfig.from_byte})
-#: The counters of a line (the one stats class of every protocol).
-LineStats = TransactionStats
 
 
 class _Plan(Generic[T]):
@@ -118,7 +117,7 @@ def _own(command: Request[T]) -> Command[T]:
     return command
 
 
-class AsyncDyn232Client:
+class AsyncDyn232Client(StreamClient[ReplyKey, bytes, int]):
     """Executes DYN232M Commands on one line (one ByteStream, any number of drives)."""
 
     def __init__(
@@ -133,26 +132,16 @@ class AsyncDyn232Client:
         eeprom_guard: EepromGuard | None = None,
         late_reply_s: float = DEFAULT_LATE_REPLY_S,
     ) -> None:
-        self.stream = stream
         self._plans: dict[int, _Plan[object]] = {}  # id(command) -> plan (identity checked)
         self._baud = checks.positive_int("baud", baud)
         self._turnaround_s = checks.non_negative_seconds("turnaround_s", turnaround_s)
         self._timeout = checks.optional_seconds("timeout", timeout)
         self._framer = c.Framer()
-        # Push reception: the stream calls _on_data (no data can come before __init__ ends).
-        self._push = set_receiver(stream, self._on_data)
-        #: The line's transaction manager: one lane, one transaction at a time.
-        self.transactions: TransactionManager[ReplyKey, bytes, int] = TransactionManager(
-            stream.write, link="DYN232M link", describe_key=_describe_key,
-            describe_request=_describe_request, trace_request=c.decode, retries=retries,
-            query_interval_s=query_interval_s, late_reply_s=late_reply_s,
-            eeprom_guard=eeprom_guard, pull=None if self._push else self._pull_once,
-            flush=self._flush)
-        tm = self.transactions
-        self.stats: TransactionStats = tm.stats
-        #: Replies owed by timed-out reads (``late_replies.late``, ``.given_up``).
-        self.late_replies: LateReplies[ReplyKey] = tm.late_replies
-        self.guard: EepromGuard = tm.guard
+        # The line's transaction manager: one lane, one transaction at a time.
+        super().__init__(stream, stream.write, link="DYN232M link", describe_key=_describe_key,
+                         describe_request=_describe_request, trace_request=c.decode,
+                         retries=retries, query_interval_s=query_interval_s,
+                         late_reply_s=late_reply_s, eeprom_guard=eeprom_guard)
 
     # ------------------------------------------------------------- options
     # Read plans hold their deadline: changing what it is made of drops them.
@@ -185,18 +174,8 @@ class AsyncDyn232Client:
         self._plans.clear()
 
     @property
-    def retries(self) -> int:
-        """Default re-sends of a read (per call: ``execute(..., retries=)``)."""
-        return self.transactions.retries
-
-    @property
     def query_interval_s(self) -> float:
         return self.transactions.query_interval_s
-
-    # ------------------------------------------------------------- tracing
-    def add_trace(self, hook: AxisTraceHook) -> None:
-        """``hook(direction, item, t)``: every packet sent/received (decoded) and every error."""
-        self.transactions.add_trace(hook)
 
     # ------------------------------------------------------------- deadlines
     def reply_deadline_s(self, request_len: int = c.MIN_PACKET) -> float:
@@ -258,15 +237,10 @@ class AsyncDyn232Client:
                 await tm.send(raw)
 
     # ------------------------------------------------------------- reception
-    def _on_data(self, data: bytes | None) -> None:
-        """Receive callback (push streams call it; pull streams through ``_pull_once``).
-        Bytes that arrive while no request waits pay owed late replies, if any; else they
-        are dropped, as ``flush`` drops them before the next request. ``None``: the stream
-        closed or failed."""
+    def _on_bytes(self, data: bytes) -> None:
+        """Bytes that arrive while no request waits pay owed late replies, if any; else they
+        are dropped, as ``flush`` drops them before the next request."""
         tm = self.transactions
-        if data is None:
-            tm.lost(ConnectionLost("stream closed"))
-            return
         hit = self._framer.whole_reply(data)  # the usual case: the reply, in one chunk
         if hit is not None and tm.answer((hit[0], hit[1]), hit[2]):
             if tm.tracing:
@@ -294,23 +268,8 @@ class AsyncDyn232Client:
             tm.reject(event)  # the waiting read's attempt failed (its id is not sure)
         # framing errors: keep waiting, the framer resynchronises
 
-    async def _pull_once(self) -> None:
-        """Pull streams: one ``read()`` through the receive callback."""
-        self._on_data(await self.stream.read())
-
-    def _flush(self) -> None:
-        """Before each attempt: stale bytes (late replies, noise) must not answer it."""
-        if not self._push:  # a push stream buffers nothing; _on_data drops stale bytes
-            self.stream.discard_input()
+    def _reset_receiver(self) -> None:
         self._framer.reset()
-
-    async def close(self) -> None:
-        if self.transactions.close():
-            await self.stream.close()
-
-    @property
-    def closed(self) -> bool:
-        return self.transactions.closed
 
     # ------------------------------------------------------------- broadcast / interpolation
     async def broadcast(self, command: Command[None]) -> None:
@@ -340,18 +299,9 @@ def _describe_request(raw: bytes) -> str:
 def _guard_item(command: Command[T]) -> str:
     if command.param is not None:
         return command.param
-    if command.function is c.HostFunction.SET_DRIVE_CONFIG:
+    if command.function is DmmFunction.SET_DRIVE_CONFIG:
         return "config"
-    if command.function is c.HostFunction.ASSIGN_DRIVE_ID:
+    if command.function is DmmFunction.ASSIGN_DRIVE_ID:
         return "drive_id"
     return command.function.name.lower()
 
-
-def __getattr__(name: str) -> object:
-    """One-release alias (issue 19): ``Dyn232Axis`` moved to servobus.protocols.dyn232.axis
-    (no Axis class lives in a client module); goes in the next release."""
-    if name == "Dyn232Axis":
-        from servobus.protocols.dyn232.axis import Dyn232Axis
-
-        return Dyn232Axis
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -44,24 +44,10 @@ BITS_PER_BYTE = 10  # 8N1: start + 8 data + stop
 
 
 class HostFunction(IntEnum):
-    """Function codes sent by the host (7.2.4); 0x00-0x0F are the shared DMM codes."""
+    """DYN232M's own host function codes (7.2.4), 0x10-0x1F: the parameter sets and reads.
+    0x00-0x0F are the shared DMM codes, :class:`~servobus.families.dmm.vocabulary.DmmFunction`
+    (one enum for both DMM protocols)."""
 
-    SET_ORIGIN = DmmFunction.SET_ORIGIN.value
-    GO_ABSOLUTE_POS = DmmFunction.GO_ABSOLUTE_POS.value
-    MAKE_LINEAR_LINE = DmmFunction.MAKE_LINEAR_LINE.value
-    GO_RELATIVE_POS = DmmFunction.GO_RELATIVE_POS.value
-    MAKE_CIRCULAR_ARC = DmmFunction.MAKE_CIRCULAR_ARC.value
-    ASSIGN_DRIVE_ID = DmmFunction.ASSIGN_DRIVE_ID.value
-    READ_DRIVE_ID = DmmFunction.READ_DRIVE_ID.value
-    SET_DRIVE_CONFIG = DmmFunction.SET_DRIVE_CONFIG.value
-    READ_DRIVE_CONFIG = DmmFunction.READ_DRIVE_CONFIG.value
-    READ_DRIVE_STATUS = DmmFunction.READ_DRIVE_STATUS.value
-    TURN_CONST_SPEED = DmmFunction.TURN_CONST_SPEED.value
-    SQUARE_WAVE = DmmFunction.SQUARE_WAVE.value
-    SIN_WAVE = DmmFunction.SIN_WAVE.value
-    SS_FREQUENCY = DmmFunction.SS_FREQUENCY.value
-    GENERAL_READ = DmmFunction.GENERAL_READ.value
-    FOR_MOTOR_DEFINE = DmmFunction.FOR_MOTOR_DEFINE.value
     SET_MAIN_GAIN = 0x10
     SET_SPEED_GAIN = 0x11
     SET_INT_GAIN = 0x12
@@ -78,6 +64,17 @@ class HostFunction(IntEnum):
     READ_HIGH_ACCEL = 0x1D
     READ_POS_ON_RANGE = 0x1E
     READ_GEAR_NUMBER = 0x1F
+
+
+#: A function code the host sends: a shared DMM code or one of DYN232M's own.
+HostCode = DmmFunction | HostFunction
+#: Every host function code, 0x00..0x1F in order.
+HOST_FUNCTIONS: tuple[HostCode, ...] = (*DmmFunction, *HostFunction)
+
+
+def host_function(code: int) -> HostCode:
+    """The host function of a 5-bit code (ValueError for a code no enum has)."""
+    return DmmFunction(code) if code < HostFunction.SET_MAIN_GAIN else HostFunction(code)
 
 
 class DriveFunction(IntEnum):
@@ -103,7 +100,7 @@ class DriveFunction(IntEnum):
 
 @dataclass(frozen=True)
 class HostSpec:
-    function: HostFunction
+    function: HostCode
     kind: Kind
     minimum: int  # allowed argument range, checked by the client before sending
     maximum: int
@@ -119,30 +116,30 @@ class DriveSpec:
     param: str | None = None
 
 
-_H, _K = HostFunction, Kind
+_M, _H, _K = DmmFunction, HostFunction, Kind
 _FULL = (VALUE_MIN, VALUE_MAX)
 _DUMMY = (0, 0)
 
-HOST_SPECS: dict[HostFunction, HostSpec] = {
+HOST_SPECS: dict[HostCode, HostSpec] = {
     s.function: s
     for s in (
-        HostSpec(_H.SET_ORIGIN, _K.ACTION, *_DUMMY, doc="current position becomes zero"),
-        HostSpec(_H.GO_ABSOLUTE_POS, _K.MOTION, *_FULL, doc="S-curve move to position"),
-        HostSpec(_H.MAKE_LINEAR_LINE, _K.MOTION, *_FULL, doc="3-axis line (broadcast)"),
-        HostSpec(_H.GO_RELATIVE_POS, _K.MOTION, *_FULL, doc="S-curve move by distance"),
-        HostSpec(_H.MAKE_CIRCULAR_ARC, _K.MOTION, *_FULL, doc="3-axis arc (broadcast)"),
-        HostSpec(_H.ASSIGN_DRIVE_ID, _K.SETTING, 0, MAX_DRIVE_ID, doc="new drive id"),
-        HostSpec(_H.READ_DRIVE_ID, _K.READ, *_DUMMY, reply=DriveFunction.IS_DRIVE_ID),
-        HostSpec(_H.SET_DRIVE_CONFIG, _K.SETTING, 0, 0x7F, doc="config byte (7.3)"),
-        HostSpec(_H.READ_DRIVE_CONFIG, _K.READ, *_DUMMY, reply=DriveFunction.IS_CONFIG),
-        HostSpec(_H.READ_DRIVE_STATUS, _K.READ, *_DUMMY, reply=DriveFunction.IS_STATUS),
-        HostSpec(_H.TURN_CONST_SPEED, _K.MOTION, -CONST_SPEED_LIMIT_RPM, CONST_SPEED_LIMIT_RPM,
+        HostSpec(_M.SET_ORIGIN, _K.ACTION, *_DUMMY, doc="current position becomes zero"),
+        HostSpec(_M.GO_ABSOLUTE_POS, _K.MOTION, *_FULL, doc="S-curve move to position"),
+        HostSpec(_M.MAKE_LINEAR_LINE, _K.MOTION, *_FULL, doc="3-axis line (broadcast)"),
+        HostSpec(_M.GO_RELATIVE_POS, _K.MOTION, *_FULL, doc="S-curve move by distance"),
+        HostSpec(_M.MAKE_CIRCULAR_ARC, _K.MOTION, *_FULL, doc="3-axis arc (broadcast)"),
+        HostSpec(_M.ASSIGN_DRIVE_ID, _K.SETTING, 0, MAX_DRIVE_ID, doc="new drive id"),
+        HostSpec(_M.READ_DRIVE_ID, _K.READ, *_DUMMY, reply=DriveFunction.IS_DRIVE_ID),
+        HostSpec(_M.SET_DRIVE_CONFIG, _K.SETTING, 0, 0x7F, doc="config byte (7.3)"),
+        HostSpec(_M.READ_DRIVE_CONFIG, _K.READ, *_DUMMY, reply=DriveFunction.IS_CONFIG),
+        HostSpec(_M.READ_DRIVE_STATUS, _K.READ, *_DUMMY, reply=DriveFunction.IS_STATUS),
+        HostSpec(_M.TURN_CONST_SPEED, _K.MOTION, -CONST_SPEED_LIMIT_RPM, CONST_SPEED_LIMIT_RPM,
                  doc="rpm, positive CW"),
-        HostSpec(_H.SQUARE_WAVE, _K.MOTION, 0, WAVE_AMPLITUDE_MAX, doc="4096 = 180 deg"),
-        HostSpec(_H.SIN_WAVE, _K.MOTION, 0, WAVE_AMPLITUDE_MAX, doc="4096 = 180 deg"),
-        HostSpec(_H.SS_FREQUENCY, _K.MOTION, 0, WAVE_FREQUENCY_MAX_HZ, doc="Hz, 0 stops"),
-        HostSpec(_H.GENERAL_READ, _K.READ, 0x1B, 0x21, doc="selector, see GeneralReadSelector"),
-        HostSpec(_H.FOR_MOTOR_DEFINE, _K.INTERNAL, *_DUMMY, doc="DMM internal; never sent"),
+        HostSpec(_M.SQUARE_WAVE, _K.MOTION, 0, WAVE_AMPLITUDE_MAX, doc="4096 = 180 deg"),
+        HostSpec(_M.SIN_WAVE, _K.MOTION, 0, WAVE_AMPLITUDE_MAX, doc="4096 = 180 deg"),
+        HostSpec(_M.SS_FREQUENCY, _K.MOTION, 0, WAVE_FREQUENCY_MAX_HZ, doc="Hz, 0 stops"),
+        HostSpec(_M.GENERAL_READ, _K.READ, 0x1B, 0x21, doc="selector, see GeneralReadSelector"),
+        HostSpec(_M.FOR_MOTOR_DEFINE, _K.INTERNAL, *_DUMMY, doc="DMM internal; never sent"),
         HostSpec(_H.SET_MAIN_GAIN, _K.SETTING, 1, 127, param="main_gain"),
         HostSpec(_H.SET_SPEED_GAIN, _K.SETTING, 1, 127, param="speed_gain"),
         HostSpec(_H.SET_INT_GAIN, _K.SETTING, 1, 127, param="int_gain"),
@@ -195,7 +192,7 @@ GENERAL_READ_REPLIES: dict[GeneralReadSelector, DriveFunction] = {
 }
 
 #: Parameter name -> (set function, read function), derived from HOST_SPECS.
-PARAM_FUNCTIONS: dict[str, tuple[HostFunction, HostFunction]] = {
+PARAM_FUNCTIONS: dict[str, tuple[HostCode, HostCode]] = {
     name: (
         next(s.function for s in HOST_SPECS.values() if s.param == name and s.kind is Kind.SETTING),
         next(s.function for s in HOST_SPECS.values() if s.param == name and s.kind is Kind.READ),
@@ -204,9 +201,9 @@ PARAM_FUNCTIONS: dict[str, tuple[HostFunction, HostFunction]] = {
 }
 
 
-def reply_function(function: HostFunction, value: int = 0) -> DriveFunction | None:
+def reply_function(function: HostCode, value: int = 0) -> DriveFunction | None:
     """The Is_* function that answers a host packet, or None when the drive stays silent."""
-    if function is HostFunction.GENERAL_READ:
+    if function is DmmFunction.GENERAL_READ:
         try:
             return GENERAL_READ_REPLIES.get(GeneralReadSelector(value))
         except ValueError:
@@ -219,7 +216,7 @@ class Packet:
     """One decoded packet. ``data`` holds the 7-bit groups (MSB cleared), MS group first."""
 
     drive_id: int
-    function: int  # 0..31; HostFunction or DriveFunction depending on direction
+    function: int  # 0..31; a HostCode or DriveFunction depending on direction
     data: bytes
 
     @property
@@ -432,7 +429,7 @@ def wire_time_s(n_bytes: int, baud: int = BAUD) -> float:
 
 def function_name(function: int, from_drive: bool) -> str:
     try:
-        return (DriveFunction(function) if from_drive else HostFunction(function)).name
+        return (DriveFunction(function) if from_drive else host_function(function)).name
     except ValueError:
         return f"0x{function:02x}"
 
@@ -444,11 +441,11 @@ def describe(packet: Packet, from_drive: bool) -> str:
     if from_drive:
         return f"drive {target} -> host: {name} = {packet.reply_value()}"
     extra = ""
-    if packet.function == HostFunction.GENERAL_READ:
+    if packet.function == DmmFunction.GENERAL_READ:
         try:
             extra = f" ({GeneralReadSelector(packet.value).name})"
         except ValueError:
             extra = " (unknown selector)"
-    spec = HOST_SPECS.get(HostFunction(packet.function))
+    spec = HOST_SPECS.get(host_function(packet.function))
     shown = "" if spec is not None and spec.minimum == spec.maximum == 0 else f" {packet.value}"
     return f"host -> {target}: {name}{shown}{extra}"

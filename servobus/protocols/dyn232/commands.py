@@ -11,12 +11,13 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Generic, TypeVar
 
-from servobus.axis import checks
+from servobus import checks
 from servobus.errors import ArgumentRangeError
 from servobus.families.dmm import params as P
 from servobus.families.dmm.profile import pack_arc_word as pack_arc_word  # one home: drive.profile
 from servobus.families.dmm.profile import unpack_arc_word as unpack_arc_word
 from servobus.families.dmm.registers import DriveConfig, DriveStatus
+from servobus.families.dmm.vocabulary import DmmFunction as DF
 from servobus.protocols.dyn232 import codec as c
 
 H = c.HostFunction
@@ -38,7 +39,7 @@ class Command(Generic[T]):
     result of executing the command (``Command[None]``: no reply)."""
 
     drive_id: int
-    function: c.HostFunction
+    function: c.HostCode
     value: int = 0
     reply: c.DriveFunction | None = None
     kind: c.Kind = c.Kind.ACTION
@@ -69,7 +70,7 @@ def check_drive_id(drive_id: int) -> int:
     return drive_id
 
 
-def _check_value(function: c.HostFunction, value: object, what: str) -> int:
+def _check_value(function: c.HostCode, value: object, what: str) -> int:
     spec = c.HOST_SPECS[function]
     if isinstance(value, bool) or not isinstance(value, int):
         raise ArgumentRangeError(f"{what} must be an integer, got {value!r}")
@@ -80,7 +81,7 @@ def _check_value(function: c.HostFunction, value: object, what: str) -> int:
     return value
 
 
-def _cmd(drive_id: int, function: c.HostFunction, value: int = 0, *,
+def _cmd(drive_id: int, function: c.HostCode, value: int = 0, *,
          parse: Callable[[int], T], reply: c.DriveFunction | None = None,
          param: str | None = None) -> Command[T]:
     spec = c.HOST_SPECS[function]
@@ -89,7 +90,7 @@ def _cmd(drive_id: int, function: c.HostFunction, value: int = 0, *,
                    param=param)
 
 
-def _send(drive_id: int, function: c.HostFunction, value: int = 0, *,
+def _send(drive_id: int, function: c.HostCode, value: int = 0, *,
           param: str | None = None) -> Command[None]:
     """A command without a reply (motion, settings)."""
     return _cmd(drive_id, function, value, parse=_no_reply, param=param)
@@ -97,31 +98,33 @@ def _send(drive_id: int, function: c.HostFunction, value: int = 0, *,
 
 # ------------------------------------------------------------------ motion
 def make_move_absolute(drive_id: int, position: int) -> Command[None]:
-    return _send(drive_id, H.GO_ABSOLUTE_POS, _check_value(H.GO_ABSOLUTE_POS, position, "position"))
+    checked = _check_value(DF.GO_ABSOLUTE_POS, position, "position")
+    return _send(drive_id, DF.GO_ABSOLUTE_POS, checked)
 
 
 def make_move_relative(drive_id: int, distance: int) -> Command[None]:
-    return _send(drive_id, H.GO_RELATIVE_POS, _check_value(H.GO_RELATIVE_POS, distance, "distance"))
+    checked = _check_value(DF.GO_RELATIVE_POS, distance, "distance")
+    return _send(drive_id, DF.GO_RELATIVE_POS, checked)
 
 
 def make_turn_const_speed(drive_id: int, rpm: int) -> Command[None]:
-    return _send(drive_id, H.TURN_CONST_SPEED, _check_value(H.TURN_CONST_SPEED, rpm, "rpm"))
+    return _send(drive_id, DF.TURN_CONST_SPEED, _check_value(DF.TURN_CONST_SPEED, rpm, "rpm"))
 
 
 def make_square_wave(drive_id: int, amplitude: int) -> Command[None]:
-    return _send(drive_id, H.SQUARE_WAVE, _check_value(H.SQUARE_WAVE, amplitude, "amplitude"))
+    return _send(drive_id, DF.SQUARE_WAVE, _check_value(DF.SQUARE_WAVE, amplitude, "amplitude"))
 
 
 def make_sine_wave(drive_id: int, amplitude: int) -> Command[None]:
-    return _send(drive_id, H.SIN_WAVE, _check_value(H.SIN_WAVE, amplitude, "amplitude"))
+    return _send(drive_id, DF.SIN_WAVE, _check_value(DF.SIN_WAVE, amplitude, "amplitude"))
 
 
 def make_wave_frequency(drive_id: int, hz: int) -> Command[None]:
-    return _send(drive_id, H.SS_FREQUENCY, _check_value(H.SS_FREQUENCY, hz, "frequency"))
+    return _send(drive_id, DF.SS_FREQUENCY, _check_value(DF.SS_FREQUENCY, hz, "frequency"))
 
 
 def make_set_origin(drive_id: int) -> Command[None]:
-    return _send(drive_id, H.SET_ORIGIN)
+    return _send(drive_id, DF.SET_ORIGIN)
 
 
 def _check_feedrate(feedrate: int, allow_negative: bool) -> int:
@@ -136,9 +139,9 @@ def _check_feedrate(feedrate: int, allow_negative: bool) -> int:
 def make_linear_line(dx: int, dy: int, dz: int, feedrate: int) -> list[Command[None]]:
     """Example 7: four broadcast packets dX, dY, dZ, feedrate (1..127)."""
     _check_feedrate(feedrate, allow_negative=False)
-    words = [_check_value(H.MAKE_LINEAR_LINE, v, n) for v, n in ((dx, "dx"), (dy, "dy"),
+    words = [_check_value(DF.MAKE_LINEAR_LINE, v, n) for v, n in ((dx, "dx"), (dy, "dy"),
                                                                    (dz, "dz"))]
-    return [Command(c.BROADCAST_ID, H.MAKE_LINEAR_LINE, v, kind=c.Kind.MOTION, parse=_no_reply)
+    return [Command(c.BROADCAST_ID, DF.MAKE_LINEAR_LINE, v, kind=c.Kind.MOTION, parse=_no_reply)
             for v in [*words, feedrate]]
 
 
@@ -154,9 +157,9 @@ def make_circular_arc(
         raise ArgumentRangeError(f"plane={plane!r} must be 0 (XY), 1 (YZ) or 2 (ZX)")
     _check_feedrate(feedrate, allow_negative=True)
     points = (_point("start", start), _point("end", end))
-    words = [_check_value(H.MAKE_CIRCULAR_ARC, v, "arc coordinate")
+    words = [_check_value(DF.MAKE_CIRCULAR_ARC, v, "arc coordinate")
              for point in points for v in point]
-    return [Command(c.BROADCAST_ID, H.MAKE_CIRCULAR_ARC, v, kind=c.Kind.MOTION,
+    return [Command(c.BROADCAST_ID, DF.MAKE_CIRCULAR_ARC, v, kind=c.Kind.MOTION,
                     parse=_no_reply)
             for v in [*words, pack_arc_word(plane, feedrate)]]
 
@@ -169,7 +172,7 @@ def _point(what: str, point: object) -> tuple[object, ...]:
 
 # ------------------------------------------------------------------ actions (no reply)
 def _action(drive_id: int, selector: c.GeneralReadSelector) -> Command[None]:
-    return Command(check_drive_id(drive_id), H.GENERAL_READ, int(selector), kind=c.Kind.ACTION,
+    return Command(check_drive_id(drive_id), DF.GENERAL_READ, int(selector), kind=c.Kind.ACTION,
                    parse=_no_reply)
 
 
@@ -195,11 +198,11 @@ def make_set_param(drive_id: int, name: str, value: int) -> Command[None]:
 
 def make_set_config(drive_id: int, config: DriveConfig | int) -> Command[None]:
     value = config.to_byte() if isinstance(config, DriveConfig) else config
-    return _send(drive_id, H.SET_DRIVE_CONFIG, _check_value(H.SET_DRIVE_CONFIG, value, "config"))
+    return _send(drive_id, DF.SET_DRIVE_CONFIG, _check_value(DF.SET_DRIVE_CONFIG, value, "config"))
 
 
 def make_assign_id(drive_id: int, new_id: int) -> Command[None]:
-    return _send(drive_id, H.ASSIGN_DRIVE_ID, _check_value(H.ASSIGN_DRIVE_ID, new_id, "new id"))
+    return _send(drive_id, DF.ASSIGN_DRIVE_ID, _check_value(DF.ASSIGN_DRIVE_ID, new_id, "new id"))
 
 
 # ------------------------------------------------------------------ reads
@@ -210,19 +213,19 @@ def make_read_param(drive_id: int, name: str) -> Command[int]:
 
 
 def make_read_status(drive_id: int) -> Command[DriveStatus]:
-    return _cmd(drive_id, H.READ_DRIVE_STATUS, parse=DriveStatus.from_byte)
+    return _cmd(drive_id, DF.READ_DRIVE_STATUS, parse=DriveStatus.from_byte)
 
 
 def make_read_config(drive_id: int) -> Command[DriveConfig]:
-    return _cmd(drive_id, H.READ_DRIVE_CONFIG, parse=DriveConfig.from_byte)
+    return _cmd(drive_id, DF.READ_DRIVE_CONFIG, parse=DriveConfig.from_byte)
 
 
 def make_read_id(drive_id: int) -> Command[int]:
-    return _cmd(drive_id, H.READ_DRIVE_ID, parse=_identity)
+    return _cmd(drive_id, DF.READ_DRIVE_ID, parse=_identity)
 
 
 def _general_read(drive_id: int, selector: c.GeneralReadSelector) -> Command[int]:
-    return _cmd(drive_id, H.GENERAL_READ, int(selector), parse=_identity,
+    return _cmd(drive_id, DF.GENERAL_READ, int(selector), parse=_identity,
                 reply=c.GENERAL_READ_REPLIES[selector])
 
 
@@ -250,7 +253,7 @@ def broadcast(command: Command[T]) -> Command[T]:
     return replace(command, drive_id=c.BROADCAST_ID)
 
 
-def _param_functions(name: str) -> tuple[c.HostFunction, c.HostFunction]:
+def _param_functions(name: str) -> tuple[c.HostCode, c.HostCode]:
     try:
         return c.PARAM_FUNCTIONS[name]
     except KeyError:

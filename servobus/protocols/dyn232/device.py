@@ -2,7 +2,7 @@
 
 Pure-ish: no I/O and no clock. ``Dyn232Line.receive(data)`` takes host bytes in any
 chunking and returns the bytes the drives send back; the caller advances the drives' time
-first (servers via :mod:`servobus.sim.realtime`, tests via ``VirtualDrive.advance``).
+first (servers via :mod:`servobus.sim.wall_clock`, tests via ``VirtualDrive.advance``).
 Pacing lives in :mod:`servobus.protocols.dyn232.pacing`, sockets in
 :mod:`servobus.protocols.dyn232.server`.
 
@@ -47,6 +47,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator, Sequence
 
 from servobus.errors import ChecksumError, ProtocolError
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.protocols.dyn232 import codec as c
 from servobus.sim.dmm.actions import run_action
 from servobus.sim.dmm.drive import VirtualDrive
@@ -65,7 +66,7 @@ def wrap28(value: int) -> int:
 def host_value(packet: c.Packet) -> int:
     """Value of a host packet: 1-byte register/parameter writes are 7-bit unsigned."""
     try:
-        spec = c.HOST_SPECS[H(packet.function)]
+        spec = c.HOST_SPECS[c.host_function(packet.function)]
     except ValueError:
         return packet.value
     if spec.kind is c.Kind.SETTING and len(packet.data) == 1:
@@ -89,7 +90,7 @@ class Dyn232Line:
         self.checksum_errors = 0
         self.framing_errors = 0
         self.collisions = 0  # replies suppressed because several drives would answer
-        self._handlers: dict[H, Handler] = _build_handlers()
+        self._handlers: dict[c.HostCode, Handler] = _build_handlers()
         self._plans: dict[bytes, _Plan | None] = {}  # request bytes -> plan (handle_whole)
         self._replies: dict[tuple[int, int, int], bytes] = {}  # memoised reply encodings
 
@@ -160,7 +161,7 @@ class Dyn232Line:
     def _plan(self, packet: c.Packet) -> _Plan | None:
         """What a valid packet does: (handler, value, reply function, addressed id)."""
         try:
-            function = H(packet.function)
+            function = c.host_function(packet.function)
         except ValueError:  # pragma: no cover - every 5-bit code is a HostFunction
             return None
         handler = self._handlers.get(function)
@@ -201,7 +202,7 @@ class Dyn232Line:
 
 
 # ---------------------------------------------------------------------- function table
-def _build_handlers() -> dict[H, Handler]:
+def _build_handlers() -> dict[c.HostCode, Handler]:
     """HostFunction -> handler(drive, value) -> reply value or None (no reply)."""
 
     def motion(method: Callable[[VirtualDrive, int], bool]) -> Handler:
@@ -214,7 +215,7 @@ def _build_handlers() -> dict[H, Handler]:
         drive.set_origin()
 
     def assign_id(drive: VirtualDrive, value: int) -> None:
-        spec = c.HOST_SPECS[H.ASSIGN_DRIVE_ID]
+        spec = c.HOST_SPECS[DmmFunction.ASSIGN_DRIVE_ID]
         if spec.minimum <= value <= spec.maximum:
             drive.assign_id(value)
 
@@ -235,23 +236,23 @@ def _build_handlers() -> dict[H, Handler]:
         run_action(drive, selector)
         return None
 
-    table: dict[H, Handler] = {
-        H.SET_ORIGIN: set_origin,
-        H.GO_ABSOLUTE_POS: motion(VirtualDrive.move_absolute),
-        H.GO_RELATIVE_POS: motion(VirtualDrive.move_relative),
-        H.MAKE_LINEAR_LINE: motion(VirtualDrive.linear_line_word),
-        H.MAKE_CIRCULAR_ARC: motion(VirtualDrive.circular_arc_word),
-        H.TURN_CONST_SPEED: motion(VirtualDrive.turn_const_speed),
-        H.SQUARE_WAVE: motion(VirtualDrive.square_wave),
-        H.SIN_WAVE: motion(VirtualDrive.sine_wave),
-        H.SS_FREQUENCY: motion(VirtualDrive.set_wave_frequency),
-        H.ASSIGN_DRIVE_ID: assign_id,
-        H.READ_DRIVE_ID: lambda d, v: d.drive_id,
-        H.SET_DRIVE_CONFIG: set_config,
-        H.READ_DRIVE_CONFIG: lambda d, v: d.read_config().to_byte(),
-        H.READ_DRIVE_STATUS: lambda d, v: d.read_status().to_byte(),
-        H.GENERAL_READ: general_read,
-        # H.FOR_MOTOR_DEFINE: DMM-internal, deliberately absent (ignored).
+    table: dict[c.HostCode, Handler] = {
+        DmmFunction.SET_ORIGIN: set_origin,
+        DmmFunction.GO_ABSOLUTE_POS: motion(VirtualDrive.move_absolute),
+        DmmFunction.GO_RELATIVE_POS: motion(VirtualDrive.move_relative),
+        DmmFunction.MAKE_LINEAR_LINE: motion(VirtualDrive.linear_line_word),
+        DmmFunction.MAKE_CIRCULAR_ARC: motion(VirtualDrive.circular_arc_word),
+        DmmFunction.TURN_CONST_SPEED: motion(VirtualDrive.turn_const_speed),
+        DmmFunction.SQUARE_WAVE: motion(VirtualDrive.square_wave),
+        DmmFunction.SIN_WAVE: motion(VirtualDrive.sine_wave),
+        DmmFunction.SS_FREQUENCY: motion(VirtualDrive.set_wave_frequency),
+        DmmFunction.ASSIGN_DRIVE_ID: assign_id,
+        DmmFunction.READ_DRIVE_ID: lambda d, v: d.drive_id,
+        DmmFunction.SET_DRIVE_CONFIG: set_config,
+        DmmFunction.READ_DRIVE_CONFIG: lambda d, v: d.read_config().to_byte(),
+        DmmFunction.READ_DRIVE_STATUS: lambda d, v: d.read_status().to_byte(),
+        DmmFunction.GENERAL_READ: general_read,
+        # DmmFunction.FOR_MOTOR_DEFINE: DMM-internal, deliberately absent (ignored).
     }
     for spec in c.HOST_SPECS.values():  # parameter set/read pairs come from the codec table
         if spec.param is None:

@@ -30,7 +30,7 @@ from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232.device import Dyn232Line
 from servobus.protocols.dyn232.pacing import HostPort, LineRunner
 from servobus.sim.dmm.drive import VirtualDrive
-from servobus.sim.fleet import make_drives, parse_ids
+from servobus.sim.dmm.fleet import make_drives, parse_drive_ids
 from servobus.transport.base import Direction
 from servobus.transport.buffered import PushInput
 
@@ -89,7 +89,7 @@ def parse_sim_url(url: str, default_id: int = c.FACTORY_ID) -> SimUrl:
     if model not in U.MODELS:
         raise ArgumentRangeError(f"unknown model {model!r}; known: {', '.join(U.MODELS)}")
     if "ids" in query:
-        ids = parse_ids(query["ids"])
+        ids = parse_drive_ids(query["ids"])
     else:
         ids = (default_id if 0 <= default_id <= c.MAX_DRIVE_ID else c.FACTORY_ID,)
     return SimUrl(kind=kind, ids=ids,
@@ -149,7 +149,7 @@ def open_sim_stream(
     if kind.lower() not in SIM_KINDS:
         raise ArgumentRangeError(f"unknown virtual drive {kind!r}; known: {', '.join(SIM_KINDS)}")
     if drives is None:
-        parse_ids(",".join(str(i) for i in ids))  # same validation as URLs
+        parse_drive_ids(",".join(str(i) for i in ids))  # same validation as URLs
         drives = make_drives(ids, state=state, model=model)
     return SimByteStream(LineRunner(Dyn232Line(drives), paced=paced))
 
@@ -183,7 +183,7 @@ async def open_sim_axis(url: DriveUrl, *, drive_id: int | None = None,
     if drive_id is not None:
         check_drive_id(drive_id)
     ids_text = options.pop("ids", None)
-    ids = parse_ids(str(ids_text)) if ids_text is not None else (
+    ids = parse_drive_ids(str(ids_text)) if ids_text is not None else (
         (c.FACTORY_ID,) if drive_id is None else (drive_id,))
     paced = not bool(options.pop("fast", False)) and bool(options.pop("paced", True))
     model = str(options.pop("model", U.DEFAULT_MODEL))

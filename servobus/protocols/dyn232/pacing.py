@@ -34,7 +34,7 @@ from collections.abc import Callable, Iterator
 
 from servobus.protocols.dyn232 import codec as c
 from servobus.protocols.dyn232.device import Dyn232Line
-from servobus.sim.realtime import RealtimeClock
+from servobus.sim.wall_clock import RealtimeClock
 from servobus.sim.wire import (
     COARSE_S,
     FINE_COARSE_S,

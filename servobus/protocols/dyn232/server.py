@@ -13,9 +13,10 @@ cap); this module puts the DYN232M line and its 38400-baud runner behind them:
   (:mod:`servobus.protocols.dyn232.pacing`).
 
 The server binds 127.0.0.1 unless an address is given explicitly, and warns (one log line)
-when told to bind beyond loopback. The CLI's event loop runs on
-:class:`servobus.sim.fine_selector.FineEpollSelector`: epoll for any number of connections,
-with microsecond timeouts so paced replies are released on time.
+when told to bind beyond loopback. :func:`serve` is the entry point, as in every protocol's
+``server`` module; the CLI runs it on :class:`servobus.sim.fine_selector.FineEpollSelector`
+(``run_in_fine_loop``): epoll for any number of connections, with microsecond timeouts so
+paced replies are released on time.
 """
 
 from __future__ import annotations
@@ -24,22 +25,10 @@ from collections.abc import Callable, Sequence
 from typing import TextIO
 
 from servobus.protocols.dyn232.device import Dyn232Line
-from servobus.protocols.dyn232.pacing import COARSE_S, FINE_COARSE_S, HostPort, LineRunner
+from servobus.protocols.dyn232.pacing import COARSE_S, HostPort, LineRunner
 from servobus.sim import server_limits as lim
 from servobus.sim.dmm.drive import VirtualDrive
-from servobus.sim.line_server import (
-    CLOSE_TIMEOUT_S,
-    DEFAULT_HOST,
-    QUANTUM,
-    LineServer,
-    format_tcp_url,
-    parse_listen_url,
-    run_in_fine_loop,
-    serve_line,
-)
-
-__all__ = ["CLOSE_TIMEOUT_S", "DEFAULT_HOST", "QUANTUM", "WHAT", "Dyn232Server",
-           "format_tcp_url", "parse_listen_url", "run_server", "serve"]
+from servobus.sim.line_server import DEFAULT_HOST, LineServer, serve_line
 
 WHAT = "sim dyn232"  # how log lines name this server
 
@@ -83,22 +72,3 @@ async def serve(
     server = Dyn232Server(drives, paced=paced, coarse_s=coarse_s, max_clients=max_clients)
     return await serve_line(server, listen=listen, pty=pty, tap=tap, duration=duration,
                             out=out, ready=ready)
-
-
-def run_server(
-    drives: Sequence[VirtualDrive],
-    *,
-    listen: tuple[str, int] | None = (DEFAULT_HOST, 0),
-    pty: bool = False,
-    tap: tuple[str, int] | None = None,
-    paced: bool = True,
-    duration: float | None = None,
-    out: TextIO | None = None,
-    max_clients: int = lim.DEFAULT_MAX_CLIENTS,
-    ready: Callable[[], None] | None = None,
-) -> Dyn232Server:
-    """Blocking entry point for the CLI: ``serve`` on an epoll loop with fine timeouts."""
-    max_clients = lim.fit_fd_limit(max_clients)
-    return run_in_fine_loop(serve(drives, listen=listen, pty=pty, tap=tap, paced=paced,
-                                  duration=duration, out=out, coarse_s=FINE_COARSE_S,
-                                  max_clients=max_clients, ready=ready))

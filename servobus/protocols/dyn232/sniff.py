@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from servobus.errors import ChecksumError, ProtocolError
 from servobus.families.dmm import params as P
 from servobus.families.dmm.registers import DriveConfig, DriveStatus
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.protocols.dyn232 import codec as c
 from servobus.sniff import ByteDecoder, ErrorEvent
 
@@ -107,7 +108,7 @@ def _detail(packet: c.Packet, from_drive: bool) -> str:
     """Extra decoding of register values, appended to the codec's describe()."""
     byte = packet.unsigned & 0x7F
     if not from_drive:
-        if packet.function == c.HostFunction.SET_DRIVE_CONFIG:
+        if packet.function == DmmFunction.SET_DRIVE_CONFIG:
             return f" (0x{byte:02x}: {_config_text(byte)})"
         return ""
     if packet.function == c.DriveFunction.IS_STATUS:
@@ -126,7 +127,7 @@ def text_of(packet: c.Packet, from_drive: bool) -> str:
 
 
 def _host_plausible(packet: c.Packet) -> bool:
-    spec = c.HOST_SPECS[c.HostFunction(packet.function)]
+    spec = c.HOST_SPECS[c.host_function(packet.function)]
     if spec.kind is c.Kind.READ and spec.minimum == spec.maximum == 0:
         return packet.value == 0  # dummy byte
     return spec.minimum <= packet.value <= spec.maximum
@@ -203,9 +204,9 @@ class LineDecoder:
         return event
 
     def _expect_reply(self, packet: c.Packet) -> None:
-        reply = c.reply_function(c.HostFunction(packet.function), packet.value)
+        reply = c.reply_function(c.host_function(packet.function), packet.value)
         if reply is not None:
             self._pending = (packet.drive_id, reply)
 
 
-DECODER = ByteDecoder("dyn232", "DYN232M", LineDecoder)  # the DYN232M entry of DECODERS
+DECODER = ByteDecoder("dyn232", "DYN232M", LineDecoder)  # SPEC.decoder

@@ -7,8 +7,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, ClassVar
 
 from servobus.axis.base import AsyncAxis
-from servobus.axis.command_axis import CommandAxis, CommandSet
 from servobus.families.dmm import units as U
+from servobus.families.dmm.command_axis import CommandAxis, CommandSet
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan import commands as cmds
 from servobus.protocols.dyncan.client import ID_REINIT_S, AsyncDynCanClient, open_can_client

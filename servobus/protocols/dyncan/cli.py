@@ -31,11 +31,11 @@ from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan.device import DynCanNetwork
 from servobus.protocols.dyncan.server import serve
 from servobus.sim.dmm.drive import VirtualDrive
-from servobus.sim.fleet import make_drives, parse_ids
-from servobus.sim.realtime import RealtimeClock
+from servobus.sim.dmm.fleet import make_drives, parse_drive_ids
 from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS, fit_fd_limit, log_to_stderr
 from servobus.sim.socketcand_bus import socketcand_bus
 from servobus.sim.socketcand_hub import SocketcandHub, parse_socketcand_address
+from servobus.sim.wall_clock import RealtimeClock
 
 
 async def run_socketcand_nodes(drives: Sequence[VirtualDrive], host: str, port: int, *,
@@ -76,7 +76,7 @@ def sim_dyncan_cmd(address: str, ids: str, fast: bool, bitrate: int, state: str 
                    control: tuple[str, int] | None) -> None:
     """Virtual DYN2/DYN4 drives on one CAN bus (DYN CAN protocol, socketcand rawmode)."""
     log_to_stderr()
-    drive_ids = option_value("--ids", parse_ids, ids)
+    drive_ids = option_value("--ids", parse_drive_ids, ids)
     host, port = option_value("--socketcand", parse_socketcand_address, address)
     if 0 in drive_ids:
         raise click.BadParameter("id 0 is the DYN CAN broadcast id; use 1..63",

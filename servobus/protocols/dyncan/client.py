@@ -47,8 +47,7 @@ import logging
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any, TypeVar, cast
 
-from servobus.axis import checks
-from servobus.axis.command_axis import Request
+from servobus import checks
 from servobus.errors import (
     ArgumentRangeError,
     DriveAlarm,
@@ -56,6 +55,7 @@ from servobus.errors import (
     DriveTimeout,
     ServobusError,
 )
+from servobus.families.dmm.command_axis import Request
 from servobus.link.can import CanClient
 from servobus.link.eeprom_guard import EepromGuard
 from servobus.link.late_replies import DEFAULT_LATE_REPLY_S
@@ -350,12 +350,3 @@ async def open_can_client(can: str, *, timeout: float | None = None,
         await port.close()
         raise
 
-
-def __getattr__(name: str) -> object:
-    """One-release aliases (issue 19): ``DynCanAxis`` and ``open_can_axis`` moved to
-    servobus.protocols.dyncan.axis (no Axis class lives in a client module)."""
-    if name in ("DynCanAxis", "open_can_axis"):
-        from servobus.protocols.dyncan import axis
-
-        return getattr(axis, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -56,24 +56,10 @@ BITRATES_KBIT = (10, 20, 50, 125, 250, 500, 800, 1000)
 
 
 class Function(IntEnum):
-    """The 32 function codes (section 5)."""
+    """DYN CAN's own function codes (section 5), 0x10-0x1F. 0x00-0x0F are the shared DMM
+    codes, :class:`~servobus.families.dmm.vocabulary.DmmFunction` (one enum for both DMM
+    protocols)."""
 
-    SET_ORIGIN = DmmFunction.SET_ORIGIN.value
-    GO_ABSOLUTE_POS = DmmFunction.GO_ABSOLUTE_POS.value
-    MAKE_LINEAR_LINE = DmmFunction.MAKE_LINEAR_LINE.value
-    GO_RELATIVE_POS = DmmFunction.GO_RELATIVE_POS.value
-    MAKE_CIRCULAR_ARC = DmmFunction.MAKE_CIRCULAR_ARC.value
-    ASSIGN_DRIVE_ID = DmmFunction.ASSIGN_DRIVE_ID.value
-    READ_DRIVE_ID = DmmFunction.READ_DRIVE_ID.value
-    SET_DRIVE_CONFIG = DmmFunction.SET_DRIVE_CONFIG.value
-    READ_DRIVE_CONFIG = DmmFunction.READ_DRIVE_CONFIG.value
-    READ_DRIVE_STATUS = DmmFunction.READ_DRIVE_STATUS.value
-    TURN_CONST_SPEED = DmmFunction.TURN_CONST_SPEED.value
-    SQUARE_WAVE = DmmFunction.SQUARE_WAVE.value
-    SIN_WAVE = DmmFunction.SIN_WAVE.value
-    SS_FREQUENCY = DmmFunction.SS_FREQUENCY.value
-    GENERAL_READ = DmmFunction.GENERAL_READ.value
-    FOR_MOTOR_DEFINE = DmmFunction.FOR_MOTOR_DEFINE.value
     SET_PARAM_GROUP1 = 0x10
     SET_PARAM_GROUP2 = 0x11
     SET_PARAM_GROUP3 = 0x12
@@ -90,6 +76,17 @@ class Function(IntEnum):
     DRIVE_ERROR = 0x1D
     ECHO = 0x1E
     DIAGNOSTIC_COUNTER = 0x1F
+
+
+#: A DYN CAN function code: a shared DMM code or one of DYN CAN's own.
+Code = DmmFunction | Function
+#: Every function code, 0x00..0x1F in order.
+FUNCTIONS: tuple[Code, ...] = (*DmmFunction, *Function)
+
+
+def function_of(code: int) -> Code:
+    """The function of a 5-bit code (ValueError for a code no enum has)."""
+    return DmmFunction(code) if code < Function.SET_PARAM_GROUP1 else Function(code)
 
 
 class DriveErrorCode(IntEnum):
@@ -127,7 +124,7 @@ class Field:
 
 @dataclass(frozen=True)
 class FunctionSpec:
-    function: Function
+    function: Code
     kind: Kind
     request: Layout
     sent: tuple[int, int]  # data bytes host -> drive (min, max)
@@ -159,7 +156,7 @@ class FunctionSpec:
         return self.minimum <= value <= self.maximum
 
 
-_F, _K, _L = Function, Kind, Layout
+_D, _F, _K, _L = DmmFunction, Function, Kind, Layout
 _POS = (VALUE_MIN, VALUE_MAX)
 _G1 = (Field("main_gain", 1), Field("speed_gain", 1), Field("int_gain", 1), Field("trq_cons", 1))
 _G2 = (Field("max_speed", 1), Field("max_accel", 1))
@@ -167,7 +164,7 @@ _G3 = (Field("on_range", 1), Field("gear_num", 2), Field("line_num", 2))
 _SELECTORS = tuple(int(s) for s in GeneralReadSelector)
 
 
-def _motion(fn: Function, lengths: tuple[int, int], lo: int, hi: int, doc: str,
+def _motion(fn: Code, lengths: tuple[int, int], lo: int, hi: int, doc: str,
             drive_error: bool = True) -> FunctionSpec:
     return FunctionSpec(fn, _K.MOTION, _L.SIGNED, lengths, None, minimum=lo, maximum=hi,
                         drive_error=drive_error, doc=doc)
@@ -186,36 +183,36 @@ def _group_set(fn: Function, fields: tuple[Field, ...], doc: str) -> FunctionSpe
 
 
 #: THE DYN CAN function table (section 5, corrected by section 6 and docs/errata.md).
-SPECS: dict[Function, FunctionSpec] = {
+SPECS: dict[Code, FunctionSpec] = {
     s.function: s
     for s in (
-        FunctionSpec(_F.SET_ORIGIN, _K.ACTION, _L.BYTE, (0, 1), None, minimum=ORIGIN_CODE,
+        FunctionSpec(_D.SET_ORIGIN, _K.ACTION, _L.BYTE, (0, 1), None, minimum=ORIGIN_CODE,
                      maximum=ORIGIN_CODE, codes=(ORIGIN_CODE,),
                      doc="current position becomes absolute zero (0 or 1 byte 0xFF)"),
-        _motion(_F.GO_ABSOLUTE_POS, (1, 4), *_POS, "point-to-point absolute move"),
-        _motion(_F.MAKE_LINEAR_LINE, (1, 4), *_POS, "3-axis linear interpolation word"),
-        _motion(_F.GO_RELATIVE_POS, (1, 4), *_POS, "point-to-point relative move"),
-        _motion(_F.MAKE_CIRCULAR_ARC, (1, 4), *_POS, "3-axis circular interpolation word"),
-        FunctionSpec(_F.ASSIGN_DRIVE_ID, _K.SETTING, _L.BYTE, (1, 1), None, minimum=0,
+        _motion(_D.GO_ABSOLUTE_POS, (1, 4), *_POS, "point-to-point absolute move"),
+        _motion(_D.MAKE_LINEAR_LINE, (1, 4), *_POS, "3-axis linear interpolation word"),
+        _motion(_D.GO_RELATIVE_POS, (1, 4), *_POS, "point-to-point relative move"),
+        _motion(_D.MAKE_CIRCULAR_ARC, (1, 4), *_POS, "3-axis circular interpolation word"),
+        FunctionSpec(_D.ASSIGN_DRIVE_ID, _K.SETTING, _L.BYTE, (1, 1), None, minimum=0,
                      maximum=ASSIGN_ID_MAX, drive_error=True,
                      doc="new drive id; wait 10 ms for the CAN port to re-initialise"),
-        FunctionSpec(_F.READ_DRIVE_ID, _K.READ, _L.NONE, (0, 0), _L.BYTE, (1, 1),
+        FunctionSpec(_D.READ_DRIVE_ID, _K.READ, _L.NONE, (0, 0), _L.BYTE, (1, 1),
                      doc="drive id"),
-        FunctionSpec(_F.SET_DRIVE_CONFIG, _K.SETTING, _L.BYTE, (1, 1), None, minimum=0,
+        FunctionSpec(_D.SET_DRIVE_CONFIG, _K.SETTING, _L.BYTE, (1, 1), None, minimum=0,
                      maximum=0xFF, doc="configuration byte (b7 b6 unimplemented)"),
-        FunctionSpec(_F.READ_DRIVE_CONFIG, _K.READ, _L.NONE, (0, 0), _L.BYTE, (1, 1),
+        FunctionSpec(_D.READ_DRIVE_CONFIG, _K.READ, _L.NONE, (0, 0), _L.BYTE, (1, 1),
                      doc="configuration byte", dummy=1),
-        FunctionSpec(_F.READ_DRIVE_STATUS, _K.READ, _L.NONE, (0, 0), _L.BYTE, (1, 1),
+        FunctionSpec(_D.READ_DRIVE_STATUS, _K.READ, _L.NONE, (0, 0), _L.BYTE, (1, 1),
                      doc="status byte"),
-        _motion(_F.TURN_CONST_SPEED, (1, 2), -CONST_SPEED_LIMIT_RPM, CONST_SPEED_LIMIT_RPM,
+        _motion(_D.TURN_CONST_SPEED, (1, 2), -CONST_SPEED_LIMIT_RPM, CONST_SPEED_LIMIT_RPM,
                 "rpm, positive CW"),
-        _motion(_F.SQUARE_WAVE, (1, 3), 0, WAVE_AMPLITUDE_MAX, "amplitude, 4096 = 180 deg"),
-        _motion(_F.SIN_WAVE, (1, 3), 0, WAVE_AMPLITUDE_MAX, "amplitude, 4096 = 180 deg"),
-        _motion(_F.SS_FREQUENCY, (1, 1), 0, WAVE_FREQUENCY_MAX_HZ, "wave frequency, Hz"),
-        FunctionSpec(_F.GENERAL_READ, _K.READ, _L.BYTE, (1, 1), _L.SIGNED, (1, 4),
+        _motion(_D.SQUARE_WAVE, (1, 3), 0, WAVE_AMPLITUDE_MAX, "amplitude, 4096 = 180 deg"),
+        _motion(_D.SIN_WAVE, (1, 3), 0, WAVE_AMPLITUDE_MAX, "amplitude, 4096 = 180 deg"),
+        _motion(_D.SS_FREQUENCY, (1, 1), 0, WAVE_FREQUENCY_MAX_HZ, "wave frequency, Hz"),
+        FunctionSpec(_D.GENERAL_READ, _K.READ, _L.BYTE, (1, 1), _L.SIGNED, (1, 4),
                      minimum=min(_SELECTORS), maximum=max(_SELECTORS), codes=_SELECTORS,
                      doc="selector 0x1B position (counts), 0x1E torque (700 = peak)"),
-        FunctionSpec(_F.FOR_MOTOR_DEFINE, _K.INTERNAL, _L.RAW, (0, 0), None,
+        FunctionSpec(_D.FOR_MOTOR_DEFINE, _K.INTERNAL, _L.RAW, (0, 0), None,
                      doc="DMM internal; never sent"),
         _group_set(_F.SET_PARAM_GROUP1, _G1, "main, speed, integration gain, torque filter"),
         _group_set(_F.SET_PARAM_GROUP2, _G2, "max speed, max acceleration"),
@@ -249,7 +246,7 @@ SPECS: dict[Function, FunctionSpec] = {
 assert len(SPECS) == 32
 
 #: Parameter name -> (set group function, read group function, field index).
-PARAM_GROUPS: dict[str, tuple[Function, Function, int]] = {
+PARAM_GROUPS: dict[str, tuple[Code, Code, int]] = {
     f.param: (
         s.function,
         next(r.function for r in SPECS.values()
@@ -378,7 +375,7 @@ def decode(arbitration_id: int, data: bytes | bytearray) -> Frame:
     return Frame(drive_id, function, bytes(data))
 
 
-def request(drive_id: int, function: Function, value: int | None = None,
+def request(drive_id: int, function: Code, value: int | None = None,
             fields: tuple[int, ...] | None = None, raw: bytes | None = None) -> Frame:
     """Host request with the table's layout; structural checks only (fits the bytes).
 
@@ -405,7 +402,7 @@ def request(drive_id: int, function: Function, value: int | None = None,
     return Frame(drive_id, function, data)
 
 
-def reply(drive_id: int, function: Function, value: int | None = None,
+def reply(drive_id: int, function: Code, value: int | None = None,
           fields: tuple[int, ...] | None = None, raw: bytes | None = None) -> Frame:
     """Drive reply on the request's identifier, with the table's reply layout."""
     spec = SPECS[function]
@@ -436,7 +433,7 @@ def expects_reply(frame: Frame) -> bool:
     """Will the drive answer this request (General_Read: only the reading selectors)."""
     if frame.function not in _REPLY_LENGTHS:
         return False
-    if frame.function == Function.GENERAL_READ:
+    if frame.function == DmmFunction.GENERAL_READ:
         return bool(frame.data) and frame.data[0] in _ANSWERED_CODES
     return True
 
@@ -452,7 +449,7 @@ def is_reply_shape(frame: Frame) -> bool:
 # ------------------------------------------------------------------ text
 def function_name(function: int) -> str:
     try:
-        return Function(function).name
+        return function_of(function).name
     except ValueError:
         return f"0x{function:02x}"
 
@@ -491,7 +488,7 @@ def describe(frame: Frame, from_drive: bool | None = None) -> str:
     """One line for ``servobus decode`` / ``sniff``; direction guessed when None."""
     name = function_name(frame.function)
     try:
-        spec = SPECS[Function(frame.function)]
+        spec = SPECS[function_of(frame.function)]
     except ValueError:  # pragma: no cover - 5 bits always name a function
         return f"id 0x{frame.arbitration_id:03x}: {frame.data.hex(' ')}"
     if from_drive is None:
@@ -506,7 +503,7 @@ def describe(frame: Frame, from_drive: bool | None = None) -> str:
             return f"drive {target} -> host: DRIVE_ERROR {what}"
         return f"drive {target} -> host: {name}{_show(frame, spec.reply, spec)}"
     extra = ""
-    if frame.function == Function.GENERAL_READ and frame.data:
+    if frame.function == DmmFunction.GENERAL_READ and frame.data:
         try:
             extra = f" ({GeneralReadSelector(frame.data[0]).name})"
         except ValueError:

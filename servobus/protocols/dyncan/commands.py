@@ -17,10 +17,11 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Generic, TypeVar
 
-from servobus.axis import checks
+from servobus import checks
 from servobus.errors import ArgumentRangeError
 from servobus.families.dmm import params as P
 from servobus.families.dmm.registers import DriveConfig, DriveStatus
+from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.families.dmm.vocabulary import GeneralReadSelector as GR
 from servobus.protocols.dyncan import codec as c
 
@@ -52,8 +53,8 @@ class CanCommand(Generic[T]):
         return self.frame.drive_id
 
     @property
-    def function(self) -> F:
-        return F(self.frame.function)
+    def function(self) -> c.Code:
+        return c.function_of(self.frame.function)
 
     @property
     def expects_reply(self) -> bool:
@@ -76,7 +77,7 @@ def check_drive_id(drive_id: int, *, allow_broadcast: bool = True) -> int:
     return drive_id
 
 
-def check_value(function: F, value: int, what: str) -> int:
+def check_value(function: c.Code, value: int, what: str) -> int:
     spec = c.SPECS[function]
     if isinstance(value, bool) or not isinstance(value, int):
         raise ArgumentRangeError(f"{what} must be an integer, got {value!r}")
@@ -94,7 +95,7 @@ class _NoData:
 _NO_DATA = _NoData()
 
 
-def _cmd(drive_id: int, function: F, value: int | _NoData = _NO_DATA, *, what: str = "value",
+def _cmd(drive_id: int, function: c.Code, value: int | _NoData = _NO_DATA, *, what: str = "value",
          parse: Callable[[c.Frame], T], guard_item: str | None = None,
          raw: bytes | None = None) -> CanCommand[T]:
     """Every value a caller gives is checked, ``None`` included (it would encode as 0 and
@@ -110,7 +111,7 @@ def _cmd(drive_id: int, function: F, value: int | _NoData = _NO_DATA, *, what: s
                       guard_item=guard_item)
 
 
-def _send(drive_id: int, function: F, value: int | _NoData = _NO_DATA, *, what: str = "value",
+def _send(drive_id: int, function: c.Code, value: int | _NoData = _NO_DATA, *, what: str = "value",
           guard_item: str | None = None) -> CanCommand[None]:
     """A command without a reply (motion, settings, actions)."""
     return _cmd(drive_id, function, value, what=what, parse=_no_reply, guard_item=guard_item)
@@ -118,36 +119,36 @@ def _send(drive_id: int, function: F, value: int | _NoData = _NO_DATA, *, what: 
 
 # ------------------------------------------------------------------ motion
 def make_move_absolute(drive_id: int, position: int) -> CanCommand[None]:
-    return _send(drive_id, F.GO_ABSOLUTE_POS, position, what="position")
+    return _send(drive_id, DmmFunction.GO_ABSOLUTE_POS, position, what="position")
 
 
 def make_move_relative(drive_id: int, distance: int) -> CanCommand[None]:
-    return _send(drive_id, F.GO_RELATIVE_POS, distance, what="distance")
+    return _send(drive_id, DmmFunction.GO_RELATIVE_POS, distance, what="distance")
 
 
 def make_linear_line_word(drive_id: int, value: int) -> CanCommand[None]:
     """One Make_LinearLine word (the CAN manual gives no word order; see DYN232M 7.5)."""
-    return _send(drive_id, F.MAKE_LINEAR_LINE, value, what="line word")
+    return _send(drive_id, DmmFunction.MAKE_LINEAR_LINE, value, what="line word")
 
 
 def make_circular_arc_word(drive_id: int, value: int) -> CanCommand[None]:
-    return _send(drive_id, F.MAKE_CIRCULAR_ARC, value, what="arc word")
+    return _send(drive_id, DmmFunction.MAKE_CIRCULAR_ARC, value, what="arc word")
 
 
 def make_turn_const_speed(drive_id: int, rpm: int) -> CanCommand[None]:
-    return _send(drive_id, F.TURN_CONST_SPEED, rpm, what="rpm")
+    return _send(drive_id, DmmFunction.TURN_CONST_SPEED, rpm, what="rpm")
 
 
 def make_square_wave(drive_id: int, amplitude: int) -> CanCommand[None]:
-    return _send(drive_id, F.SQUARE_WAVE, amplitude, what="amplitude")
+    return _send(drive_id, DmmFunction.SQUARE_WAVE, amplitude, what="amplitude")
 
 
 def make_sine_wave(drive_id: int, amplitude: int) -> CanCommand[None]:
-    return _send(drive_id, F.SIN_WAVE, amplitude, what="amplitude")
+    return _send(drive_id, DmmFunction.SIN_WAVE, amplitude, what="amplitude")
 
 
 def make_wave_frequency(drive_id: int, hz: int) -> CanCommand[None]:
-    return _send(drive_id, F.SS_FREQUENCY, hz, what="frequency")
+    return _send(drive_id, DmmFunction.SS_FREQUENCY, hz, what="frequency")
 
 
 def make_sync_load(drive_id: int, value: int, *, relative: bool = False) -> CanCommand[None]:
@@ -170,7 +171,7 @@ def make_position_direct(drive_id: int, step: int) -> CanCommand[None]:
 
 def make_set_origin(drive_id: int) -> CanCommand[None]:
     """Sent as one byte 0xFF (section 6); the node also accepts no data."""
-    return _send(drive_id, F.SET_ORIGIN, c.ORIGIN_CODE)
+    return _send(drive_id, DmmFunction.SET_ORIGIN, c.ORIGIN_CODE)
 
 
 # ------------------------------------------------------------------ actions
@@ -189,24 +190,24 @@ def make_disable(drive_id: int) -> CanCommand[None]:
 
 def make_reset(drive_id: int) -> CanCommand[None]:
     """General_Read 0x1C: drive reset, as on DYN232M (same firmware; not in the CAN manual)."""
-    return CanCommand(c.request(check_drive_id(drive_id), F.GENERAL_READ, int(GR.RESET)),
+    return CanCommand(c.request(check_drive_id(drive_id), DmmFunction.GENERAL_READ, int(GR.RESET)),
                       Kind.ACTION, parse=_no_reply)
 
 
 # ------------------------------------------------------------------ settings (EEPROM)
 def make_set_config(drive_id: int, config: DriveConfig | int) -> CanCommand[None]:
     value = config.to_byte() if isinstance(config, DriveConfig) else config
-    return _send(drive_id, F.SET_DRIVE_CONFIG, value, what="config", guard_item="config")
+    return _send(drive_id, DmmFunction.SET_DRIVE_CONFIG, value, what="config", guard_item="config")
 
 
 def make_assign_id(drive_id: int, new_id: int) -> CanCommand[None]:
     """New ids are 1..63 (the drive accepts 0..64, but 0 is broadcast and 64 has no id bits)."""
     check_drive_id(new_id, allow_broadcast=False)
-    return _send(check_drive_id(drive_id), F.ASSIGN_DRIVE_ID, new_id, what="new id",
+    return _send(check_drive_id(drive_id), DmmFunction.ASSIGN_DRIVE_ID, new_id, what="new id",
                 guard_item="drive_id")
 
 
-def group_of(name: str) -> tuple[F, F, int]:
+def group_of(name: str) -> tuple[c.Code, c.Code, int]:
     """(set function, read function, field index) of a parameter reachable over CAN."""
     spec = P.spec(checks.param_name(name))
     try:
@@ -221,8 +222,8 @@ def group_of(name: str) -> tuple[F, F, int]:
 def make_set_params(drive_id: int, values: Mapping[str, int]) -> list[CanCommand[None]]:
     """One group write per group touched; the other fields of a group are sent as 0
     (= leave unchanged). Every value is checked before any frame is built."""
-    groups: dict[F, list[int]] = {}
-    names: dict[F, list[str]] = {}
+    groups: dict[c.Code, list[int]] = {}
+    names: dict[c.Code, list[str]] = {}
     if not isinstance(values, Mapping):
         raise ArgumentRangeError(f"parameter values must be a mapping, got {values!r}")
     for name, value in values.items():
@@ -243,8 +244,8 @@ def make_set_param(drive_id: int, name: str, value: int) -> CanCommand[None]:
 
 
 # ------------------------------------------------------------------ reads
-def make_read_group(drive_id: int, function: F) -> CanCommand[dict[str, int]]:
-    if not isinstance(function, F):
+def make_read_group(drive_id: int, function: c.Code) -> CanCommand[dict[str, int]]:
+    if not isinstance(function, DmmFunction | F):
         raise ArgumentRangeError(f"{function!r} is not a DYN CAN function")
     spec = c.SPECS[function]
     if not (spec.kind is Kind.READ and spec.fields):
@@ -273,31 +274,31 @@ def _unsigned(frame: c.Frame) -> int:
 
 @functools.cache  # immutable result: built once per drive id (hot polling path)
 def make_read_status(drive_id: int) -> CanCommand[DriveStatus]:
-    return _cmd(drive_id, F.READ_DRIVE_STATUS,
+    return _cmd(drive_id, DmmFunction.READ_DRIVE_STATUS,
                 parse=lambda f: DriveStatus.from_byte(f.unsigned))
 
 
 @functools.cache  # immutable result: built once per drive id (hot polling path)
 def make_read_config(drive_id: int) -> CanCommand[DriveConfig]:
-    return _cmd(drive_id, F.READ_DRIVE_CONFIG,
+    return _cmd(drive_id, DmmFunction.READ_DRIVE_CONFIG,
                 parse=lambda f: DriveConfig.from_byte(f.unsigned))
 
 
 @functools.cache  # immutable result: built once per drive id (hot polling path)
 def make_read_id(drive_id: int) -> CanCommand[int]:
-    return _cmd(drive_id, F.READ_DRIVE_ID, parse=_unsigned)
+    return _cmd(drive_id, DmmFunction.READ_DRIVE_ID, parse=_unsigned)
 
 
 @functools.cache  # immutable result: built once per drive id (hot polling path)
 def make_read_position(drive_id: int) -> CanCommand[int]:
     """General_Read 0x1B: absolute position, encoder counts (reply on 0x0E)."""
-    return _cmd(drive_id, F.GENERAL_READ, int(GR.POSITION), parse=_frame_value)
+    return _cmd(drive_id, DmmFunction.GENERAL_READ, int(GR.POSITION), parse=_frame_value)
 
 
 @functools.cache  # immutable result: built once per drive id (hot polling path)
 def make_read_torque(drive_id: int) -> CanCommand[int]:
     """General_Read 0x1E: torque, 700 = peak current, positive = CCW."""
-    return _cmd(drive_id, F.GENERAL_READ, int(GR.TORQUE), parse=_frame_value)
+    return _cmd(drive_id, DmmFunction.GENERAL_READ, int(GR.TORQUE), parse=_frame_value)
 
 
 @functools.cache  # immutable result: built once per drive id (hot polling path)

@@ -52,6 +52,7 @@ from dataclasses import dataclass
 from servobus.errors import FramingError
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import CONFIG_DEFINED_MASK, AlarmCode
+from servobus.families.dmm.vocabulary import DmmFunction as DF
 from servobus.families.dmm.vocabulary import GeneralReadSelector as GR
 from servobus.protocols.dyncan import codec as c
 from servobus.sim.dmm.actions import run_action
@@ -152,8 +153,8 @@ class DynCanNetwork:
     def handle(self, frame: c.Frame) -> list[c.Frame]:
         """Execute one host frame on every node it addresses; return the replies."""
         self.stats.frames += 1
-        spec = c.SPECS[F(frame.function)]
-        handler = self._handlers.get(F(frame.function))
+        spec = c.SPECS[c.function_of(frame.function)]
+        handler = self._handlers.get(c.function_of(frame.function))
         if handler is None:
             return []
         if not spec.accepts_length(len(frame.data)):
@@ -259,7 +260,7 @@ def _position_direct(node: DynCanNode, frame: c.Frame) -> None:
 
 def _general_read(node: DynCanNode, frame: c.Frame) -> c.Frame | None:
     value = _general_read_value(node.drive, frame.data[0])
-    return None if value is None else c.reply(_reply_id(node, frame), F.GENERAL_READ, value)
+    return None if value is None else c.reply(_reply_id(node, frame), DF.GENERAL_READ, value)
 
 
 def _general_read_value(drive: VirtualDrive, code: int) -> int | None:
@@ -303,7 +304,7 @@ def _set_group(node: DynCanNode, frame: c.Frame) -> None:
 def _read_group(node: DynCanNode, frame: c.Frame) -> c.Frame:
     spec = frame.spec
     values = tuple(node.drive.get_param(f.param) for f in spec.fields)
-    return c.reply(_reply_id(node, frame), F(frame.function), fields=values)
+    return c.reply(_reply_id(node, frame), c.function_of(frame.function), fields=values)
 
 
 def _reply_id(node: DynCanNode, frame: c.Frame) -> int:
@@ -313,7 +314,7 @@ def _reply_id(node: DynCanNode, frame: c.Frame) -> int:
 
 def _reader(read: Callable[[DynCanNode], int]) -> Handler:
     def run(node: DynCanNode, frame: c.Frame) -> c.Frame:
-        return c.reply(_reply_id(node, frame), F(frame.function), read(node))
+        return c.reply(_reply_id(node, frame), c.function_of(frame.function), read(node))
 
     return run
 
@@ -322,26 +323,26 @@ def _echo(node: DynCanNode, frame: c.Frame) -> c.Frame:
     return c.reply(_reply_id(node, frame), F.ECHO, raw=frame.data)
 
 
-def _build_handlers() -> dict[F, Handler]:
+def _build_handlers() -> dict[c.Code, Handler]:
     def set_config(node: DynCanNode, frame: c.Frame) -> None:
         node.drive.set_config(frame.unsigned & CONFIG_DEFINED_MASK)  # b7 b6 unimplemented
 
-    table: dict[F, Handler] = {
-        F.SET_ORIGIN: _set_origin,
-        F.GO_ABSOLUTE_POS: _motion(VirtualDrive.move_absolute),
-        F.MAKE_LINEAR_LINE: _motion(VirtualDrive.linear_line_word),
-        F.GO_RELATIVE_POS: _motion(VirtualDrive.move_relative),
-        F.MAKE_CIRCULAR_ARC: _motion(VirtualDrive.circular_arc_word),
-        F.ASSIGN_DRIVE_ID: _assign_id,
-        F.READ_DRIVE_ID: _reader(lambda n: n.drive_id),
-        F.SET_DRIVE_CONFIG: set_config,
-        F.READ_DRIVE_CONFIG: _reader(lambda n: n.drive.read_config().to_byte()),
-        F.READ_DRIVE_STATUS: _reader(lambda n: n.drive.read_status().to_byte()),
-        F.TURN_CONST_SPEED: _motion(VirtualDrive.turn_const_speed),
-        F.SQUARE_WAVE: _motion(VirtualDrive.square_wave),
-        F.SIN_WAVE: _motion(VirtualDrive.sine_wave),
-        F.SS_FREQUENCY: _motion(VirtualDrive.set_wave_frequency),
-        F.GENERAL_READ: _general_read,
+    table: dict[c.Code, Handler] = {
+        DF.SET_ORIGIN: _set_origin,
+        DF.GO_ABSOLUTE_POS: _motion(VirtualDrive.move_absolute),
+        DF.MAKE_LINEAR_LINE: _motion(VirtualDrive.linear_line_word),
+        DF.GO_RELATIVE_POS: _motion(VirtualDrive.move_relative),
+        DF.MAKE_CIRCULAR_ARC: _motion(VirtualDrive.circular_arc_word),
+        DF.ASSIGN_DRIVE_ID: _assign_id,
+        DF.READ_DRIVE_ID: _reader(lambda n: n.drive_id),
+        DF.SET_DRIVE_CONFIG: set_config,
+        DF.READ_DRIVE_CONFIG: _reader(lambda n: n.drive.read_config().to_byte()),
+        DF.READ_DRIVE_STATUS: _reader(lambda n: n.drive.read_status().to_byte()),
+        DF.TURN_CONST_SPEED: _motion(VirtualDrive.turn_const_speed),
+        DF.SQUARE_WAVE: _motion(VirtualDrive.square_wave),
+        DF.SIN_WAVE: _motion(VirtualDrive.sine_wave),
+        DF.SS_FREQUENCY: _motion(VirtualDrive.set_wave_frequency),
+        DF.GENERAL_READ: _general_read,
         F.GO_ABSOLUTE_POS_SYNC: _load_sync(absolute=True),
         F.GO_RELATIVE_POS_SYNC: _load_sync(absolute=False),
         F.SYNC_TRIGGER: _sync_trigger,

@@ -20,8 +20,9 @@ from servobus.protocols.dyncan.client import open_can_client
 from servobus.protocols.dyncan.commands import check_drive_id
 from servobus.protocols.dyncan.device import DynCanNetwork
 from servobus.protocols.dyncan.server import serve
-from servobus.sim.fleet import make_drives, parse_ids
-from servobus.sim.realtime import RealtimeClock
+from servobus.sim.core.ids import parse_ids
+from servobus.sim.dmm.fleet import make_drives
+from servobus.sim.wall_clock import RealtimeClock
 from servobus.transport.can_bus import AsyncCanBus, BitTiming
 
 if TYPE_CHECKING:

@@ -9,8 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from servobus.axis.url import DriveUrl, merge_options
-from servobus.link.can import can_spec
+from servobus.axis.url import DriveUrl, can_spec, merge_options
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan.axis import DynCanAxis
 from servobus.protocols.dyncan.client import open_can_client

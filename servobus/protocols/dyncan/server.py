@@ -9,7 +9,7 @@ import contextlib
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan.device import DynCanNetwork
 from servobus.sim.can_requests import requests
-from servobus.sim.realtime import RealtimeClock
+from servobus.sim.wall_clock import RealtimeClock
 from servobus.transport.can_bus import FramePort
 
 

@@ -3,10 +3,11 @@
 ``functions`` holds the one table (function codes, frame lengths, error codes),
 ``messages`` the frozen dataclasses, ``codec`` (arbitration id, data) <-> messages in both
 directions, ``describe`` one line per frame for decode/sniff, ``commands`` the host's pure
-commands, ``client``/``axis`` the host side, ``node`` the virtual motors' side, ``sync``
-synchronised multi-axis motion. Registers, ranges and units are the YZ-AIM family's
-(servobus.families.yzaim.registers). This module only declares the registry tables (nothing heavy is
-imported: docs/architecture.md).
+commands, ``client``/``axis``/``opener`` the host side, ``device``/``server``/
+``inprocess``/``cli`` the virtual motors' side, ``sync`` synchronised multi-axis motion.
+Registers, ranges and units are the YZ-AIM family's (servobus.families.yzaim.registers).
+This module only declares its ProtocolSpec (nothing heavy is imported:
+docs/architecture.md).
 
 URLs: ``easycan+<python-can interface>://<channel>``, e.g. ``easycan+pcan://PCAN_USBBUS1``,
 ``easycan+socketcand://127.0.0.1:29536/can0``, ``easycan+virtual://bus0``; ``sim://easycan``

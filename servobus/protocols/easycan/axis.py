@@ -1,7 +1,7 @@
 """EasyCanAxis: one YZ-AIM motor on an EasyCan bus, in the Axis units (docs/easycan.md).
 
 Positions are the motor's own counts (32,768 per revolution) on the wire, speeds rpm. The
-mapping of the Axis calls onto the YZ-AIM registers is :mod:`servobus.axis.register_axis`'s
+mapping of the Axis calls onto the YZ-AIM registers is :mod:`servobus.families.yzaim.axis`'s
 (shared with Modbus RTU); what EasyCan does its own way (YZ-AIM manual sections):
 
 * registers are read with 0x03 (one register or a 32-bit pair), the status and current
@@ -20,13 +20,13 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from servobus.axis.base import AsyncAxis
-from servobus.axis.register_axis import RegisterAxis
+from servobus.families.yzaim.axis import YzaimAxis
 from servobus.protocols.easycan import commands as cmds
 from servobus.protocols.easycan.client import AsyncEasyCanClient
 from servobus.protocols.easycan.sync import SyncGroup
 
 
-class EasyCanAxis(RegisterAxis[AsyncEasyCanClient]):
+class EasyCanAxis(YzaimAxis[AsyncEasyCanClient]):
     protocol_name = "easycan"
     reachable_params = cmds.REACHABLE_PARAMS
 

@@ -28,10 +28,10 @@ from servobus.families.yzaim import registers as yzaim
 from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.functions import BITRATE
 from servobus.protocols.easycan.server import serve
-from servobus.sim.realtime import RealtimeClock
 from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS, fit_fd_limit, log_to_stderr
 from servobus.sim.socketcand_bus import socketcand_bus
 from servobus.sim.socketcand_hub import parse_socketcand_address
+from servobus.sim.wall_clock import RealtimeClock
 from servobus.sim.yzaim.fleet import make_motors, parse_addresses
 from servobus.sim.yzaim.motor import YzaimMotor
 

@@ -31,7 +31,7 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-from servobus.axis import checks
+from servobus import checks
 from servobus.errors import (
     ArgumentRangeError,
     DriveError,

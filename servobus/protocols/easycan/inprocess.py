@@ -23,7 +23,7 @@ from servobus.protocols.easycan.client import open_easycan_client
 from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.functions import BITRATE
 from servobus.protocols.easycan.server import serve
-from servobus.sim.realtime import RealtimeClock
+from servobus.sim.wall_clock import RealtimeClock
 from servobus.sim.yzaim.fleet import FACTORY_ADDRESS, make_motors, parse_addresses
 from servobus.transport.can_bus import AsyncCanBus, BitTiming
 

@@ -14,8 +14,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from servobus.axis.url import DriveUrl, merge_options
-from servobus.link.can import can_spec
+from servobus.axis.url import DriveUrl, can_spec, merge_options
 from servobus.protocols.easycan import commands as cmds
 from servobus.protocols.easycan.axis import EasyCanAxis
 from servobus.protocols.easycan.client import open_easycan_client

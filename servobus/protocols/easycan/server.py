@@ -8,7 +8,7 @@ import time
 
 from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.sim.can_requests import requests
-from servobus.sim.realtime import RealtimeClock
+from servobus.sim.wall_clock import RealtimeClock
 from servobus.transport.can_bus import CanFrame, FramePort
 
 

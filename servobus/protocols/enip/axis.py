@@ -1,18 +1,15 @@
-"""EnipAxis: the vendor-neutral Axis of one DYN5 over EtherNet/IP explicit messaging.
+"""EnipAxis: one DYN5 over EtherNet/IP explicit messaging: the wire of the DYN5 profile.
 
-Units (docs/axis.md): positions in encoder counts (65,536 per revolution), speed in rpm,
-current in amperes. Every call is a Get/Set_Attribute_Single on the Parameter object
-(class 0x0F, attribute 1) through :class:`AsyncEnipClient`; the instance table is
-``servobus.families.dyn5.params`` and the Axis view of it ``servobus.families.dyn5.family``.
+The mapping of the Axis API onto the DYN5 (GEAR_NUM, status word, currents, torque mode) is
+:class:`servobus.families.dyn5.axis.Dyn5Axis`'s, on the DMM profile. What this module adds
+is the wire: every instance read or write is a Get/Set_Attribute_Single on the Parameter
+object (class 0x0F, attribute 1) through :class:`AsyncEnipClient`, sessions, and what only
+EtherNet/IP has.
 
-* Moves: counts -> command units through GEAR_NUM (read once, then tracked through this
-  axis's own writes; forgotten at Reset and origin, which reload RAM), written to 0x15 /
-  0x17. A Set reply only says the module took the value (manual 4.1, 7: effective within
-  300 us); motion is seen in the status word. Never re-sent.
-* Current: 0x1F counts 2000 = 100 % of the drive's peak current, positive = CCW (4.4); the
-  Axis gives amperes positive towards increasing position (CW), so the sign flips. The
-  peak current is not readable over EtherNet/IP: ``peak_current_a`` (default 20 A, the
-  DYN5-H01 of the manual's 4.4 example) scales it.
+* A Set reply only says the module took the value (manual 4.1, 7: effective within 300 us);
+  motion is seen in the status word. A move is never re-sent.
+* The peak current is not readable over EtherNet/IP: ``peak_current_a`` (default 20 A, the
+  DYN5-H01 of the manual's 4.4 example) scales the torque instances.
 * Ids: a DYN5 has no drive id; it is addressed by its IP address, and the drives of one
   daisy chain share B3.B2.B1 (manual 2). Decision: the Axis's ``drive_id`` is B0, the last
   octet; ``sibling(n)`` opens its own session to B3.B2.B1.n on the same TCP port;
@@ -36,22 +33,18 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
-from servobus.axis import checks
-from servobus.axis.base import DEFAULT_WAIT_TIMEOUT_S, AsyncAxis, AxisTraceHook, check_int
+from servobus import checks
+from servobus.axis.base import AxisTraceHook
 from servobus.errors import (
     ArgumentRangeError,
     ConnectionLost,
     DriveError,
     DriveTimeout,
     FramingError,
-    NotSupported,
     ProtocolError,
 )
-from servobus.families.base import AxisStatus, Family, ParamInfo, StreamProfile
-from servobus.families.dmm import units as U
-from servobus.families.dmm.family import command_to_counts, counts_to_command
 from servobus.families.dyn5 import params as dyn5
-from servobus.families.dyn5.family import DYN5, PARAM_INSTANCES, Dyn5Status, axis_status
+from servobus.families.dyn5.axis import Dyn5Axis
 from servobus.families.dyn5.params import Instance
 from servobus.link.transaction import DEFAULT_RETRIES
 from servobus.protocols.enip.client import CONNECT_TIMEOUT_S, DEFAULT_TIMEOUT_S, AsyncEnipClient
@@ -71,7 +64,7 @@ DEFAULT_RESET_TIMEOUT_S = 15.0
 RESET_RETRY_S = 0.2
 #: B0 of a daisy chain's addresses (manual 2: avoid 0, 254 and 255).
 DRIVE_IDS = range(1, 254)
-_I = dyn5.BY_NAME
+STATUS_INSTANCE = dyn5.BY_NAME["drive_status"].number
 
 
 @dataclass(frozen=True)
@@ -115,7 +108,7 @@ def with_last_octet(ip: str, b0: int) -> str:
     return f"{ip.rsplit('.', 1)[0]}.{b0}"
 
 
-class EnipAxis(AsyncAxis):
+class EnipAxis(Dyn5Axis):
     """One DYN5 on one EtherNet/IP session (module docstring)."""
 
     def __init__(self, client: AsyncEnipClient | None, ip: str,
@@ -123,7 +116,6 @@ class EnipAxis(AsyncAxis):
         self._client = client
         self.ip = check_ip(ip)
         self.options = options
-        self._gear_num: int | None = None
         self._hooks: list[AxisTraceHook] = []
         self._closers: list[Callable[[], Awaitable[None]]] = []
         self._closed = False
@@ -172,10 +164,6 @@ class EnipAxis(AsyncAxis):
         return PROTOCOL
 
     @property
-    def family(self) -> Family:
-        return DYN5
-
-    @property
     def drive_ids(self) -> range:
         return DRIVE_IDS
 
@@ -194,136 +182,25 @@ class EnipAxis(AsyncAxis):
             raise FramingError(f"instance 0x{number:02X} answered {len(data)} bytes, not a UDINT")
         return inst.decode(data) if inst is not None else dyn5.decode_udint(data)
 
-    async def write_instance(self, key: int | str, value: int) -> None:
-        """Set attribute 1 of a known instance; the value is checked against the table first."""
-        inst = dyn5.instance(key)
-        await self._write(inst, value)
-
-    async def _write(self, inst: Instance, value: int) -> None:
+    async def _write_instance(self, inst: Instance, value: int) -> None:
         data = inst.encode(inst.check(value))
         client = await self.client()
         await client.set_attribute_single(ClassCode.PARAMETER, inst.number,
                                           dyn5.PARAMETER_ATTRIBUTE, data)
 
     @property
+    def peak_current_a(self) -> float:
+        return self.options.peak_current_a
+
+    @property
     def id_address(self) -> str:
         """B3.B2.B1.id: the drive id picks the drive of the URL's daisy chain (docs/enip.md)."""
         return self.ip
 
-    # ------------------------------------------------------------- units
-    async def gear_num(self) -> int:
-        """GEAR_NUM as this axis knows it (read from the drive the first time)."""
-        if self._gear_num is None:
-            self._gear_num = await self.read_instance(_I["gear_num"].number)
-        return self._gear_num
-
-    async def to_command(self, counts: int) -> int:
-        return counts_to_command(counts, await self.gear_num())
-
-    def _check_move(self, value: object, *, relative: bool) -> int:
-        """Type, then the command range at the GEAR_NUM known so far (the widest before the
-        first read): a value no GEAR_NUM can reach is refused before even the gear read."""
-        counts = super()._check_move(value, relative=relative)
-        gear = self._gear_num or DYN5.param("gear_num").minimum
-        _I["go_relative_pos" if relative else "go_absolute_pos"].check(
-            counts_to_command(counts, gear))
-        return counts
-
-    async def position_window(self) -> int:
-        """On Position Range (1/16384 rev) in counts: the drive's own in-position window."""
-        return max(1, round(U.onrange_to_counts(await self.read_param("on_range"))))
-
-    # ------------------------------------------------------------- motion
-    async def _send_move_to(self, position: int) -> None:
-        command = await self.to_command(position)
-        self._check_limits(position, False)  # now at the drive's GEAR_NUM
-        await self._write(_I["go_absolute_pos"], command)
-
-    async def _send_move_by(self, distance: int) -> None:
-        command = await self.to_command(distance)
-        self._check_limits(distance, True)
-        await self._write(_I["go_relative_pos"], command)
-
-    def _move_limits(self, relative: bool) -> tuple[int, int] | None:
-        """0x15/0x16's command range in counts at the GEAR_NUM known so far (the widest,
-        GEAR_NUM's minimum, before it is read)."""
-        inst = _I["go_relative_pos" if relative else "go_absolute_pos"]
-        if inst.minimum is None or inst.maximum is None:
-            return None
-        gear = self._gear_num or DYN5.param("gear_num").minimum
-        return command_to_counts(inst.minimum, gear), command_to_counts(inst.maximum, gear)
-
-    def _limits_note(self) -> str:
-        return f" at GEAR_NUM {self._gear_num}" if self._gear_num else ""
-
-    async def move_range(self, *, relative: bool = False) -> tuple[int, int] | None:
-        await self.gear_num()
-        return self._move_limits(relative)
-
-    async def stream_profile(self) -> StreamProfile:
-        """High Speed and High Accel at GEAR_NUM: Go_Absolute_Pos over explicit messaging
-        retargets the running profile (DTPU); never written per motion (EEPROM)."""
-        return StreamProfile(*U.stream_profile(await self.read_param("max_speed"),
-                                               await self.read_param("max_accel"),
-                                               await self.gear_num()))
-
-    async def move_to_command(self, command: int, *, wait: bool = False,
-                              timeout: float | None = None) -> None:
-        """Absolute move in raw command units (x 4096/GEAR_NUM x 4 counts), no conversion."""
-        await self._write(_I["go_absolute_pos"], check_int("command", command))
-        if wait:
-            await self.wait_idle(DEFAULT_WAIT_TIMEOUT_S if timeout is None else timeout)
-
-    async def move_by_command(self, command: int, *, wait: bool = False,
-                              timeout: float | None = None) -> None:
-        """Relative move in raw command units, no conversion."""
-        await self._write(_I["go_relative_pos"], check_int("command", command))
-        if wait:
-            await self.wait_idle(DEFAULT_WAIT_TIMEOUT_S if timeout is None else timeout)
-
-    async def turn(self, rpm: int) -> None:
-        await self._write(_I["turn_const_speed"], check_int("rpm", rpm))
-
-    async def square_wave(self, amplitude: int) -> None:
-        """Square-wave motion, 4096 = 180 deg (send ``wave_frequency`` first, 4.4)."""
-        await self._write(_I["square_wave_amplitude"], amplitude)
-
-    async def sine_wave(self, amplitude: int) -> None:
-        await self._write(_I["sine_wave_amplitude"], amplitude)
-
-    async def wave_frequency(self, hz: int) -> None:
-        await self._write(_I["ss_frequency"], hz)
-
-    async def set_origin(self) -> None:
-        """0x03 = 0xFFFF: the current position becomes absolute zero (multi-turn), then the
-        drive resets its servo control (4.4): RAM values, GEAR_NUM included, are reloaded."""
-        await self._write(_I["set_abs_origin"], dyn5.ORIGIN_KEY)
-        self._gear_num = None
-
-    async def home(self) -> None:
-        """The DYN5 runs no homing of its own: after power-up or Reset it reports its
-        absolute position without moving (DYN5 manual 4.4, 0x21 and "Motor Absolute
-        Position"); nothing is sent."""
-        raise NotSupported(f"a {self.family.title} runs no homing of its own: after a "
-                           "power-up or Reset it reports its absolute position without "
-                           "moving: set the zero where the axis stands "
-                           "(origin: Set ABS Origin), then move to 0", family=self.family.name)
-
-    async def _move_profile_values(self, rpm: float | None,
-                                   accel_rpm_s: float | None) -> dict[str, int]:
-        """High Speed and High Accel (EEPROM; the DMM formulas, Appendix B) at GEAR_NUM."""
-        return U.profile_params(rpm, accel_rpm_s, await self.gear_num())
-
-    async def enable(self) -> None:
-        await self._write(_I["sw_enable"], dyn5.ENABLE)
-
-    async def disable(self) -> None:
-        await self._write(_I["sw_enable"], dyn5.DISABLE)
-
+    # ------------------------------------------------------------- Reset and link
     async def reset(self) -> None:
         """0x21 = 0xABCD, then reconnect once the adapter is back (module docstring)."""
-        await self._write(_I["drive_reset"], dyn5.RESET_KEY)
-        self._gear_num = None
+        await super().reset()  # 0x21 = 0xABCD; GEAR_NUM is forgotten (Dyn5Axis)
         old, self._client = self._client, None
         if old is not None:
             await old.close()
@@ -356,93 +233,12 @@ class EnipAxis(AsyncAxis):
         self._client.transactions.on_lost(callback)
         return True
 
-    async def power_marker(self, token: int | None = None) -> int | None:
-        """Instance 0x01, the memory test object (4.4): RAM that "will be lost after power
-        cycle or Reset", 0 after power-up. The machine leaves a non-zero token there and
-        reads it after its link came back: 0 means the drive lost power (or was reset)."""
-        if token is not None:
-            await self._write(_I["memory_test"], token)
-        return await self.read_instance("memory_test")
-
-    # ------------------------------------------------------------- torque mode
-    async def set_torque_mode(self, torque: bool) -> None:
-        """0x25: torque mode (True) or position/speed mode (False); the torque command
-        restarts at 0."""
-        await self._write(_I["command_mode"],
-                          dyn5.TORQUE_MODE if torque else dyn5.POSITION_SPEED_MODE)
-
-    async def torque_mode(self) -> bool:
-        return await self.read_instance(_I["command_mode"].number) == dyn5.TORQUE_MODE
-
-    async def torque(self, amps: float) -> None:
-        """Torque-mode current command in amperes, positive towards increasing position
-        (0x26: 2000 = peak current, positive = CW); clamped to +-peak.
-
-        The drive delivers it only below the torque-mode speed limit (parameter
-        ``torque_speed_limit``, 0x27): there its speed loop clamps the torque and holds the
-        limit, so the current read back falls to what the load takes (docs/enip.md)."""
-        if isinstance(amps, bool) or not isinstance(amps, int | float) or amps != amps:
-            raise ArgumentRangeError(f"amps must be a number, got {amps!r}")
-        await self._write(_I["torque_command"],
-                          dyn5.amps_to_torque(float(amps), self.options.peak_current_a))
-
-    # ------------------------------------------------------------- readouts
-    async def status_word(self) -> int:
-        return await self.read_instance(_I["drive_status"].number)
-
-    async def status(self) -> AxisStatus:
-        """The status word, and the speed when no profile runs (moving = the motor turns,
-        dyn5_family.axis_status): a constant speed leaves the busy bit clear."""
-        word = await self.status_word()
-        busy = Dyn5Status.from_word(word).motion_busy
-        return axis_status(word, None if busy else await self.speed())
-
-    async def readings(self) -> tuple[int, float, AxisStatus]:
-        """One speed read serves both the speed and :meth:`status` (3 requests, not 4)."""
-        word, position, speed = await asyncio.gather(
-            self.status_word(), self.position(), self.speed())
-        busy = Dyn5Status.from_word(word).motion_busy
-        return position, speed, axis_status(word, None if busy else speed)
-
-    async def position(self) -> int:
-        return await self.read_instance(_I["motor_position"].number)
-
-    async def speed(self) -> float:
-        return float(await self.read_instance(_I["motor_speed"].number))
-
-    async def torque_raw(self) -> int:
-        """0x1F as read: 2000 = peak current, positive = CCW."""
-        return await self.read_instance(_I["motor_torque"].number)
-
-    async def current(self) -> float:
-        return 0.0 - dyn5.torque_to_amps(await self.torque_raw(), self.options.peak_current_a)
-
     async def identity(self) -> IdentityReply:
         """Identity object instance 1, Get_Attributes_All (4.2)."""
         client = await self.client()
         return IdentityReply.decode(await client.get_attributes_all(ClassCode.IDENTITY, 1))
 
-    # ------------------------------------------------------------- parameters and ids
-    def parameters(self) -> tuple[ParamInfo, ...]:
-        return DYN5.params
-
-    def _param_instance(self, name: str) -> Instance:
-        self.param_info(checks.param_name(name))
-        return PARAM_INSTANCES[name]
-
-    async def read_param(self, name: str) -> int:
-        return await self.read_instance(self._param_instance(name).number)
-
-    def _check_param(self, name: str, value: object) -> int:
-        checked = super()._check_param(name, value)
-        return self._param_instance(name).check(checked)
-
-    async def write_param(self, name: str, value: int) -> None:
-        self._check_param(name, value)
-        await self._write(self._param_instance(name), value)
-        if name == "gear_num":
-            self._gear_num = value
-
+    # ------------------------------------------------------------- ids
     async def read_id(self) -> int:
         """B0 of the address, once the drive has answered a status read."""
         await self.status()
@@ -457,7 +253,7 @@ class EnipAxis(AsyncAxis):
         checks.seconds("timeout", timeout)
         try:
             client = await self.client(connect_timeout=timeout)
-            await client.get_attribute_single(ClassCode.PARAMETER, _I["drive_status"].number,
+            await client.get_attribute_single(ClassCode.PARAMETER, STATUS_INSTANCE,
                                               dyn5.PARAMETER_ATTRIBUTE, timeout=timeout,
                                               retries=0)
         except (DriveTimeout, ConnectionLost):

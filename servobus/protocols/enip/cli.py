@@ -27,7 +27,8 @@ import click
 from servobus import fastloop
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
-from servobus.cli.open_axis import emit_json, note, open_axis
+from servobus.cli.open_axis import open_axis
+from servobus.cli.output import emit_json, note
 from servobus.cli.param_types import Seconds
 from servobus.cli.sim_cmd import add_sim_command
 from servobus.cli.sim_control import control_option, start_control
@@ -36,8 +37,8 @@ from servobus.families.dmm import units as U
 from servobus.families.dyn5 import params as dyn5
 from servobus.protocols.enip.codec import io
 from servobus.protocols.enip.codec.encap import TCP_PORT
-from servobus.realtime import request_realtime
 from servobus.sim.fine_selector import fine_event_loop
+from servobus.thread_priority import request_realtime
 
 if TYPE_CHECKING:
     from servobus.protocols.enip.scanner import InputFrame
@@ -62,7 +63,7 @@ def _listening(servers: list[EnipServer]) -> None:
 async def run_adapters(hosts: str, tcp_port: int, udp_port: int, state: str | None,
                        model: str, duration: float | None, reset_downtime_s: float,
                        control: tuple[str, int] | None = None) -> None:
-    from servobus.protocols.enip.server import serve_enip
+    from servobus.protocols.enip.server import serve
 
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
@@ -70,7 +71,7 @@ async def run_adapters(hosts: str, tcp_port: int, udp_port: int, state: str | No
         with contextlib.suppress(NotImplementedError, RuntimeError):
             loop.add_signal_handler(sig, stop.set)
     try:
-        await serve_enip(hosts, tcp_port, udp_port, state, model=model, stop=stop,
+        await serve(hosts, tcp_port, udp_port, state, model=model, stop=stop,
                          duration=duration, reset_downtime_s=reset_downtime_s,
                          on_ready=lambda servers: _ready(servers, control))
     except OSError as exc:

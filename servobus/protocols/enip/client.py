@@ -37,7 +37,7 @@ import logging
 import struct
 from collections.abc import Callable
 
-from servobus.axis import checks
+from servobus import checks
 from servobus.errors import (
     ConnectionLost,
     DriveError,

@@ -4,7 +4,7 @@ Decision (issue 22): the scanner's O->T production runs on this thread, not on t
 loop it was opened on. A loop wakes up late whenever it is busy with anything else (a
 reply being decoded, a user's task, the epoll selector's millisecond rounding), and it is
 a user's thread: servobus may not change its scheduling. The clock thread is servobus's
-own, so it may run at SCHED_FIFO (:mod:`servobus.realtime`) - but only when asked,
+own, so it may run at SCHED_FIFO (:mod:`servobus.thread_priority`) - but only when asked,
 ``SERVOBUS_CLOCK_REALTIME=1``: measured, a real-time clock thread once stalled O->T
 production for ~0.4 s (1 run in 12, two scanner processes at once on a loaded 2-core
 machine; the same runs without it never did). The likely cause is the interpreter lock:
@@ -34,7 +34,7 @@ import time
 from collections.abc import Callable
 from typing import ClassVar
 
-from servobus.realtime import request_realtime
+from servobus.thread_priority import request_realtime
 
 log = logging.getLogger("servobus.enip")
 

@@ -17,7 +17,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from servobus.axis import checks
+from servobus import checks
 from servobus.errors import ArgumentRangeError, FramingError
 from servobus.protocols.enip.axis import check_ip
 from servobus.protocols.enip.codec import discovery

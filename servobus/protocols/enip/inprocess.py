@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from servobus.axis import checks
+from servobus import checks
 from servobus.axis.url import DriveUrl, merge_options
 from servobus.errors import ArgumentRangeError
 from servobus.families.dmm import units as U
@@ -23,7 +23,7 @@ from servobus.protocols.enip.axis import DRIVE_IDS, EnipAxis, with_last_octet
 from servobus.protocols.enip.client import AsyncEnipClient
 from servobus.protocols.enip.opener import OPTIONS, axis_options
 from servobus.protocols.enip.server import start_fleet
-from servobus.sim.fleet import parse_ids
+from servobus.sim.core.ids import parse_ids
 
 if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis

@@ -48,9 +48,10 @@ import threading
 from collections import deque
 from collections.abc import AsyncIterator, Callable
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING, cast
+from typing import Protocol, cast
 
-from servobus.axis import checks
+from servobus import checks
+from servobus.axis.types import AxisStatus
 from servobus.errors import (
     ArgumentRangeError,
     ConnectionLost,
@@ -59,9 +60,9 @@ from servobus.errors import (
     FramingError,
     ProtocolError,
 )
-from servobus.families.base import AxisStatus
 from servobus.families.dyn5 import params as dyn5
 from servobus.families.dyn5.family import axis_status
+from servobus.protocols.enip.client import AsyncEnipClient
 from servobus.protocols.enip.clock import ClockThread, Tick
 from servobus.protocols.enip.codec import io
 from servobus.protocols.enip.codec.cip import GeneralStatus, MessageRouterRequest, Service
@@ -82,8 +83,15 @@ from servobus.protocols.enip.codec.epath import LogicalType, Segment, logical
 from servobus.protocols.enip.production import Producer, ProductionWheel
 from servobus.protocols.enip.udp import UdpSocket
 
-if TYPE_CHECKING:
-    from servobus.protocols.enip.axis import EnipAxis
+
+class Session(Protocol):
+    """What the I/O needs of the axis that opens it (``EnipAxis``): the adapter's address and
+    its explicit session, reconnected after a loss (typed here: the axis imports this)."""
+
+    ip: str
+
+    async def client(self, connect_timeout: float | None = None) -> AsyncEnipClient: ...
+    async def reconnect(self) -> None: ...
 
 log = logging.getLogger("servobus.enip")
 
@@ -219,7 +227,7 @@ def local_address_for(ip: str) -> str:
 class CyclicIo:
     """Class 1 I/O with one DYN5 (module docstring). Use ``async with axis.io(...)``."""
 
-    def __init__(self, axis: EnipAxis, *, rpi_ms: float = 10.0,
+    def __init__(self, axis: Session, *, rpi_ms: float = 10.0,
                  multiplier: int = DEFAULT_MULTIPLIER, reconnect: bool = True,
                  queue: int = DEFAULT_QUEUE,
                  on_frame: Callable[[InputFrame], None] | None = None,

@@ -71,10 +71,11 @@ from servobus.protocols.enip.codec.encap import (
 from servobus.protocols.enip.connections import IoConnection
 from servobus.protocols.enip.device import Dyn5Adapter, Origin, Outcome
 from servobus.protocols.enip.production import Producer, ProductionWheel
+from servobus.sim.core.state_file import StateKind
 from servobus.sim.dmm.drive import VirtualDrive
-from servobus.sim.eeprom import EepromStore, StateKind, check_drive_record
-from servobus.sim.realtime import RealtimeClock
+from servobus.sim.dmm.eeprom import EepromStore, check_drive_record
 from servobus.sim.server_limits import MAX_OUTPUT_BYTES, WRITE_HIGH_WATER
+from servobus.sim.wall_clock import RealtimeClock
 
 log = logging.getLogger("servobus.enip")
 
@@ -652,7 +653,7 @@ async def start_fleet(hosts: str | Sequence[str] = "127.0.0.1", tcp_port: int = 
     return fleet
 
 
-async def serve_enip(hosts: str | Sequence[str] = "127.0.0.1", tcp_port: int = TCP_PORT,
+async def serve(hosts: str | Sequence[str] = "127.0.0.1", tcp_port: int = TCP_PORT,
                      udp_port: int = io.UDP_PORT, state: str | None = None, *,
                      model: str | None = None, stop: asyncio.Event | None = None,
                      duration: float | None = None,
@@ -711,7 +712,7 @@ class BackgroundEnip:
 
         async def main() -> None:
             self._stop = asyncio.Event()
-            await serve_enip(*self._args, stop=self._stop, on_ready=ready,
+            await serve(*self._args, stop=self._stop, on_ready=ready,
                              reset_downtime_s=self._downtime)
 
         try:

@@ -3,7 +3,7 @@
 ``crc`` CRC-16/MODBUS; ``codec`` frames <-> frozen dataclasses for both sides; ``timing``
 character and inter-frame times; ``framer`` cutting a byte stream into frames (by silence
 and content for a line or sniffer, by predicted length for a host awaiting a reply);
-``client``/``policy``/``axis``/``opener`` the host side; ``line``/``pacing``/``server``/
+``client``/``policy``/``axis``/``opener`` the host side; ``device``/``pacing``/``server``/
 ``inprocess``/``cli`` the virtual line of YZ-AIM motors; ``sniff`` decode/sniff.
 
 URLs: ``modbus:///dev/ttyUSB0?baud=19200``, ``modbus:COM3``, ``modbus+socket://HOST:PORT``

@@ -1,7 +1,7 @@
 """ModbusAxis: one YZ-AIM motor on a Modbus RTU line, in the Axis units (docs/modbus.md).
 
 Positions are encoder counts (32,768 per revolution), speeds rpm, currents A. The mapping
-of the Axis calls onto the YZ-AIM registers is :mod:`servobus.axis.register_axis`'s (shared
+of the Axis calls onto the YZ-AIM registers is :mod:`servobus.families.yzaim.axis`'s (shared
 with EasyCan); what the serial port does its own way (manual sections in brackets):
 
 * Registers are read with 0x03 (a span: the status read takes output_enable 0x01 ..
@@ -21,11 +21,11 @@ with EasyCan); what the serial port does its own way (manual sections in bracket
 from __future__ import annotations
 
 from servobus.axis.base import check_int
-from servobus.axis.register_axis import ABS, ADDRESS, INC, R, RegisterAxis
 from servobus.errors import ArgumentRangeError, DriveError
 from servobus.families.yzaim import registers as Y
+from servobus.families.yzaim.axis import ABS, ADDRESS, INC, R, YzaimAxis
 from servobus.protocols.modbus import codec as C
-from servobus.protocols.modbus.client import ModbusClient
+from servobus.protocols.modbus.client import AsyncModbusClient
 from servobus.protocols.modbus.params import REACHABLE_PARAMS
 
 #: One status read: output_enable 0x01 .. motor_speed 0x10 (and on to the position 0x17
@@ -44,7 +44,7 @@ def check_address(address: object) -> int:
     return value
 
 
-class ModbusAxis(RegisterAxis[ModbusClient]):
+class ModbusAxis(YzaimAxis[AsyncModbusClient]):
     """One YZ-AIM motor on a Modbus RTU line."""
 
     protocol_name = "modbus"

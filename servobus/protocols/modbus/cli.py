@@ -27,9 +27,11 @@ from servobus.cli.sim_cmd import (
 )
 from servobus.families.yzaim import registers as Y
 from servobus.protocols.modbus.inprocess import FACTORY_ADDRESS, make_motors, parse_addresses
-from servobus.protocols.modbus.server import run_server
+from servobus.protocols.modbus.server import serve
 from servobus.protocols.modbus.timing import DEFAULT_BAUD
-from servobus.sim.server_limits import log_to_stderr
+from servobus.sim.line_server import run_in_fine_loop
+from servobus.sim.server_limits import fit_fd_limit, log_to_stderr
+from servobus.sim.wire import FINE_COARSE_S
 
 
 @click.command("modbus")
@@ -53,9 +55,10 @@ def sim_modbus_cmd(listen: str | None, ids: str, pty: bool, fast: bool, baud: in
     motors = make_motors(addresses, state=state, model=model)
     banner = sim_banner("modbus", len(motors), "motor", model, "addresses",
                         (m.address for m in motors), fast, f"paced at {baud} 8N1")
-    server = run_server(motors, listen=endpoint, pty=pty, tap=tap_endpoint, paced=not fast,
-                        baud=baud, duration=duration, max_clients=max_clients,
-                        ready=lambda: click.echo(banner, err=True))
+    server = run_in_fine_loop(serve(
+        motors, listen=endpoint, pty=pty, tap=tap_endpoint, paced=not fast, baud=baud,
+        duration=duration, coarse_s=FINE_COARSE_S, max_clients=fit_fd_limit(max_clients),
+        ready=lambda: click.echo(banner, err=True)))
     line = server.line
     echo_stopped(f"{line.frames} frame(s)",
                  f"{line.replies} repl(ies) ({line.exceptions} exception(s))",

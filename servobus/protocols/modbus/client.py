@@ -1,6 +1,6 @@
 """Modbus RTU host client on any ByteStream (serial port, TCP bridge, ``sim://``, the pair).
 
-One :class:`ModbusClient` per line (any number of devices on it). It moves register words;
+One :class:`AsyncModbusClient` per line (any number of devices on it). It moves register words;
 what the registers mean is the device family's (:mod:`servobus.protocols.modbus.axis`).
 The transaction rules are the shared :class:`~servobus.link.transaction.TransactionManager`'s
 (one lane: RS-485 has one master; deadlines measured from when the request left; reads
@@ -37,26 +37,24 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
-from servobus.axis import checks
-from servobus.axis.base import AxisTraceHook
+from servobus import checks
 from servobus.errors import (
     ArgumentRangeError,
     ChecksumError,
-    ConnectionLost,
     DriveError,
     DriveTimeout,
 )
 from servobus.link.eeprom_guard import EepromGuard
-from servobus.link.late_replies import DEFAULT_LATE_REPLY_S, LateReplies
-from servobus.link.stats import TransactionStats
-from servobus.link.transaction import DEFAULT_RETRIES, TransactionManager, check_call
+from servobus.link.late_replies import DEFAULT_LATE_REPLY_S
+from servobus.link.stream import StreamClient
+from servobus.link.transaction import DEFAULT_RETRIES, check_call
 from servobus.protocols.modbus import codec as C
 from servobus.protocols.modbus import commands
 from servobus.protocols.modbus.framer import GapFramer, ReplyFramer
 from servobus.protocols.modbus.policy import DEFAULT_TURNAROUND_S, RtuPolicy
 from servobus.protocols.modbus.sniff import REGISTER_NAMES, reply_event, request_event
 from servobus.protocols.modbus.timing import DEFAULT_BAUD, wire_time_s
-from servobus.transport.base import ByteStream, Direction, set_receiver
+from servobus.transport.base import ByteStream, Direction
 
 log = logging.getLogger(__name__)
 
@@ -117,7 +115,7 @@ def exception_error(request: C.Request, reply: C.ExceptionReply) -> DriveError:
         code=reply.code, drive_id=request.address)
 
 
-class ModbusClient:
+class AsyncModbusClient(StreamClient[ReplyKey, Outgoing, C.Reply]):
     """Executes Modbus RTU transactions on one line (one ByteStream)."""
 
     def __init__(
@@ -132,7 +130,6 @@ class ModbusClient:
         eeprom_guard: EepromGuard | None = None,
         frame_gap_s: float | None = None,
     ) -> None:
-        self.stream = stream
         self.policy = RtuPolicy(baud=baud, turnaround_s=turnaround_s, timeout=timeout,
                                 frame_gap_s=frame_gap_s)
         self._framer = ReplyFramer()
@@ -140,26 +137,15 @@ class ModbusClient:
         self._armed: ReplyKey | None = None  # the key of the request the framer answers
         self._crc_mark = 0
         self._quiet_at = 0.0  # monotonic time from which our next frame may start
-        self._push = set_receiver(stream, self._on_data)
-        #: The line's transaction manager: one lane, one transaction at a time.
-        self.transactions: TransactionManager[ReplyKey, Outgoing, C.Reply] = \
-            TransactionManager(
-                self._write, link="Modbus RTU link", describe_key=_describe_key,
-                describe_request=_describe_request, trace_request=_trace_request,
-                retries=retries, late_reply_s=late_reply_s, eeprom_guard=eeprom_guard,
-                pull=None if self._push else self._pull_once, flush=self._flush)
-        tm = self.transactions
-        self.stats: TransactionStats = tm.stats
-        self.late_replies: LateReplies[ReplyKey] = tm.late_replies
-        self.guard: EepromGuard = tm.guard
+        # The line's transaction manager: one lane, one transaction at a time.
+        super().__init__(stream, self._write, link="Modbus RTU link",
+                         describe_key=_describe_key, describe_request=_describe_request,
+                         trace_request=_trace_request, retries=retries,
+                         late_reply_s=late_reply_s, eeprom_guard=eeprom_guard)
 
     @property
     def baud(self) -> int:
         return self.policy.baud
-
-    @property
-    def retries(self) -> int:
-        return self.transactions.retries
 
     @staticmethod
     def check_options(options: Mapping[str, object]) -> None:
@@ -180,11 +166,6 @@ class ModbusClient:
             if check is None:
                 raise ArgumentRangeError(f"unknown Modbus client option {name!r}")
             check(name, value)
-
-    # ------------------------------------------------------------- tracing
-    def add_trace(self, hook: AxisTraceHook) -> None:
-        """``hook(direction, item, t)``: every frame sent/received (decoded) and every error."""
-        self.transactions.add_trace(hook)
 
     # ------------------------------------------------------------- public transactions
     async def read(self, address: int, start: int, count: int = 1, *,
@@ -252,23 +233,13 @@ class ModbusClient:
                 return
             await asyncio.sleep(wait - GAP_YIELD_S if wait > GAP_YIELD_S else 0)
 
-    def _flush(self) -> None:
-        """Before each attempt: stale bytes (late replies, noise) must not answer it."""
-        if not self._push:
-            self.stream.discard_input()
+    def _reset_receiver(self) -> None:
         self._armed = None
 
-    async def _pull_once(self) -> None:
-        """Pull streams: one ``read()`` through the receive path."""
-        self._on_data(await self.stream.read())
-
     # ------------------------------------------------------------- reception
-    def _on_data(self, data: bytes | None) -> None:
-        """Every received chunk (push callback or ``pull``); None: the link died."""
+    def _on_bytes(self, data: bytes) -> None:
+        """Every received chunk (push callback or ``pull``)."""
         tm = self.transactions
-        if data is None:
-            tm.lost(ConnectionLost("stream closed"))
-            return
         now = time.monotonic()
         # Bytes from the line: the line is busy until now (a reply also proves that our
         # request has left), quiet t3.5 after.
@@ -306,14 +277,6 @@ class ModbusClient:
             else:
                 tm.stray(event)
 
-    # ------------------------------------------------------------- lifetime
-    async def close(self) -> None:
-        if self.transactions.close():
-            await self.stream.close()
-
-    @property
-    def closed(self) -> bool:
-        return self.transactions.closed
 
 
 def _trace_request(out: Outgoing) -> object:

@@ -15,7 +15,8 @@ URL options (``sim://modbus?ids=1,2&fast=1&state=FILE&model=57AIM30C&baud=19200`
 | ``baud`` | the line's baud rate (pacing and the client's deadlines) | 19200 |
 
 Client options (``timeout``, ``retries``, ``turnaround_s``, ``late_reply_s``,
-``frame_gap_s``, ``eeprom_guard``) pass to :class:`~servobus.protocols.modbus.client.ModbusClient`.
+``frame_gap_s``, ``eeprom_guard``) pass to
+:class:`~servobus.protocols.modbus.client.AsyncModbusClient`.
 Unpaced (``fast=1``) the client keeps no frame gap unless ``frame_gap_s`` says so: the
 in-process line is no wire, and its framer cuts frames by content.
 """
@@ -29,7 +30,7 @@ from servobus.axis.url import DriveUrl, merge_options
 from servobus.errors import ConnectionLost
 from servobus.families.yzaim import registers as Y
 from servobus.protocols.modbus.axis import ModbusAxis, check_address
-from servobus.protocols.modbus.client import ModbusClient
+from servobus.protocols.modbus.client import AsyncModbusClient
 from servobus.protocols.modbus.device import ModbusLine
 from servobus.protocols.modbus.pacing import RtuLineRunner, RtuPort
 from servobus.protocols.modbus.timing import DEFAULT_BAUD
@@ -107,14 +108,14 @@ async def open_sim_axis(url: DriveUrl, *, drive_id: int | None = None,
     model = str(options.pop("model", Y.DEFAULT_MODEL))
     state = options.pop("state", None)
     baud = options.pop("baud", DEFAULT_BAUD)
-    ModbusClient.check_options({"baud": baud, **options})
+    AsyncModbusClient.check_options({"baud": baud, **options})
     assert isinstance(baud, int)
     if not paced:
         options.setdefault("frame_gap_s", 0.0)  # no wire: no silence to keep (docs above)
     stream = open_sim_stream(ids=ids, paced=paced, model=model, baud=baud,
                              state=str(state) if state else None)
     try:
-        client = ModbusClient(stream, baud=baud, **options)  # type: ignore[arg-type]
+        client = AsyncModbusClient(stream, baud=baud, **options)  # type: ignore[arg-type]
     except BaseException:
         await stream.close()
         raise

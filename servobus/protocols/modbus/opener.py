@@ -15,12 +15,12 @@ from __future__ import annotations
 
 from typing import Any
 
-from servobus.axis import checks
+from servobus import checks
 from servobus.axis.url import DriveUrl, merge_options
 from servobus.errors import ArgumentRangeError
 from servobus.link.opening import client_on
 from servobus.protocols.modbus.axis import ModbusAxis, check_address
-from servobus.protocols.modbus.client import ModbusClient
+from servobus.protocols.modbus.client import AsyncModbusClient
 from servobus.protocols.modbus.timing import DEFAULT_BAUD
 from servobus.transport.base import ByteStream
 
@@ -69,8 +69,8 @@ async def open_axis(url: DriveUrl, *, drive_id: int | None = None,
     transport = str(options.pop("transport", "auto"))
     if transport not in ("auto", "tcp", "pyserial"):
         raise ArgumentRangeError(f"transport={transport!r}: use 'auto', 'tcp' or 'pyserial'")
-    ModbusClient.check_options(options)
+    AsyncModbusClient.check_options(options)
     stream = await open_stream(port, baud=baud, transport=transport)
-    client = await client_on(stream, lambda s: ModbusClient(
+    client = await client_on(stream, lambda s: AsyncModbusClient(
         s, baud=baud, **options))  # type: ignore[arg-type]
     return ModbusAxis(client, address)

@@ -33,7 +33,7 @@ from typing import Protocol
 from servobus.protocols.modbus.crc import crc_ok
 from servobus.protocols.modbus.framer import GapFramer
 from servobus.protocols.modbus.timing import DEFAULT_BAUD, char_time_s, inter_frame_gap_s
-from servobus.sim.realtime import Clocked, RealtimeClock
+from servobus.sim.wall_clock import Clocked, RealtimeClock
 from servobus.sim.wire import COARSE_S, RX_BUFFER_BYTES, SPIN_S, PacedLine, PacedPort, WireClock
 from servobus.transport.base import Direction
 

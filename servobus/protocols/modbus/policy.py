@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from servobus.axis import checks
+from servobus import checks
 from servobus.protocols.modbus import codec as C
 from servobus.protocols.modbus.timing import DEFAULT_BAUD, inter_frame_gap_s, wire_time_s
 

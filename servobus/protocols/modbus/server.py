@@ -18,13 +18,8 @@ from servobus.protocols.modbus.device import ModbusLine
 from servobus.protocols.modbus.pacing import RtuLineRunner, RtuPort
 from servobus.protocols.modbus.timing import DEFAULT_BAUD
 from servobus.sim import server_limits as lim
-from servobus.sim.line_server import (
-    DEFAULT_HOST,
-    LineServer,
-    run_in_fine_loop,
-    serve_line,
-)
-from servobus.sim.wire import COARSE_S, FINE_COARSE_S
+from servobus.sim.line_server import DEFAULT_HOST, LineServer, serve_line
+from servobus.sim.wire import COARSE_S
 from servobus.sim.yzaim.motor import YzaimMotor
 
 WHAT = "sim modbus"  # how log lines name this server
@@ -67,24 +62,3 @@ async def serve(
                           max_clients=max_clients)
     return await serve_line(server, listen=listen, pty=pty, tap=tap, duration=duration,
                             out=out, ready=ready)
-
-
-def run_server(
-    motors: Sequence[YzaimMotor],
-    *,
-    listen: tuple[str, int] | None = (DEFAULT_HOST, 0),
-    pty: bool = False,
-    tap: tuple[str, int] | None = None,
-    paced: bool = True,
-    baud: int = DEFAULT_BAUD,
-    duration: float | None = None,
-    out: TextIO | None = None,
-    max_clients: int = lim.DEFAULT_MAX_CLIENTS,
-    ready: Callable[[], None] | None = None,
-) -> ModbusServer:
-    """Blocking entry point for the CLI: ``serve`` on an epoll loop with fine timeouts."""
-    max_clients = lim.fit_fd_limit(max_clients)
-    return run_in_fine_loop(serve(motors, listen=listen, pty=pty, tap=tap, paced=paced,
-                                  baud=baud, duration=duration, out=out,
-                                  coarse_s=FINE_COARSE_S, max_clients=max_clients,
-                                  ready=ready))

@@ -99,7 +99,7 @@ class Motor(EngineShaft):
         self._gains = DEFAULT_GAINS
         self._profile = (1.0, 1.0)  # generator speed (rpm), acceleration (rpm/s)
         self._free = False
-        #: Called after every control period when set (servobus.sim.capture).
+        #: Called after every control period when set (servobus.sim.core.capture).
         self.period_observer: Callable[[Motor], None] | None = None
         eng = self._engine
         eng.power_on()

@@ -65,7 +65,7 @@ import math
 from collections.abc import Callable, Iterable
 from dataclasses import replace
 
-from servobus.families.base import Family
+from servobus.axis.types import Family
 from servobus.families.dmm import params as P
 from servobus.families.dmm import profile as PR
 from servobus.families.dmm import units as U
@@ -78,13 +78,14 @@ from servobus.families.dmm.registers import (
     ServoMode,
 )
 from servobus.families.dmm.vocabulary import WAVE_AMPLITUDE_MAX, WAVE_FREQUENCY_MAX_HZ
-from servobus.sim import capture as _capture
+from servobus.sim.core import capture as _capture
 from servobus.sim.core import constants as K
 from servobus.sim.core import interp
 from servobus.sim.core.engine import Gen, Ref, Servo, ServoEngine
 from servobus.sim.core.io import PulseDecoder, PulseFormat, pulse_period
 from servobus.sim.core.motor import EngineShaft
-from servobus.sim.eeprom import EepromStore
+from servobus.sim.dmm.eeprom import EepromStore
+from servobus.sim.dmm.trace import DriveTrace
 
 AlarmListener = Callable[["VirtualDrive", AlarmCode], None]
 PeriodObserver = Callable[["VirtualDrive"], None]
@@ -124,11 +125,11 @@ class VirtualDrive(EngineShaft):
         self._line_direction: tuple[float, float, float] | None = None  # the running line
         self._timers: list[tuple[float, int, Callable[[], None]]] = []  # (time, seq, action)
         self._timer_seq = 0
-        #: Called after every control period when set (servobus.sim.capture records the
+        #: Called after every control period when set (servobus.sim.core.capture records the
         #: drive's 4 kHz trace with it); None runs the periods in one batch.
         self.period_observer: PeriodObserver | None = None
         self._power_on()
-        _capture.note_created(self)
+        _capture.note_created(DriveTrace(self))
 
     # ---------------------------------------------------------------- lifecycle
     def _power_on(self) -> None:
@@ -274,7 +275,7 @@ class VirtualDrive(EngineShaft):
         """Write a parameter; out-of-range writes are ignored and return False.
 
         EEPROM wear: past 1,000,000 writes the value still takes effect (RAM) but no longer
-        survives a power cycle (see :mod:`servobus.sim.eeprom`)."""
+        survives a power cycle (see :mod:`servobus.sim.dmm.eeprom`)."""
         spec = P.spec(name)
         if isinstance(value, bool) or not isinstance(value, int) or not self._valid(name, value):
             return False
@@ -334,7 +335,7 @@ class VirtualDrive(EngineShaft):
 
     def trace_flags(self) -> tuple[bool, bool, bool, bool]:
         """(servo on, motion busy, on position, alarm) as peek_status has them, without
-        building a DriveStatus (servobus.sim.capture reads it every control period)."""
+        building a DriveStatus (servobus.sim.dmm.trace reads it every control period)."""
         return (not self.servo_free, self._engine.busy, self._on_position(),
                 self._alarm is not AlarmCode.NONE or self._crc_notice)
 

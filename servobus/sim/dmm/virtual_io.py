@@ -2,7 +2,7 @@
 
 The Axis side (servobus.axis.virtual_io) knows no simulator; :mod:`servobus.sim.schemes`
 gives every ``sim://`` axis of a DMM family a :class:`SimIoSource` over the drives it talks
-to. Each call is one control-channel request (servobus.sim.control, docs/sim-control.md):
+to. Each call is one control-channel request (servobus.sim.dmm.control, docs/sim-control.md):
 the same argument checks and ranges, from the same table. The in-process drives run in
 wall-clock time on their line's clock, so no extra sync is needed before a request.
 """
@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from servobus.errors import ArgumentRangeError
-from servobus.sim.control import COMMANDS, ControlError, DriveControl
+from servobus.sim.dmm.control import COMMANDS, ControlError, DriveControl
 from servobus.sim.dmm.drive import VirtualDrive
 
 #: Families whose virtual drives have the JP3 connector: the DMM drives (DYN2 manual 2.3,

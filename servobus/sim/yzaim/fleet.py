@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from servobus.families.yzaim import registers as yzaim
-from servobus.sim.fleet import parse_ids
+from servobus.sim.core.ids import parse_ids
 from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.sim.yzaim.store import YzaimStore
 

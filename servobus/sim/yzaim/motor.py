@@ -76,10 +76,10 @@ from collections.abc import Sequence
 from enum import IntEnum
 
 from servobus.axis.capture import status_bits
+from servobus.axis.types import motion_state
 from servobus.errors import ServobusError
-from servobus.families.base import motion_state
 from servobus.families.yzaim import registers as yzaim
-from servobus.sim import capture
+from servobus.sim.core import capture
 from servobus.sim.core.motor import Motor
 from servobus.sim.yzaim import physics as phys
 from servobus.sim.yzaim.store import YzaimStore
@@ -595,7 +595,7 @@ class YzaimMotor:
             self._next_tick = self._at + TICK_S
 
     # ---------------------------------------------------------------- 4 kHz trace
-    # What servobus.sim.capture records of this motor (trace_buffer() on sim://easycan and
+    # What servobus.sim.core.capture records of this motor (trace_buffer() on sim://easycan and
     # sim://modbus): its address, its counts and offset, its alarm - not its core drive's.
     counts_per_rev = yzaim.COUNTS_PER_REV
 

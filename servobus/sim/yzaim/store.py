@@ -7,9 +7,10 @@ record position"). With a path it is kept as JSON so it survives a restart of th
 Several motors may share one file: each keeps its own record under the address it had when
 the record was made (its serial number).
 
-The file is the DMM drives' state file (:class:`servobus.sim.eeprom.StateFile`, one machinery
-for both families): checked whole at start-up, locked against a second simulator, written
-atomically, every other motor's record kept when one motor rewrites its own.
+The file is the virtual drives' state file (:class:`servobus.sim.core.state_file.StateFile`,
+one machinery for every family): checked whole at start-up, locked against a second
+simulator, written atomically, every other motor's record kept when one motor rewrites its
+own.
 
 File format (decision): ``{"<address 1..254>": {"registers": {name: raw value}, "position":
 counts or null, "saves": n}}``; every field optional. Decision (issue 17, replacing "a record
@@ -26,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from servobus.families.yzaim import registers as yzaim
-from servobus.sim.eeprom import StateFile, StateKind, checked_int, describe
+from servobus.sim.core.state_file import StateFile, StateKind, checked_int, describe
 
 _FIELDS = frozenset({"registers", "position", "saves"})
 _ADDRESS = yzaim.BY_NAME["device_address"]

@@ -26,7 +26,7 @@ from servobus.protocols.easycan.commands import EasyCanCommand
 from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.messages import ReadReply, ReadRequest, WriteRequest
 from servobus.protocols.easycan.server import serve
-from servobus.sim.realtime import RealtimeClock
+from servobus.sim.wall_clock import RealtimeClock
 from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.transport.base import Direction
 from servobus.transport.can_bus import AsyncCanBus, CanFrame, FrameTraceHook

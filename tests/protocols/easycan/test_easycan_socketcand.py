@@ -28,8 +28,8 @@ from servobus.protocols.easycan.messages import (
     ReadRequest,
 )
 from servobus.protocols.easycan.server import serve
-from servobus.sim.realtime import RealtimeClock
 from servobus.sim.socketcand_hub import SocketcandHub
+from servobus.sim.wall_clock import RealtimeClock
 from servobus.sim.yzaim.motor import YzaimMotor
 
 pytestmark = [pytest.mark.timeout(90), pytest.mark.slow]

@@ -16,7 +16,7 @@ from servobus.protocols.easycan.client import AsyncEasyCanClient
 from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.server import serve
 from servobus.protocols.easycan.sync import SyncGroup
-from servobus.sim.realtime import RealtimeClock
+from servobus.sim.wall_clock import RealtimeClock
 from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.transport.can_bus import AsyncCanBus, BitTiming
 

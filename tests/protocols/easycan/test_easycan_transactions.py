@@ -1,6 +1,6 @@
 """The EasyCan client on the shared TransactionManager (issue 9), on a scripted push port.
 
-The manager's own rules are tested on a scripted medium (test_axis_transaction.py); here:
+The manager's own rules are tested on a scripted medium (test_link_transaction.py); here:
 the client exposes the one manager and stats class, applies EasyCan's rule table (which
 commands are re-sent, which reply answers which request, lanes per motor and for cache
 writes, the EEPROM-backed save flag), measures deadlines from when the frame left, and

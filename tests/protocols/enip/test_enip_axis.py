@@ -162,6 +162,41 @@ async def test_reset_that_never_comes_back_is_a_timeout() -> None:
         await axis.close()
 
 
+async def test_reset_waits_through_an_adapter_that_hangs_up_while_it_reboots(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """While it reboots after Reset the adapter accepts TCP and hangs up at once. When the
+    client's event loop had seen that hang-up (and closed the socket) before the stream was
+    built, setting TCP_NODELAY on it raised OSError EBADF, and ``servobus reset`` failed
+    with "Bad file descriptor" though the drive did reset. Here every connection made during
+    the reboot is handed over only once the loop has closed its socket, so each reconnect
+    meets that case; reset() must wait through it until the adapter answers."""
+    async with adapters(downtime=1.0) as fleet:
+        server = fleet.servers[0]
+        axis = await connect_async(url_of(fleet), timeout=0.3)
+        loop = asyncio.get_running_loop()
+        real = loop.create_connection
+        closed_first: list[int] = []
+
+        async def connect_then_see_the_hang_up(*args: object, **kw: object) -> object:
+            transport, protocol = await real(*args, **kw)  # type: ignore[arg-type]
+            if server.down:
+                sock = transport.get_extra_info("socket")
+                await wait_until_async(lambda: sock.fileno() == -1, timeout=30,
+                                       what="the loop closing the reset connection")
+                closed_first.append(1)
+            return transport, protocol
+
+        monkeypatch.setattr(loop, "create_connection", connect_then_see_the_hang_up)
+        try:
+            server.drive.trip(AlarmCode.LOST_PHASE)
+            await axis.reset()  # before the fix: OSError [Errno 9] Bad file descriptor
+            assert closed_first, "no reconnect met the rebooting adapter"
+            assert server.stats.resets == 1
+            assert (await axis.status()).alarm_code == 0
+        finally:
+            await axis.close()
+
+
 async def test_origin_waves_and_torque_mode() -> None:
     async with rig() as (fleet, axis):
         drive = fleet.servers[0].drive

@@ -85,30 +85,30 @@ def test_realtime_falls_back_with_one_log_line(monkeypatch: pytest.MonkeyPatch,
     import logging
     import os
 
-    from servobus import realtime
+    from servobus import thread_priority
 
     def refuse(*_: object) -> None:
         raise PermissionError(1, "Operation not permitted")
 
-    monkeypatch.delenv(realtime.ENV, raising=False)
+    monkeypatch.delenv(thread_priority.ENV, raising=False)
     monkeypatch.setattr(os, "sched_setscheduler", refuse, raising=False)
     monkeypatch.setattr(os, "SCHED_FIFO", 1, raising=False)
-    with caplog.at_level(logging.INFO, logger="servobus.realtime"):
-        assert realtime.request_realtime("test clock") is False
+    with caplog.at_level(logging.INFO, logger="servobus.thread_priority"):
+        assert thread_priority.request_realtime("test clock") is False
     assert len(caplog.records) == 1 and "CAP_SYS_NICE" in caplog.records[0].getMessage()
 
 
 def test_realtime_off_by_env_asks_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
     import os
 
-    from servobus import realtime
+    from servobus import thread_priority
 
     def must_not_run(*_: object) -> None:
         raise AssertionError("asked for SCHED_FIFO")
 
-    monkeypatch.setenv(realtime.ENV, "0")
+    monkeypatch.setenv(thread_priority.ENV, "0")
     monkeypatch.setattr(os, "sched_setscheduler", must_not_run, raising=False)
-    assert realtime.request_realtime("test clock") is False
+    assert thread_priority.request_realtime("test clock") is False
 
 
 def test_producers_of_one_period_share_their_wake_ups() -> None:

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
+from servobus.axis.types import Storage
 from servobus.families import FAMILIES, family
-from servobus.families.base import Storage
 from servobus.families.dmm.family import DYN2
 from servobus.families.dyn5 import params as dyn5
 from servobus.families.dyn5.family import DYN5, PARAM_INSTANCES, Dyn5Status, axis_status

@@ -381,12 +381,12 @@ def test_reset_drops_everything_and_loses_ram(sim: BackgroundEnip, server: EnipS
 
 
 # ---------------------------------------------------------------- the CLI's entry point
-def test_serve_enip_runs_several_hosts_with_a_state_file(tmp_path: object) -> None:
+def test_serve_runs_several_hosts_with_a_state_file(tmp_path: object) -> None:
     import asyncio
     import json
     from pathlib import Path
 
-    from servobus.protocols.enip.server import parse_hosts, serve_enip
+    from servobus.protocols.enip.server import parse_hosts, serve
 
     state = Path(str(tmp_path)) / "dyn5.json"
 
@@ -399,7 +399,7 @@ def test_serve_enip_runs_several_hosts_with_a_state_file(tmp_path: object) -> No
             servers[1].drive.set_origin()  # an EEPROM write lands under the host's key
             stop.set()
 
-        await serve_enip("127.0.0.1,127.0.0.3", 0, 0, str(state), stop=stop, on_ready=ready)
+        await serve("127.0.0.1,127.0.0.3", 0, 0, str(state), stop=stop, on_ready=ready)
         return bound
 
     bound = asyncio.run(asyncio.wait_for(main(), 10))

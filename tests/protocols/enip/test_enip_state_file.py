@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from servobus.protocols.enip.server import DYN5_STATE, make_drive
-from servobus.sim.eeprom import StateFileError, parse_state
+from servobus.sim.core.state_file import StateFileError, parse_state
 
 pytestmark = pytest.mark.timeout(60)
 

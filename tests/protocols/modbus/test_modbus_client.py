@@ -20,7 +20,7 @@ from servobus.errors import (
 )
 from servobus.families.yzaim import registers as Y
 from servobus.protocols.modbus import codec as C
-from servobus.protocols.modbus.client import ModbusClient
+from servobus.protocols.modbus.client import AsyncModbusClient
 from servobus.protocols.modbus.policy import RtuPolicy
 from servobus.protocols.modbus.sniff import RtuFrameEvent
 from servobus.protocols.modbus.timing import inter_frame_gap_s, wire_time_s
@@ -183,7 +183,7 @@ async def test_bad_arguments_are_refused_before_sending(call: object) -> None:
 ])
 def test_bad_client_options_are_refused(options: dict[str, object]) -> None:
     with pytest.raises(ArgumentRangeError):
-        ModbusClient.check_options(options)
+        AsyncModbusClient.check_options(options)
 
 
 def test_deadline_is_wire_time_gap_and_turnaround() -> None:
@@ -228,7 +228,7 @@ async def test_traces_show_decoded_frames_and_timeouts() -> None:
 async def test_a_client_works_on_a_stream_it_did_not_open() -> None:
     """The client takes any ByteStream; a closed client closes it and refuses calls."""
     host, _device = open_pair()
-    client = ModbusClient(host, timeout=0.02, retries=0)
+    client = AsyncModbusClient(host, timeout=0.02, retries=0)
     with pytest.raises(DriveTimeout):
         await client.read(1, SPEED)
     await client.close()
