@@ -40,13 +40,20 @@ loaded host is read again, as the CLI's ``move --wait`` does). Figures:
   as long with every proxy stopped (nothing listening anywhere): a reconnect backoff that
   spins shows up in the second.
 
-Issue 30 adds the gateway's faults (hostile MQTT payloads, session floods, login floods) to
-the same run: a :class:`FaultKind` is a name, an ``inject`` and an ``applies`` filter, and
-its outcome is checked by ``check`` (by default: the axis recovers and moves).
+Then the gateway's faults of issue 30 (benchmarks/fault_gateway.py, the kinds in
+benchmarks/faults_hostile.py): a real ``servobus serve`` on the built-in virtual machine
+(OPC UA with a users file, MQTT with ``--mqtt-commands`` through a Mosquitto broker on a free
+port; without Mosquitto the MQTT part is skipped in one line) takes 10,000 hostile MQTT
+payloads, an OPC UA session flood and a login flood, one line each of what it did; then an
+OPC UA read and an MQTT state message must still arrive, and it is stopped with Ctrl-C.
+The gateway answers about 90 commands a second on the loaded 2-core machine: the 10,000
+payloads take about 2 minutes.
 
-Run: ``python -m benchmarks faults`` (3 minutes of faults, then 2 x 10 s of CPU), options
-after it: ``--seconds S``, ``--idle-seconds S``, ``--seed N``, ``--logs DIR`` (keep the
-processes' logs); or ``python -m benchmarks.bench_faults``.
+Run: ``python -m benchmarks faults`` (3 minutes of faults, then 2 x 10 s of CPU, then about
+2.5 minutes of the gateway's faults), options after it: ``--seconds S``, ``--idle-seconds
+S``, ``--seed N``, ``--logs DIR`` (keep the processes' logs), ``--only link|hostile|mqtt|
+sessions|logins`` (repeatable: the link faults, all of the gateway's, or one of them),
+``--hostile-count N`` (hostile MQTT payloads); or ``python -m benchmarks.bench_faults``.
 """
 
 from __future__ import annotations
@@ -67,6 +74,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from benchmarks import fault_gateway
+from benchmarks.fault_gateway import HOSTILE_COUNT, expected_time, print_hostile, run_hostile
 from benchmarks.fault_proxy import MotionTap, Proxy
 from benchmarks.verdict import mark, percent
 from servobus.machine.machine import RETRY_MAX_S
@@ -437,6 +446,17 @@ def print_report(r: Report, idle_s: float) -> None:
           f"{r.stats.get('log_lines', 0)} log lines, reads {reads}")
 
 
+#: What ``--only`` selects: the link faults, the gateway's (all three), or one of those.
+ONLY = {"link": ["link"], "hostile": list(fault_gateway.KINDS),
+        **{kind: [kind] for kind in fault_gateway.KINDS}}
+
+
+def selected(only: list[str] | None) -> list[str]:
+    """The parts to run, in the run's order: ``link`` first, then the gateway's kinds."""
+    chosen = {part for name in (only or ["link", "hostile"]) for part in ONLY[name]}
+    return [part for part in ("link", *fault_gateway.KINDS) if part in chosen]
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m benchmarks faults")
     parser.add_argument("--seconds", type=float, default=SECONDS,
@@ -446,18 +466,41 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=SEED)
     parser.add_argument("--logs", type=Path, help="keep the processes' logs in this directory "
                         "(the machine's with its debug lines: every reconnect try)")
+    parser.add_argument("--only", action="append", choices=list(ONLY),
+                        help="run only these (repeatable): the link faults, the gateway's "
+                        "hostile kinds, or one of those; default: all")
+    parser.add_argument("--hostile-count", type=int, default=HOSTILE_COUNT,
+                        help="hostile MQTT payloads (the gateway answers about 90 a second)")
     options, _ = parser.parse_known_args(sys.argv[1:] if argv is None else argv)
+    parts = selected(options.only)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    print(f"faults: drive restarts, bridge restarts and dropped connections on "
-          f"{', '.join(SIMS)} (paced virtual drives behind TCP proxies) for "
-          f"{options.seconds:g} s under a machine (retry=True) polling every axis every "
-          f"0.1 s in its own process; seed {options.seed}, load {load:.2f}")
     with tempfile.TemporaryDirectory(prefix="servobus-faults-") as tmp:
         logs = options.logs or Path(tmp)
         logs.mkdir(parents=True, exist_ok=True)
-        report = asyncio.run(run(options.seconds, options.idle_seconds, options.seed, logs,
-                                 debug=options.logs is not None))
-    print_report(report, options.idle_seconds)
+        if "link" in parts:
+            print(f"faults: drive restarts, bridge restarts and dropped connections on "
+                  f"{', '.join(SIMS)} (paced virtual drives behind TCP proxies) for "
+                  f"{options.seconds:g} s under a machine (retry=True) polling every axis "
+                  f"every 0.1 s in its own process; seed {options.seed}, load {load:.2f}")
+            report = asyncio.run(run(options.seconds, options.idle_seconds, options.seed,
+                                     logs, debug=options.logs is not None))
+            print_report(report, options.idle_seconds)
+            print()
+        kinds = [part for part in parts if part != "link"]
+        if kinds:
+            print(hostile_header(kinds, options.hostile_count, options.seed))
+            print_hostile(asyncio.run(run_hostile(kinds, options.hostile_count,
+                                                  options.seed, logs)))
+
+
+def hostile_header(kinds: list[str], count: int, seed: int) -> str:
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    what = {"mqtt": f"{count} hostile MQTT payloads (the gateway answers about 90 a second "
+                    f"here: {expected_time(count)})",
+            "sessions": "an OPC UA session flood", "logins": "a login flood"}
+    return (f"faults of the gateway: {', '.join(what[k] for k in kinds)} against servobus "
+            f"serve in its own process (built-in virtual machine; OPC UA with a users file; "
+            f"MQTT commands through Mosquitto when installed); seed {seed}, load {load:.2f}")
 
 
 if __name__ == "__main__":
