@@ -34,6 +34,7 @@ import time
 from collections.abc import Awaitable, Callable, Iterator
 from typing import TYPE_CHECKING
 
+from servobus.axis.capabilities import Capability
 from servobus.errors import (
     ArgumentRangeError,
     ClosedError,
@@ -636,13 +637,12 @@ class AsyncMachineAxis:
         if self.spec.origin == "set":
             await self.set_origin()
         elif self.spec.origin == "home":
-            home = getattr(self.core(), "home", None)
-            if home is None:
-                core = self.core()
+            core = self.core()
+            if not core.supports(Capability.HOMING):
                 raise NotSupported(f"{self.source}: axis {self.name}: origin: "
                                    f"{core.family.title} over {core.protocol} has no "
                                    "homing; use origin = \"set\"", family=core.family.name)
-            await home()
+            await core.home()
 
     def skip_origin(self) -> None:
         """The link opened after start-up: the file's origin rule is not applied (one
