@@ -246,15 +246,58 @@ class AsyncAxis(ABC):
         return NotSupported(f"{self.family.title} over {self.protocol} has no "
                             f"{capability.words}", family=self.family.name)
 
-    async def home(self) -> None:
-        """The family's homing run (Capability.HOMING): a machine file's ``origin = "home"``.
-        NotSupported where the family has none."""
-        raise self.unsupported(Capability.HOMING)
-
     def link_stats(self) -> TransactionStats:
         """The protocol client's transaction counters (Capability.LINK_STATS; all drives on
         the link). NotSupported where the client keeps none."""
         raise self.unsupported(Capability.LINK_STATS)
+
+    async def home(self) -> None:
+        """Start the drive's own homing, a procedure the drive runs to find its zero by
+        itself; it returns once the homing is started and :meth:`wait_idle` waits for its
+        end (Capability.HOMING). NotSupported, saying why and nothing sent, where the
+        family's drive has no homing a host can start (docs/cli.md, "home")."""
+        raise NotSupported(f"{self.family.title} over {self.protocol} has no homing a host "
+                           "can start: set the zero where the axis stands "
+                           "(set_origin)", family=self.family.name)
+
+    async def following_error(self) -> float | None:
+        """Commanded minus actual position (Pset - Pmotor), counts, as the drive reports it;
+        None where it reports none. No manual of the families gives a readout of it on the
+        wire (the DMM status has only its bound, the on-position bit |Pset - Pmotor| <=
+        OnRange), so only the in-process virtual drives report theirs, through their
+        internal state (:meth:`virtual_io`)."""
+        source = self.io_source
+        if source is None:
+            return None
+        value = (await source.for_drive(self.drive_id).state()).get("following_error")
+        return float(value) if isinstance(value, int | float) else None
+
+    async def set_move_profile(self, rpm: float | None = None,
+                               accel_rpm_s: float | None = None) -> dict[str, int]:
+        """Make point-to-point moves run at most at ``rpm`` (motor rpm) and accelerate at
+        ``accel_rpm_s``, the family's own way (None: leave that one as it is). Each
+        parameter is read and written only where the drive's value differs (on DMM drives
+        these are EEPROM parameters: never write them per move). Returns the parameters
+        written, by name (empty: the drive had them). NotSupported where the family has no
+        profile a host sets; every value is checked before anything is sent."""
+        speed = None if rpm is None else checks.positive("rpm", rpm, "rpm")
+        accel = None if accel_rpm_s is None else checks.positive("accel_rpm_s", accel_rpm_s,
+                                                                 "rpm/s")
+        values = await self._move_profile_values(speed, accel)
+        for name, value in values.items():
+            self._check_param(name, value)
+        written: dict[str, int] = {}
+        for name, value in values.items():
+            if await self.read_param(name) != value:
+                await self.write_param(name, value)
+                written[name] = value
+        return written
+
+    async def _move_profile_values(self, rpm: float | None,
+                                   accel_rpm_s: float | None) -> dict[str, int]:
+        """The family's parameters for a move profile (:meth:`set_move_profile`)."""
+        raise NotSupported(f"{self.family.title} over {self.protocol} has no move profile a "
+                           "host sets", family=self.family.name)
 
     async def stream_profile(self) -> StreamProfile:
         """The profile a streamed position target runs at (:meth:`stream_to`; reads the

@@ -244,10 +244,6 @@ class Axis:
         """NotSupported (nothing is sent) when this axis lacks ``capability``."""
         self._core.require(capability)
 
-    def home(self) -> None:
-        """The family's homing run (:meth:`AsyncAxis.home`; Capability.HOMING)."""
-        return self._call(self._core.home)
-
     def link_stats(self) -> TransactionStats:
         """The protocol client's transaction counters (Capability.LINK_STATS)."""
         return self._core.link_stats()
@@ -290,6 +286,16 @@ class Axis:
     def set_origin(self) -> None:
         return self._call(self._core.set_origin)
 
+    def home(self) -> None:
+        """Start the drive's own homing; NotSupported saying why where it has none."""
+        return self._call(self._core.home)
+
+    def set_move_profile(self, rpm: float | None = None,
+                         accel_rpm_s: float | None = None) -> dict[str, int]:
+        """Point-to-point speed and acceleration, written only where the drive differs
+        (:meth:`AsyncAxis.set_move_profile`); the parameters written."""
+        return self._call(self._core.set_move_profile, rpm, accel_rpm_s)
+
     def enable(self) -> None:
         return self._call(self._core.enable)
 
@@ -324,6 +330,10 @@ class Axis:
     def current(self) -> float:
         """Torque-producing motor current, A (positive = towards increasing position)."""
         return self._call(self._core.current)
+
+    def following_error(self) -> float | None:
+        """Pset - Pmotor, counts, where the drive reports it; None where it does not."""
+        return self._call(self._core.following_error)
 
     def position_window(self) -> int:
         """Counts within which the drive reports "in position"."""

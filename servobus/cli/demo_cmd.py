@@ -311,9 +311,9 @@ def _drive_demo(ctx: CliContext, yes: bool, script: _Script) -> str:
 
 def _machine_demo(ctx: CliContext, yes: bool, script: _Script) -> str:
     from servobus.cli.machine_cli import (
-        _spec_names,
         note_builtin_machine_once,
         note_origins_skipped,
+        spec_names,
     )
     from servobus.machine import open_machine
     from servobus.machine.builtin import builtin_spec
@@ -325,7 +325,7 @@ def _machine_demo(ctx: CliContext, yes: bool, script: _Script) -> str:
     if real and not yes:
         raise click.UsageError(f"the demo moves the motors ({', '.join(real)} are real drives); "
                                "add --yes to run it")
-    source, names = _spec_names(ctx)
+    source, names = spec_names(ctx)
     chosen = ctx.axis_option or names[0]
     if chosen not in names:
         raise click.UsageError(f"no axis {chosen!r} in {source}; axes: {', '.join(names)}")

@@ -38,7 +38,7 @@ from servobus.cli.failures import EXIT_FAULT, CliError
 from servobus.cli.hold import hold_speed, speed_words
 from servobus.cli.motion_guard import stop_on_interrupt
 from servobus.cli.open_axis import connection_label, open_axis, open_drive_machine
-from servobus.cli.output import emit, kv_text
+from servobus.cli.output import emit, following_words, kv_text
 from servobus.cli.param_types import Seconds
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveTimeout, NotSupported
 
@@ -121,7 +121,8 @@ def check_reach(axis: Axis, counts: int, relative: bool, number: float, unit: st
 def status_record(axis: Axis, status: AxisStatus) -> dict[str, object]:
     """--json of ``status``: the AxisStatus at top level, position, the vendor's extras."""
     record: dict[str, object] = {"drive_id": axis.drive_id, "protocol": axis.protocol,
-                                 **status.as_dict(), "position": axis.position()}
+                                 **status.as_dict(), "position": axis.position(),
+                                 "following_error": axis.following_error()}
     vendor: Any = status.vendor
     if vendor is not None and hasattr(vendor, "as_dict"):
         record["vendor_status"] = vendor.as_dict()
@@ -150,7 +151,8 @@ def render_status(con: Console, record: dict[str, object], title: str) -> None:
                    "alarm_before"):
             continue
         top[key] = (alarm_words(record["alarm_code"], value, record["alarm_latched"])
-                    if key == "alarm" else value)
+                    if key == "alarm" else following_words(value, "counts")
+                    if key == "following_error" else value)
     con.print(kv_text(title, top), markup=False)
     for key, block_title in BLOCKS.items():
         block = record.get(key)
@@ -306,15 +308,31 @@ def check_lease_rpm(axis: Axis, rpm: int) -> None:
               help="seconds --wait waits before DriveTimeout")
 @click.option("--confirm", is_flag=True,
               help="check that the drive took the move (status/position); never re-sent")
-@click.argument("target", type=Target(), metavar="TARGET")
+@click.option("--together", is_flag=True,
+              help="absolute moves of several machine axes started together: NAME=TARGET ...")
+@click.argument("targets", nargs=-1, required=True, metavar="TARGET")
 @pass_cli
 def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float, confirm: bool,
-             target: tuple[float, str]) -> None:
+             together: bool, targets: tuple[str, ...]) -> None:
     """Point-to-point move to/by TARGET: counts (16384), 2.5rev, 90deg or 120cmd.
 
     On a machine axis (--machine/--axis) a bare number is in the axis's unit (12.5 = 12.5 mm),
-    checked against its soft limits before anything is sent."""
-    number, unit = target
+    checked against its soft limits before anything is sent, and the machine file's speed
+    and accel set the drive's move profile (written only where the drive differs).
+    With --together: `move --together x=10 y=20` starts several axes together and says
+    what the start skew can be."""
+    if together:
+        from servobus.cli.together_cmd import move_together
+
+        move_together(ctx, targets, relative=relative, wait=wait, wait_timeout=wait_timeout,
+                      confirm=confirm)
+        return
+    if len(targets) != 1:
+        raise click.UsageError("move takes one TARGET (several NAME=TARGET with --together)")
+    try:
+        number, unit = Target().convert(targets[0], None, None)
+    except click.BadParameter as exc:
+        raise click.BadParameter(exc.message, param_hint="'TARGET'") from None
     if ctx.machine_mode:
         machine_cli.move(ctx, f"{number!r}{unit}", relative, wait, wait_timeout, confirm)
         return

@@ -36,14 +36,14 @@ from rich.console import Console
 
 from servobus.cli.context import CliContext
 from servobus.cli.failures import EXIT_FAULT, CliError
-from servobus.cli.output import emit, kv_text, note
+from servobus.cli.output import emit, following_words, kv_text, note
 from servobus.errors import DriveAlarm
 
 if TYPE_CHECKING:
     from servobus.axis.sync import Axis
     from servobus.machine import Machine, MachineAxis
 
-def _spec_names(ctx: CliContext) -> tuple[str, list[str]]:
+def spec_names(ctx: CliContext) -> tuple[str, list[str]]:
     from servobus.machine.builtin import BUILTIN_SOURCE, builtin_spec
     from servobus.machine.config import load_machine_file
 
@@ -54,7 +54,7 @@ def _spec_names(ctx: CliContext) -> tuple[str, list[str]]:
 
 def chosen_axis(ctx: CliContext) -> str:
     """The axis a one-axis command acts on: --axis, the only axis, or one line listing them."""
-    source, names = _spec_names(ctx)
+    source, names = spec_names(ctx)
     if ctx.axis_option is not None:
         if ctx.axis_option not in names:
             raise click.UsageError(f"no axis {ctx.axis_option!r} in {source}; axes: "
@@ -139,6 +139,9 @@ def axis_record(axis: MachineAxis) -> dict[str, object]:
     counts = axis.counts()
     record.update(protocol=axis.protocol, position=axis.to_user(counts), counts=counts,
                   **axis.status().as_dict())
+    core = axis.axis
+    error = core.following_error() if core is not None else None
+    record["following_error"] = None if error is None else axis.to_user(error)
     return record
 
 
@@ -147,7 +150,9 @@ def status(ctx: CliContext) -> None:
         with open_machine_axis(ctx) as axis:
             record = axis_record(axis)
             title = f"status of {label(axis)}"
-        emit(ctx, record, lambda con: con.print(kv_text(title, record), markup=False))
+        shown = {**record, "following_error": following_words(record.get("following_error"),
+                                                              axis.unit)}
+        emit(ctx, record, lambda con: con.print(kv_text(title, shown), markup=False))
         raise_alarms([record])
         return
     from servobus.machine import open_machine
@@ -191,21 +196,23 @@ def raise_alarms(records: list[dict[str, object]]) -> None:
 
 def render_machine_table(con: Console, name: str, records: list[dict[str, object]]) -> None:
     """Plain columns (no wrapping or ellipsis whatever the terminal width)."""
-    head = ("axis", "position", "counts", "enabled", "moving", "in_pos", "alarm", "link")
+    head = ("axis", "position", "counts", "enabled", "moving", "in_pos", "f_error", "alarm",
+            "link")
     rows: list[tuple[str, ...]] = []
     for r in records:
         link = f"{r['url']} id {r['id']}"
         if not r["online"]:
-            rows.append((str(r["axis"]), "-", "-", "-", "-", "-", "-",
+            rows.append((str(r["axis"]), "-", "-", "-", "-", "-", "-", "-",
                          f"{link} OFFLINE: {r.get('error', '')}"))
             continue
         position = r["position"]
         assert isinstance(position, float)
         rows.append((str(r["axis"]), f"{position:.3f} {r['unit']}", str(r["counts"]),
                      _yes(r["enabled"]), _yes(r["moving"]), _yes(r["in_position"]),
-                     str(r["alarm"]) or "-", f"{link} ({r['protocol']})"))
+                     _error(r.get("following_error")), str(r["alarm"]) or "-",
+                     f"{link} ({r['protocol']})"))
     widths = [max(len(row[i]) for row in (head, *rows)) for i in range(len(head))]
-    right = (1, 2)
+    right = (1, 2, 6)
     lines = [f"machine {name}"]
     for row in (head, *rows):
         cells = [cell.rjust(w) if i in right else cell.ljust(w)
@@ -216,6 +223,11 @@ def render_machine_table(con: Console, name: str, records: list[dict[str, object
 
 def _yes(value: object) -> str:
     return "yes" if value else "no"
+
+
+def _error(value: object) -> str:
+    """The following error in the table: ``-`` where the drive reports none."""
+    return f"{value:.4f}" if isinstance(value, int | float) else "-"
 
 
 def position(ctx: CliContext) -> None:
@@ -233,6 +245,7 @@ def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: f
     (servobus.cli.arrival)."""
     from servobus.cli.arrival import check_arrival, check_ready, read_status, wait_arrival
     from servobus.cli.motion_guard import stop_on_interrupt
+    from servobus.cli.move_profile import apply_profile
     from servobus.machine import parse_quantity
 
     with open_machine_axis(ctx) as axis:
@@ -244,6 +257,12 @@ def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: f
         with stop_on_interrupt(core):
             if wait or confirm:
                 check_ready(who, core.drive_id, read_status(core))
+            # A move that is refused sends nothing, not even the profile: checked first.
+            if not relative:
+                axis.check_target(user)
+            elif axis.limits is not None:
+                axis.check_target(axis.position() + user)
+            written = apply_profile(axis)  # the file's speed/accel, where the drive differs
             start = axis.counts() if relative and (wait or confirm) else 0
             if confirm:
                 _confirmed_move(axis, core, user, relative, start)
@@ -254,6 +273,8 @@ def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: f
             record: dict[str, object] = {"axis": axis.name,
                                          "move": "relative" if relative else "absolute",
                                          "target": user, "unit": axis.unit}
+            if written:
+                record["profile_written"] = written
             if wait:
                 window = core.position_window()
                 st = (wait_arrival(core, wait_timeout, window) if wait_timeout > 0

@@ -39,6 +39,10 @@ COMMAND_MODULES: list[str] = [
     "servobus.cli.gui_cmd",
     "servobus.cli.serve_cmd",
     "servobus.cli.users_cmd",
+    "servobus.cli.enable_cmd",
+    "servobus.cli.origin_cmd",
+    "servobus.cli.jog_cmd",
+    "servobus.cli.shell_cmd",
 ]
 
 DEBUG_ENV = "SERVOBUS_DEBUG"

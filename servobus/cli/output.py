@@ -49,6 +49,13 @@ def _fmt(value: object) -> str:
     return str(value)
 
 
+def following_words(value: object, unit: str) -> str:
+    """The following error as ``status`` shows it (None: the drive reports none)."""
+    if not isinstance(value, int | float):
+        return "not reported by this drive"
+    return f"{value:.1f} {unit}" if unit == "counts" else f"{value:.4f} {unit}"
+
+
 def note(message: str) -> None:
     """A remark for humans on stderr; never mixes into --json output."""
     click.echo(message, err=True)

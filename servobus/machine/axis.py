@@ -34,7 +34,6 @@ import time
 from collections.abc import Awaitable, Callable, Iterator
 from typing import TYPE_CHECKING
 
-from servobus.axis.capabilities import Capability
 from servobus.errors import (
     ArgumentRangeError,
     ClosedError,
@@ -104,6 +103,7 @@ class AsyncMachineAxis:
         self._is_closed = False
         self.checking = False  # set by the machine while it checks a reopened link
         self.marker_before: int | None = None  # the power cell when the link last opened
+        self._profile_for: AsyncAxis | None = None  # the Axis apply_profile() ran on
 
     # ------------------------------------------------------------- identity
     @property
@@ -617,6 +617,36 @@ class AsyncMachineAxis:
         with contextlib.suppress(NotSupported, ArgumentRangeError):
             await self.mark_power()
 
+    async def home(self) -> None:
+        """The drive's own homing (AsyncAxis.home: NotSupported, saying why, where the
+        family has none); returns once it is started, :meth:`wait_idle` waits for its end.
+        A motion: refused while a power loss is unacknowledged."""
+        core = self._motion()
+        self._moving = True
+        with self._watch():
+            await core.home()
+
+    async def apply_profile(self) -> dict[str, int]:
+        """The file's ``speed`` and ``accel`` as the drive's point-to-point profile
+        (AsyncAxis.set_move_profile: read, written only where the drive differs), once per
+        opened link: the parameters written ({} when the drive had them, or the file names
+        neither). The CLI's ``move`` calls it before moving (docs/machine.md)."""
+        core = self.core()
+        if self._profile_for is core:
+            return {}
+        spec = self.spec
+        rpm = None if spec.speed is None else abs(self.scale.to_rpm(spec.speed))
+        accel = None if spec.accel is None else abs(self.scale.to_rpm(spec.accel))
+        written: dict[str, int] = {}
+        if rpm is not None or accel is not None:
+            with self._watch():
+                written = await core.set_move_profile(rpm, accel)
+        if written:
+            log.warning("axis %s: the drive's move profile set from the machine file: %s",
+                        self.name, ", ".join(f"{k} = {v}" for k, v in written.items()))
+        self._profile_for = core
+        return written
+
     async def set_origin(self) -> None:
         """The position here becomes 0 counts (limits count from it)."""
         with self._watch():
@@ -637,12 +667,12 @@ class AsyncMachineAxis:
         if self.spec.origin == "set":
             await self.set_origin()
         elif self.spec.origin == "home":
-            core = self.core()
-            if not core.supports(Capability.HOMING):
-                raise NotSupported(f"{self.source}: axis {self.name}: origin: "
-                                   f"{core.family.title} over {core.protocol} has no "
-                                   "homing; use origin = \"set\"", family=core.family.name)
-            await core.home()
+            try:
+                await self.home()
+                await self.wait_idle()  # the machine opens once the axis is homed
+            except NotSupported as exc:
+                raise NotSupported(f"{self.source}: axis {self.name}: origin: {exc}; use "
+                                   "origin = \"set\"", family=exc.family) from None
 
     def skip_origin(self) -> None:
         """The link opened after start-up: the file's origin rule is not applied (one

@@ -182,6 +182,15 @@ class MachineAxis:
     def set_origin(self) -> None:
         self._runner.run(self._core.set_origin())
 
+    def home(self) -> None:
+        """The drive's own homing (AsyncMachineAxis.home); NotSupported saying why."""
+        self._runner.run(self._core.home())
+
+    def apply_profile(self) -> dict[str, int]:
+        """The file's speed and accel as the drive's move profile, written only where the
+        drive differs (AsyncMachineAxis.apply_profile); the parameters written."""
+        return self._runner.run(self._core.apply_profile())
+
     def wait_idle(self, timeout: float | None = None) -> AxisStatus:
         return self._runner.run(self._core.wait_idle(timeout))
 

@@ -304,6 +304,7 @@ async def test_origin_rules_at_start_up(tmp_path: Path,
         assert calls == ["c"]  # x has no origin rule
         assert await m["c"].position() == 0.0
     path = write_machine(tmp_path, text.replace('"set"', '"home"'))
-    with pytest.raises(NotSupported, match=r"m\.toml: axis c: origin: .* has no homing") as info:
+    with pytest.raises(NotSupported, match=r"m\.toml: axis c: origin: .* homes only by itself "
+                       r"at power-on.*use origin = \"set\"") as info:
         await open_machine_async(path)
     assert "\n" not in str(info.value)

@@ -17,6 +17,9 @@ CiA 402 onto a node's primitives):
 * ``stream_profile()``: Max Speed and Max Accel at GEAR_NUM: a target update (DTPU) runs
   the point-to-point profile; never written per motion (EEPROM, docs/safety.md).
 * ``position_window()``: OnRange (1/16384 rev) in counts, the drive's own window.
+* ``set_move_profile()``: Max Speed and Max Accel at GEAR_NUM, written only where the
+  drive's differ (EEPROM). ``home()`` is each wire's own: a DYN2 homes by a reset in
+  absolute mode, a DYN5 runs no homing.
 
 A wire supplies the hooks: :meth:`_send` (one profile :class:`Action` with its value),
 :meth:`_check_action` (the same value checked, nothing sent), :meth:`_read_value` (a
@@ -151,6 +154,12 @@ class DmmAxis(AsyncAxis, Generic[S]):
         return StreamProfile(*U.stream_profile(await self.read_param("max_speed"),
                                                await self.read_param("max_accel"),
                                                await self.gear_num()))
+
+    async def _move_profile_values(self, rpm: float | None,
+                                   accel_rpm_s: float | None) -> dict[str, int]:
+        """Max Speed and Max Accel (EEPROM; DYN5: High Speed and High Accel, the same
+        formulas, Appendix B) at the drive's GEAR_NUM (units.profile_params)."""
+        return U.profile_params(rpm, accel_rpm_s, await self.gear_num())
 
     # ------------------------------------------------------------- motion
     async def _send_move_to(self, position: int) -> None:

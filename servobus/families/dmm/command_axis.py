@@ -21,10 +21,10 @@ from servobus import checks
 from servobus.axis.base import AxisTraceHook
 from servobus.axis.client_axis import ClientAxis
 from servobus.axis.types import AxisStatus, Family, ParamInfo
-from servobus.errors import DriveTimeout, ProtocolError
+from servobus.errors import DriveTimeout, MoveFailed, NotSupported, ProtocolError
 from servobus.families.dmm.axis import Action, DmmAxis, Readout
 from servobus.families.dmm.family import DYN2, axis_status
-from servobus.families.dmm.registers import DriveConfig, DriveStatus
+from servobus.families.dmm.registers import DriveConfig, DriveStatus, ServoMode
 from servobus.link.eeprom_guard import EepromGuard
 from servobus.link.transaction import TransactionManager
 
@@ -187,6 +187,28 @@ class CommandAxis(ClientAxis[CommandClient], DmmAxis[DriveStatus]):
 
     async def _write_param(self, name: str, value: int) -> None:
         await self._run(self.commands.make_set_param(self._id, name, value))
+
+    async def home(self) -> None:
+        """DMM absolute-encoder homing (DYN2 manual 7.1 "Absolute encoder homing", 7.3
+        config b2; DYN CAN 6 Set_Origin): in absolute mode the drive returns to its stored
+        zero after a power-on reset - the nearest one, within half a turn (the encoder is
+        single-turn) - and takes no command until it is there. The reset selector is that
+        reset (it also clears a latched alarm). In relative mode there is no stored zero:
+        NotSupported, nothing sent."""
+        cfg = await self.config()
+        if not cfg.absolute:
+            raise NotSupported(
+                f"drive {self._id} is in relative mode (config b2 = 0): a {self.family.title} "
+                "homes only in absolute mode, returning to the zero stored by Set_Origin after "
+                "a power-on reset: set absolute mode in its config, or set "
+                "the zero where the axis stands (origin)", family=self.family.name)
+        if cfg.free or cfg.servo_mode is not ServoMode.POSITION:
+            how = ("with the motor free (b5 = 1)" if cfg.free
+                   else f"in {cfg.servo_mode.name.lower()} mode")
+            raise MoveFailed(f"drive {self._id} would not home: its config starts it {how}, "
+                             "and only a drive in position mode returns to its zero; nothing "
+                             "was sent", drive_id=self._id)
+        await self.reset()
 
     # ------------------------------------------------------------- registers
     async def drive_status(self) -> DriveStatus:

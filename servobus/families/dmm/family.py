@@ -28,6 +28,7 @@ ALARM_TEXT: dict[int, str] = {
 CAPABILITIES = frozenset({
     Capability.WAVES, Capability.CONFIG, Capability.ORIGIN, Capability.DRIVE_ID,
     Capability.RESET, Capability.COMMAND_UNITS, Capability.STREAM_TARGETS, Capability.TUNING,
+    Capability.HOMING,
 })
 
 DYN2 = Family(

@@ -5,7 +5,10 @@ Every conversion factor lives here once.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+
+from servobus.errors import ArgumentRangeError
 
 COUNTS_PER_REV = 65_536  # 16-bit absolute encoder; position readouts are in these counts
 ONRANGE_UNITS_PER_REV = 16_384  # OnRange and the lost-phase threshold count in 1/16384 rev
@@ -13,6 +16,7 @@ LOST_PHASE_UNITS = 8_192  # 180 deg in 1/16384 rev
 GEAR_BASE = 4_096  # gear ratio = 4096 / GEAR_NUM
 SPEED_FACTOR_RPM = 12.21  # (MaxSpd+3)^2 / 16 * 12.21 rpm
 ACCEL_FACTOR_RPM_S = 635.78  # MaxAcl * 635.78 rpm/s
+PARAM_MAX = 127  # Max Speed and Max Accel: 1..127 (5.1)
 SOFT_START_K = 59.98  # speed-mode 10-90 % rise time = 59.98 / MaxAcl^2 s
 WAVE_COUNTS_PER_UNIT = COUNTS_PER_REV / 8_192  # wave amplitude 4096 = 180 deg
 ANALOG_SPEED_RPM_PER_V = 600.0  # +5 V = 3000 rpm
@@ -41,6 +45,34 @@ def stream_profile(max_speed: int, max_accel: int, gear_num: int) -> tuple[float
     """A position target's motor speed and acceleration, (rpm, rpm/s): the point-to-point
     profile (7.4.1) a target update (DTPU) runs at; both are EEPROM parameters."""
     return profile_speed_rpm(max_speed, gear_num), profile_accel_rpm_s(max_accel, gear_num)
+
+
+def profile_params(rpm: float | None, accel_rpm_s: float | None,
+                   gear_num: int) -> dict[str, int]:
+    """``max_speed``/``max_accel`` for a point-to-point profile (7.4.1) at GEAR_NUM (None:
+    leave it out). Decision: Max Speed is the smallest value whose cruise is at least
+    ``rpm``, so a lease at that speed stays inside the profile (a step of (v+3)^2 is about
+    7 % at v = 25); Max Accel the largest whose acceleration is at most ``accel_rpm_s``
+    (at least 1, at most 127): never harder than asked. A speed above Max Speed 127's is
+    ArgumentRangeError."""
+    values: dict[str, int] = {}
+    ratio = gear_ratio(gear_num)
+    if rpm is not None:
+        top = profile_speed_rpm(PARAM_MAX, gear_num)
+        if rpm > top:
+            raise ArgumentRangeError(f"{rpm:g} rpm is above the fastest profile the drive runs "
+                                     f"at GEAR_NUM {gear_num} ({top:g} rpm, max_speed "
+                                     f"{PARAM_MAX})")
+        v = max(1, math.ceil(math.sqrt(rpm * 16 / (SPEED_FACTOR_RPM * ratio)) - 3))
+        while v > 1 and profile_speed_rpm(v - 1, gear_num) >= rpm:  # float edges
+            v -= 1
+        while profile_speed_rpm(v, gear_num) < rpm:
+            v += 1
+        values["max_speed"] = v
+    if accel_rpm_s is not None:
+        values["max_accel"] = min(PARAM_MAX,
+                                  max(1, math.floor(accel_rpm_s / (ACCEL_FACTOR_RPM_S * ratio))))
+    return values
 
 
 def command_to_counts(command: float, gear_num: int = GEAR_BASE) -> float:

@@ -21,7 +21,7 @@ from abc import abstractmethod
 
 from servobus import checks
 from servobus.axis.types import AxisStatus, Family, ParamInfo
-from servobus.errors import ArgumentRangeError
+from servobus.errors import ArgumentRangeError, NotSupported
 from servobus.families.dmm.axis import Action, DmmAxis, Readout
 from servobus.families.dyn5 import params as dyn5
 from servobus.families.dyn5.family import DYN5, PARAM_INSTANCES, Dyn5Status, axis_status
@@ -136,6 +136,15 @@ class Dyn5Axis(DmmAxis[int]):
         return self._param_instance(name).check(checked)
 
     # ------------------------------------------------------------- the DYN5's own
+    async def home(self) -> None:
+        """The DYN5 runs no homing of its own: after power-up or Reset it reports its
+        absolute position without moving (DYN5 manual 4.4, 0x21 and "Motor Absolute
+        Position"); nothing is sent."""
+        raise NotSupported(f"a {self.family.title} runs no homing of its own: after a "
+                           "power-up or Reset it reports its absolute position without "
+                           "moving: set the zero where the axis stands "
+                           "(origin: Set ABS Origin), then move to 0", family=self.family.name)
+
     async def power_marker(self, token: int | None = None) -> int | None:
         """Instance 0x01, the memory test object (4.4): RAM that "will be lost after power
         cycle or Reset", 0 after power-up. The machine leaves a non-zero token there and

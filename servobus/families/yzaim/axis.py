@@ -64,6 +64,7 @@ from servobus.errors import (
     DriveError,
     DriveTimeout,
     MotionRefused,
+    NotSupported,
     ProtocolError,
 )
 from servobus.families.yzaim import registers as Y
@@ -322,6 +323,31 @@ class YzaimAxis(ClientAxis[C]):
         self._target = None
         await self._write("output_enable", 0)
         await self._write("output_enable", 1)
+
+    async def home(self) -> None:
+        """No homing a host starts (decision, nothing sent): the mechanical-origin search
+        (special function 0x19 = 1 or 4, manual 4.6 and 5.2) runs at power-on once saved,
+        against the mechanical stop (a stall); the manual does not say that writing 0x19
+        starts it at once, and the virtual motor models no mechanical stop."""
+        raise NotSupported(
+            f"a {self.family.title} motor homes only by itself at power-on (special_function "
+            "1 or 4, saved: it stalls against the mechanical stop, then sets its origin); "
+            "servobus starts none: set the zero where the axis "
+            "stands (origin)", family=self.family.name)
+
+    async def _move_profile_values(self, rpm: float | None,
+                                   accel_rpm_s: float | None) -> dict[str, int]:
+        """target_speed 0x02 (the cruise of position moves, rounded up) and acceleration
+        0x03 (rounded down, below 60000: at 60000 and above the motor runs no curve)."""
+        values: dict[str, int] = {}
+        if rpm is not None:
+            if rpm > _SPEED.maximum:
+                raise ArgumentRangeError(f"{rpm:g} rpm is above the fastest cruise speed "
+                                         f"(target_speed {_SPEED.maximum} rpm)")
+            values["target_speed"] = max(1, math.ceil(rpm))
+        if accel_rpm_s is not None:
+            values["acceleration"] = min(Y.NO_PROFILE_ACCEL - 1, max(1, math.floor(accel_rpm_s)))
+        return values
 
     async def save_parameters(self) -> None:
         """Save flag 0x14 = 1: every saved register goes to EEPROM (5.2, 5.4a)."""
