@@ -3,7 +3,8 @@
 (servobus.families.<f>.axis), the registry finds the protocols."""
 
 from servobus.axis.base import AsyncAxis
+from servobus.axis.capabilities import Capability
 from servobus.axis.connect import connect, connect_async
 from servobus.axis.sync import Axis
 
-__all__ = ["AsyncAxis", "Axis", "connect", "connect_async"]
+__all__ = ["AsyncAxis", "Axis", "Capability", "connect", "connect_async"]

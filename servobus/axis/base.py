@@ -36,8 +36,10 @@ import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from types import TracebackType
+from typing import ClassVar
 
 from servobus import checks
+from servobus.axis.capabilities import CONNECTION_CAPABILITIES, Capability
 from servobus.axis.capture import Capture, CaptureSource
 from servobus.axis.types import AxisStatus, Family, ParamInfo, StreamProfile
 from servobus.axis.virtual_io import VirtualIo, VirtualIoSource
@@ -49,6 +51,7 @@ from servobus.errors import (
     MoveFailed,
     NotSupported,
 )
+from servobus.link.stats import TransactionStats
 from servobus.transport.base import Direction
 
 log = logging.getLogger(__name__)
@@ -210,17 +213,49 @@ class AsyncAxis(ABC):
         then judges a power loss by the position (docs/machine.md, "Recovery")."""
         return None
 
-    def unsupported(self, feature: str) -> NotSupported:
-        """The error for a feature this family (or this protocol) does not have."""
-        self.family.require(feature)  # raises when the family lacks it
+    #: What this protocol's connection adds to the family's capabilities, whatever the
+    #: drive (a client that counts its transactions: LINK_STATS).
+    protocol_capabilities: ClassVar[frozenset[Capability]] = frozenset()
+
+    @property
+    def capabilities(self) -> frozenset[Capability]:
+        """What this axis can do beyond the basics (servobus.axis.capabilities): the family's
+        declared set, the protocol's, and what this connection gives (a synchronised start,
+        a virtual drive's trace and I/O)."""
+        extra = set(self.protocol_capabilities)
+        if self.sync_group() is not None:
+            extra.add(Capability.SYNC_START)
+        if self.capture_source is not None:
+            extra.add(Capability.DRIVE_TRACE)
+        if self.io_source is not None:
+            extra.add(Capability.VIRTUAL_IO)
+        return self.family.capabilities | extra
+
+    def supports(self, capability: Capability) -> bool:
+        return capability in self.capabilities
+
+    def require(self, capability: Capability) -> None:
+        """NotSupported (nothing is sent) when this axis lacks ``capability``."""
+        if capability not in self.capabilities:
+            raise self.unsupported(capability)
+
+    def unsupported(self, capability: Capability) -> NotSupported:
+        """The error for a capability this family (or this protocol) does not have."""
+        if capability not in CONNECTION_CAPABILITIES:
+            self.family.require(capability)  # raises when the family lacks it
         return NotSupported(f"{self.family.title} over {self.protocol} has no "
-                            f"{feature.replace('_', ' ')}", family=self.family.name)
+                            f"{capability.words}", family=self.family.name)
+
+    def link_stats(self) -> TransactionStats:
+        """The protocol client's transaction counters (Capability.LINK_STATS; all drives on
+        the link). NotSupported where the client keeps none."""
+        raise self.unsupported(Capability.LINK_STATS)
 
     async def home(self) -> None:
         """Start the drive's own homing, a procedure the drive runs to find its zero by
         itself; it returns once the homing is started and :meth:`wait_idle` waits for its
-        end. NotSupported, saying why and nothing sent, where the family's drive has no
-        homing a host can start (docs/cli.md, "home")."""
+        end (Capability.HOMING). NotSupported, saying why and nothing sent, where the
+        family's drive has no homing a host can start (docs/cli.md, "home")."""
         raise NotSupported(f"{self.family.title} over {self.protocol} has no homing a host "
                            "can start: set the zero where the axis stands "
                            "(set_origin)", family=self.family.name)
@@ -267,7 +302,7 @@ class AsyncAxis(ABC):
     async def stream_profile(self) -> StreamProfile:
         """The profile a streamed position target runs at (:meth:`stream_to`; reads the
         drive's parameters). NotSupported where the family streams no targets."""
-        raise self.unsupported("streamed position targets")
+        raise self.unsupported(Capability.STREAM_TARGETS)
 
     async def stream_to(self, position: int, rpm: float) -> None:
         """Move the drive's running target to ``position`` counts, a target update the drive
@@ -281,14 +316,14 @@ class AsyncAxis(ABC):
 
     async def square_wave(self, amplitude: int) -> None:
         """Drive-generated square-wave test motion (families with "waves")."""
-        raise self.unsupported("waves")
+        raise self.unsupported(Capability.WAVES)
 
     async def sine_wave(self, amplitude: int) -> None:
         """Drive-generated sine-wave test motion (families with "waves")."""
-        raise self.unsupported("waves")
+        raise self.unsupported(Capability.WAVES)
 
     async def wave_frequency(self, hz: int) -> None:
-        raise self.unsupported("waves")
+        raise self.unsupported(Capability.WAVES)
 
     def sync_group(self) -> object | None:
         """A synchronised start: axes whose ``sync_group()`` is the same (non-None) object can
@@ -300,8 +335,7 @@ class AsyncAxis(ABC):
     async def sync_move_to(self, moves: Sequence[tuple[AsyncAxis, int]]) -> None:
         """Absolute moves (counts) of axes of this axis's :meth:`sync_group`, loaded first
         and started by one trigger; every target is checked before anything is sent."""
-        raise NotSupported(f"{self.family.title} over {self.protocol} has no synchronised "
-                           "start", family=self.family.name)
+        raise self.unsupported(Capability.SYNC_START)
 
     def _check_sync_moves(self, moves: Sequence[tuple[AsyncAxis, int]]) -> None:
         """Every axis in this axis's sync group, every target in range (nothing sent)."""

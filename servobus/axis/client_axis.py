@@ -12,7 +12,9 @@ from collections.abc import Awaitable, Callable
 from typing import Any, ClassVar, Generic, Protocol, Self, TypeVar
 
 from servobus.axis.base import AsyncAxis, AxisTraceHook
+from servobus.axis.capabilities import Capability
 from servobus.errors import ConnectionLost
+from servobus.link.stats import TransactionStats
 from servobus.link.transaction import TransactionManager
 
 
@@ -34,6 +36,8 @@ class ClientAxis(AsyncAxis, Generic[C]):
     protocol_name: ClassVar[str]
     #: How ``repr`` names the address ("id" on DMM drives, "motor" on YZ-AIM).
     address_word: ClassVar[str] = "id"
+    #: Every link client counts its transactions.
+    protocol_capabilities: ClassVar[frozenset[Capability]] = frozenset({Capability.LINK_STATS})
 
     def __init__(self, client: C, drive_id: int, *, owns_client: bool = True) -> None:
         self.client = client
@@ -65,6 +69,9 @@ class ClientAxis(AsyncAxis, Generic[C]):
 
     async def add_trace(self, hook: AxisTraceHook) -> None:
         self.client.add_trace(hook)
+
+    def link_stats(self) -> TransactionStats:
+        return self.client.transactions.stats
 
     def on_link_lost(self, callback: Callable[[ConnectionLost], object]) -> bool:
         """The client's transaction manager hears of the medium's end (link.transaction)."""

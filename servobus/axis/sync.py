@@ -34,9 +34,11 @@ from servobus.errors import ClosedError, ConnectionLost
 
 if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis, AxisTraceHook
+    from servobus.axis.capabilities import Capability
     from servobus.axis.capture import Capture
     from servobus.axis.types import AxisStatus, Family, ParamInfo, StreamProfile
     from servobus.axis.virtual_io import VirtualIo
+    from servobus.link.stats import TransactionStats
 
 T = TypeVar("T")
 P = ParamSpec("P")
@@ -228,6 +230,23 @@ class Axis:
     def id_address(self) -> str | None:
         """The network address the drive id selected (DYN5), None where the id is a bus address."""
         return self._core.id_address
+
+    # ------------------------------------------------------------- capabilities
+    @property
+    def capabilities(self) -> frozenset[Capability]:
+        """What this axis can do beyond the basics (:attr:`AsyncAxis.capabilities`)."""
+        return self._core.capabilities
+
+    def supports(self, capability: Capability) -> bool:
+        return self._core.supports(capability)
+
+    def require(self, capability: Capability) -> None:
+        """NotSupported (nothing is sent) when this axis lacks ``capability``."""
+        self._core.require(capability)
+
+    def link_stats(self) -> TransactionStats:
+        """The protocol client's transaction counters (Capability.LINK_STATS)."""
+        return self._core.link_stats()
 
     # ------------------------------------------------------------- motion
     def move_to(self, position: int, *, wait: bool = False, timeout: float | None = None,

@@ -17,6 +17,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import Enum
 
+from servobus.axis.capabilities import Capability
 from servobus.errors import ArgumentRangeError, NotSupported
 
 
@@ -117,14 +118,15 @@ class AxisStatus:
 
 @dataclass(frozen=True)
 class Family:
-    """A device family: name, counts per revolution, parameters, features."""
+    """A device family: name, counts per revolution, parameters, capabilities."""
 
     name: str  # "dmm-dyn2", "dmm-dyn5", "yzaim"
     title: str  # for people: "DMM DYN2/DYN4"
     counts_per_rev: int
     params: tuple[ParamInfo, ...]
-    #: Optional Axis features this family has ("waves", "config", "origin", ...).
-    features: frozenset[str] = frozenset()
+    #: What the family's drives can do beyond the Axis basics, on any protocol
+    #: (servobus.axis.capabilities; an Axis adds what its connection gives).
+    capabilities: frozenset[Capability] = frozenset()
     #: Alarm code -> text.
     alarms: Mapping[int, str] = field(default_factory=dict)
     #: Motor counts per unit of a drive-generated wave's amplitude (families with "waves"):
@@ -139,10 +141,10 @@ class Family:
             f"{self.title} has no parameter {name!r}; it has: "
             f"{', '.join(p.name for p in self.params)}")
 
-    def require(self, feature: str) -> None:
-        """Raise NotSupported (before anything is sent) when the family lacks ``feature``."""
-        if feature not in self.features:
-            raise NotSupported(f"{self.title} drives have no {feature.replace('_', ' ')}",
+    def require(self, capability: Capability) -> None:
+        """Raise NotSupported (before anything is sent) when the family lacks ``capability``."""
+        if capability not in self.capabilities:
+            raise NotSupported(f"{self.title} drives have no {capability.words}",
                                family=self.name)
 
     def alarm_text(self, code: int) -> str:

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any, TypeAlias
 import click
 from rich.console import Console
 
+from servobus.axis.capabilities import Capability
 from servobus.cli import machine_cli
 from servobus.cli.arrival import check_arrival, check_ready, read_status, wait_arrival
 from servobus.cli.command_class import ServobusCommand
@@ -125,7 +126,7 @@ def status_record(axis: Axis, status: AxisStatus) -> dict[str, object]:
     vendor: Any = status.vendor
     if vendor is not None and hasattr(vendor, "as_dict"):
         record["vendor_status"] = vendor.as_dict()
-    if "config" in axis.family.features and hasattr(axis.core, "config"):
+    if axis.supports(Capability.CONFIG):
         record["config"] = axis.extra.config().as_dict()
     return record
 
@@ -201,7 +202,7 @@ def reset_cmd(ctx: CliContext, wait_timeout: float) -> None:
     cause first: an alarm whose cause remains trips again. Exits 1 if the alarm is still
     there."""
     with open_axis(ctx) as axis:
-        axis.family.require("reset")
+        axis.require(Capability.RESET)
         before = read_status(axis)
         axis.reset()
         after = _status_after_reset(axis, wait_timeout)
@@ -342,7 +343,7 @@ def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float, c
             check_ready(who, axis.drive_id, read_status(axis))
         start = axis.position() if wait and relative else 0  # where "by" counts from
         if unit == "cmd":
-            if not hasattr(axis.core, "move_to_command"):
+            if not axis.supports(Capability.COMMAND_UNITS):
                 raise NotSupported(f"{axis.family.title} over {axis.protocol} has no raw "
                                    "command units; give counts, rev or deg", axis.family.name)
             (axis.extra.move_by_command if relative else axis.extra.move_to_command)(int(number))

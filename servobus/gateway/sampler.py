@@ -175,13 +175,8 @@ class Sampler:
             why = axis.last_error
             return _failed(axis, OFFLINE if why is None else f"{OFFLINE}: {why}",
                            offline_code(axis.last_good))
-        readings = getattr(axis, "readings", None)  # one request fewer where it exists
-        if readings is not None:
-            (position, speed, status), current = await asyncio.gather(
-                readings(), self._current(axis))
-        else:
-            position, speed, status, current = await asyncio.gather(
-                axis.position(), axis.speed(), axis.status(), self._current(axis))
+        (position, speed, status), current = await asyncio.gather(
+            axis.readings(), self._current(axis))
         return Sample(axis.name, time.time(), True, "", position, speed, current, status,
                       health_of(axis))
 

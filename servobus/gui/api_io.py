@@ -22,6 +22,7 @@ from starlette.requests import Request
 from starlette.responses import JSONResponse, Response
 from starlette.routing import Route
 
+from servobus.axis.capabilities import Capability
 from servobus.errors import ArgumentRangeError
 from servobus.gui.fleet import AxisHandle
 from servobus.gui.http_util import api, body, handle, integer, number, ok
@@ -71,11 +72,12 @@ async def io_write(request: Request) -> Response:
 
 
 def _configurable(h: AxisHandle) -> Any:
-    """The axis, when its family has a config byte and the axis reaches it."""
+    """The axis, when it has a config byte (Capability.CONFIG); its ``config`` and
+    ``set_config`` are the family's (typed there), so the GUI holds the axis as ``Any``."""
     axis = h.axis
-    if "config" not in axis.family.features or not hasattr(axis, "set_config"):
-        raise axis.unsupported("config")
-    return axis
+    axis.require(Capability.CONFIG)
+    configurable: Any = axis
+    return configurable
 
 
 def _as_dict(cfg: Any) -> dict[str, object]:

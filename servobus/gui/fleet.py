@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TypeVar, cast
 
 from servobus.axis.base import AsyncAxis
+from servobus.axis.capabilities import Capability
 from servobus.errors import ArgumentRangeError
 from servobus.gui.link_stats import CallStats, client_counters
 from servobus.gui.traffic import TrafficLog
@@ -106,7 +107,7 @@ class AxisHandle:
                 "default_speed": m.default_speed, "label": m.spec.label, "online": m.online})
         if m is not None and not m.online:  # what the page can show until it comes back
             return {"id": self.id, "protocol": "", "family": "", "family_title": "offline",
-                    "counts_per_rev": 1, "features": [], "alarms": {}, "params": 0,
+                    "counts_per_rev": 1, "capabilities": [], "alarms": {}, "params": 0,
                     "virtual_io": False, **named}
         a = self.axis
         fam = a.family
@@ -115,10 +116,10 @@ class AxisHandle:
         return {
             "id": self.id, "protocol": a.protocol, "family": fam.name,
             "family_title": fam.title, "counts_per_rev": a.counts_per_rev,
-            "features": sorted(fam.features),
+            "capabilities": sorted(a.capabilities),
             "alarms": {str(k): v for k, v in fam.alarms.items()},
             "params": len(a.parameters()),
-            "virtual_io": a.io_source is not None,
+            "virtual_io": a.supports(Capability.VIRTUAL_IO),
             **named,
         }
 

@@ -2,9 +2,9 @@
 
 Every call the GUI makes on an axis goes through :meth:`CallStats.timed`, so the
 Diagnostics panel shows round trips, timeouts and errors per axis whatever the protocol.
-Retries happen inside the protocol client; where a client exposes its own counters
-(a ``stats`` dataclass on ``axis.client``, as the DYN232M, DYN CAN and Modbus clients have),
-they are shown too, read by duck typing (the GUI imports no protocol).
+Retries happen inside the protocol client; where the client counts its own transactions
+(``Capability.LINK_STATS``: every link client), they are shown too, asked of the Axis by
+capability (the GUI imports no protocol).
 """
 
 from __future__ import annotations
@@ -15,6 +15,8 @@ from collections.abc import Awaitable
 from dataclasses import dataclass, field
 from typing import TypeVar
 
+from servobus.axis.base import AsyncAxis
+from servobus.axis.capabilities import Capability
 from servobus.errors import ConnectionLost, DriveTimeout
 
 T = TypeVar("T")
@@ -67,10 +69,9 @@ class CallStats:
         }
 
 
-def client_counters(axis: object) -> dict[str, object] | None:
-    """The protocol client's own counters when it exposes a ``stats`` dataclass, else None."""
-    stats = getattr(getattr(axis, "client", None), "stats", None)
-    if stats is None or not dataclasses.is_dataclass(stats) or isinstance(stats, type):
+def client_counters(axis: AsyncAxis) -> dict[str, object] | None:
+    """The protocol client's own counters (Capability.LINK_STATS), else None."""
+    if not axis.supports(Capability.LINK_STATS):
         return None
-    return {k: v for k, v in dataclasses.asdict(stats).items()
+    return {k: v for k, v in dataclasses.asdict(axis.link_stats()).items()
             if isinstance(v, int | float | str)}

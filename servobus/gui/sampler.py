@@ -22,7 +22,8 @@ from array import array
 from collections import deque
 from collections.abc import Iterable
 
-from servobus.errors import ConnectionLost, NotSupported, ServobusError
+from servobus.axis.capabilities import Capability
+from servobus.errors import ConnectionLost, ServobusError
 from servobus.gui.fleet import AxisHandle
 from servobus.gui.ring import SampleRing
 from servobus.gui.signals import BIT_SIGNALS, POLLED_READS, SIGNALS
@@ -105,10 +106,11 @@ class AxisSampler:
         try:
             if self.source != "poll":
                 try:
-                    await self.handle.axis.trace_buffer()  # starts the drive's recording
-                    self.source = "trace"
-                except NotSupported:
-                    self.source = "poll"
+                    if self.handle.axis.supports(Capability.DRIVE_TRACE):
+                        await self.handle.axis.trace_buffer()  # starts the drive's recording
+                        self.source = "trace"
+                    else:
+                        self.source = "poll"
                 except ConnectionLost:
                     raise
                 except Exception as exc:  # a trace that cannot start: poll instead

@@ -297,3 +297,91 @@ def test_bounded_json_imports_only_the_errors() -> None:
     layer may use it."""
     found = {name for name in imports(ROOT / "bounded_json.py") if name.startswith("servobus")}
     assert found == {"servobus.errors", "servobus.errors.JsonRefused"}
+
+
+# ---------------------------------------------------------------- typed capabilities
+#: Objects whose attributes are probed, by name in the source: an Axis, its core, its client.
+AXIS_LIKE = re.compile(r"axis|core|client", re.I)
+#: ``getattr(x, name)`` calls that dispatch a request to a method by its name (the name is
+#: checked against a fixed list first): not a probe of what the Axis can do.
+DISPATCH = {
+    ("gui/api_axes.py", "getattr(h.axis, str(action))"):
+        "runs the command action named in the request, checked against ACTIONS first",
+    ("gui/sampler.py", "getattr(axis, call)"):
+        "runs the read a POLLED_READS entry names (position, speed, current)",
+}
+#: ``hasattr``/``getattr`` with a default in the front ends on objects that are no Axis,
+#: core or client of a drive; each with why it is not a capability probe.
+NOT_AN_AXIS = {
+    ("cli/decode_cmd.py", "hasattr(self._stream, 'read1')"):
+        "a byte stream (stdin or a capture file): read1 where buffered",
+    ("cli/drive_cmds.py", "hasattr(vendor, 'as_dict')"):
+        "an AxisStatus's vendor record (typed object: each family's own status type)",
+    ("gui/traffic.py", "getattr(item, 'is_error', False)"):
+        "a traced packet or frame of any protocol (the trace hook hands decoded objects)",
+    ("gui/traffic.py", "getattr(item, 'describe', None)"): "a traced packet or frame",
+    ("gui/traffic.py", "getattr(item, 'lines', None)"): "a traced packet or frame",
+    ("gui/server.py", "getattr(exc, 'signal_name', 'Ctrl-C')"):
+        "the stop exception of a signal handler",
+    ("gui/server.py", "getattr(app.state, 'gui', None)"): "Starlette's app state",
+    ("gui/fair.py", "getattr(scope['app'].state, 'gui', None)"): "Starlette's app state",
+    ("gui/fleet.py", "getattr(AsyncAxis, name, None)"):
+        "the offline stand-in asks the API class whether a name is a coroutine method, to "
+        "fail it the way the API would (dispatch, not a capability probe)",
+    ("gateway/mqtt_presence.py", "getattr(code, 'is_failure', False)"):
+        "a paho reason code (an int or a ReasonCode by paho version)",
+    ("gateway/opcua_model.py", "getattr(arg, 'Value', arg)"): "an OPC UA Variant or value",
+    ("gateway/mqtt.py", "getattr(client, '_client', None)"):
+        "the aiomqtt client's paho client (an MQTT client, not a drive's)",
+    ("gateway/mqtt.py", "getattr(paho, 'publish', None)"): "the paho client",
+    ("gateway/opcua_server.py",
+     "getattr(ua.StatusCodes, code, ua.StatusCodes.BadInternalError)"):
+        "an OPC UA status code by name",
+    ("gateway/opcua_server.py", "getattr(self.server.iserver, 'time_task', None)"):
+        "asyncua's internal server",
+}
+
+
+def probes(relative: str, source: str) -> list[str]:
+    """Where ``source`` probes an object: every ``hasattr(...)``, every ``getattr`` with a
+    default, and a two-argument ``getattr`` on an axis, core or client not in DISPATCH;
+    minus the listed calls on objects that are no Axis (NOT_AN_AXIS)."""
+    found: list[str] = []
+    for node in ast.walk(ast.parse(source)):
+        if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)):
+            continue
+        call = ast.unparse(node)
+        if node.func.id == "hasattr" or (node.func.id == "getattr" and len(node.args) > 2):
+            if (relative, call) not in NOT_AN_AXIS:
+                found.append(f"{relative}:{node.lineno}: {call}")
+        elif node.func.id == "getattr" and node.args and AXIS_LIKE.search(
+                ast.unparse(node.args[0])) and (relative, call) not in DISPATCH:
+            found.append(f"{relative}:{node.lineno}: {call}")
+    return found
+
+
+def test_the_probe_finder_bites() -> None:
+    assert probes("cli/x.py", "hasattr(axis.core, 'move_to_command')\n")
+    assert probes("gui/x.py", "getattr(getattr(axis, 'client', None), 'stats', None)\n")
+    assert probes("machine/x.py", "home = getattr(self.core(), 'home')\n")
+    assert probes("gui/api_axes.py", "getattr(h.axis, str(action))\n") == []
+    assert probes("gui/x.py", "getattr(h.axis, str(action))\n")  # listed for one file only
+    assert probes("cli/x.py", "axis.supports(Capability.HOMING)\n") == []
+
+
+def test_the_front_ends_ask_for_capabilities_and_never_probe() -> None:
+    """Issue 31: what an Axis can do is asked by name (``axis.supports(Capability.X)``,
+    servobus.axis.capabilities), never probed with ``hasattr`` or ``getattr`` with a default
+    on an Axis, its core or its client. A new call on an object that is no Axis goes into
+    NOT_AN_AXIS with its reason; a dispatch by name into DISPATCH."""
+    found = [hit for package in FRONT_ENDS for path in sources(ROOT / package)
+             for hit in probes(str(path.relative_to(ROOT)), path.read_text(encoding="utf-8"))]
+    assert found == []
+
+
+def test_every_listed_call_is_still_there() -> None:
+    """No stale entry in NOT_AN_AXIS or DISPATCH (it would let a later probe through)."""
+    seen = {(where, ast.unparse(node)) for where in {w for w, _ in (*NOT_AN_AXIS, *DISPATCH)}
+            for node in ast.walk(ast.parse((ROOT / where).read_text(encoding="utf-8")))
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name)}
+    assert set(NOT_AN_AXIS) | set(DISPATCH) <= seen

@@ -16,6 +16,7 @@ NOT_ON_THE_FACADE = {
     "capture_source": "wiring the simulator sets on the core (trace_buffer() reads it)",
     "io_source": "wiring the simulator sets on the core (virtual_io() reads it)",
     "unsupported": "a helper for protocol implementations, not for callers",
+    "protocol_capabilities": "a protocol's declaration; callers ask ``capabilities``",
 }
 #: Facade members AsyncAxis has not: the way to the core and to a protocol's extras.
 FACADE_ONLY = {"core", "extra"}

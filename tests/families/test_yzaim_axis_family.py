@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from servobus.axis.capabilities import Capability
 from servobus.axis.types import Storage
 from servobus.errors import ArgumentRangeError, NotSupported
 from servobus.families import family
@@ -38,9 +39,9 @@ def test_alarm_texts_and_features() -> None:
     assert YZAIM.alarm_text(0) == ""
     assert "stall" in YZAIM.alarm_text(0x14)
     assert YZAIM.alarm_text(0x33) == "alarm 51"
-    YZAIM.require("origin")
+    YZAIM.require(Capability.ORIGIN)
     with pytest.raises(NotSupported):
-        YZAIM.require("waves")
+        YZAIM.require(Capability.WAVES)
 
 
 def test_status_idle_moving_and_alarms() -> None:

@@ -71,6 +71,9 @@ class FakeAxis:
                           alarm_code=self.alarm, alarm_text="over current" if self.alarm else "",
                           alarm_latched=bool(self.alarm), raw=0, family="fake")
 
+    async def readings(self) -> tuple[float, float, AxisStatus]:
+        return await self.position(), await self.speed(), await self.status()
+
     async def move_to(self, target: float, /) -> None:
         if self.power_lost:  # as the machine axis: motion waits for the acknowledgement
             raise PowerLostError(f"axis {self.name}: the drive may have lost power")

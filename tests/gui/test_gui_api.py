@@ -55,7 +55,8 @@ def test_three_virtual_axes_with_identity_and_live_status(client: TestClient) ->
     info = client.get("/api/info").json()
     assert [a["id"] for a in info["axes"]] == [1, 2, 3]
     a1 = info["axes"][0]
-    assert a1["protocol"] == "dyn232" and a1["counts_per_rev"] == REV and "waves" in a1["features"]
+    assert a1["protocol"] == "dyn232" and a1["counts_per_rev"] == REV
+    assert "waves" in a1["capabilities"]
     assert {s["name"] for s in info["signals"]} >= {"position", "position_error", "speed",
                                                     "current", "moving"}
     s = status(client, 2)

@@ -9,6 +9,7 @@ half away from zero; the resolution is ``16384 / GEAR_NUM`` counts (4 at GEAR_NU
 
 from __future__ import annotations
 
+from servobus.axis.capabilities import Capability
 from servobus.axis.types import AxisStatus, Family, motion_state, round_counts
 from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
@@ -22,15 +23,20 @@ ALARM_TEXT: dict[int, str] = {
     AlarmCode.OVER_VOLTAGE: "over voltage",
 }
 
-#: Features of the DMM Axis beyond move/speed/stop/params (Family.require names them).
-FEATURES = frozenset({"waves", "config", "origin", "drive_id", "reset"})
+#: What the DMM Axis (families/dmm/axis.py) can do beyond move/speed/stop/params, on any
+#: protocol (servobus.axis.capabilities).
+CAPABILITIES = frozenset({
+    Capability.WAVES, Capability.CONFIG, Capability.ORIGIN, Capability.DRIVE_ID,
+    Capability.RESET, Capability.COMMAND_UNITS, Capability.STREAM_TARGETS, Capability.TUNING,
+    Capability.HOMING,
+})
 
 DYN2 = Family(
     name="dmm-dyn2",
     title="DMM DYN2/DC2/DYN4",
     counts_per_rev=U.COUNTS_PER_REV,
     params=tuple(p.info for p in P.PARAMS),
-    features=FEATURES,
+    capabilities=CAPABILITIES,
     alarms={int(k): v for k, v in ALARM_TEXT.items()},
     wave_counts_per_unit=U.WAVE_COUNTS_PER_UNIT,
 )

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from servobus.axis.capabilities import Capability
 from servobus.axis.types import AxisStatus, Family, ParamInfo, Storage, motion_state
 from servobus.families.dmm import params as dmm_params
 from servobus.families.dmm import units as U
@@ -48,10 +49,16 @@ ALARM_TEXT: dict[int, str] = {
 #: Alarm codes that do not latch (a one-read notice, like the DYN2 checksum code).
 NOTICE_CODES = frozenset({int(AlarmCode.CHECKSUM)})
 
-#: Optional Axis features (Family.require): square/sine waves (0x0F/0x11/0x13), the multi-turn
-#: absolute origin (0x03), Reset (0x21), torque mode (0x25/0x26/0x27), cyclic I/O (section 5).
-#: No "config" byte and no "drive_id": a DYN5 is addressed by its IP address (manual 2, 3.1).
-FEATURES = frozenset({"waves", "origin", "reset", "torque_mode", "cyclic_io"})
+#: What the DYN5 Axis can do (servobus.axis.capabilities): square/sine waves
+#: (0x0F/0x11/0x13), the multi-turn absolute origin (0x03), Reset (0x21), torque mode
+#: (0x25/0x26/0x27), cyclic I/O (section 5), the power-cleared marker cell, raw command
+#: units and streamed targets (the DMM profile). No config byte and no drive id: a DYN5 is
+#: addressed by its IP address (manual 2, 3.1).
+CAPABILITIES = frozenset({
+    Capability.WAVES, Capability.ORIGIN, Capability.RESET, Capability.TORQUE_MODE,
+    Capability.CYCLIC_IO, Capability.POWER_LOSS_DETECTION, Capability.COMMAND_UNITS,
+    Capability.STREAM_TARGETS, Capability.TUNING,
+})
 
 
 def _param_name(inst: Instance) -> str:
@@ -84,7 +91,7 @@ DYN5 = Family(
     title="DMM DYN5",
     counts_per_rev=U.COUNTS_PER_REV,
     params=tuple(_info(i) for i in SETTABLE),
-    features=FEATURES,
+    capabilities=CAPABILITIES,
     alarms=ALARM_TEXT,
     wave_counts_per_unit=U.WAVE_COUNTS_PER_UNIT,
 )

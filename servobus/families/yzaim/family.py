@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from servobus.axis.capabilities import Capability
 from servobus.axis.types import AxisStatus, Family, ParamInfo, Storage, motion_state
 from servobus.families.yzaim import registers as yzaim
 
@@ -34,9 +35,13 @@ NAME = yzaim.FAMILY
 #: Registers that are Axis calls or motion rather than settings (module docstring).
 NOT_PARAMETERS = frozenset({"modbus_enable", "output_enable", "device_address",
                             "sync_control", "save_flag"})
-#: Optional Axis features (Family.require): position clear (origin), addressable ids,
-#: reset (output_enable 0 then 1 clears a latched alarm), synchronous position streaming.
-FEATURES = frozenset({"origin", "drive_id", "reset", "sync_positions"})
+#: What the YZ-AIM Axis can do (servobus.axis.capabilities): position clear (origin),
+#: addressable ids, reset (output_enable 0 then 1 clears a latched alarm), streamed targets.
+#: The synchronised start depends on the protocol (EasyCan's position caches).
+CAPABILITIES = frozenset({
+    Capability.ORIGIN, Capability.DRIVE_ID, Capability.RESET, Capability.STREAM_TARGETS,
+    Capability.TUNING,
+})
 
 _UNITS: dict[str, str] = {
     "speed_loop_kp": "0.001",
@@ -67,7 +72,7 @@ YZAIM = Family(
     title="YZ-AIM",
     counts_per_rev=yzaim.COUNTS_PER_REV,
     params=tuple(_info(r) for r in SETTABLE),
-    features=FEATURES,
+    capabilities=CAPABILITIES,
     alarms={a.code: a.text for a in yzaim.ALARMS if a.code},
 )
 

@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING
 
 from servobus import checks
 from servobus.axis.base import AxisTraceHook
+from servobus.axis.capabilities import Capability
 from servobus.errors import (
     ArgumentRangeError,
     ConnectionLost,
@@ -46,6 +47,7 @@ from servobus.errors import (
 from servobus.families.dyn5 import params as dyn5
 from servobus.families.dyn5.axis import Dyn5Axis
 from servobus.families.dyn5.params import Instance
+from servobus.link.stats import TransactionStats
 from servobus.link.transaction import DEFAULT_RETRIES
 from servobus.protocols.enip.client import CONNECT_TIMEOUT_S, DEFAULT_TIMEOUT_S, AsyncEnipClient
 from servobus.protocols.enip.codec.cip import ClassCode
@@ -111,6 +113,8 @@ def with_last_octet(ip: str, b0: int) -> str:
 class EnipAxis(Dyn5Axis):
     """One DYN5 on one EtherNet/IP session (module docstring)."""
 
+    protocol_capabilities = frozenset({Capability.LINK_STATS})
+
     def __init__(self, client: AsyncEnipClient | None, ip: str,
                  options: EnipOptions = EnipOptions()) -> None:
         self._client = client
@@ -138,6 +142,11 @@ class EnipAxis(Dyn5Axis):
         for hook in self._hooks:
             client.add_trace(hook)
         return client
+
+    def link_stats(self) -> TransactionStats:
+        """The current session's counters (zeros before the first connection; a reconnect
+        starts a new session and new counters)."""
+        return TransactionStats() if self._client is None else self._client.stats
 
     async def client(self, connect_timeout: float | None = None) -> AsyncEnipClient:
         """The session; a sibling (or an axis after ``reset``) connects on first use."""
@@ -245,7 +254,7 @@ class EnipAxis(Dyn5Axis):
         return self.drive_id
 
     async def assign_id(self, new_id: int) -> None:
-        raise self.unsupported("drive_id")
+        raise self.unsupported(Capability.DRIVE_ID)
 
     async def ping(self, timeout: float = 0.05) -> bool:
         """One status read without retry (connecting first if needed). A refused request

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 import click
 
 from servobus import fastloop
+from servobus.axis.capabilities import Capability
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.open_axis import open_axis
@@ -178,7 +179,7 @@ def io_cmd(ctx: CliContext, rpi: float, frames: int | None, duration: float | No
     """Live Class 1 input image (position, speed, torque, status) of an EtherNet/IP drive."""
     live = sys.stdout.isatty() and not ctx.json
     with open_axis(ctx) as axis:
-        if not hasattr(axis.core, "monitor_io"):
+        if not axis.supports(Capability.CYCLIC_IO):
             raise NotSupported(f"{axis.family.title} over {axis.protocol} has no cyclic I/O; "
                                "use --url enip://HOST", axis.family.name)
         show = _live_display() if live else None

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from servobus.axis.capabilities import Capability
 from servobus.axis.types import Storage
 from servobus.families import FAMILIES, family
 from servobus.families.dmm.family import DYN2
@@ -67,9 +68,10 @@ def test_alarm_codes_b4_b2(code: int, text: str, latched: bool) -> None:
     assert st.vendor.as_dict()["alarm"] == code
 
 
-def test_features() -> None:
-    for feature in ("waves", "origin", "reset", "torque_mode", "cyclic_io"):
-        DYN5.require(feature)
-    for missing in ("config", "drive_id"):
+def test_capabilities() -> None:
+    for capability in (Capability.WAVES, Capability.ORIGIN, Capability.RESET,
+                       Capability.TORQUE_MODE, Capability.CYCLIC_IO):
+        DYN5.require(capability)
+    for missing in (Capability.CONFIG, Capability.DRIVE_ID):
         with pytest.raises(Exception, match="DYN5"):
             DYN5.require(missing)

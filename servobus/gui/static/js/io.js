@@ -99,8 +99,8 @@ export class IoPanel {
   async loadConfig() {
     const box = $("#io-config-box");
     const fam = this.ctx.identity(this.ctx.selected);
-    box.classList.toggle("hidden", !fam.features.includes("config"));
-    if (!fam.features.includes("config")) return;
+    box.classList.toggle("hidden", !fam.capabilities.includes("config"));
+    if (!fam.capabilities.includes("config")) return;
     try {
       this.fillConfig(await api(this.url("/config")));
     } catch (err) {

@@ -173,7 +173,7 @@ export class MotionPanel {
 
   renderSelection() {
     const ident = this.ctx.identity(this.ctx.selected);
-    const waves = ident.features.includes("waves");
+    const waves = ident.capabilities.includes("waves");
     for (const node of $$("#wave-box button, #wave-box input, #wave-box select")) node.disabled = !waves;
     $("#wave-hint").textContent = waves
       ? "Amplitude in the drive's own wave units (DMM: 4096 = 180°); the wave runs until Off or Stop."
