@@ -111,7 +111,7 @@ def provided(attribute: str) -> dict[str, str]:
 
 
 def provided_list(attribute: str) -> list[str]:
-    """The single value of every spec that has one (``CLI``: ``"module:register"``), in
+    """The single value of every spec that has one (``CLI``: ``"module:COMMANDS"``), in
     provider order."""
     found = [getattr(spec, attribute.lower()) for spec in specs().values()]
     return [value for value in found if isinstance(value, str)]

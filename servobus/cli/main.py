@@ -27,7 +27,8 @@ from servobus.cli.failures import Terminated, describe
 from servobus.cli.param_types import Seconds
 
 #: Command-group modules; each defines ``register(group: click.Group) -> None``. Protocol
-#: packages add theirs (``sim <protocol>``) through the registry (``CLI`` in their __init__).
+#: packages declare theirs (``sim <protocol>`` ...) as data on their ProtocolSpec;
+#: servobus.cli.protocol_cmds builds them from the registry, after these.
 COMMAND_MODULES: list[str] = [
     "servobus.cli.sim_cmd",
     "servobus.cli.decode_cmd",
@@ -92,12 +93,11 @@ def cli(ctx: click.Context, url: str | None, port: str | None, can: str | None,
 
 
 def _register_commands() -> None:
-    from servobus.axis import registry
+    from servobus.cli import protocol_cmds
 
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(cli)
-    for target in registry.provided_list("CLI"):
-        registry.load(target)(cli)
+    protocol_cmds.register(cli)
 
 
 _register_commands()

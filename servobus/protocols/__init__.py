@@ -35,7 +35,8 @@ class ProtocolSpec:
     sim: str | None = None
     #: Further names of the virtual drive (``sim://dyn2`` for ``sim://dyn232``).
     sim_aliases: tuple[str, ...] = ()
-    #: ``register(cli)``: the protocol's CLI commands (``servobus sim <name>`` ...).
+    #: Its command-line commands as data: a tuple of servobus.axis.cli_spec.Command
+    #: (``servobus sim <name>``, ``servobus discover`` ...), built by servobus.cli.
     cli: str | None = None
     #: The sniff/decode decoder (servobus.sniff.Decoder).
     decoder: str | None = None
@@ -52,12 +53,12 @@ class ProtocolSpec:
     def conventional(cls, name: str, family: str, **fields: Any) -> ProtocolSpec:
         """The spec of a package laid out as every ``servobus/protocols/<name>/`` is: targets
         by convention - ``opener:open_axis`` for scheme ``<name>``, ``inprocess:open_sim_axis``,
-        ``cli:register``, ``sniff:DECODER``, ``commands:REACHABLE_PARAMS`` - unless ``fields``
+        ``cli:COMMANDS``, ``sniff:DECODER``, ``commands:REACHABLE_PARAMS`` - unless ``fields``
         name another (any field of the spec)."""
         base = f"servobus.protocols.{name}"
         conventions: dict[str, Any] = {
             "opener": f"{base}.opener:open_axis", "schemes": (name,),
-            "sim": f"{base}.inprocess:open_sim_axis", "cli": f"{base}.cli:register",
+            "sim": f"{base}.inprocess:open_sim_axis", "cli": f"{base}.cli:COMMANDS",
             "decoder": f"{base}.sniff:DECODER", "params": f"{base}.commands:REACHABLE_PARAMS"}
         return cls(name=name, family=family, **{**conventions, **fields})
 

@@ -22,11 +22,14 @@ import json
 import logging
 import socket
 import sys
+from collections.abc import Sequence
 from typing import Any, TextIO
 
 from servobus.sim import server_limits as lim
 from servobus.sim.dmm.control import COMMANDS, DriveControl, Reply
+from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.line_server import DEFAULT_HOST, format_tcp_url
+from servobus.sim.wall_clock import RealtimeClock
 
 MAX_LINE = 4096  # bytes of one request line
 DEFAULT_MAX_CLIENTS = 16
@@ -204,3 +207,20 @@ class _Session:
 def print_endpoint(server: ControlServer, out: TextIO | None = None) -> None:
     """``control on tcp://HOST:PORT`` on stdout, flushed (scripts and tests read it)."""
     print(f"control on {server.url}", file=out if out is not None else sys.stdout, flush=True)
+
+
+def start_control(endpoint: tuple[str, int] | None, drives: Sequence[VirtualDrive], *,
+                  clock: RealtimeClock | None = None) -> ControlServer | None:
+    """Bind, print where, and serve ``drives`` on the running loop (None: nothing to do) -
+    what ``--control`` of a ``servobus sim <protocol>`` does once its server is up.
+
+    ``clock`` is the server's wall-clock mapping when it has one at hand; otherwise one is
+    made from the drives' own time. Raises ListenError when the address cannot be bound."""
+    if endpoint is None:
+        return None
+    clock = clock if clock is not None else RealtimeClock(drives)
+    server = ControlServer(DriveControl(drives, sync=clock.sync))
+    server.bind(*endpoint)
+    print_endpoint(server)
+    server.start()
+    return server

@@ -15,6 +15,7 @@ import pytest
 
 from servobus import families
 from servobus.axis import registry
+from servobus.axis.cli_spec import Command
 from servobus.axis.url import parse_url
 from servobus.protocols import ProtocolSpec
 
@@ -54,7 +55,7 @@ def test_every_target_resolves(name: str) -> None:
         if field in ("opener", "sim"):
             assert inspect.iscoroutinefunction(value), (field, target)
         elif field == "cli":
-            assert callable(value), target
+            assert value and all(isinstance(c, Command) for c in value), target
         elif field == "params":
             assert len(tuple(value)) > 0 and all(isinstance(n, str) for n in value), target
         else:

@@ -8,7 +8,8 @@ stdout gets one line, flushed at once, so scripts and tests can read the port::
 Connect with python-can (``interface="socketcand", host=..., port=..., channel="can0"``) or
 ``servobus --can socketcand:127.0.0.1:40123 --id 1 status``. Everything else (warnings, one
 line per abuse event, statistics) goes to stderr. An address that cannot be bound ends the
-command with one ``error: ...`` line, exit code 2.
+command with one ``error: ...`` line, exit code 2. The command is data (``COMMANDS``,
+servobus.axis.cli_spec); the CLI builds it.
 """
 
 from __future__ import annotations
@@ -16,20 +17,14 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Sequence
 
-import click
-
-from servobus.cli.sim_cmd import (
-    add_sim_command,
-    echo_stopped,
-    option_value,
-    sim_banner,
-    sim_options,
-)
-from servobus.cli.sim_control import control_option, start_control
+from servobus.axis.cli_spec import Command, CommandIO, Option
+from servobus.errors import ArgumentRangeError
 from servobus.families.dmm import units as U
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan.device import DynCanNetwork
 from servobus.protocols.dyncan.server import serve
+from servobus.sim.cli_options import CONTROL, sim_banner, sim_options, stopped_line
+from servobus.sim.control_server import start_control
 from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.dmm.fleet import make_drives, parse_drive_ids
 from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS, fit_fd_limit, log_to_stderr
@@ -59,29 +54,21 @@ async def run_socketcand_nodes(drives: Sequence[VirtualDrive], host: str, port: 
     return network, bus.hub
 
 
-@click.command("dyncan")
-@click.option("--socketcand", "address", metavar="HOST:PORT", default="127.0.0.1:0",
-              show_default=True, help="serve the CAN bus over socketcand; PORT 0 picks a free port")
-@click.option("--bitrate", type=click.Choice([str(k * 1000) for k in c.BITRATES_KBIT]),
-              callback=lambda _ctx, _param, value: int(value), default="1000000",
-              show_default=True, help="bit rate of the timing model")
-@sim_options(ids_default="1", ids_help="drive ids on the bus (1..63)",
-             fast_help="no 1 Mbit/s bit-timing model: answer at once",
-             state_help="keep each drive's EEPROM (parameters, config, id) in this JSON file",
-             models=U.MODELS, model_default=U.DEFAULT_MODEL, model_help="drive/motor model",
-             clients_help="socketcand clients served at once; more are refused")
-@control_option
-def sim_dyncan_cmd(address: str, ids: str, fast: bool, bitrate: int, state: str | None,
-                   model: str, duration: float | None, max_clients: int,
-                   control: tuple[str, int] | None) -> None:
+def node_ids(text: str) -> tuple[int, ...]:
+    """``--ids`` of DYN CAN nodes: 1..63 (0 is the broadcast id)."""
+    ids = parse_drive_ids(text)
+    if 0 in ids:
+        raise ArgumentRangeError("id 0 is the DYN CAN broadcast id; use 1..63")
+    return ids
+
+
+def run_sim(io: CommandIO, *, address: tuple[str, int], bitrate: int, ids: tuple[int, ...],
+            fast: bool, state: str | None, model: str, duration: float | None,
+            max_clients: int, control: tuple[str, int] | None) -> None:
     """Virtual DYN2/DYN4 drives on one CAN bus (DYN CAN protocol, socketcand rawmode)."""
     log_to_stderr()
-    drive_ids = option_value("--ids", parse_drive_ids, ids)
-    host, port = option_value("--socketcand", parse_socketcand_address, address)
-    if 0 in drive_ids:
-        raise click.BadParameter("id 0 is the DYN CAN broadcast id; use 1..63",
-                                 param_hint="--ids")
-    drives = make_drives(drive_ids, state=state, model=model)
+    host, port = address
+    drives = make_drives(ids, state=state, model=model)
     banner = sim_banner("dyncan", len(drives), "drive", model, "ids",
                         (d.drive_id for d in drives), fast,
                         f"{bitrate / 1e6:g} Mbit/s timing model")
@@ -90,13 +77,28 @@ def sim_dyncan_cmd(address: str, ids: str, fast: bool, bitrate: int, state: str 
                                                     max_clients=fit_fd_limit(max_clients),
                                                     banner=banner, control=control))
     s = network.stats
-    echo_stopped(f"{s.frames} frame(s)", f"{s.replies} repl(ies)",
-                 f"{s.drive_errors} drive error(s)", f"{s.malformed} malformed",
-                 f"{s.alarms_pushed} alarm push(es)",
-                 f"{hub.frames_lost} frame(s) lost to full receive FIFOs",
-                 f"{hub.cap.refused} connection(s) refused",
-                 f"{hub.dropped_clients} client(s) dropped for not reading")
+    io.echo(stopped_line(f"{s.frames} frame(s)", f"{s.replies} repl(ies)",
+                         f"{s.drive_errors} drive error(s)", f"{s.malformed} malformed",
+                         f"{s.alarms_pushed} alarm push(es)",
+                         f"{hub.frames_lost} frame(s) lost to full receive FIFOs",
+                         f"{hub.cap.refused} connection(s) refused",
+                         f"{hub.dropped_clients} client(s) dropped for not reading"), err=True)
 
 
-def register(group: click.Group) -> None:
-    add_sim_command(group, sim_dyncan_cmd)
+COMMANDS = (Command(
+    "dyncan", run_sim.__doc__ or "", run_sim, sim=True,
+    options=(
+        Option("--socketcand", "address",
+               "serve the CAN bus over socketcand; PORT 0 picks a free port",
+               metavar="HOST:PORT", default="127.0.0.1:0", show_default=True,
+               parse=parse_socketcand_address),
+        Option("--bitrate", "bitrate", "bit rate of the timing model",
+               choices=tuple(str(k * 1000) for k in c.BITRATES_KBIT), default="1000000",
+               show_default=True, parse=int),
+        *sim_options(parse_ids=node_ids, ids_default="1", ids_help="drive ids on the bus (1..63)",
+                     fast_help="no 1 Mbit/s bit-timing model: answer at once",
+                     state_help="keep each drive's EEPROM (parameters, config, id) in this JSON "
+                                "file",
+                     models=U.MODELS, model_default=U.DEFAULT_MODEL, model_help="drive/motor model",
+                     clients_help="socketcand clients served at once; more are refused"),
+        CONTROL)),)

@@ -7,7 +7,8 @@ stdout gets one line, flushed at once, so scripts and tests can read the port::
 Connect with python-can (``interface="socketcand", host=..., port=..., channel="can0"``) or
 ``servobus --url easycan+socketcand://127.0.0.1:40123 --id 1 status``. Everything else goes
 to stderr. The motors come set up for communication control (gear numerator 0 saved,
-modbus_enable 1 at power-on) unless ``--state`` holds other saved values.
+modbus_enable 1 at power-on) unless ``--state`` holds other saved values. The command is
+data (``COMMANDS``, servobus.axis.cli_spec); the CLI builds it.
 """
 
 from __future__ import annotations
@@ -15,19 +16,12 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Sequence
 
-import click
-
-from servobus.cli.sim_cmd import (
-    add_sim_command,
-    echo_stopped,
-    option_value,
-    sim_banner,
-    sim_options,
-)
+from servobus.axis.cli_spec import Command, CommandIO, Option
 from servobus.families.yzaim import registers as yzaim
 from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.functions import BITRATE
 from servobus.protocols.easycan.server import serve
+from servobus.sim.cli_options import sim_banner, sim_options, stopped_line
 from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS, fit_fd_limit, log_to_stderr
 from servobus.sim.socketcand_bus import socketcand_bus
 from servobus.sim.socketcand_hub import parse_socketcand_address
@@ -53,31 +47,35 @@ async def run_socketcand_motors(motors: Sequence[YzaimMotor], host: str, port: i
     return network
 
 
-@click.command("easycan")
-@click.option("--socketcand", "address", metavar="HOST:PORT", default="127.0.0.1:0",
-              show_default=True, help="serve the CAN bus over socketcand; PORT 0 picks a free port")
-@sim_options(ids_default="1", ids_help="motor addresses on the bus (1..254)",
-             fast_help="no 1 Mbit/s bit-timing model: answer at once",
-             state_help="keep each motor's EEPROM (saved registers, position) in this JSON file",
-             models=[m.name for m in yzaim.MODELS], model_default=yzaim.DEFAULT_MODEL,
-             model_help="YZ-AIM motor model",
-             clients_help="socketcand clients served at once; more are refused")
-def sim_easycan_cmd(address: str, ids: str, fast: bool, state: str | None, model: str,
-                    duration: float | None, max_clients: int) -> None:
+def run_sim(io: CommandIO, *, address: tuple[str, int], ids: tuple[int, ...], fast: bool,
+            state: str | None, model: str, duration: float | None, max_clients: int) -> None:
     """Virtual YZ-AIM motors on one CAN bus (EasyCan protocol, socketcand rawmode)."""
     log_to_stderr()
-    addresses = option_value("--ids", parse_addresses, ids)
-    host, port = option_value("--socketcand", parse_socketcand_address, address)
-    motors = make_motors(addresses, state=state, model=model)
+    host, port = address
+    motors = make_motors(ids, state=state, model=model)
     banner = sim_banner("easycan", len(motors), "motor", model, "addresses",
                         (m.address for m in motors), fast, "1 Mbit/s timing model")
     network = asyncio.run(run_socketcand_motors(
         motors, host, port, fast=fast, duration=duration,
         max_clients=fit_fd_limit(max_clients), banner=banner))
     s = network.stats
-    echo_stopped(f"{s.frames} frame(s)", f"{s.replies} repl(ies)", f"{s.errors} error repl(ies)",
-                 f"{s.ignored} ignored", f"{s.cache_dropped} cache frame(s) too fast")
+    io.echo(stopped_line(f"{s.frames} frame(s)", f"{s.replies} repl(ies)",
+                         f"{s.errors} error repl(ies)", f"{s.ignored} ignored",
+                         f"{s.cache_dropped} cache frame(s) too fast"), err=True)
 
 
-def register(group: click.Group) -> None:
-    add_sim_command(group, sim_easycan_cmd)
+COMMANDS = (Command(
+    "easycan", run_sim.__doc__ or "", run_sim, sim=True,
+    options=(
+        Option("--socketcand", "address",
+               "serve the CAN bus over socketcand; PORT 0 picks a free port",
+               metavar="HOST:PORT", default="127.0.0.1:0", show_default=True,
+               parse=parse_socketcand_address),
+        *sim_options(parse_ids=parse_addresses, ids_default="1",
+                     ids_help="motor addresses on the bus (1..254)",
+                     fast_help="no 1 Mbit/s bit-timing model: answer at once",
+                     state_help="keep each motor's EEPROM (saved registers, position) in this "
+                                "JSON file",
+                     models=[m.name for m in yzaim.MODELS], model_default=yzaim.DEFAULT_MODEL,
+                     model_help="YZ-AIM motor model",
+                     clients_help="socketcand clients served at once; more are refused"))),)

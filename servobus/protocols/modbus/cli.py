@@ -9,65 +9,63 @@ stdout gets one line per endpoint, flushed at once, so scripts and tests can rea
 
 Everything else (motor list, warnings, statistics) goes to stderr. Connect with
 ``servobus --url modbus+socket://127.0.0.1:40123 --id 1 status`` or pymodbus
-(docs/modbus.md).
+(docs/modbus.md). The command is data (``COMMANDS``, servobus.axis.cli_spec).
 """
 
 from __future__ import annotations
 
-import click
-
-from servobus.cli.sim_cmd import (
-    add_sim_command,
-    echo_stopped,
-    line_endpoints,
-    option_value,
-    serial_line_options,
-    sim_banner,
-    sim_options,
-)
+from servobus.axis.cli_spec import Command, CommandIO, Option
 from servobus.families.yzaim import registers as Y
 from servobus.protocols.modbus.inprocess import FACTORY_ADDRESS, make_motors, parse_addresses
 from servobus.protocols.modbus.server import serve
 from servobus.protocols.modbus.timing import DEFAULT_BAUD
+from servobus.sim.cli_options import (
+    line_endpoint,
+    serial_line_options,
+    sim_banner,
+    sim_options,
+    stopped_line,
+)
 from servobus.sim.line_server import run_in_fine_loop
 from servobus.sim.server_limits import fit_fd_limit, log_to_stderr
 from servobus.sim.wire import FINE_COARSE_S
 
 
-@click.command("modbus")
-@serial_line_options(connects="modbus+socket", tap_carries="frame")
-@click.option("--baud", type=click.IntRange(min=300), default=DEFAULT_BAUD, show_default=True,
-              help="the line's baud rate (8N1): pacing and the t3.5 frame gap")
-@sim_options(ids_default=str(FACTORY_ADDRESS), ids_help="device addresses on the line (1..254)",
-             fast_help="no baud-rate pacing: answer at once",
-             state_help="keep each motor's EEPROM (saved registers, position) in this JSON file",
-             models=Y.MODEL_BY_NAME, model_default=Y.DEFAULT_MODEL,
-             model_help="YZ-AIM motor model",
-             clients_help="TCP connections (line and tap) served at once; more are closed at "
-                          "once")
-def sim_modbus_cmd(listen: str | None, ids: str, pty: bool, fast: bool, baud: int,
-                   state: str | None, tap: str | None, model: str, duration: float | None,
-                   max_clients: int) -> None:
+def run_sim(io: CommandIO, *, listen: tuple[str, int] | None, pty: bool,
+            tap: tuple[str, int] | None, baud: int, ids: tuple[int, ...], fast: bool,
+            state: str | None, model: str, duration: float | None, max_clients: int) -> None:
     """Virtual YZ-AIM motors sharing one Modbus RTU line (RS-485 multi-drop)."""
     log_to_stderr()
-    addresses = option_value("--ids", parse_addresses, ids)
-    endpoint, tap_endpoint = line_endpoints(listen, pty, tap)
-    motors = make_motors(addresses, state=state, model=model)
+    motors = make_motors(ids, state=state, model=model)
     banner = sim_banner("modbus", len(motors), "motor", model, "addresses",
                         (m.address for m in motors), fast, f"paced at {baud} 8N1")
     server = run_in_fine_loop(serve(
-        motors, listen=endpoint, pty=pty, tap=tap_endpoint, paced=not fast, baud=baud,
+        motors, listen=line_endpoint(listen, pty), pty=pty, tap=tap, paced=not fast, baud=baud,
         duration=duration, coarse_s=FINE_COARSE_S, max_clients=fit_fd_limit(max_clients),
-        ready=lambda: click.echo(banner, err=True)))
+        ready=lambda: io.echo(banner, err=True)))
     line = server.line
-    echo_stopped(f"{line.frames} frame(s)",
-                 f"{line.replies} repl(ies) ({line.exceptions} exception(s))",
-                 f"{line.broadcasts} broadcast(s)", f"{line.crc_errors} CRC error(s)",
-                 f"{line.discarded} byte(s) discarded",
-                 f"{server.runner.rx_dropped} byte(s) lost to full receive buffers",
-                 f"{server.cap.refused} connection(s) refused",
-                 f"{server.dropped_clients} client(s) dropped for not reading")
+    io.echo(stopped_line(f"{line.frames} frame(s)",
+                         f"{line.replies} repl(ies) ({line.exceptions} exception(s))",
+                         f"{line.broadcasts} broadcast(s)", f"{line.crc_errors} CRC error(s)",
+                         f"{line.discarded} byte(s) discarded",
+                         f"{server.runner.rx_dropped} byte(s) lost to full receive buffers",
+                         f"{server.cap.refused} connection(s) refused",
+                         f"{server.dropped_clients} client(s) dropped for not reading"),
+            err=True)
 
 
-def register(group: click.Group) -> None:
-    add_sim_command(group, sim_modbus_cmd)
+COMMANDS = (Command(
+    "modbus", run_sim.__doc__ or "", run_sim, sim=True,
+    options=(
+        *serial_line_options(connects="modbus+socket", tap_carries="frame"),
+        Option("--baud", "baud", "the line's baud rate (8N1): pacing and the t3.5 frame gap",
+               type=int, minimum=300, default=DEFAULT_BAUD, show_default=True),
+        *sim_options(parse_ids=parse_addresses, ids_default=str(FACTORY_ADDRESS),
+                     ids_help="device addresses on the line (1..254)",
+                     fast_help="no baud-rate pacing: answer at once",
+                     state_help="keep each motor's EEPROM (saved registers, position) in this "
+                                "JSON file",
+                     models=Y.MODEL_BY_NAME, model_default=Y.DEFAULT_MODEL,
+                     model_help="YZ-AIM motor model",
+                     clients_help="TCP connections (line and tap) served at once; more are "
+                                  "closed at once"))),)
