@@ -48,6 +48,7 @@ from servobus.errors import (
     PowerLostError,
     ServobusError,
 )
+from servobus.gateway.refusals import RefusalLog
 from servobus.gateway.source import Machine, MachineAxis
 from servobus.machine.lease import DEFAULT_TTL_S
 from servobus.machine.lease import check_ttl as lease_ttl
@@ -105,6 +106,7 @@ class Command:
 class Commander:
     def __init__(self, machine: Machine) -> None:
         self.machine = machine
+        self.refusals = RefusalLog()
 
     def check(self, user: str | None, command: Command) -> MachineAxis | None:
         """Refused unless ``user`` may run ``command`` with these arguments."""
@@ -152,8 +154,10 @@ class Commander:
             async with asyncio.timeout(COMMAND_DEADLINE_S):
                 await self._call(axis, command, owner or f"{via}:{user}")
         except Refused as exc:
-            log.warning("%s %s: %s %s refused (%s): %s", via, user or "anonymous", target, what,
-                        exc.code, exc.message)
+            suffix = self.refusals.admit(f"{via} {user or 'anonymous'}")
+            if suffix is not None:  # one line per spell (servobus.gateway.refusals)
+                log.warning("%s %s: %s %s refused (%s): %s%s", via, user or "anonymous",
+                            target, what, exc.code, exc.message, suffix)
             raise
         except Exception as exc:
             code = status_name(exc)

@@ -319,8 +319,10 @@ class MqttGateway:
         except Refused as exc:
             if ident is None:
                 ident = _peek_id(payload)
-                log.warning("mqtt: command on %s/%s/cmd refused (%s): %s", self.base, axis,
-                            exc.code, exc.message)
+                suffix = self.commander.refusals.admit("mqtt gate")
+                if suffix is not None:  # one line per spell (servobus.gateway.refusals)
+                    log.warning("mqtt: command on %s/%s/cmd refused (%s): %s%s", self.base,
+                                axis, exc.code, exc.message, suffix)
             reply = {"id": ident, "ok": False, "code": exc.code, "error": exc.message}
         await client.publish(f"{self.base}/{axis}/reply", json.dumps(reply).encode(), qos=1)
 
