@@ -12,12 +12,13 @@ Axis, the CLI and the GUI read the family to know what a drive has.
 
 from __future__ import annotations
 
-import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from enum import Enum
+from typing import Protocol
 
 from servobus.axis.capabilities import Capability
+from servobus.axis.units import to_counts
 from servobus.errors import ArgumentRangeError, NotSupported
 
 
@@ -81,6 +82,12 @@ class StreamProfile:
     accel_rpm_s: float
 
 
+class VendorStatus(Protocol):
+    """A family's own decoded status (``AxisStatus.vendor``): the drive's bits by name."""
+
+    def as_dict(self) -> dict[str, object]: ...
+
+
 @dataclass(frozen=True)
 class AxisStatus:
     """One status for every family; ``vendor`` keeps the family's own decoded value.
@@ -97,7 +104,7 @@ class AxisStatus:
     alarm_latched: bool  # holds until reset / power cycle
     raw: int  # the status value as the drive sent it
     family: str
-    vendor: object = field(default=None, compare=False)
+    vendor: VendorStatus | None = field(default=None, compare=False)
 
     @property
     def alarm(self) -> bool:
@@ -116,6 +123,23 @@ class AxisStatus:
         }
 
 
+class MoveProfile(Protocol):
+    """The figures of one planned point-to-point move, for people and as JSON."""
+
+    def rows(self) -> list[tuple[str, str]]: ...
+
+    def as_dict(self) -> dict[str, float | int]: ...
+
+
+@dataclass(frozen=True)
+class PtpCalculator:
+    """A family's point-to-point profile: which of its parameters shape a move (names in
+    ``Family.params``), and the calculation from their values and a move's command."""
+
+    inputs: tuple[str, ...]
+    compute: Callable[[Mapping[str, int], int], MoveProfile]
+
+
 @dataclass(frozen=True)
 class Family:
     """A device family: name, counts per revolution, parameters, capabilities."""
@@ -132,6 +156,9 @@ class Family:
     #: Motor counts per unit of a drive-generated wave's amplitude (families with "waves"):
     #: a front end checks offset +- amplitude against soft limits before starting one.
     wave_counts_per_unit: float = 0.0
+    #: How the family's drives plan a point-to-point move, computed offline from its
+    #: parameters (``servobus profile``); None where the family has no such table.
+    ptp_profile: PtpCalculator | None = None
 
     def param(self, name: str) -> ParamInfo:
         for p in self.params:
@@ -151,14 +178,7 @@ class Family:
         return "" if code == 0 else self.alarms.get(code, f"alarm {code}")
 
     def revs_to_counts(self, revs: float) -> int:
-        return round_counts(revs * self.counts_per_rev)
+        return to_counts(revs, "rev", self.counts_per_rev)
 
     def degrees_to_counts(self, degrees: float) -> int:
-        return round_counts(degrees / 360.0 * self.counts_per_rev)
-
-
-def round_counts(value: float) -> int:
-    """Round half away from zero; NaN and infinities are refused."""
-    if not math.isfinite(value):
-        raise ArgumentRangeError(f"a position must be a finite number, got {value!r}")
-    return int(math.copysign(math.floor(abs(value) + 0.5), value))
+        return to_counts(degrees, "deg", self.counts_per_rev)

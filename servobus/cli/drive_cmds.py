@@ -24,12 +24,13 @@ import contextlib
 import math
 import re
 import time
-from typing import TYPE_CHECKING, Any, TypeAlias
+from typing import TYPE_CHECKING, TypeAlias
 
 import click
 from rich.console import Console
 
 from servobus.axis.capabilities import Capability
+from servobus.axis.units import from_counts, to_counts
 from servobus.cli import machine_cli
 from servobus.cli.arrival import check_arrival, check_ready, read_status, wait_arrival
 from servobus.cli.command_class import ServobusCommand
@@ -81,14 +82,6 @@ def check_drive_target(number: float, unit: str) -> None:
                                  "(--machine FILE, docs/machine.md)", param_hint="TARGET")
 
 
-def to_counts(axis: Axis, number: float, unit: str) -> int:
-    if unit == "rev":
-        return int(axis.revs(number))
-    if unit == "deg":
-        return int(axis.degrees(number))
-    return int(number)
-
-
 def typed(number: float, unit: str) -> str:
     """A TARGET as the user wrote it (``16384``, ``2.5rev``, ``-90deg``)."""
     text = str(int(number)) if number.is_integer() else repr(number)
@@ -99,8 +92,7 @@ def in_unit(axis: Axis, counts: int, unit: str) -> str:
     """Counts in a TARGET unit, rounded towards zero (a bound stays reachable)."""
     if unit == "counts":
         return str(counts)
-    per_unit = axis.counts_per_rev / (360.0 if unit == "deg" else 1.0)
-    value = math.trunc(counts / per_unit * 1000) / 1000
+    value = math.trunc(from_counts(counts, unit, axis.counts_per_rev) * 1000) / 1000
     return f"{value:.3f}".rstrip("0").rstrip(".")
 
 
@@ -123,9 +115,8 @@ def status_record(axis: Axis, status: AxisStatus) -> dict[str, object]:
     record: dict[str, object] = {"drive_id": axis.drive_id, "protocol": axis.protocol,
                                  **status.as_dict(), "position": axis.position(),
                                  "following_error": axis.following_error()}
-    vendor: Any = status.vendor
-    if vendor is not None and hasattr(vendor, "as_dict"):
-        record["vendor_status"] = vendor.as_dict()
+    if status.vendor is not None:
+        record["vendor_status"] = status.vendor.as_dict()
     if axis.supports(Capability.CONFIG):
         record["config"] = axis.extra.config().as_dict()
     return record
@@ -349,7 +340,7 @@ def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float, c
             (axis.extra.move_by_command if relative else axis.extra.move_to_command)(int(number))
             record: dict[str, object] = {"command_units": int(number)}
         else:
-            counts = to_counts(axis, number, unit)
+            counts = to_counts(number, unit or "counts", axis.counts_per_rev)
             check_reach(axis, counts, relative, number, unit)
             (axis.move_by if relative else axis.move_to)(counts, confirm=confirm)
             record = {"counts": counts}

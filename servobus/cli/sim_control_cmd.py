@@ -22,9 +22,9 @@ from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext
 from servobus.cli.failures import CliError
 from servobus.cli.param_types import Seconds
-from servobus.sim.control_client import DEFAULT_TIMEOUT_S, ControlClient
+from servobus.sim.control_client import DEFAULT_TIMEOUT_S, FAULTS, ControlClient
+from servobus.sim.core.control import Arg, ControlError, Reply
 from servobus.sim.core.io import PulseFormat
-from servobus.sim.dmm.control import FAULTS, Arg, ControlError, Reply
 
 CONTROL_ENV = "SERVOBUS_CONTROL"
 _META = "servobus.sim_control"

@@ -10,11 +10,11 @@ from starlette.responses import JSONResponse, Response
 from starlette.routing import Route
 
 from servobus import __version__
+from servobus.axis.units import DRIVE_UNITS, to_counts
 from servobus.errors import ArgumentRangeError
 from servobus.gui.http_util import api, body, handle, integer, number, ok, state
 from servobus.gui.signals import SIGNALS
 from servobus.gui.soft_limits import check_wave
-from servobus.gui.units import UNITS, to_counts
 
 ACTIONS = ("enable", "disable", "stop", "set_origin", "reset")
 #: Actions that end a running jog or constant speed first (whoever holds it: Stop wins).
@@ -30,7 +30,7 @@ async def info(request: Request) -> Response:
         "axes": [h.identity() for h in gui.fleet.handles.values()],
         "signals": [{"name": s.name, "unit": s.unit, "label": s.label}
                     for s in SIGNALS.values()],
-        "units": list(UNITS), "jog_lease_s": gui.jog.lease_s,
+        "units": list(DRIVE_UNITS), "jog_lease_s": gui.jog.lease_s,
         "machine": gui.fleet.machine.name if gui.fleet.machine_file and gui.fleet.machine
         else None,
     })
@@ -74,11 +74,11 @@ async def move(request: Request) -> Response:
     relative = bool(doc.get("relative", False))
     m = h.machine_axis
     if m is not None and h.named:  # a machine axis: its own unit, its limits before the wire
-        user = value if unit == m.unit else m.to_user(to_counts(h.axis, value, unit))
+        user = value if unit == m.unit else m.to_user(to_counts(value, unit, h.axis.counts_per_rev))
         await h.call(m.move_by(user) if relative else m.move_to(user))
         return ok(counts=m.to_counts(user), relative=relative, value=user, unit=m.unit,
                   status=await _refresh(request, h.id))
-    counts = to_counts(h.axis, value, unit)
+    counts = to_counts(value, unit, h.axis.counts_per_rev)
     if m is not None:  # a bare URL's axis, in counts: a move replaces a running lease
         await h.call(m.move_by(counts) if relative else m.move_to(counts))
     elif relative:

@@ -14,12 +14,12 @@ from starlette.responses import JSONResponse, Response
 from starlette.routing import Route
 
 from servobus.axis.types import ParamInfo, Storage
+from servobus.axis.units import to_counts
 from servobus.errors import ArgumentRangeError
 from servobus.families import params_file as PF
 from servobus.gui import tuning
 from servobus.gui.fleet import AxisHandle
 from servobus.gui.http_util import api, body, handle, integer, number, ok, state
-from servobus.gui.units import to_counts
 
 
 def describe(p: ParamInfo) -> dict[str, object]:
@@ -118,7 +118,8 @@ async def step(request: Request) -> Response:
     h = handle(request)
     gui = state(request)
     doc = await body(request)
-    distance = to_counts(h.axis, number(doc, "distance"), str(doc.get("unit", "counts")))
+    distance = to_counts(number(doc, "distance"), str(doc.get("unit", "counts")),
+                         h.axis.counts_per_rev)
     result = await tuning.run_step(h, gui.samplers[h.id], gui.tuning[h.id], distance,
                                    number(doc, "duration_s", 1.0))
     return JSONResponse(result)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from servobus.axis.types import round_counts
+from servobus.axis.units import round_counts
 from servobus.errors import ArgumentRangeError
 
 _QUANTITY = re.compile(r"^([-+]?(?:\d+(?:\.\d*)?|\.\d+)(?:e[-+]?\d+)?)\s*([a-z]*)$")

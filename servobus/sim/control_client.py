@@ -8,10 +8,15 @@ import socket
 from typing import Any
 
 from servobus.errors import ConnectionLost, DriveTimeout
-from servobus.sim.dmm.control import ControlError, Reply
+from servobus.sim.core.control import ControlError, FaultTable, Reply
+from servobus.sim.dmm import control as drive_control
 from servobus.sim.line_server import parse_listen_url
 
 DEFAULT_TIMEOUT_S = 5.0
+#: The faults the channel's drives take, for clients that offer them by name (the CLI's
+#: ``servobus sim control fault``): the control server serves the DMM virtual drives
+#: (servobus.sim.control_server), so theirs.
+FAULTS: FaultTable = drive_control.FAULTS
 MAX_REPLY = 1 << 20  # bytes of one reply line (a state reply is well under 2 KiB)
 
 

@@ -26,7 +26,8 @@ from collections.abc import Sequence
 from typing import Any, TextIO
 
 from servobus.sim import server_limits as lim
-from servobus.sim.dmm.control import COMMANDS, DriveControl, Reply
+from servobus.sim.core.control import Reply
+from servobus.sim.dmm.control import COMMANDS, DriveControl
 from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.line_server import DEFAULT_HOST, format_tcp_url
 from servobus.sim.wall_clock import RealtimeClock

@@ -10,9 +10,11 @@ half away from zero; the resolution is ``16384 / GEAR_NUM`` counts (4 at GEAR_NU
 from __future__ import annotations
 
 from servobus.axis.capabilities import Capability
-from servobus.axis.types import AxisStatus, Family, motion_state, round_counts
+from servobus.axis.types import AxisStatus, Family, motion_state
+from servobus.axis.units import round_counts
 from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
+from servobus.families.dmm.profile import PTP
 from servobus.families.dmm.registers import AlarmCode, DriveStatus
 
 ALARM_TEXT: dict[int, str] = {
@@ -37,6 +39,7 @@ DYN2 = Family(
     counts_per_rev=U.COUNTS_PER_REV,
     params=tuple(p.info for p in P.PARAMS),
     capabilities=CAPABILITIES,
+    ptp_profile=PTP,
     alarms={int(k): v for k, v in ALARM_TEXT.items()},
     wave_counts_per_unit=U.WAVE_COUNTS_PER_UNIT,
 )

@@ -17,8 +17,10 @@ the trapezoid is still reached. 1.5 % keeps the total within 2 % of Appendix B's
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
+from servobus.axis.types import PtpCalculator
 from servobus.families.dmm import units as U
 
 SMOOTHING_FRACTION = 0.015
@@ -125,6 +127,15 @@ def ptp_profile(max_speed: int, max_accel: int, gear_num: int, command: int) -> 
         smoothing_s=smooth,
         total_time_s=trap + smooth,
     )
+
+
+def profile_of(params: Mapping[str, int], command: int) -> PtpProfile:
+    """:func:`ptp_profile` from the parameters by name (the Family's ``ptp_profile``)."""
+    return ptp_profile(params["max_speed"], params["max_accel"], params["gear_num"], command)
+
+
+#: The DMM families' point-to-point profile (DYN2 and DYN5 plan moves alike).
+PTP = PtpCalculator(inputs=("max_speed", "max_accel", "gear_num"), compute=profile_of)
 
 
 # ---------------------------------------------------------------- interpolation words

@@ -33,6 +33,7 @@ from servobus.axis.capabilities import Capability
 from servobus.axis.types import AxisStatus, Family, ParamInfo, Storage, motion_state
 from servobus.families.dmm import params as dmm_params
 from servobus.families.dmm import units as U
+from servobus.families.dmm.profile import PTP
 from servobus.families.dmm.registers import ALARM_SHIFT, AlarmCode, StatusBits
 from servobus.families.dyn5 import params as dyn5
 from servobus.families.dyn5.params import Instance, Kind
@@ -94,6 +95,7 @@ DYN5 = Family(
     capabilities=CAPABILITIES,
     alarms=ALARM_TEXT,
     wave_counts_per_unit=U.WAVE_COUNTS_PER_UNIT,
+    ptp_profile=PTP,
 )
 
 

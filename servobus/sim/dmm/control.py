@@ -23,80 +23,18 @@ echoed in its reply. ``id`` may be left out when the channel serves exactly one 
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from servobus.errors import ServobusError
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, CommandMode
 from servobus.sim.core import constants as K
+from servobus.sim.core.control import Arg, ControlError, Reply
 from servobus.sim.core.io import PulseFormat
 from servobus.sim.dmm.drive import VirtualDrive
 
-Reply = dict[str, Any]
 MAX_COUNT = 1 << 31  # |pulses| per request (a 28-bit position range fits many times over)
-
-
-class ControlError(ServobusError):
-    """A request the channel refuses; ``kind`` names the class of problem (see ERROR_KINDS)."""
-
-    def __init__(self, kind: str, message: str) -> None:
-        super().__init__(message)
-        self.kind = kind
-
-
-#: Error kinds in replies ``{"ok": false, "kind": ..., "error": ...}``.
-ERROR_KINDS = {
-    "malformed": "the line is not a JSON object",
-    "too_long": "the line is longer than the channel accepts (the rest of it is skipped)",
-    "unknown_command": "cmd is missing or not a command",
-    "unknown_id": "no drive with that id (or id missing with several drives)",
-    "bad_argument": "an argument is missing, unknown, of the wrong type or out of range",
-    "busy": "the channel serves its maximum number of connections",
-}
-
-_REQUIRED = object()
-
-
-@dataclass(frozen=True)
-class Arg:
-    """One argument: JSON type (float, int, bool, str), range or choices, default."""
-
-    name: str
-    kind: type
-    lo: float | None = None
-    hi: float | None = None
-    choices: tuple[str, ...] = ()
-    default: object = _REQUIRED
-    doc: str = ""
-
-    @property
-    def required(self) -> bool:
-        return self.default is _REQUIRED
-
-    def parse(self, raw: object) -> object:
-        if self.kind is bool:
-            if not isinstance(raw, bool):
-                raise ControlError("bad_argument", f"{self.name} must be true or false")
-            return raw
-        if self.kind is str:
-            if not isinstance(raw, str) or (self.choices and raw not in self.choices):
-                raise ControlError("bad_argument",
-                                   f"{self.name} must be one of {', '.join(self.choices)}")
-            return raw
-        if isinstance(raw, bool) or not isinstance(raw, int | float) or not math.isfinite(raw):
-            raise ControlError("bad_argument", f"{self.name} must be a finite number")
-        value: float = raw
-        if self.kind is int:
-            if value != int(value):
-                raise ControlError("bad_argument", f"{self.name} must be an integer")
-            value = int(value)
-        if (self.lo is not None and value < self.lo) or (self.hi is not None and value > self.hi):
-            raise ControlError("bad_argument",
-                               f"{self.name} {raw} is outside {self.lo:g}..{self.hi:g}")
-        return value
 
 
 Handler = Callable[["DriveControl", VirtualDrive, dict[str, Any]], Reply]

@@ -13,7 +13,8 @@ from collections.abc import Sequence
 from typing import Any
 
 from servobus.errors import ArgumentRangeError
-from servobus.sim.dmm.control import COMMANDS, ControlError, DriveControl
+from servobus.sim.core.control import ControlError
+from servobus.sim.dmm.control import COMMANDS, DriveControl
 from servobus.sim.dmm.drive import VirtualDrive
 
 #: Families whose virtual drives have the JP3 connector: the DMM drives (DYN2 manual 2.3,
