@@ -9,6 +9,7 @@ from typing import Any
 from servobus.axis.cli_spec import Option
 from servobus.sim.line_server import parse_listen_url
 from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS
+from servobus.sim.socketcand_hub import parse_socketcand_address
 
 
 def sim_options(*, parse_ids: Callable[[str], Any], ids_default: str | None, ids_help: str,
@@ -37,6 +38,12 @@ def listen_option(flag: str, dest: str, help: str) -> Option:
     """A ``tcp://HOST:PORT`` option, received as (host, port) or None."""
     return Option(flag, dest, help, metavar="tcp://HOST:PORT", parse=parse_listen_url)
 
+
+#: ``--socketcand``: the CAN bus of a CAN protocol's virtual drives, served over socketcand.
+SOCKETCAND = Option("--socketcand", "address",
+                    "serve the CAN bus over socketcand; PORT 0 picks a free port",
+                    metavar="HOST:PORT", default="127.0.0.1:0", show_default=True,
+                    parse=parse_socketcand_address)
 
 #: ``--control``: serve the control channel (servobus.sim.control_server.start_control).
 CONTROL = listen_option(

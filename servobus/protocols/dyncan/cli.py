@@ -23,13 +23,13 @@ from servobus.families.dmm import units as U
 from servobus.protocols.dyncan import codec as c
 from servobus.protocols.dyncan.device import DynCanNetwork
 from servobus.protocols.dyncan.server import serve
-from servobus.sim.cli_options import CONTROL, sim_banner, sim_options, stopped_line
+from servobus.sim.cli_options import CONTROL, SOCKETCAND, sim_banner, sim_options, stopped_line
 from servobus.sim.control_server import start_control
 from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.dmm.fleet import make_drives, parse_drive_ids
 from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS, fit_fd_limit, log_to_stderr
 from servobus.sim.socketcand_bus import socketcand_bus
-from servobus.sim.socketcand_hub import SocketcandHub, parse_socketcand_address
+from servobus.sim.socketcand_hub import SocketcandHub
 from servobus.sim.wall_clock import RealtimeClock
 
 
@@ -88,10 +88,7 @@ def run_sim(io: CommandIO, *, address: tuple[str, int], bitrate: int, ids: tuple
 COMMANDS = (Command(
     "dyncan", run_sim.__doc__ or "", run_sim, sim=True,
     options=(
-        Option("--socketcand", "address",
-               "serve the CAN bus over socketcand; PORT 0 picks a free port",
-               metavar="HOST:PORT", default="127.0.0.1:0", show_default=True,
-               parse=parse_socketcand_address),
+        SOCKETCAND,
         Option("--bitrate", "bitrate", "bit rate of the timing model",
                choices=tuple(str(k * 1000) for k in c.BITRATES_KBIT), default="1000000",
                show_default=True, parse=int),

@@ -16,15 +16,14 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Sequence
 
-from servobus.axis.cli_spec import Command, CommandIO, Option
+from servobus.axis.cli_spec import Command, CommandIO
 from servobus.families.yzaim import registers as yzaim
 from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.functions import BITRATE
 from servobus.protocols.easycan.server import serve
-from servobus.sim.cli_options import sim_banner, sim_options, stopped_line
+from servobus.sim.cli_options import SOCKETCAND, sim_banner, sim_options, stopped_line
 from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS, fit_fd_limit, log_to_stderr
 from servobus.sim.socketcand_bus import socketcand_bus
-from servobus.sim.socketcand_hub import parse_socketcand_address
 from servobus.sim.wall_clock import RealtimeClock
 from servobus.sim.yzaim.fleet import make_motors, parse_addresses
 from servobus.sim.yzaim.motor import YzaimMotor
@@ -67,10 +66,7 @@ def run_sim(io: CommandIO, *, address: tuple[str, int], ids: tuple[int, ...], fa
 COMMANDS = (Command(
     "easycan", run_sim.__doc__ or "", run_sim, sim=True,
     options=(
-        Option("--socketcand", "address",
-               "serve the CAN bus over socketcand; PORT 0 picks a free port",
-               metavar="HOST:PORT", default="127.0.0.1:0", show_default=True,
-               parse=parse_socketcand_address),
+        SOCKETCAND,
         *sim_options(parse_ids=parse_addresses, ids_default="1",
                      ids_help="motor addresses on the bus (1..254)",
                      fast_help="no 1 Mbit/s bit-timing model: answer at once",
