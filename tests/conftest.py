@@ -1,25 +1,21 @@
-"""Shared test helpers: waiting on a condition, and the session-end check for leftovers.
+"""Fixtures and pytest hooks only; the helpers tests import live in rig.py and the *_rig.py
+modules (never ``from conftest import``: docs/testing.md).
 
 * ``async def test_...`` functions run on a fresh event loop each, by pytest-asyncio in auto
   mode (pyproject ``asyncio_mode = "auto"``): no marker, no decorator.
-* ``wait_until(predicate, timeout=..., poll=...)`` polls until ``predicate()`` is true and
-  fails the test with the last value when ``timeout`` passes - for conditions that have no
-  event to wait on (simulated physics in wall-clock time). ``await wait_until_async(...)``
-  does the same for coroutine predicates.
+* Hypothesis runs the same examples every time, without its per-example deadline.
+* Ctrl-C reaches the processes tests start, even from a run in the background.
 * At the end of a run (of each xdist worker) ``no_child_left_behind`` fails if a process
   started by a test is still running, naming it.
 """
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
-import inspect
 import os
 import signal
 import time
-from collections.abc import Awaitable, Callable, Iterator
-from typing import Any
+from collections.abc import Iterator
 
 import pytest
 from hypothesis import settings
@@ -44,36 +40,6 @@ def pytest_configure(config: pytest.Config) -> None:
     """
     if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
         signal.signal(signal.SIGINT, signal.default_int_handler)
-
-
-def wait_until(predicate: Callable[[], Any], *, timeout: float = 5.0,
-               poll: float = 0.01, what: str = "condition") -> Any:
-    """Poll ``predicate`` until it returns something true; return it, or fail on timeout."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if time.monotonic() >= deadline:
-            pytest.fail(f"{what} not met within {timeout:g} s (last: {value!r})")
-        time.sleep(poll)  # the polling helper's own short sleep
-
-
-async def wait_until_async(predicate: Callable[[], Awaitable[Any] | Any], *,
-                           timeout: float = 5.0, poll: float = 0.01,
-                           what: str = "condition") -> Any:
-    """``wait_until`` inside a running loop, without blocking it; ``predicate`` may be a
-    coroutine function or a plain one (a state that tasks on the loop change)."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if inspect.isawaitable(value):
-            value = await value
-        if value:
-            return value
-        if time.monotonic() >= deadline:
-            pytest.fail(f"{what} not met within {timeout:g} s (last: {value!r})")
-        await asyncio.sleep(poll)  # the polling helper's own short sleep
 
 
 # ------------------------------------------------------------ no child left behind

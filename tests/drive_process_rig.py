@@ -4,7 +4,6 @@ offline state. ``procs`` is a fixture: a test module imports it by name."""
 
 from __future__ import annotations
 
-import socket
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -24,12 +23,6 @@ SIMS = {
     "modbus": (["modbus", "--listen", "tcp://127.0.0.1:{port}", "--ids", "1"],
                "modbus+socket://127.0.0.1:{port}"),
 }
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def sim_url(protocol: str, port: int) -> str:

@@ -10,7 +10,7 @@ import math
 from collections.abc import Iterator
 
 import pytest
-from conftest import wait_until
+from rig import wait_until
 
 from servobus.axis import Axis, connect, registry
 from servobus.axis.capabilities import Capability

@@ -8,7 +8,7 @@ the gateway's sampler polling 32 axes at 50 Hz paid that read twice.
 from __future__ import annotations
 
 import pytest
-from conftest import wait_until_async
+from rig import wait_until_async
 
 from servobus.axis import registry
 from servobus.axis.connect import connect_async

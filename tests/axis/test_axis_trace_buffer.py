@@ -6,7 +6,7 @@ import asyncio
 import time
 
 import pytest
-from conftest import wait_until_async
+from rig import wait_until_async
 
 from servobus import connect_async
 from servobus.axis.capture import STATUS_BITS, Capture, status_bits

@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 import pytest
-from conftest import wait_until_async
+from rig import wait_until_async
 
 from servobus.axis import connect_async
 from servobus.axis.base import AsyncAxis

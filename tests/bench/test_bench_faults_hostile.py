@@ -3,14 +3,10 @@ serving, left a payload unanswered or answered one with an unexpected error is a
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 
-# benchmarks/ is a top-level package of the repository, not installed with servobus.
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root: benchmarks/
 from benchmarks import verdict
 from benchmarks.bench_faults import selected
 from benchmarks.fault_gateway import HostileReport, print_hostile

@@ -4,17 +4,12 @@ nothing else: its 'motion commands re-sent' figure can be other than 0."""
 from __future__ import annotations
 
 import struct
-import sys
-from pathlib import Path
 
 import pytest
 
+from benchmarks.fault_proxy import MotionTap
 from servobus.protocols.enip.codec import cpf
 from servobus.protocols.enip.codec.encap import EncapPacket
-
-# benchmarks/ is a top-level package of the repository, not installed with servobus.
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root: benchmarks/
-from benchmarks.fault_proxy import MotionTap
 
 
 def enip_set(instance: int, value: int, session: int) -> bytes:

@@ -2,14 +2,10 @@
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 
-# benchmarks/ is a top-level package of the repository, not installed with servobus.
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root: benchmarks/
 from benchmarks import verdict as V
 
 

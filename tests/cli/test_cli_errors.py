@@ -13,7 +13,6 @@ import io
 import json
 import logging
 import os
-import socket
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -22,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from rig import free_port
 
 from servobus.cli.failures import EXIT_FAULT, EXIT_USAGE
 from servobus.cli.main import DEBUG_ENV, QUIET_LOGGERS, main
@@ -29,13 +29,6 @@ from servobus.families.dmm import params as P
 
 SERVOBUS = [sys.executable, "-m", "servobus"]
 CASE_TIMEOUT_S = 20.0
-
-
-def closed_port() -> int:
-    """A local TCP port nothing listens on (bound once, then released)."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @dataclass(frozen=True)
@@ -152,7 +145,7 @@ def fill(tmp_path: Path) -> dict[str, str]:
     backup.write_text(json.dumps({"format": "servobus.params", "version": 1,
                                   "protocol": "dyn232", "drive_id": 0,
                                   "params": {n: P.spec(n).default for n in P.DYN_PARAMS}}))
-    return {"closed": str(closed_port()), "tmp": str(tmp_path), "backup": str(backup),
+    return {"closed": str(free_port()), "tmp": str(tmp_path), "backup": str(backup),
             "hexfile": str(tmp_path / "capture.txt"), "binfile": str(tmp_path / "capture.bin")}
 
 

@@ -21,7 +21,7 @@ from pathlib import Path
 from types import TracebackType
 
 import pytest
-from conftest import wait_until
+from rig import wait_until
 
 from servobus.cli import failures as F
 from servobus.cli import jog_cmd

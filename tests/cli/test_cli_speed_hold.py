@@ -17,7 +17,7 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-from conftest import wait_until
+from rig import wait_until
 from subprocess_rig import read_line, stop_process
 
 import servobus.machine.links as links

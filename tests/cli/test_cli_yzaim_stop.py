@@ -17,7 +17,7 @@ import sys
 from collections.abc import Iterator
 
 import pytest
-from conftest import wait_until
+from rig import wait_until
 from subprocess_rig import read_line, stop_process
 
 from servobus.axis import connect

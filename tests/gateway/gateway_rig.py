@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 from asyncua import Client, Node
+from rig import free_port
 from subprocess_rig import Process, read_line, stop_process
 
 from servobus.gateway.opcua_model import DI_URI, ROBOTICS_URI, SERVOBUS_URI
@@ -108,13 +109,6 @@ MOSQUITTO = shutil.which("mosquitto") or ("/usr/sbin/mosquitto"
                                           if Path("/usr/sbin/mosquitto").exists() else None)
 PASSWD = shutil.which("mosquitto_passwd")
 BROKER_USERS = {"gateway": "gateway-secret-1", "tester": "tester-secret-1"}
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
 
 
 @contextlib.contextmanager

@@ -9,9 +9,9 @@ import signal
 
 import pytest
 from asyncua import Client, ua
-from conftest import wait_until_async
 from fake_machine import FakeMachine
 from gateway_rig import axes_of, names, parameter
+from rig import wait_until_async
 
 from servobus.gateway.commands import Command, Commander, Refused
 from servobus.gateway.opcua_server import OpcUaOptions

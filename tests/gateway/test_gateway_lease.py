@@ -17,8 +17,8 @@ import aiomqtt
 import pytest
 from asyncua import Client, ua
 from asyncua.ua.uaerrors import UaStatusCodeError
-from conftest import wait_until_async
 from gateway_rig import BROKER_USERS, PASSWORD, USER, axes_of, mosquitto, names
+from rig import wait_until_async
 
 from servobus.gateway.mqtt import MqttOptions
 from servobus.gateway.opcua_server import OpcUaOptions

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 from asyncua import Client
-from conftest import wait_until_async
 from gateway_rig import PASSWORD, USER, axes_of, names, start_gateway, users_file
+from rig import wait_until_async
 from subprocess_rig import read_line, stop_process
 
 from servobus.machine import AsyncMachine, AsyncMachineAxis, open_machine_async

@@ -16,11 +16,11 @@ from typing import Any
 
 import aiomqtt
 import pytest
-from conftest import wait_until_async
 from fake_machine import FakeMachine
 from gateway_rig import BROKER_USERS, mosquitto
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.reasoncodes import ReasonCode
+from rig import wait_until_async
 
 from benchmarks.faults_hostile import hostile_mqtt, hostile_payloads, nested_4k
 from servobus.errors import GatewayConflict

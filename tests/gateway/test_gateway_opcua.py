@@ -12,7 +12,6 @@ from pathlib import Path
 import pytest
 from asyncua import Client, Node, ua
 from asyncua.ua.uaerrors import UaStatusCodeError
-from conftest import wait_until_async
 from gateway_rig import (
     PASSWORD,
     USER,
@@ -24,6 +23,7 @@ from gateway_rig import (
     start_gateway,
     users_file,
 )
+from rig import wait_until_async
 
 MACHINE = "virtual-cell"
 

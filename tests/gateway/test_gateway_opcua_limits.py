@@ -15,9 +15,9 @@ import pytest
 import pytest_asyncio
 from asyncua import Client, Node, ua
 from asyncua.ua.uaerrors import UaStatusCodeError
-from conftest import wait_until_async
 from fake_machine import FakeMachine
 from gateway_rig import axes_of, machine_node, names
+from rig import wait_until_async
 
 from benchmarks.faults_hostile import login_flood, session_flood
 from servobus.gateway import opcua_limits

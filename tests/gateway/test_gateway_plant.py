@@ -13,19 +13,18 @@ from pathlib import Path
 import pytest
 from asyncua import Client, ua
 from asyncua.crypto.cert_gen import setup_self_signed_certificate
-from conftest import wait_until_async
 from cryptography.x509.oid import ExtendedKeyUsageOID
 from gateway_rig import (
     PASSWORD,
     USER,
     RunningGateway,
     axes_of,
-    free_port,
     names,
     parameter,
     start_gateway,
     users_file,
 )
+from rig import free_port, wait_until_async
 
 from servobus.gateway.opcua_server import OpcUaGateway, OpcUaOptions
 

@@ -16,7 +16,6 @@ from typing import Any
 import aiomqtt
 from asyncua import Client, Node, ua
 from asyncua.ua.uaerrors import UaStatusCodeError
-from conftest import wait_until_async
 from fake_machine import FakeAxis, FakeMachine
 from gateway_rig import (
     BROKER_USERS,
@@ -29,6 +28,7 @@ from gateway_rig import (
     parameter,
     user_client,
 )
+from rig import wait_until_async
 
 import servobus
 from servobus.gateway.commands import Commander

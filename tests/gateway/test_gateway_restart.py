@@ -22,18 +22,17 @@ import pytest
 import pytest_asyncio
 from asyncua import Node, ua
 from asyncua.ua.uaerrors import UaStatusCodeError
-from conftest import wait_until_async
 from drive_process_rig import SIMS, sim_url, start_sim
 from gateway_rig import (
     PASSWORD,
     USER,
     axes_of,
-    free_port,
     machine_node,
     names,
     parameter,
     user_client,
 )
+from rig import free_port, wait_until_async
 from subprocess_rig import stop_process
 
 from servobus.gateway.opcua_server import OpcUaOptions

@@ -8,7 +8,7 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-from conftest import wait_until
+from rig import wait_until
 from starlette.testclient import TestClient
 
 from servobus.families import params_file as PF

@@ -19,7 +19,7 @@ from typing import Any
 
 import browser_rig
 import pytest
-from conftest import wait_until
+from rig import wait_until
 
 browser_rig.skip_without_browser()
 

@@ -17,9 +17,9 @@ from typing import Any
 
 import browser_rig
 import pytest
-from conftest import wait_until
-from drive_process_rig import free_port, sim_url, start_sim
 from drive_process_rig import procs as procs  # the fixture, for this module
+from drive_process_rig import sim_url, start_sim
+from rig import free_port, wait_until
 from subprocess_rig import read_line, stop_process
 
 browser_rig.skip_without_browser()

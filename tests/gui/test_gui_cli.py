@@ -15,7 +15,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 import pytest
-from conftest import wait_until
+from rig import wait_until
 from subprocess_rig import read_line, stop_process
 
 from servobus.axis import connect

@@ -10,7 +10,7 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-from conftest import wait_until
+from rig import wait_until
 from starlette.testclient import TestClient
 
 from servobus.axis.connect import connect_async

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import pytest
-from conftest import wait_until
+from rig import wait_until
 from subprocess_rig import read_line, stop_process
 from websockets.sync.client import ClientConnection
 from websockets.sync.client import connect as ws_connect

@@ -13,7 +13,7 @@ from contextlib import contextmanager
 from typing import Any
 
 import pytest
-from conftest import wait_until
+from rig import wait_until
 from starlette.testclient import TestClient
 
 from servobus.errors import DriveTimeout

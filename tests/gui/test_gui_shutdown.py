@@ -10,7 +10,7 @@ from __future__ import annotations
 import asyncio
 
 import pytest
-from conftest import wait_until_async
+from rig import wait_until_async
 
 from servobus.gui.app import create_app
 from servobus.gui.state import GuiState

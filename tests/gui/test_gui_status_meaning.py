@@ -8,7 +8,7 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-from conftest import wait_until
+from rig import wait_until
 from starlette.testclient import TestClient
 
 from servobus.gui.app import create_app

@@ -9,7 +9,7 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
-from conftest import wait_until
+from rig import wait_until
 from starlette.testclient import TestClient, WebSocketTestSession
 
 from servobus.gui import frames

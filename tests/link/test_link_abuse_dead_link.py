@@ -18,6 +18,7 @@ from contextlib import asynccontextmanager
 from typing import Any
 
 import pytest
+from can_rig import ScriptedCanPort
 from dyn232_rig import PATHS, rig
 from dyncan_rig import harness
 
@@ -29,7 +30,6 @@ from servobus.protocols.dyn232.client import AsyncDyn232Client
 from servobus.protocols.dyncan.axis import DynCanAxis, open_can_axis
 from servobus.protocols.dyncan.client import AsyncDynCanClient
 from servobus.transport.base import TraceHook
-from servobus.transport.can_bus import CanFrame, FrameTraceHook
 
 pytestmark = pytest.mark.timeout(30)
 DEADLINE_S = 3.0
@@ -161,27 +161,10 @@ async def test_can_bus_closed_while_waiting() -> None:
         await fails_at_once(ax.position_direct(10))
 
 
-class BrokenCanPort:
-    def __init__(self, error: OSError) -> None:
-        self.error = error
-
-    async def send(self, arbitration_id: int, data: bytes) -> None:
-        raise self.error
-
-    async def recv(self, timeout: float | None = None) -> CanFrame | None:
-        await asyncio.sleep(3600)  # never a frame
-        return None
-
-    def add_trace(self, hook: FrameTraceHook) -> None:
-        pass
-
-    async def close(self) -> None:
-        pass
-
-
 async def test_builtin_errors_of_a_foreign_can_port_become_connection_lost() -> None:
     error = BrokenPipeError(32, "Broken pipe")
-    client = AsyncDynCanClient(BrokenCanPort(error), timeout=DEADLINE_S)
+    client = AsyncDynCanClient(ScriptedCanPort(push_mode=False, send_error=error),
+                              timeout=DEADLINE_S)
     ax = DynCanAxis(client, 1)
     try:
         lost = await fails_at_once(ax.status())

@@ -16,6 +16,7 @@ import logging
 import time
 
 import pytest
+from can_rig import Answer, ScriptedCanPort
 from dyn232_rig import PATHS, rig
 
 # benchmarks/ is a package of the repository (not installed): pytest's pythonpath has the root.
@@ -25,7 +26,6 @@ from servobus.protocols.dyncan import codec as cc
 from servobus.protocols.dyncan.axis import DynCanAxis
 from servobus.protocols.dyncan.client import AsyncDynCanClient
 from servobus.transport.base import Direction
-from servobus.transport.can_bus import CanFrame, FrameReceiver, FrameTraceHook
 
 pytestmark = [pytest.mark.timeout(60), pytest.mark.slow]
 READS = 40  # ~2 s per run; benchmarks.stale_reads runs the issue's 885
@@ -148,66 +148,44 @@ async def test_late_replies_and_retries_are_logged(caplog: pytest.LogCaptureFixt
 
 
 # ---------------------------------------------------------------------- DYN CAN drain rules
-class ScriptedCanPort:
-    """One drive that answers reads with a counter; ``delays`` scripts the next replies
-    (seconds late, or None: lost). Order kept, as on a bus."""
+class CountingDrive:
+    """A script for ScriptedCanPort: one drive that answers reads with a counter; ``delays``
+    scripts the next replies (seconds late, or None: lost)."""
 
     def __init__(self) -> None:
         self.received = 0
         self.delays: list[float | None] = []
-        self._receiver: FrameReceiver | None = None
-        self._release_at = 0.0
 
-    def set_receiver(self, receiver: FrameReceiver) -> None:
-        self._receiver = receiver
-
-    def add_trace(self, hook: FrameTraceHook) -> None:
-        pass
-
-    async def send(self, arbitration_id: int, data: bytes) -> None:
+    def __call__(self, arbitration_id: int, data: bytes) -> list[Answer]:
         request = cc.decode(arbitration_id, data)
         if not cc.expects_reply(request):
-            return
+            return []
         answer = cc.reply(request.drive_id, cc.function_of(request.function), self.received)
         self.received += 1
         delay = self.delays.pop(0) if self.delays else 0.0
-        if delay is None:
-            return
-        loop = asyncio.get_running_loop()
-        self._release_at = max(self._release_at, loop.time()) + delay
-        loop.call_at(self._release_at, self._deliver, answer)
-
-    def _deliver(self, frame: cc.Frame) -> None:
-        if self._receiver is not None:
-            self._receiver(CanFrame(frame.arbitration_id, frame.data))
-
-    async def recv(self, timeout: float | None = None) -> CanFrame | None:
-        raise NotImplementedError("push only")
-
-    async def close(self) -> None:
-        if self._receiver is not None:
-            self._receiver(None)
+        return [] if delay is None else [(answer.arbitration_id, answer.data, delay)]
 
 
 async def test_dyncan_late_frame_is_dropped_and_the_drain_is_bounded() -> None:
-    port = ScriptedCanPort()
-    client = AsyncDynCanClient(port, timeout=DEADLINE_S, retries=0, late_reply_s=LATE_S)
+    drive = CountingDrive()
+    client = AsyncDynCanClient(ScriptedCanPort(drive, in_order=True),  # as on a bus
+                               timeout=DEADLINE_S, retries=0, late_reply_s=LATE_S)
     ax = DynCanAxis(client, 1)
     try:
-        port.delays = [2 * DEADLINE_S]
+        drive.delays = [2 * DEADLINE_S]
         with pytest.raises(DriveTimeout):
             await ax.position()
-        start = port.received
+        start = drive.received
         assert await ax.position() >= start  # the late frame (value 0) was not taken
         assert client.late_replies.late == 1
-        port.delays = [None]  # lost for good
+        drive.delays = [None]  # lost for good
         with pytest.raises(DriveTimeout):
             await ax.position()
         t_fail = time.monotonic()
         drains = client.late_replies.drains
         await ax.speed()  # another identifier: no wait (the client counts every read that waits)
         assert client.late_replies.drains == drains
-        start = port.received
+        start = drive.received
         assert await ax.position() >= start
         waited = time.monotonic() - t_fail
         assert LATE_S - EARLY_S <= waited <= LATE_S + DEADLINE_S + MARGIN_S

@@ -16,7 +16,7 @@ from collections import deque
 from dataclasses import dataclass
 
 import pytest
-from conftest import wait_until_async
+from rig import wait_until_async
 
 from servobus.errors import (
     ArgumentRangeError,

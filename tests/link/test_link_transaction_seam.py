@@ -9,9 +9,8 @@ counters without a re-send.
 
 from __future__ import annotations
 
-import asyncio
-
 import pytest
+from can_rig import Answer, ScriptedCanPort
 from dyn232_rig import rig
 
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveError
@@ -21,51 +20,30 @@ from servobus.protocols.dyncan import codec as cc
 from servobus.protocols.dyncan import commands as ccan
 from servobus.protocols.dyncan.axis import DynCanAxis
 from servobus.protocols.dyncan.client import AsyncDynCanClient
-from servobus.transport.can_bus import CanFrame, FrameReceiver, FrameTraceHook
 
 pytestmark = pytest.mark.timeout(20)
 
 
-class ErrorPort:
-    """One DYN CAN drive that answers every read with ``answer`` (a Drive Error code or
-    None: a normal reply) and counts what it received."""
+class ErrorDrive:
+    """A script for ScriptedCanPort: one DYN CAN drive that answers every read with
+    ``answer`` (a Drive Error code, or None: a normal reply of 0)."""
 
-    def __init__(self) -> None:
-        self.sent: list[cc.Frame] = []
-        self.answer: int | None = None
-        self._receiver: FrameReceiver | None = None
+    def __init__(self, answer: int | None = None) -> None:
+        self.answer = answer
 
-    def set_receiver(self, receiver: FrameReceiver) -> None:
-        self._receiver = receiver
-
-    def add_trace(self, hook: FrameTraceHook) -> None:
-        pass
-
-    async def send(self, arbitration_id: int, data: bytes) -> None:
+    def __call__(self, arbitration_id: int, data: bytes) -> list[Answer]:
         request = cc.decode(arbitration_id, data)
-        self.sent.append(request)
         if not cc.expects_reply(request):
-            return
+            return []
         if self.answer is None:
             frame = cc.reply(request.drive_id, cc.function_of(request.function), 0)
         else:
             frame = cc.Frame(request.drive_id, cc.Function.DRIVE_ERROR, bytes((self.answer,)))
-        asyncio.get_running_loop().call_soon(self.push, frame)
-
-    def push(self, frame: cc.Frame) -> None:
-        assert self._receiver is not None
-        self._receiver(CanFrame(frame.arbitration_id, frame.data))
-
-    async def recv(self, timeout: float | None = None) -> CanFrame | None:
-        raise NotImplementedError("push only")
-
-    async def close(self) -> None:
-        if self._receiver is not None:
-            self._receiver(None)
+        return [(frame.arbitration_id, frame.data)]
 
 
 async def test_both_clients_share_the_manager_and_its_stats() -> None:
-    port = ErrorPort()
+    port = ScriptedCanPort(ErrorDrive())
     can = AsyncDynCanClient(port)
     async with rig((0,)) as r:
         for client in (r.client, can):
@@ -79,7 +57,7 @@ async def test_both_clients_share_the_manager_and_its_stats() -> None:
 
 
 async def test_a_request_of_the_other_protocol_is_refused_before_sending() -> None:
-    port = ErrorPort()
+    port = ScriptedCanPort(ErrorDrive())
     can = AsyncDynCanClient(port)
     async with rig((0,)) as r:
         with pytest.raises(ArgumentRangeError, match="not a DYN232M command"):
@@ -92,10 +70,9 @@ async def test_a_request_of_the_other_protocol_is_refused_before_sending() -> No
 
 
 async def test_drive_error_in_flight_ends_the_read_without_a_resend() -> None:
-    port = ErrorPort()
+    port = ScriptedCanPort(ErrorDrive(cc.DriveErrorCode.INVALID_DATA))
     client = AsyncDynCanClient(port, retries=2)
     ax = DynCanAxis(client, 3)
-    port.answer = cc.DriveErrorCode.INVALID_DATA
     with pytest.raises(DriveError) as info:
         await ax.position()
     assert info.value.code == cc.DriveErrorCode.INVALID_DATA and info.value.drive_id == 3
@@ -105,10 +82,11 @@ async def test_drive_error_in_flight_ends_the_read_without_a_resend() -> None:
 
 
 async def test_alarm_push_is_counted_and_raised_by_the_next_call() -> None:
-    port = ErrorPort()
+    port = ScriptedCanPort(ErrorDrive())
     client = AsyncDynCanClient(port)
     ax = DynCanAxis(client, 3)
-    port.push(cc.Frame(3, cc.Function.DRIVE_ERROR, bytes((cc.DriveErrorCode.ALARM,))))
+    alarm = cc.Frame(3, cc.Function.DRIVE_ERROR, bytes((cc.DriveErrorCode.ALARM,)))
+    port.push(alarm.arbitration_id, alarm.data)
     assert client.stats.alarms == 1
     with pytest.raises(DriveAlarm):
         await ax.status()

@@ -7,8 +7,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from conftest import wait_until_async
 from machine_rig import write_machine
+from rig import wait_until_async
 
 from servobus.axis.types import StreamProfile
 from servobus.errors import ArgumentRangeError, LimitError, OwnerError

@@ -11,8 +11,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import wait_until
 from machine_rig import write_machine
+from rig import wait_until
 from starlette.testclient import TestClient
 
 from servobus.gui import frames

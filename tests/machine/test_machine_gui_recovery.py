@@ -22,10 +22,10 @@ from typing import Any
 
 import machine_rig
 import pytest
-from conftest import wait_until
-from drive_process_rig import free_port, sim_url, start_sim
 from drive_process_rig import procs as procs  # the fixture, for this module
+from drive_process_rig import sim_url, start_sim
 from machine_rig import write_machine
+from rig import free_port, wait_until
 from starlette.testclient import TestClient
 from subprocess_rig import read_line, stop_process
 

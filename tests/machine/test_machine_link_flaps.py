@@ -9,12 +9,11 @@ import asyncio
 import contextlib
 import functools
 import logging
-import socket
 from pathlib import Path
 
 import pytest
-from conftest import wait_until_async
 from machine_rig import write_machine
+from rig import free_port, wait_until_async
 
 from servobus.axis import connect_async
 from servobus.errors import DriveTimeout, MachineLinkError
@@ -26,12 +25,6 @@ from servobus.sim.dmm.drive import VirtualDrive
 
 SIMULATED_S = 60.0
 ONE_AXIS = '[axes.a]\nurl = "{url}"\nid = 1\nunit = "rev"\n'
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def servobus_lines(caplog: pytest.LogCaptureFixture) -> list[str]:

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import machine_rig
 import pytest
-from conftest import wait_until_async
 from machine_rig import write_machine
+from rig import wait_until_async
 
 import servobus
 from servobus.axis import registry

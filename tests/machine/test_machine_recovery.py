@@ -16,10 +16,10 @@ from pathlib import Path
 
 import machine_rig
 import pytest
-from conftest import wait_until_async
-from drive_process_rig import SIMS, free_port, sim_url, start_sim
+from drive_process_rig import SIMS, sim_url, start_sim
 from drive_process_rig import procs as procs  # the fixture, for this module
 from machine_rig import write_machine
+from rig import free_port, wait_until_async
 
 from servobus import connect
 from servobus.axis import registry

@@ -14,7 +14,7 @@ import struct
 import time
 
 import pytest
-from conftest import wait_until
+from rig import wait_until
 from sim_abuse_rig import (
     ANSWER_S,
     Flood,

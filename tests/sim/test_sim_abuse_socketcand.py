@@ -10,7 +10,7 @@ import socket
 import time
 
 import pytest
-from conftest import wait_until
+from rig import wait_until
 from sim_abuse_rig import (
     ANSWER_S,
     Flood,

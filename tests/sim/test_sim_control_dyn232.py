@@ -15,7 +15,7 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-from conftest import wait_until
+from rig import wait_until
 from subprocess_rig import read_line
 
 from servobus.families.dmm.registers import ALARM_SHIFT, StatusBits

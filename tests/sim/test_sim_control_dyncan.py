@@ -12,7 +12,7 @@ from collections.abc import Iterator
 
 import can
 import pytest
-from conftest import wait_until
+from rig import wait_until
 from subprocess_rig import read_line
 
 from servobus.families.dmm.registers import ALARM_SHIFT, StatusBits

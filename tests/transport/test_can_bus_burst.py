@@ -22,7 +22,10 @@ pytestmark = pytest.mark.timeout(30)
 
 
 class _ThreadedBus(VirtualBus):  # type: ignore[misc]
-    """A virtual bus AsyncCanBus does not recognise: served by python-can's Notifier."""
+    """A virtual bus AsyncCanBus does not recognise: served by python-can's Notifier.
+
+    Not can_rig's ScriptedCanPort: that one stands in for AsyncCanBus above the transport;
+    here AsyncCanBus itself is under test, on a python-can bus."""
 
 
 def _threaded_port(channel: str) -> AsyncCanBus:

@@ -7,8 +7,8 @@ import itertools
 from collections.abc import Awaitable
 
 import pytest
-from conftest import wait_until_async
 from dyncan_rig import harness
+from rig import wait_until_async
 
 from servobus.axis.base import AsyncAxis
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveError, DriveTimeout

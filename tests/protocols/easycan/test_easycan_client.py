@@ -1,5 +1,8 @@
 """EasyCan client and axis against virtual YZ-AIM motors and a scripted bus.
 
+The scripted bus (can_rig) is read through ``recv`` here (``push_mode=False``: a port
+without ``set_receiver``), the path test_easycan_transactions.py does not take.
+
 Golden frames: the manual's 5.4a examples (speed 1000 + acceleration 10000 in one write,
 absolute position 2 turns, incremental -32768) as the client sends them.
 """
@@ -10,11 +13,12 @@ import asyncio
 import itertools
 from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import asynccontextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import pytest
-from conftest import wait_until_async
+from can_rig import Answer, Script, ScriptedCanPort
+from rig import wait_until_async
 
 from servobus.errors import ArgumentRangeError, ConnectionLost, DriveError, DriveTimeout
 from servobus.families.yzaim import registers as Y
@@ -29,7 +33,7 @@ from servobus.protocols.easycan.server import serve
 from servobus.sim.wall_clock import RealtimeClock
 from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.transport.base import Direction
-from servobus.transport.can_bus import AsyncCanBus, CanFrame, FrameTraceHook
+from servobus.transport.can_bus import AsyncCanBus
 
 pytestmark = pytest.mark.timeout(60)
 _channels = itertools.count()
@@ -64,50 +68,13 @@ async def rig(*addresses: int, timeout: float | None = None) -> AsyncIterator[Ri
         await node_port.close()
 
 
-@dataclass
-class ScriptedBus:
-    """A FramePort whose replies a test scripts: ``answer(id, data)`` -> frames to deliver."""
-
-    answer: Callable[[int, bytes], list[tuple[int, bytes, float]]]
-    sent: list[tuple[int, bytes]] = field(default_factory=list)
-    closed: bool = False
-
-    def __post_init__(self) -> None:
-        self._queue: asyncio.Queue[CanFrame | None] = asyncio.Queue()
-
-    async def send(self, arbitration_id: int, data: bytes) -> None:
-        if self.closed:
-            raise ConnectionLost("closed")
-        self.sent.append((arbitration_id, bytes(data)))
-        loop = asyncio.get_running_loop()
-        for rid, rdata, delay in self.answer(arbitration_id, bytes(data)):
-            loop.call_later(delay, self._queue.put_nowait, CanFrame(rid, rdata))
-
-    async def recv(self, timeout: float | None = None) -> CanFrame | None:
-        try:
-            frame = await asyncio.wait_for(self._queue.get(), timeout)
-        except TimeoutError:
-            return None
-        if frame is None:
-            raise ConnectionLost("closed")
-        return frame
-
-    def add_trace(self, hook: FrameTraceHook) -> None:
-        pass
-
-    async def close(self) -> None:
-        self.closed = True
-        self._queue.put_nowait(None)
-
-
 def motor_answers(motor: YzaimMotor, delay: float = 0.0,
-                  drop: Callable[[int], bool] = lambda n: False
-                  ) -> Callable[[int, bytes], list[tuple[int, bytes, float]]]:
+                  drop: Callable[[int], bool] = lambda n: False) -> Script:
     """Answer like a motor; ``drop(n)`` (n = request number) swallows replies."""
     network = EasyCanNetwork([motor])
     counter = itertools.count()
 
-    def answer(arbitration_id: int, data: bytes) -> list[tuple[int, bytes, float]]:
+    def answer(arbitration_id: int, data: bytes) -> list[Answer]:
         out = network.handle_raw(arbitration_id, data)
         if drop(next(counter)):
             return []
@@ -119,7 +86,7 @@ def motor_answers(motor: YzaimMotor, delay: float = 0.0,
 # ------------------------------------------------------------------ golden frames
 async def test_the_manuals_frames_as_the_client_sends_them() -> None:
     motor = YzaimMotor(1)
-    bus = ScriptedBus(motor_answers(motor))
+    bus = ScriptedCanPort(motor_answers(motor), push_mode=False)
     client = AsyncEasyCanClient(bus)
     # 5.4a: FF 06 02 02 E8 03 10 27 (speed 1000 and acceleration 10000 in one frame)
     both = EasyCanCommand(WriteRequest(1, 0x02, (1000, 10000)), "write speed+accel",
@@ -137,7 +104,7 @@ async def test_the_manuals_frames_as_the_client_sends_them() -> None:
 
 # ------------------------------------------------------------------ bad input
 async def test_bad_input_is_refused_before_sending() -> None:
-    bus = ScriptedBus(motor_answers(YzaimMotor(1)))
+    bus = ScriptedCanPort(motor_answers(YzaimMotor(1)), push_mode=False)
     axis = EasyCanAxis(AsyncEasyCanClient(bus), 1)
     calls: tuple[Callable[[], Awaitable[None]], ...] = (
         lambda: axis.write_param("target_speed", 3001),
@@ -187,12 +154,12 @@ async def test_a_lost_reply_times_out_and_the_late_one_never_answers_a_later_rea
     network = EasyCanNetwork([motor])
     count = itertools.count()
 
-    def answer(arbitration_id: int, data: bytes) -> list[tuple[int, bytes, float]]:
+    def answer(arbitration_id: int, data: bytes) -> list[Answer]:
         n = next(count)
         return [(i, d, 0.08 if n == 0 else 0.0) for i, d in
                 network.handle_raw(arbitration_id, data)]
 
-    bus = ScriptedBus(answer)
+    bus = ScriptedCanPort(answer, push_mode=False)
     client = AsyncEasyCanClient(bus, timeout=0.03, late_reply_s=0.2)
     axis = EasyCanAxis(client, 1)
     # the first attempt's reply comes too late: the retry answers (10000)
@@ -206,7 +173,7 @@ async def test_a_lost_reply_times_out_and_the_late_one_never_answers_a_later_rea
 
 
 async def test_reads_are_retried_moves_are_sent_once() -> None:
-    bus = ScriptedBus(lambda i, d: [])  # a motor that never answers
+    bus = ScriptedCanPort(push_mode=False)  # a motor that never answers
     client = AsyncEasyCanClient(bus, timeout=0.01, late_reply_s=0)
     axis = EasyCanAxis(client, 1)
     with pytest.raises(DriveTimeout):

@@ -1,4 +1,4 @@
-"""The EasyCan client on the shared TransactionManager (issue 9), on a scripted push port.
+"""The EasyCan client on the shared TransactionManager (issue 9), on a scripted CAN port.
 
 The manager's own rules are tested on a scripted medium (test_link_transaction.py); here:
 the client exposes the one manager and stats class, applies EasyCan's rule table (which
@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import asyncio
 import math
-from collections.abc import Callable
 
 import pytest
+from can_rig import Answer, Script, ScriptedCanPort
 
 from servobus.axis import connect
 from servobus.errors import (
@@ -43,17 +43,8 @@ from servobus.protocols.easycan.messages import (
 )
 from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.transport.base import Direction
-from servobus.transport.can_bus import CanFrame, FrameReceiver, FrameTraceHook
 
 pytestmark = pytest.mark.timeout(30)
-
-Frames = list[tuple[int, bytes]]
-Script = Callable[[int, bytes], Frames]
-
-
-def silent(arbitration_id: int, data: bytes) -> Frames:
-    return []
-
 
 def motors(*addresses: int) -> Script:
     """Answer like virtual YZ-AIM motors (at once)."""
@@ -61,53 +52,24 @@ def motors(*addresses: int) -> Script:
     return lambda arbitration_id, data: network.handle_raw(arbitration_id, data)
 
 
-class Port:
-    """A push FramePort: records each request; ``script`` gives the frames that answer it,
-    delivered right after ``send`` returns (``send_s``: how long a send takes)."""
-
-    def __init__(self, script: Script = silent, send_s: float = 0.0) -> None:
-        self.script = script
-        self.send_s = send_s
-        self.sent: list[Request] = []
-        self._receiver: FrameReceiver | None = None
-
-    def set_receiver(self, receiver: FrameReceiver) -> None:
-        self._receiver = receiver
-
-    def add_trace(self, hook: FrameTraceHook) -> None:
-        pass
-
-    async def send(self, arbitration_id: int, data: bytes) -> None:
-        if self.send_s:
-            await asyncio.sleep(self.send_s)  # scripted: a send that takes this long
-        self.sent.append(codec.decode_request(arbitration_id, data))
-        loop = asyncio.get_running_loop()
-        for frame in self.script(arbitration_id, bytes(data)):
-            loop.call_soon(self.push, *frame)
-
-    def push(self, arbitration_id: int, data: bytes) -> None:
-        assert self._receiver is not None
-        self._receiver(CanFrame(arbitration_id, data))
-
-    def reply(self, reply: Reply) -> None:
-        self.push(*codec.encode(reply))
-
-    async def recv(self, timeout: float | None = None) -> CanFrame | None:
-        raise NotImplementedError("push only")
-
-    async def close(self) -> None:
-        if self._receiver is not None:
-            self._receiver(None)
+def requests(port: ScriptedCanPort) -> list[Request]:
+    """What the client sent, decoded."""
+    return [codec.decode_request(*frame) for frame in port.sent]
 
 
-async def until_sent(port: Port, n: int) -> None:
+def answer(port: ScriptedCanPort, reply: Reply) -> None:
+    """``reply`` arrives from the bus now."""
+    port.push(*codec.encode(reply))
+
+
+async def until_sent(port: ScriptedCanPort, n: int) -> None:
     while len(port.sent) < n:
         await asyncio.sleep(0)  # polling helper: yield to the tasks that send (no timer)
 
 
 # ------------------------------------------------------------------ the one manager
 async def test_the_client_exposes_the_shared_manager_and_its_stats() -> None:
-    client = AsyncEasyCanClient(Port(motors(1)))
+    client = AsyncEasyCanClient(ScriptedCanPort(motors(1)))
     assert type(client.stats) is TransactionStats
     assert client.stats is client.transactions.stats
     assert client.late_replies is client.transactions.late_replies
@@ -121,7 +83,7 @@ async def test_the_client_exposes_the_shared_manager_and_its_stats() -> None:
 
 
 async def test_a_command_of_another_protocol_is_refused_before_sending() -> None:
-    port = Port(motors(1))
+    port = ScriptedCanPort(motors(1))
     client = AsyncEasyCanClient(port)
     foreign = dyncan_cmds.make_read_status(1)
     with pytest.raises(ArgumentRangeError, match="not an EasyCan command"):
@@ -133,7 +95,7 @@ async def test_a_command_of_another_protocol_is_refused_before_sending() -> None
 
 
 async def test_options_and_per_call_knobs_are_checked_before_sending() -> None:
-    port = Port(motors(1))
+    port = ScriptedCanPort(motors(1))
     for bad in ({"timeout": 0}, {"timeout": math.nan}, {"retries": -1}, {"retries": 1.5},
                 {"late_reply_s": -0.1}, {"eeprom_guard": "yes"}):
         with pytest.raises(ArgumentRangeError):
@@ -167,11 +129,11 @@ def test_a_bad_client_option_in_the_url_is_refused(query: str) -> None:
 ], ids=lambda v: getattr(v, "what", str(v)))
 async def test_reads_and_settings_are_retried_the_rest_is_sent_once(
         command: cmds.EasyCanCommand, attempts: int) -> None:
-    port = Port()  # a motor that never answers
+    port = ScriptedCanPort()  # a motor that never answers
     client = AsyncEasyCanClient(port, timeout=0.005, late_reply_s=0)
     with pytest.raises(DriveTimeout) as info:
         await client.execute(command)
-    assert port.sent == [command.request] * attempts
+    assert requests(port) == [command.request] * attempts
     assert client.stats.timeouts == attempts and client.stats.retries == attempts - 1
     assert ("not re-sent" in str(info.value)) == (attempts == 1)
     assert f"motor 1 to {command.what}" in str(info.value)
@@ -179,10 +141,10 @@ async def test_reads_and_settings_are_retried_the_rest_is_sent_once(
 
 
 async def test_an_error_reply_ends_the_call_without_a_resend() -> None:
-    def refuse(arbitration_id: int, data: bytes) -> Frames:
+    def refuse(arbitration_id: int, data: bytes) -> list[Answer]:
         return [codec.encode(ErrorReply(1, Function.READ, ErrorCode.ILLEGAL_ADDRESS))]
 
-    port = Port(refuse)
+    port = ScriptedCanPort(refuse)
     client = AsyncEasyCanClient(port, retries=2)
     with pytest.raises(DriveError) as info:
         await client.read(cmds.make_read(1, "max_current"))
@@ -196,20 +158,20 @@ async def test_an_error_reply_ends_the_call_without_a_resend() -> None:
 
 # ------------------------------------------------------------------ which reply answers
 async def test_a_reply_of_another_register_is_not_taken_for_the_answer() -> None:
-    port = Port()
+    port = ScriptedCanPort()
     client = AsyncEasyCanClient(port)
     call = asyncio.create_task(client.read(cmds.make_read(1, "target_speed")))
     await until_sent(port, 1)
-    port.reply(ReadReply(1, 0x03, (7,)))  # another host's read of motor 1 (acceleration)
-    port.reply(ReadReply(1, 0x02, (2, 0)))  # the right register, but two words
-    port.reply(ReadReply(1, 0x02, (1234,)))
+    answer(port, ReadReply(1, 0x03, (7,)))  # another host's read of motor 1 (acceleration)
+    answer(port, ReadReply(1, 0x02, (2, 0)))  # the right register, but two words
+    answer(port, ReadReply(1, 0x02, (1234,)))
     assert await call == 1234
     assert client.stats.unmatched == 2 and client.stats.replies == 1
     await client.close()
 
 
 async def test_two_motors_wait_at_once_one_motor_one_request_at_a_time() -> None:
-    port = Port()
+    port = ScriptedCanPort()
     client = AsyncEasyCanClient(port)
     one = asyncio.create_task(client.read(cmds.make_read(1, "target_speed")))
     two = asyncio.create_task(client.read(cmds.make_read(2, "target_speed")))
@@ -217,26 +179,26 @@ async def test_two_motors_wait_at_once_one_motor_one_request_at_a_time() -> None
     await until_sent(port, 2)
     for _ in range(5):  # "not sent" has no event: five loop passes to send it wrongly
         await asyncio.sleep(0)  # see above
-    assert [r.slave for r in port.sent] == [1, 2]  # motor 1's second read waits its turn
-    port.reply(ReadReply(2, 0x02, (222,)))  # answered in the other order
-    port.reply(ReadReply(1, 0x02, (111,)))
+    assert [r.slave for r in requests(port)] == [1, 2]  # motor 1's second read waits its turn
+    answer(port, ReadReply(2, 0x02, (222,)))  # answered in the other order
+    answer(port, ReadReply(1, 0x02, (111,)))
     assert await two == 222 and await one == 111
     await until_sent(port, 3)
-    assert port.sent[2] == ReadRequest(1, 0x03, 1)
-    port.reply(ReadReply(1, 0x03, (333,)))
+    assert requests(port)[2] == ReadRequest(1, 0x03, 1)
+    answer(port, ReadReply(1, 0x03, (333,)))
     assert await again == 333
     await client.close()
 
 
 async def test_a_too_fast_error_answers_the_cache_write_not_a_register_write() -> None:
-    port = Port()
+    port = ScriptedCanPort()
     client = AsyncEasyCanClient(port)
     cache = asyncio.create_task(client.position_write(cmds.make_cache(1, 100, reply=True)))
     write = asyncio.create_task(client.execute(cmds.make_write(1, "target_speed", 500)))
     await until_sent(port, 2)  # two lanes: the cache write does not wait for motor 1's
-    assert isinstance(port.sent[0], PositionCacheWrite)
-    port.reply(ErrorReply(1, Function.WRITE, ErrorCode.INTERPOLATION_TOO_FAST))
-    port.reply(WriteReply(1, 0x02, (500,)))
+    assert isinstance(requests(port)[0], PositionCacheWrite)
+    answer(port, ErrorReply(1, Function.WRITE, ErrorCode.INTERPOLATION_TOO_FAST))
+    answer(port, WriteReply(1, 0x02, (500,)))
     with pytest.raises(DriveError) as info:
         await cache
     assert info.value.code == 0x05 and "position_cache (0x1A)" in str(info.value)
@@ -250,7 +212,7 @@ async def test_the_deadline_runs_from_when_the_frame_left() -> None:
     # slow link), answered at once after it: the old client started its timer before
     # sending, so its first attempt timed out and the read was sent twice (a move, never
     # re-sent, failed)
-    port = Port(motors(1), send_s=0.08)
+    port = ScriptedCanPort(motors(1), send_s=0.08)
     client = AsyncEasyCanClient(port, timeout=0.05)
     assert await client.read(cmds.make_read(1, "acceleration")) == 10000
     assert client.stats.timeouts == 0 and len(port.sent) == 1
@@ -258,7 +220,7 @@ async def test_the_deadline_runs_from_when_the_frame_left() -> None:
 
 
 async def test_the_save_flag_passes_the_eeprom_guard() -> None:
-    port = Port(motors(1))
+    port = ScriptedCanPort(motors(1))
     client = AsyncEasyCanClient(port, eeprom_guard=EepromGuard(warn_per_window=100,
                                                                max_per_window=2))
     save = cmds.make_write(1, "save_flag", Y.SaveFlag.SAVE)
@@ -275,7 +237,7 @@ async def test_the_save_flag_passes_the_eeprom_guard() -> None:
 
 
 async def test_a_dying_bus_ends_the_waiting_read_at_once() -> None:
-    port = Port()
+    port = ScriptedCanPort()
     client = AsyncEasyCanClient(port, timeout=5.0)
     loop = asyncio.get_running_loop()
     call = asyncio.create_task(client.read(cmds.make_read(1, "target_speed")))
@@ -294,7 +256,7 @@ async def test_a_dying_bus_ends_the_waiting_read_at_once() -> None:
 
 
 async def test_a_timeout_is_traced_and_a_late_reply_dropped() -> None:
-    port = Port()
+    port = ScriptedCanPort()
     client = AsyncEasyCanClient(port, timeout=0.01, retries=0)
     seen: list[tuple[Direction, object]] = []
     client.add_trace(lambda d, item, t: seen.append((d, item)))
@@ -303,8 +265,8 @@ async def test_a_timeout_is_traced_and_a_late_reply_dropped() -> None:
         await client.read(read)
     assert seen[0] == (Direction.TX, read.request)
     assert seen[1][0] is Direction.RX and isinstance(seen[1][1], DriveTimeout)
-    port.reply(ReadReply(1, 0x02, (1000,)))  # the late one: owed, dropped
+    answer(port, ReadReply(1, 0x02, (1000,)))  # the late one: owed, dropped
     assert client.stats.late_replies == 1 and client.stats.unmatched == 0
-    port.reply(ReadReply(1, 0x02, (1000,)))  # nothing owed any more: a stray
+    answer(port, ReadReply(1, 0x02, (1000,)))  # nothing owed any more: a stray
     assert client.stats.unmatched == 1
     await client.close()

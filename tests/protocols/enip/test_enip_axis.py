@@ -7,8 +7,8 @@ import asyncio
 import math
 
 import pytest
-from conftest import wait_until_async
 from enip_rig import DOWNTIME_S, adapters, rig, url_of
+from rig import wait_until_async
 
 from servobus.axis import connect, connect_async
 from servobus.axis.base import AsyncAxis

@@ -11,8 +11,8 @@ from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 
 import pytest
-from conftest import wait_until_async
 from enip_rig import adapters
+from rig import wait_until_async
 
 from servobus.errors import ConnectionLost, DriveError, DriveTimeout, ProtocolError
 from servobus.families.dyn5 import params as dyn5

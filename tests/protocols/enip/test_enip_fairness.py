@@ -13,8 +13,8 @@ from collections.abc import Callable
 
 import enip_raw as raw
 import pytest
-from conftest import wait_until_async
 from enip_rig import adapters
+from rig import wait_until_async
 
 from servobus.protocols.enip.codec.encap import EncapPacket
 from servobus.protocols.enip.server import PACKETS_PER_TURN, EnipServer, _TcpClient

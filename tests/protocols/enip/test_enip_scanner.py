@@ -8,8 +8,8 @@ import asyncio
 import itertools
 
 import pytest
-from conftest import wait_until_async
 from enip_rig import DOWNTIME_S, rig
+from rig import wait_until_async
 
 from servobus.errors import ArgumentRangeError, ConnectionLost, DriveError
 from servobus.families.dyn5 import params as dyn5

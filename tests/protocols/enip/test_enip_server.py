@@ -11,7 +11,7 @@ from collections.abc import Iterator
 
 import enip_raw as raw
 import pytest
-from conftest import wait_until
+from rig import wait_until
 
 from servobus.families.dyn5 import params as dyn5
 from servobus.protocols.enip.server import BackgroundEnip, EnipServer

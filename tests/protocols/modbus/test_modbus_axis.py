@@ -7,8 +7,8 @@ import asyncio
 from pathlib import Path
 
 import pytest
-from conftest import wait_until_async
 from modbus_rig import rig
+from rig import wait_until_async
 
 from servobus.axis import connect_async
 from servobus.errors import (

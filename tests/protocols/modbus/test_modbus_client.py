@@ -8,8 +8,8 @@ import itertools
 import time
 
 import pytest
-from conftest import wait_until_async
 from modbus_rig import PATHS, rig
+from rig import wait_until_async
 
 from servobus.errors import (
     ArgumentRangeError,

@@ -7,7 +7,7 @@ import asyncio
 import time
 
 import pytest
-from conftest import wait_until_async
+from rig import wait_until_async
 
 from servobus.families.yzaim import registers as Y
 from servobus.protocols.modbus import codec as C
