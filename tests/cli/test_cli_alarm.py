@@ -10,12 +10,12 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
+from cli_rig import run
 
 from servobus import axis as axis_package
 from servobus.axis import Axis
 from servobus.axis.types import AxisStatus
 from servobus.cli import failures as F
-from servobus.cli.main import main
 from servobus.sim.dmm.control import DriveControl
 
 URLS = ["sim://dyn232?fast=1", "sim://dyncan?fast=1", "sim://easycan?fast=1", "sim://enip",
@@ -23,14 +23,6 @@ URLS = ["sim://dyn232?fast=1", "sim://dyncan?fast=1", "sim://easycan?fast=1", "s
 #: A latched alarm every family has: (family name, code).
 LATCHED = {"dmm-dyn2": 2, "dmm-dyn5": 2, "yzaim": 0x14}
 
-
-def run(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
-    """``servobus ARGS`` in this process: exit code, stdout, stderr."""
-    with pytest.raises(SystemExit) as info:
-        main(list(args))
-    out, err = capsys.readouterr()
-    code = info.value.code
-    return code if isinstance(code, int) else 0, out, err
 
 
 @pytest.fixture

@@ -21,6 +21,8 @@ from pathlib import Path
 from types import TracebackType
 
 import pytest
+from cli_rig import no_env as no_env  # the fixture, for this module
+from cli_rig import run
 from rig import wait_until
 
 from servobus.cli import failures as F
@@ -29,7 +31,6 @@ from servobus.cli.failures import CliError
 from servobus.cli.hold import RENEW_S, TTL_S
 from servobus.cli.jog_cmd import Jogger
 from servobus.cli.jog_keys import MINUS, OTHER, PLUS, QUIT, decode
-from servobus.cli.main import main
 from servobus.errors import LimitError
 from servobus.machine.lease import Lease
 
@@ -166,18 +167,6 @@ def test_a_lease_that_ended_underneath_ends_the_command() -> None:
 
 
 # ------------------------------------------------------------------ the command
-@pytest.fixture(autouse=True)
-def _no_env(monkeypatch: pytest.MonkeyPatch) -> None:
-    for name in ("SERVOBUS_MACHINE", "SERVOBUS_URL", "SERVOBUS_ID"):
-        monkeypatch.delenv(name, raising=False)
-
-
-def run(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
-    with pytest.raises(SystemExit) as info:
-        main(list(args))
-    out, err = capsys.readouterr()
-    code = info.value.code
-    return code if isinstance(code, int) else 0, out, err
 
 
 @pytest.fixture

@@ -8,21 +8,20 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
+from cli_rig import no_env as no_env  # the fixture, for this module
+from cli_rig import on_connect as on_connect  # the fixture
+from cli_rig import run
 
-import servobus.machine.links as links
-from servobus import axis as axis_package
-from servobus.axis import Axis
 from servobus.axis.base import AsyncAxis
 from servobus.axis.types import AxisStatus
 from servobus.cli import arrival
 from servobus.cli import failures as F
 from servobus.cli.arrival import check_arrival, wait_arrival
-from servobus.cli.main import main
 from servobus.errors import MoveFailed
 
 URLS = ["sim://dyn232?fast=1", "sim://dyncan?fast=1", "sim://easycan?fast=1", "sim://enip",
@@ -51,42 +50,7 @@ def write_machine(tmp_path: Path) -> Path:
     return path
 
 
-def run(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
-    with pytest.raises(SystemExit) as info:
-        main(list(args))
-    out, err = capsys.readouterr()
-    code = info.value.code
-    return code if isinstance(code, int) else 0, out, err
 
-
-@pytest.fixture(autouse=True)
-def _no_env(monkeypatch: pytest.MonkeyPatch) -> None:
-    for name in ("SERVOBUS_MACHINE", "SERVOBUS_URL", "SERVOBUS_ID"):
-        monkeypatch.delenv(name, raising=False)
-
-
-@pytest.fixture
-def on_connect(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[Callable[[AsyncAxis], Any]]]:
-    """Async actions run on each AsyncAxis the CLI opens (one drive or a machine link);
-    every frame sent afterwards lands in ``sent`` (the Axis trace hook)."""
-    actions: list[Callable[[AsyncAxis], Any]] = []
-    real_sync, real_async = axis_package.connect, links.connect_async
-
-    def connect(url: str, **options: Any) -> Axis:
-        ax = real_sync(url, **options)
-        for action in actions:
-            ax._call(lambda a=action: a(ax.core))  # type: ignore[attr-defined,misc]
-        return ax
-
-    async def connect_async(url: str | None = None, **options: Any) -> AsyncAxis:
-        ax = await real_async(url, **options)
-        for action in actions:
-            await action(ax)
-        return ax
-
-    monkeypatch.setattr(axis_package, "connect", connect)
-    monkeypatch.setattr(links, "connect_async", connect_async)
-    yield actions
 
 
 sent: list[object] = []  # the move primitives called after ``disabled``

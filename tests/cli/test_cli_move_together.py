@@ -13,9 +13,10 @@ import json
 from pathlib import Path
 
 import pytest
+from cli_rig import no_env as no_env  # the fixture, for this module
+from cli_rig import run
 
 from servobus.cli import failures as F
-from servobus.cli.main import main
 from servobus.cli.together_cmd import SYNCED, UNSYNCED
 from servobus.families.dmm import units as U
 
@@ -32,18 +33,6 @@ unit = "rev"
 """
 
 
-def run(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
-    with pytest.raises(SystemExit) as info:
-        main(list(args))
-    out, err = capsys.readouterr()
-    code = info.value.code
-    return code if isinstance(code, int) else 0, out, err
-
-
-@pytest.fixture(autouse=True)
-def _no_env(monkeypatch: pytest.MonkeyPatch) -> None:
-    for name in ("SERVOBUS_MACHINE", "SERVOBUS_URL", "SERVOBUS_ID"):
-        monkeypatch.delenv(name, raising=False)
 
 
 def machine(tmp_path: Path, text: str) -> str:

@@ -11,19 +11,10 @@ import json
 from pathlib import Path
 
 import pytest
+from cli_rig import run
 
 from servobus.axis import connect
 from servobus.cli import failures as F
-from servobus.cli.main import main
-
-
-def run(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
-    """``servobus ARGS`` in this process: exit code, stdout, stderr."""
-    with pytest.raises(SystemExit) as info:
-        main(list(args))
-    out, err = capsys.readouterr()
-    code = info.value.code
-    return code if isinstance(code, int) else 0, out, err
 
 
 def one_error_line(err: str) -> str:
