@@ -3,18 +3,17 @@ budget (per peer address and in all, on a real OPC UA server too)."""
 
 from __future__ import annotations
 
-import asyncio
-import functools
 import json
 from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
-from asyncua import Client, ua
+from asyncua import ua
 from asyncua.ua.uaerrors import UaStatusCodeError
 from click.testing import CliRunner
 from fake_machine import FakeMachine
 
+from benchmarks.faults_hostile import bound_client
 from servobus.cli.failures import describe
 from servobus.cli.main import cli
 from servobus.gateway import users as users_module
@@ -185,30 +184,9 @@ def test_a_flood_is_one_log_line_per_spell(caplog: pytest.LogCaptureFixture,
 USER, PASSWORD = "op", "correct horse"
 
 
-def bind_source(client: Client, source: str) -> Client:
-    """asyncua's client cannot choose its source address: its connection is made by
-    ``loop.create_connection(protocol, host, port)`` in ``UaClient.connect_socket``. This
-    wraps that one method so the call gets ``local_addr=(source, 0)``; the logins of these
-    tests connect one after another, so no other connection is made meanwhile."""
-    uaclient = client.uaclient
-    connect_socket = uaclient.connect_socket
-
-    async def from_source(host: str, port: int) -> None:
-        loop = asyncio.get_running_loop()
-        loop.create_connection = functools.partial(  # type: ignore[method-assign]
-            type(loop).create_connection, loop, local_addr=(source, 0))
-        try:
-            await connect_socket(host, port)
-        finally:
-            del loop.create_connection  # type: ignore[method-assign]
-
-    uaclient.connect_socket = from_source
-    return client
-
-
 async def login(endpoint: str, source: str, password: str) -> bool:
     """A user login from ``source``: True when the session was activated."""
-    client = bind_source(Client(endpoint, timeout=10), source)
+    client = bound_client(endpoint, source)  # asyncua cannot choose its address
     client.set_user(USER)
     client.set_password(password)
     try:
