@@ -22,6 +22,9 @@ from servobus.transport.can_bus import AsyncCanBus, BitTiming
 
 pytestmark = pytest.mark.timeout(60)
 REV = Y.COUNTS_PER_REV
+#: The fastest the motors go in the first moments of the move (~220 counts per ms at 400
+#: rpm mid-acceleration; this bounds it from above).
+COUNTS_PER_S_AT_MOST = 300_000
 _channels = itertools.count()
 
 
@@ -66,7 +69,13 @@ async def test_loaded_caches_wait_for_the_signal_then_start_together() -> None:
         # "Nothing moves" has no event: give the motors 0.1 s of wall time to do it wrongly.
         await asyncio.sleep(0.1)  # see above: no event for "nothing moved"
         assert [m.position for m in network.motors] == [0, 0, 0]  # nothing moves yet
-        await group.signal()  # the trigger
+        loop = asyncio.get_running_loop()
+        began = loop.time()
+        await group.signal()  # the trigger: one frame per motor, back to back
+        # The motors take their caches when their signal frame reaches the bus; a loaded host
+        # spaces the frames out (not the simulator: it executes each frame as of its arrival).
+        # So the start skew can be up to the time the signal frames took to go out.
+        sending_s = loop.time() - began
         # Mid-acceleration: 400 rpm, ~220 counts per ms. Any later instant (a loaded machine)
         # is as good: the motors are brought to one instant of their own clocks below.
         await asyncio.sleep(0.04)  # see above: any later instant is as good
@@ -75,7 +84,9 @@ async def test_loaded_caches_wait_for_the_signal_then_start_together() -> None:
             m.advance_to(now)
         spread = max(m.position for m in network.motors) - min(m.position
                                                                 for m in network.motors)
-        assert min(m.position for m in network.motors) > 0 and spread < 150
+        allowed = 150 + COUNTS_PER_S_AT_MOST * sending_s
+        assert min(m.position for m in network.motors) > 0 and spread < allowed, \
+            (spread, sending_s)
         await settle(network, targets)
 
 
