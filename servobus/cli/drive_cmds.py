@@ -249,10 +249,10 @@ FOR_HELP = ("hold the speed this many seconds, then stop (default: until Ctrl-C 
 
 @click.command("speed", cls=ServobusCommand)
 @click.option("--for", "for_s", type=Seconds(), default=None, metavar="SECONDS", help=FOR_HELP)
-@click.argument("rpm", type=float)
+@click.argument("speed_text", metavar="SPEED")
 @pass_cli
-def speed_cmd(ctx: CliContext, for_s: float | None, rpm: float) -> None:
-    """Turn at constant speed RPM while this command runs, then stop (positive = towards
+def speed_cmd(ctx: CliContext, for_s: float | None, speed_text: str) -> None:
+    """Turn at constant SPEED (whole rpm) while this command runs, then stop (positive = towards
     increasing position; 0 ramps down).
 
     The command holds the motion (a lease it renews, docs/safety.md): Ctrl-C, SIGTERM or
@@ -263,11 +263,9 @@ def speed_cmd(ctx: CliContext, for_s: float | None, rpm: float) -> None:
 
     On a machine axis (--machine/--axis) the speed is in its unit per second (mm/s, deg/s)."""
     if ctx.machine_mode:
-        machine_cli.speed(ctx, rpm, for_s)
+        machine_cli.speed(ctx, speed_text, for_s)
         return
-    if not rpm.is_integer():
-        raise click.BadParameter(f"{rpm:g} is not a whole number of rpm", param_hint="RPM")
-    rpm = int(rpm)
+    rpm = drive_rpm(speed_text)
     with open_drive_machine(ctx) as axis:
         core = axis.axis
         assert core is not None  # opened without retry: a failure raised
@@ -280,6 +278,20 @@ def speed_cmd(ctx: CliContext, for_s: float | None, rpm: float) -> None:
     if held.why in ("for", "limit"):
         record["held_s"] = round(held.seconds, 3)
     emit(ctx, record, lambda con: con.print(speed_words(f"{rpm} rpm", held)))
+
+
+def drive_rpm(text: str) -> int:
+    """A drive's SPEED: whole rpm (``600``, ``-600rpm``); a speed in a user unit needs the
+    mechanics of a machine axis."""
+    match = re.fullmatch(r"([-+]?\d+(?:\.\d*)?|[-+]?\.\d+)\s*(rpm)?", text.strip().lower())
+    if match is None:
+        raise click.BadParameter(f"{text!r}: a drive's speed is whole rpm, e.g. 600 (speeds in "
+                                 "mm/s or deg/s need a machine axis: --machine FILE --axis "
+                                 "NAME)", param_hint="SPEED")
+    rpm = float(match.group(1))
+    if not rpm.is_integer():
+        raise click.BadParameter(f"{rpm:g} is not a whole number of rpm", param_hint="SPEED")
+    return int(rpm)
 
 
 def check_lease_rpm(axis: Axis, rpm: int) -> None:
@@ -320,13 +332,13 @@ def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float, c
         return
     if len(targets) != 1:
         raise click.UsageError("move takes one TARGET (several NAME=TARGET with --together)")
+    if ctx.machine_mode:  # in the axis's unit: its own parser names only what it accepts
+        machine_cli.move(ctx, targets[0], relative, wait, wait_timeout, confirm)
+        return
     try:
         number, unit = Target().convert(targets[0], None, None)
     except click.BadParameter as exc:
         raise click.BadParameter(exc.message, param_hint="'TARGET'") from None
-    if ctx.machine_mode:
-        machine_cli.move(ctx, f"{number!r}{unit}", relative, wait, wait_timeout, confirm)
-        return
     check_drive_target(number, unit)
     with open_axis(ctx) as axis, stop_on_interrupt(axis):
         who = f"drive {axis.drive_id}"

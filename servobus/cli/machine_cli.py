@@ -42,14 +42,28 @@ from servobus.errors import DriveAlarm
 if TYPE_CHECKING:
     from servobus.axis.sync import Axis
     from servobus.machine import Machine, MachineAxis
+    from servobus.machine.config import MachineSpec
 
-def spec_names(ctx: CliContext) -> tuple[str, list[str]]:
+def machine_spec(ctx: CliContext) -> tuple[str, MachineSpec]:
+    """The file named (or the built-in machine's source) and its spec; nothing is opened."""
     from servobus.machine.builtin import BUILTIN_SOURCE, builtin_spec
     from servobus.machine.config import load_machine_file
 
     path = ctx.machine_path
     spec = builtin_spec() if path is None else load_machine_file(path)
-    return (BUILTIN_SOURCE if path is None else path), [a.name for a in spec.axes]
+    return (BUILTIN_SOURCE if path is None else path), spec
+
+
+def spec_names(ctx: CliContext) -> tuple[str, list[str]]:
+    source, spec = machine_spec(ctx)
+    return source, [a.name for a in spec.axes]
+
+
+def chosen_unit(ctx: CliContext) -> str:
+    """The unit of the axis a command acts on, read from the file (nothing is opened): a
+    TARGET or SPEED in another unit is refused before any link opens."""
+    name = chosen_axis(ctx)
+    return next(a.unit for a in machine_spec(ctx)[1].axes if a.name == name)
 
 
 def chosen_axis(ctx: CliContext) -> str:
@@ -248,6 +262,7 @@ def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: f
     from servobus.cli.move_profile import apply_profile
     from servobus.machine import parse_quantity
 
+    parse_quantity(text, chosen_unit(ctx), axis=chosen_axis(ctx))  # before a link opens
     with open_machine_axis(ctx) as axis:
         number, unit = parse_quantity(text, axis.unit, axis=axis.name)
         user = axis.to_user(number) if unit == "counts" and axis.online else number
@@ -310,9 +325,11 @@ def _confirmed_move(axis: MachineAxis, core: Axis, user: float, relative: bool,
         core.move_to(axis.to_counts(user), confirm=True)
 
 
-def speed(ctx: CliContext, value: float, for_s: float | None) -> None:
+def speed(ctx: CliContext, text: str, for_s: float | None) -> None:
     from servobus.cli.hold import hold_speed, speed_words
+    from servobus.machine.units import parse_speed
 
+    value = parse_speed(text, chosen_unit(ctx), axis=chosen_axis(ctx))  # before a link opens
     with open_machine_axis(ctx) as axis:
         unit = axis.speed_unit
         held = hold_speed(axis, value, for_s,
