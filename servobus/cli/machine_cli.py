@@ -42,7 +42,7 @@ from servobus.errors import DriveAlarm
 if TYPE_CHECKING:
     from servobus.axis.sync import Axis
     from servobus.machine import Machine, MachineAxis
-    from servobus.machine.config import MachineSpec
+    from servobus.machine.config import AxisSpec, MachineSpec
 
 def machine_spec(ctx: CliContext) -> tuple[str, MachineSpec]:
     """The file named (or the built-in machine's source) and its spec; nothing is opened."""
@@ -59,11 +59,16 @@ def spec_names(ctx: CliContext) -> tuple[str, list[str]]:
     return source, [a.name for a in spec.axes]
 
 
+def chosen_spec(ctx: CliContext) -> AxisSpec:
+    """The file's spec of the axis a command acts on (nothing is opened)."""
+    name = chosen_axis(ctx)
+    return next(a for a in machine_spec(ctx)[1].axes if a.name == name)
+
+
 def chosen_unit(ctx: CliContext) -> str:
     """The unit of the axis a command acts on, read from the file (nothing is opened): a
     TARGET or SPEED in another unit is refused before any link opens."""
-    name = chosen_axis(ctx)
-    return next(a.unit for a in machine_spec(ctx)[1].axes if a.name == name)
+    return chosen_spec(ctx).unit
 
 
 def chosen_axis(ctx: CliContext) -> str:

@@ -28,7 +28,7 @@ from rich.progress import (
 
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
-from servobus.cli.open_axis import connection_label, open_axis
+from servobus.cli.open_axis import link_url, open_axis
 from servobus.cli.output import console, emit, note
 from servobus.cli.param_types import Seconds
 
@@ -108,7 +108,7 @@ def scan_cmd(ctx: CliContext, first: int | None, last: int | None, ids_text: str
     with open_axis(ctx, drive_id=first if listed is None else opened_at) as axis:
         ids = wanted_ids(axis.drive_ids, first, last, listed)
         wait = axis.ping_deadline() if per_id is None else per_id
-        where = connection_label(ctx).rsplit(", id", 1)[0]
+        where = link_url(ctx)
         if not live:
             note(f"scanning {len(ids)} id(s) ({id_text(ids)}) on {where}: about "
                  f"{len(ids) * wait:.1f} s ({wait * 1000:.0f} ms per absent id)")
