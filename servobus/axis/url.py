@@ -53,6 +53,15 @@ class DriveUrl:
         """The URL the transport understands: ``socket://h:p`` for ``x+socket://h:p``."""
         return f"{self.transport}://{self.target}" if self.transport else self.target
 
+    @property
+    def link_key(self) -> str:
+        """The same string for two spellings of one link: ``socket://h:4001`` and
+        ``socket://h:4001/``, query options in any order (scheme case is already folded).
+        A machine file keys its links and refuses two axes on one drive by it."""
+        query = "&".join(f"{k}={v}" for k, v in sorted(self.options.items()))
+        scheme = f"{self.scheme}+{self.transport}" if self.transport else self.scheme
+        return f"{scheme}://{self.target.rstrip('/') or self.target}?{query}"
+
     def option(self, name: str, default: str | None = None) -> str | None:
         return self.options.get(name, default)
 
