@@ -31,7 +31,7 @@ from servobus.cli.failures import EXIT_FAULT, CliError
 from servobus.cli.hold import TTL_S, owner
 from servobus.cli.motion_guard import stop_on_interrupt
 from servobus.cli.open_axis import open_drive_machine
-from servobus.cli.output import console, emit_json
+from servobus.cli.output import console, emit_json, fixed
 from servobus.cli.params_cmd import params_table
 from servobus.errors import DriveAlarm, DriveTimeout
 
@@ -266,7 +266,7 @@ def run_machine_demo(machine: Machine, chosen: str, script: _Script) -> None:
     rec = script.step("final status")
     lines: dict[str, str] = {}
     for n, a in machine.axes.items():
-        lines[n] = f"{a.position():.3f} {a.unit}, {summary(a.status())}"
+        lines[n] = f"{fixed(a.position(), 3)} {a.unit}, {summary(a.status())}"
         script.line(f"{n}: {lines[n]}")
     rec.update(axes=lines)
 

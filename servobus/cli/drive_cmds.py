@@ -39,7 +39,7 @@ from servobus.cli.failures import EXIT_FAULT, CliError
 from servobus.cli.hold import hold_speed, speed_words
 from servobus.cli.motion_guard import stop_on_interrupt
 from servobus.cli.open_axis import connection_label, open_axis, open_drive_machine
-from servobus.cli.output import emit, following_words, kv_text
+from servobus.cli.output import emit, fixed, following_words, kv_text
 from servobus.cli.param_types import Seconds
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveTimeout, NotSupported
 
@@ -240,7 +240,7 @@ def position_cmd(ctx: CliContext) -> None:
     with open_axis(ctx) as axis:
         pos, per_rev = axis.position(), axis.counts_per_rev
     emit(ctx, {"position": pos, "counts_per_rev": per_rev, "rev": pos / per_rev},
-         lambda con: con.print(f"{pos} counts ({pos / per_rev:.4f} rev)"))
+         lambda con: con.print(f"{pos} counts ({fixed(pos / per_rev, 4)} rev)"))
 
 
 FOR_HELP = ("hold the speed this many seconds, then stop (default: until Ctrl-C or SIGTERM; "

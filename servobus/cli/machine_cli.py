@@ -36,7 +36,7 @@ from rich.console import Console
 
 from servobus.cli.context import CliContext
 from servobus.cli.failures import EXIT_FAULT, CliError
-from servobus.cli.output import emit, following_words, kv_text, note
+from servobus.cli.output import emit, fixed, following_words, kv_text, note
 from servobus.errors import DriveAlarm
 
 if TYPE_CHECKING:
@@ -226,7 +226,7 @@ def render_machine_table(con: Console, name: str, records: list[dict[str, object
             continue
         position = r["position"]
         assert isinstance(position, float)
-        rows.append((str(r["axis"]), f"{position:.3f} {r['unit']}", str(r["counts"]),
+        rows.append((str(r["axis"]), f"{fixed(position, 3)} {r['unit']}", str(r["counts"]),
                      _yes(r["enabled"]), _yes(r["moving"]), _yes(r["in_position"]),
                      _error(r.get("following_error")), str(r["alarm"]) or "-",
                      f"{link} ({r['protocol']})"))
@@ -246,7 +246,7 @@ def _yes(value: object) -> str:
 
 def _error(value: object) -> str:
     """The following error in the table: ``-`` where the drive reports none."""
-    return f"{value:.4f}" if isinstance(value, int | float) else "-"
+    return f"{fixed(value, 4)}" if isinstance(value, int | float) else "-"
 
 
 def position(ctx: CliContext) -> None:
@@ -255,7 +255,7 @@ def position(ctx: CliContext) -> None:
         user = axis.to_user(counts)
         record = {"axis": axis.name, "position": user, "unit": axis.unit, "counts": counts}
     emit(ctx, record,
-         lambda con: con.print(f"{user:.4f} {axis.unit} ({counts} counts)", markup=False))
+         lambda con: con.print(f"{fixed(user, 4)} {axis.unit} ({counts} counts)", markup=False))
 
 
 def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: float,
@@ -305,12 +305,12 @@ def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: f
                 if wait_timeout > 0:  # the target was checked (finite) by the move
                     target = start + axis.to_counts(user)
                     check_arrival(who, core.drive_id, st, counts, target, window,
-                                  f" ({axis.to_user(counts):.4f} {axis.unit})")
+                                  f" ({fixed(axis.to_user(counts), 4)} {axis.unit})")
 
     def render(con: Console) -> None:
         verb = "moving by" if relative else "moving to"
-        done = (f"; done at {record['position']:.4f} {axis.unit} ({record['counts']} counts)"
-                if wait else "")
+        done = (f"; done at {fixed(record['position'], 4)} {axis.unit} "
+                f"({record['counts']} counts)" if wait else "")
         con.print(f"axis {axis.name} {verb} {user:g} {axis.unit}{done}", markup=False)
 
     emit(ctx, record, render)
@@ -350,7 +350,7 @@ def speed(ctx: CliContext, text: str, for_s: float | None) -> None:
     def render(con: Console) -> None:
         if held.why == "limit":
             con.print(f"axis {axis.name} turned at {value:g} {unit}; stopped at its soft "
-                      f"limit, {record['stopped_at']:.3f} {axis.unit}", markup=False)
+                      f"limit, {fixed(record['stopped_at'], 3)} {axis.unit}", markup=False)
         else:
             con.print(f"axis {axis.name} " + speed_words(f"{value:g} {unit}", held),
                       markup=False)
