@@ -36,7 +36,7 @@ from rich.console import Console
 
 from servobus.cli.context import CliContext
 from servobus.cli.failures import EXIT_FAULT, CliError
-from servobus.cli.output import emit, fixed, following_words, kv_text, note
+from servobus.cli.output import emit, fixed, following_words, id_words, kv_text, note
 from servobus.errors import DriveAlarm
 
 if TYPE_CHECKING:
@@ -143,14 +143,17 @@ def note_builtin_machine_once() -> None:
 
 
 def label(axis: MachineAxis) -> str:
-    return f"axis {axis.name} ({axis.url}, id {axis.drive_id})"
+    core = axis.axis  # open: the id it talks to, the protocol's default included
+    return f"axis {axis.name} ({axis.url}, " \
+        f"{id_words(core.drive_id if core is not None else axis.drive_id)})"
 
 
 # ------------------------------------------------------------------ commands
 def axis_record(axis: MachineAxis) -> dict[str, object]:
     """One axis for ``status``: identity, position in the unit and counts, the status."""
     record: dict[str, object] = {"axis": axis.name, "unit": axis.unit, "url": axis.url,
-                                 "id": axis.drive_id, "online": axis.online,
+                                 "id": axis.drive_id if axis.axis is None
+                                 else axis.axis.drive_id, "online": axis.online,
                                  "limits": list(axis.limits) if axis.limits else None}
     if not axis.online:
         record["error"] = str(axis.last_error or "not opened")
@@ -219,7 +222,7 @@ def render_machine_table(con: Console, name: str, records: list[dict[str, object
             "link")
     rows: list[tuple[str, ...]] = []
     for r in records:
-        link = f"{r['url']} id {r['id']}"
+        link = f"{r['url']} {id_words(r['id'] if isinstance(r['id'], int) else None)}"
         if not r["online"]:
             rows.append((str(r["axis"]), "-", "-", "-", "-", "-", "-", "-",
                          f"{link} OFFLINE: {r.get('error', '')}"))

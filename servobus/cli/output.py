@@ -49,6 +49,11 @@ def _fmt(value: object) -> str:
     return str(value)
 
 
+def id_words(drive_id: int | None) -> str:
+    """``id 3``, or ``default id`` for a file or URL that names none (never ``id None``)."""
+    return "default id" if drive_id is None else f"id {drive_id}"
+
+
 def fixed(value: object, digits: int) -> str:
     """``value`` with ``digits`` decimals, never ``-0.000`` (a position of -0.0 or -0.00004
     is shown as 0.000, as a person would write it)."""
