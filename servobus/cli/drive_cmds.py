@@ -72,6 +72,21 @@ class Target(_TargetType):
         return number, unit  # "" = bare: counts on a drive, the axis's unit on a machine
 
 
+def drive_units(ctx: CliContext) -> str:
+    """The TARGET forms the named drive takes, from its family's capabilities (nothing is
+    opened): raw command units (``120cmd``) only where the family has them."""
+    from servobus.axis import registry
+    from servobus.axis.url import parse_url
+    from servobus.families import family
+
+    forms = "counts (16384), revolutions (2.5rev), degrees (90deg)"
+    protocol = registry.protocol_of(parse_url(ctx.url))
+    spec = registry.specs().get(protocol) if protocol else None
+    if spec is not None and Capability.COMMAND_UNITS not in family(spec.family).capabilities:
+        return forms.replace(", degrees", " or degrees")
+    return f"{forms} or command units (120cmd)"
+
+
 def check_drive_target(number: float, unit: str) -> None:
     """A TARGET for a single drive (no machine): whole counts, no mm (nothing is opened)."""
     if unit in ("", "counts", "cmd") and not number.is_integer():
@@ -337,8 +352,9 @@ def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float, c
         return
     try:
         number, unit = Target().convert(targets[0], None, None)
-    except click.BadParameter as exc:
-        raise click.BadParameter(exc.message, param_hint="'TARGET'") from None
+    except click.BadParameter:
+        raise click.BadParameter(f"{targets[0]!r}: write {drive_units(ctx)}",
+                                 param_hint="'TARGET'") from None
     check_drive_target(number, unit)
     with open_axis(ctx) as axis, stop_on_interrupt(axis):
         who = f"drive {axis.drive_id}"

@@ -278,3 +278,13 @@ def test_scan_of_the_builtin_drive_finds_the_id_status_shows(
     assert code == 0 and out.startswith("no drive answered"), out
     code, out, _ = run(capsys, "scan", "--ids", "0-3")
     assert code == 0 and out.strip().endswith(": 0"), out
+
+
+@pytest.mark.parametrize(("url", "cmd"), [("sim://dyn232?fast=1", True),
+                                          ("sim://easycan?fast=1", False)])
+def test_a_wrong_target_on_a_drive_names_command_units_only_where_it_has_them(
+        capsys: pytest.CaptureFixture[str], url: str, cmd: bool) -> None:
+    code, _, err = run(capsys, "--url", url, "move", "12,5")
+    line = error_line(err)
+    assert code == F.EXIT_USAGE
+    assert "2.5rev" in line and ("120cmd" in line) == cmd
