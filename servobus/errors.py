@@ -40,6 +40,16 @@ class ArgumentRangeError(ServobusError, ValueError):
     """An argument is outside the range the manual allows; nothing was sent."""
 
 
+class InvalidValue(ArgumentRangeError):
+    """A value of the wrong kind or form rather than out of range: a unit the axis does not
+    take, a name that does not exist, a malformed URL. The message says what is accepted;
+    ``todo`` is what the terminal adds (nothing was sent, or the file is unchanged)."""
+
+    def __init__(self, message: str, todo: str = "nothing was sent") -> None:
+        super().__init__(message)
+        self.todo = todo
+
+
 class LimitError(ArgumentRangeError):
     """A motion would cross a machine axis's soft limit; nothing was sent."""
 

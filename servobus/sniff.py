@@ -36,7 +36,7 @@ class ErrorEvent:
 
     def lines(self, prefix: str = "", width: int = 21) -> list[str]:
         raw = self.raw_text or self.raw.hex(" ")
-        return [f"{prefix}{raw:<{width}}{self.label}: {self.message}"]
+        return [f"{prefix}{raw_column(raw, width)}{self.label}: {self.message}"]
 
 
 @dataclass(frozen=True)
@@ -58,7 +58,13 @@ class FrameEvent:
         return {"id": self.arbitration_id, "data": self.data.hex(" "), "text": self.text}
 
     def lines(self, prefix: str = "", width: int = 21) -> list[str]:
-        return [f"{prefix}{self.raw_text:<{width}}{self.text}"]
+        return [f"{prefix}{raw_column(self.raw_text, width)}{self.text}"]
+
+
+def raw_column(raw: str, width: int) -> str:
+    """The raw bytes padded to ``width``, with at least one space before the text however
+    long they are (``01 03 ... 84 0a id 1 read``, never ``84 0aid 1``)."""
+    return f"{raw:<{width - 1}} "
 
 
 @runtime_checkable

@@ -147,6 +147,17 @@ def resembling(url: DriveUrl) -> str | None:
     return close[0] + head[len(url.scheme):] + url.raw[len(head):]
 
 
+def link_kind(url: DriveUrl) -> str | None:
+    """What carries ``url``'s frames (ProtocolSpec.link), ``"virtual"`` for the built-in
+    virtual drives (no wiring, power or baud), None for a scheme no spec declares."""
+    if url.scheme in BUILTIN_SCHEMES:
+        return "virtual"
+    for spec in specs().values():
+        if url.scheme in spec.schemes or url.scheme in spec.serial_schemes:
+            return spec.link
+    return None
+
+
 def lookup(url: DriveUrl) -> Opener:
     """The opener for ``url``: ``scheme+transport`` first, then ``scheme``."""
     table = schemes()

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 
-from servobus.errors import ArgumentRangeError
+from servobus.errors import InvalidValue
 
 #: The position units of a bare drive, in the order the front ends offer them.
 DRIVE_UNITS = ("counts", "rev", "deg")
@@ -21,14 +21,14 @@ PER_REV = {"rev": 1.0, "deg": 360.0}
 def round_counts(value: float) -> int:
     """Round half away from zero; NaN and infinities are refused."""
     if not math.isfinite(value):
-        raise ArgumentRangeError(f"a position must be a finite number, got {value!r}")
+        raise InvalidValue(f"a position must be a finite number, got {value!r}")
     return int(math.copysign(math.floor(abs(value) + 0.5), value))
 
 
 def check_unit(unit: str) -> str:
     """``unit`` when it is one of :data:`DRIVE_UNITS`; ArgumentRangeError naming them."""
     if unit not in DRIVE_UNITS:
-        raise ArgumentRangeError(f"unit {unit!r}: one of {', '.join(DRIVE_UNITS)}")
+        raise InvalidValue(f"unit {unit!r}: one of {', '.join(DRIVE_UNITS)}")
     return unit
 
 
@@ -37,7 +37,7 @@ def to_counts(value: float, unit: str, counts_per_rev: int) -> int:
     must be whole)."""
     if check_unit(unit) == "counts":
         if not math.isfinite(value) or value != int(value):
-            raise ArgumentRangeError(f"{value} counts: counts are whole numbers")
+            raise InvalidValue(f"{value} counts: counts are whole numbers")
         return int(value)
     return round_counts(value / PER_REV[unit] * counts_per_rev)
 

@@ -23,7 +23,7 @@ from types import MappingProxyType
 from urllib.parse import parse_qsl
 
 from servobus.axis.options import connect_options
-from servobus.errors import ArgumentRangeError
+from servobus.errors import InvalidValue
 
 #: RFC 3986 scheme syntax; one letter is a Windows drive (``C:``), not a scheme.
 _SCHEME = re.compile(r"^([A-Za-z][A-Za-z0-9+.\-]+):(.*)$", re.DOTALL)
@@ -53,6 +53,15 @@ class DriveUrl:
         """The URL the transport understands: ``socket://h:p`` for ``x+socket://h:p``."""
         return f"{self.transport}://{self.target}" if self.transport else self.target
 
+    @property
+    def link_key(self) -> str:
+        """The same string for two spellings of one link: ``socket://h:4001`` and
+        ``socket://h:4001/``, query options in any order (scheme case is already folded).
+        A machine file keys its links and refuses two axes on one drive by it."""
+        query = "&".join(f"{k}={v}" for k, v in sorted(self.options.items()))
+        scheme = f"{self.scheme}+{self.transport}" if self.transport else self.scheme
+        return f"{scheme}://{self.target.rstrip('/') or self.target}?{query}"
+
     def option(self, name: str, default: str | None = None) -> str | None:
         return self.options.get(name, default)
 
@@ -63,7 +72,7 @@ class DriveUrl:
         try:
             return int(text, 0)
         except ValueError:
-            raise ArgumentRangeError(
+            raise InvalidValue(
                 f"?{name}={text!r} in {self.raw!r} is not an integer") from None
 
     def float_option(self, name: str, default: float | None = None) -> float | None:
@@ -75,7 +84,7 @@ class DriveUrl:
         except ValueError:
             value = math.nan
         if not math.isfinite(value):
-            raise ArgumentRangeError(f"?{name}={text!r} in {self.raw!r} is not a number")
+            raise InvalidValue(f"?{name}={text!r} in {self.raw!r} is not a number")
         return value
 
 
@@ -86,11 +95,11 @@ def _split_query(text: str) -> tuple[str, dict[str, str]]:
     try:
         pairs = parse_qsl(query, keep_blank_values=True, strict_parsing=True)
     except ValueError:
-        raise ArgumentRangeError(f"malformed query {query!r}: use ?name=value&name=value") from None
+        raise InvalidValue(f"malformed query {query!r}: use ?name=value&name=value") from None
     options: dict[str, str] = {}
     for key, value in pairs:
         if key in options:
-            raise ArgumentRangeError(f"option {key!r} given twice in ?{query}")
+            raise InvalidValue(f"option {key!r} given twice in ?{query}")
         options[key] = value
     return body, options
 
@@ -98,7 +107,7 @@ def _split_query(text: str) -> tuple[str, dict[str, str]]:
 def parse_url(url: str) -> DriveUrl:
     """Split ``url`` into scheme, transport, target and options (no protocol knowledge)."""
     if not isinstance(url, str) or not url.strip():
-        raise ArgumentRangeError(f"a drive URL must be a non-empty string, got {url!r}")
+        raise InvalidValue(f"a drive URL must be a non-empty string, got {url!r}")
     url = url.strip()
     match = _SCHEME.match(url)
     if match is None or _COM_PORT.match(url):
@@ -128,7 +137,7 @@ def merge_options(url: DriveUrl, keywords: dict[str, object],
     for name in url.options:
         kind = types.get(name)
         if kind is None:
-            raise ArgumentRangeError(f"unknown option ?{name}= in {url.raw!r}; known: {known}")
+            raise InvalidValue(f"unknown option ?{name}= in {url.raw!r}; known: {known}")
         if kind is int:
             merged[name] = url.int_option(name)
         elif kind is float:
@@ -139,7 +148,7 @@ def merge_options(url: DriveUrl, keywords: dict[str, object],
             merged[name] = url.options[name]
     for name, value in keywords.items():
         if name not in types:
-            raise ArgumentRangeError(f"unknown connect option {name!r}; known: {known}")
+            raise InvalidValue(f"unknown connect option {name!r}; known: {known}")
         merged[name] = value
     connect_options(merged, types)
     return merged
@@ -153,7 +162,7 @@ def can_spec(url: DriveUrl) -> tuple[str, dict[str, str]]:
     """
     if not url.transport:
         s = url.scheme
-        raise ArgumentRangeError(
+        raise InvalidValue(
             f"{url.raw!r} names no CAN interface: use {s}+<interface>://<channel>, "
             f"e.g. {s}+pcan://PCAN_USBBUS1 or {s}+socketcand://127.0.0.1:29536/can0")
     channel = url.target

@@ -25,6 +25,7 @@ from __future__ import annotations
 import time
 from typing import TYPE_CHECKING
 
+from servobus.cli.failures import EXIT_USAGE, CliError
 from servobus.errors import DriveAlarm, DriveTimeout, MoveFailed
 
 if TYPE_CHECKING:
@@ -36,6 +37,16 @@ if TYPE_CHECKING:
 STILL_S = 1.0
 #: Each ``wait_idle`` of :func:`wait_arrival` lasts at most this long between the checks.
 SLICE_S = 0.25
+
+
+class StillMoving(CliError, DriveTimeout):
+    """``--wait`` ran out of ``--wait-timeout`` while the drive answered and was still on
+    its way: the cause is the time given, not the link (no --id, wiring or --baud advice).
+    Still a DriveTimeout for whoever catches that."""
+
+    def __init__(self, what: str) -> None:
+        super().__init__(what, "give --wait-timeout more seconds; the drive was not stopped "
+                               "(`servobus stop` stops it)", EXIT_USAGE)
 
 
 def wait_arrival(axis: Axis, timeout: float, window: int) -> AxisStatus:
@@ -53,7 +64,7 @@ def wait_arrival(axis: Axis, timeout: float, window: int) -> AxisStatus:
         except DriveTimeout:
             status = axis.status()
             if remaining <= SLICE_S:
-                raise DriveTimeout(
+                raise StillMoving(
                     f"drive {axis.drive_id} still moving after {timeout:g} s "
                     f"(moving={status.moving}, in_position={status.in_position})") from None
         if not status.enabled:

@@ -19,8 +19,9 @@ import click
 
 from servobus.cli.context import CliContext
 
-#: A negative number, optionally with a unit suffix (``-120``, ``-2.5rev``, ``-90deg``).
-NUMBER = re.compile(r"-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(counts?|revs?|deg|cmd)?")
+#: A negative number, optionally with a unit suffix (``-120``, ``-2.5rev``, ``-90deg``,
+#: ``-12.5mm``).
+NUMBER = re.compile(r"-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(counts?|revs?|deg|cmd|mm|rpm)?(/s)?")
 
 
 def _set_json(ctx: click.Context, param: click.Parameter, value: bool) -> None:

@@ -43,6 +43,8 @@ class CliContext:
         if self.machine_option and (self.url_option or self.port or self.can):
             raise click.UsageError("give --machine FILE or a drive (--url/--port/--can), "
                                    "not both")
+        if self.machine_path is not None or self.axis_option is not None:
+            self._refuse_drive_options()
         if self.machine_path is not None:
             return True
         if self.axis_option is not None:
@@ -51,6 +53,17 @@ class CliContext:
                                        "file; add --machine FILE (or drop --axis)")
             return True
         return False
+
+    def _refuse_drive_options(self) -> None:
+        """--id, --baud and --timeout name a drive's link: a machine axis takes its own from
+        the file, so with --machine/--axis they would be ignored (a usage error instead)."""
+        given = [name for name, value in (("--id", self.drive_id_option), ("--baud", self.baud),
+                                          ("--timeout", self.timeout)) if value is not None]
+        if given and not (self.url_option or self.port or self.can):
+            raise click.UsageError(f"{', '.join(given)} would be ignored: a machine axis "
+                                   "takes its id and link from the machine file (drop "
+                                   f"{' and '.join(given)}, or name a drive with --url "
+                                   "instead of --machine/--axis)")
 
     @property
     def named_url(self) -> str | None:

@@ -31,7 +31,7 @@ from servobus.cli.failures import EXIT_FAULT, CliError
 from servobus.cli.hold import TTL_S, owner
 from servobus.cli.motion_guard import stop_on_interrupt
 from servobus.cli.open_axis import open_drive_machine
-from servobus.cli.output import console, emit_json
+from servobus.cli.output import console, emit_json, fixed, id_words
 from servobus.cli.params_cmd import params_table
 from servobus.errors import DriveAlarm, DriveTimeout
 
@@ -266,7 +266,7 @@ def run_machine_demo(machine: Machine, chosen: str, script: _Script) -> None:
     rec = script.step("final status")
     lines: dict[str, str] = {}
     for n, a in machine.axes.items():
-        lines[n] = f"{a.position():.3f} {a.unit}, {summary(a.status())}"
+        lines[n] = f"{fixed(a.position(), 3)} {a.unit}, {summary(a.status())}"
         script.line(f"{n}: {lines[n]}")
     rec.update(axes=lines)
 
@@ -332,7 +332,7 @@ def _machine_demo(ctx: CliContext, yes: bool, script: _Script) -> str:
     label = f"machine {spec.name} ({source})"
     if not ctx.json:
         script.con.print("[bold]servobus demo[/bold] on " + escape(
-            f"{label}: " + ", ".join(f"{a.name} ({a.url} id {a.drive_id}, {a.unit})"
+            f"{label}: " + ", ".join(f"{a.name} ({a.url} {id_words(a.drive_id)}, {a.unit})"
                                      for a in spec.axes)))
     machine = open_machine(path, origins=False)  # a one-shot command (machine_cli)
     note_origins_skipped(machine)

@@ -39,7 +39,7 @@ from servobus.cli.failures import EXIT_FAULT, CliError
 from servobus.cli.hold import hold_speed, speed_words
 from servobus.cli.motion_guard import stop_on_interrupt
 from servobus.cli.open_axis import connection_label, open_axis, open_drive_machine
-from servobus.cli.output import emit, following_words, kv_text
+from servobus.cli.output import emit, fixed, following_words, kv_text
 from servobus.cli.param_types import Seconds
 from servobus.errors import ArgumentRangeError, DriveAlarm, DriveTimeout, NotSupported
 
@@ -70,6 +70,21 @@ class Target(_TargetType):
         number, unit = float(match.group(1)), (match.group(2) or "").rstrip("s")
         unit = {"count": "counts", "rev": "rev"}.get(unit, unit)
         return number, unit  # "" = bare: counts on a drive, the axis's unit on a machine
+
+
+def drive_units(ctx: CliContext) -> str:
+    """The TARGET forms the named drive takes, from its family's capabilities (nothing is
+    opened): raw command units (``120cmd``) only where the family has them."""
+    from servobus.axis import registry
+    from servobus.axis.url import parse_url
+    from servobus.families import family
+
+    forms = "counts (16384), revolutions (2.5rev), degrees (90deg)"
+    protocol = registry.protocol_of(parse_url(ctx.url))
+    spec = registry.specs().get(protocol) if protocol else None
+    if spec is not None and Capability.COMMAND_UNITS not in family(spec.family).capabilities:
+        return forms.replace(", degrees", " or degrees")
+    return f"{forms} or command units (120cmd)"
 
 
 def check_drive_target(number: float, unit: str) -> None:
@@ -240,7 +255,7 @@ def position_cmd(ctx: CliContext) -> None:
     with open_axis(ctx) as axis:
         pos, per_rev = axis.position(), axis.counts_per_rev
     emit(ctx, {"position": pos, "counts_per_rev": per_rev, "rev": pos / per_rev},
-         lambda con: con.print(f"{pos} counts ({pos / per_rev:.4f} rev)"))
+         lambda con: con.print(f"{pos} counts ({fixed(pos / per_rev, 4)} rev)"))
 
 
 FOR_HELP = ("hold the speed this many seconds, then stop (default: until Ctrl-C or SIGTERM; "
@@ -249,10 +264,10 @@ FOR_HELP = ("hold the speed this many seconds, then stop (default: until Ctrl-C 
 
 @click.command("speed", cls=ServobusCommand)
 @click.option("--for", "for_s", type=Seconds(), default=None, metavar="SECONDS", help=FOR_HELP)
-@click.argument("rpm", type=float)
+@click.argument("speed_text", metavar="SPEED")
 @pass_cli
-def speed_cmd(ctx: CliContext, for_s: float | None, rpm: float) -> None:
-    """Turn at constant speed RPM while this command runs, then stop (positive = towards
+def speed_cmd(ctx: CliContext, for_s: float | None, speed_text: str) -> None:
+    """Turn at constant SPEED (whole rpm) while this command runs, then stop (positive = towards
     increasing position; 0 ramps down).
 
     The command holds the motion (a lease it renews, docs/safety.md): Ctrl-C, SIGTERM or
@@ -263,11 +278,9 @@ def speed_cmd(ctx: CliContext, for_s: float | None, rpm: float) -> None:
 
     On a machine axis (--machine/--axis) the speed is in its unit per second (mm/s, deg/s)."""
     if ctx.machine_mode:
-        machine_cli.speed(ctx, rpm, for_s)
+        machine_cli.speed(ctx, speed_text, for_s)
         return
-    if not rpm.is_integer():
-        raise click.BadParameter(f"{rpm:g} is not a whole number of rpm", param_hint="RPM")
-    rpm = int(rpm)
+    rpm = drive_rpm(speed_text)
     with open_drive_machine(ctx) as axis:
         core = axis.axis
         assert core is not None  # opened without retry: a failure raised
@@ -280,6 +293,20 @@ def speed_cmd(ctx: CliContext, for_s: float | None, rpm: float) -> None:
     if held.why in ("for", "limit"):
         record["held_s"] = round(held.seconds, 3)
     emit(ctx, record, lambda con: con.print(speed_words(f"{rpm} rpm", held)))
+
+
+def drive_rpm(text: str) -> int:
+    """A drive's SPEED: whole rpm (``600``, ``-600rpm``); a speed in a user unit needs the
+    mechanics of a machine axis."""
+    match = re.fullmatch(r"([-+]?\d+(?:\.\d*)?|[-+]?\.\d+)\s*(rpm)?", text.strip().lower())
+    if match is None:
+        raise click.BadParameter(f"{text!r}: a drive's speed is whole rpm, e.g. 600 (speeds in "
+                                 "mm/s or deg/s need a machine axis: --machine FILE --axis "
+                                 "NAME)", param_hint="SPEED")
+    rpm = float(match.group(1))
+    if not rpm.is_integer():
+        raise click.BadParameter(f"{rpm:g} is not a whole number of rpm", param_hint="SPEED")
+    return int(rpm)
 
 
 def check_lease_rpm(axis: Axis, rpm: int) -> None:
@@ -320,13 +347,14 @@ def move_cmd(ctx: CliContext, relative: bool, wait: bool, wait_timeout: float, c
         return
     if len(targets) != 1:
         raise click.UsageError("move takes one TARGET (several NAME=TARGET with --together)")
+    if ctx.machine_mode:  # in the axis's unit: its own parser names only what it accepts
+        machine_cli.move(ctx, targets[0], relative, wait, wait_timeout, confirm)
+        return
     try:
         number, unit = Target().convert(targets[0], None, None)
-    except click.BadParameter as exc:
-        raise click.BadParameter(exc.message, param_hint="'TARGET'") from None
-    if ctx.machine_mode:
-        machine_cli.move(ctx, f"{number!r}{unit}", relative, wait, wait_timeout, confirm)
-        return
+    except click.BadParameter:
+        raise click.BadParameter(f"{targets[0]!r}: write {drive_units(ctx)}",
+                                 param_hint="'TARGET'") from None
     check_drive_target(number, unit)
     with open_axis(ctx) as axis, stop_on_interrupt(axis):
         who = f"drive {axis.drive_id}"

@@ -23,6 +23,7 @@ from servobus.errors import (
     DriveError,
     DriveTimeout,
     EepromGuardError,
+    InvalidValue,
     LimitError,
     MachineFileError,
     MotionRefused,
@@ -79,8 +80,7 @@ HINTS: tuple[tuple[type[BaseException], int, str], ...] = (
     (MoveFailed, EXIT_FAULT,
      "enable the drive and remove what stopped it (load, limit, another program), then "
      "move again"),
-    (DriveTimeout, EXIT_USAGE,
-     "check --id (`servobus scan` lists the drives that answer), power, wiring and --baud"),
+    (DriveTimeout, EXIT_USAGE, "check --id, power and wiring"),  # LINK_ADVICE first
     (ConnectionRefusedError, EXIT_USAGE,
      "nothing listens there: start the drive's bridge or `servobus sim dyn232 --listen "
      "tcp://HOST:PORT`, or fix the address"),
@@ -91,6 +91,7 @@ HINTS: tuple[tuple[type[BaseException], int, str], ...] = (
     (UnknownScheme, EXIT_USAGE,
      "write SCHEME://TARGET with a scheme above (docs/axis.md, \"Drive URLs\")"),
     (MotionRefused, EXIT_USAGE, HELP_HINT),  # its message says what to do
+    (InvalidValue, EXIT_USAGE, "nothing was sent"),  # its own ``todo`` (describe)
     (ArgumentRangeError, EXIT_USAGE, "nothing was sent; give a value inside the range"),
     (NotSupported, EXIT_USAGE, "nothing was sent; this drive or protocol lacks the feature"),
     (EepromGuardError, EXIT_USAGE,
@@ -98,13 +99,39 @@ HINTS: tuple[tuple[type[BaseException], int, str], ...] = (
     (ParamsFileError, EXIT_USAGE,
      "use a file written by `servobus params --save FILE`"),
     (ProtocolError, EXIT_USAGE,
-     "check --baud, the wiring (noise) and that the other end speaks this protocol"),
+     "check the wiring (noise) and that the other end speaks this protocol"),
     (ServobusError, EXIT_USAGE, HELP_HINT),
     (FileNotFoundError, EXIT_USAGE, "check the path"),
     (PermissionError, EXIT_USAGE,
      "check the permissions (serial ports on Linux: the dialout group)"),
     (OSError, EXIT_USAGE, "check the port, device or file named"),
 )
+
+
+SCAN = "`servobus scan` lists the drives that answer"
+#: Advice that depends on the link (servobus.axis.registry.link_kind, or ``"machine"`` when
+#: the command acts on a machine file's axis): only the options and checks that apply there
+#: (no --baud on CAN, a network or a machine, whose ids and URLs are the file's).
+LINK_ADVICE: dict[tuple[type[BaseException], str], str] = {
+    (DriveTimeout, "serial"): f"check --id ({SCAN}), power, wiring and --baud",
+    (DriveTimeout, "can"): f"check --id ({SCAN}), power, the CAN wiring and termination, the "
+                           "bus bitrate, and that the drive speaks this protocol",
+    (DriveTimeout, "network"): f"check --id ({SCAN}), that the drive is on and reachable at "
+                               "that address, and that it speaks this protocol",
+    (DriveTimeout, "virtual"): f"check --id: the virtual drives answer at the URL's ?ids= "
+                               f"({SCAN})",
+    (DriveTimeout, "machine"): "check the axis's id and url in the machine file "
+                               "(`servobus --machine FILE --axis NAME scan` lists the drives "
+                               "that answer), power and wiring",
+    (ProtocolError, "serial"): "check --baud, the wiring (noise) and that the other end "
+                               "speaks this protocol",
+    (ProtocolError, "can"): "check the bus bitrate, the wiring (noise, termination) and that "
+                            "the other end speaks this protocol",
+    (ProtocolError, "network"): "check that the address is the drive's and that it speaks "
+                                "this protocol",
+    (ProtocolError, "machine"): "check the axis's url in the machine file, the wiring and that "
+                                "the other end speaks this protocol",
+}
 
 
 def one_line(text: str) -> str:
@@ -136,8 +163,9 @@ def _what(exc: BaseException) -> str:
     return text
 
 
-def describe(exc: BaseException) -> tuple[int, str]:
-    """Exit code and the one stderr line for any exception that ends the command."""
+def describe(exc: BaseException, link: str | None = None) -> tuple[int, str]:
+    """Exit code and the one stderr line for any exception that ends the command; ``link``
+    (LINK_ADVICE) picks the advice that applies where it depends on the link."""
     if isinstance(exc, Interrupted):
         outcome = exc.outcome or "nothing was moving"
         return EXIT_INTERRUPTED, error_line(f"interrupted by {exc.signal_name}", outcome)
@@ -150,9 +178,12 @@ def describe(exc: BaseException) -> tuple[int, str]:
         return exc.exit_code, error_line(exc.format_message(), f"see `{path} --help`")
     if isinstance(exc, click.ClickException):
         return exc.exit_code, one_line(f"error: {exc.format_message()}")
+    if isinstance(exc, InvalidValue):
+        return EXIT_USAGE, error_line(_what(exc), exc.todo)
     for kind, code, todo in HINTS:
         if isinstance(exc, kind):
             what = _what(exc)
+            todo = LINK_ADVICE.get((kind, link or ""), todo)
             if todo == HELP_HINT and " - " in what:  # the message already says what to do
                 return code, f"error: {what}"
             return code, error_line(what, todo)

@@ -39,7 +39,7 @@ from servobus.cli.hold import RENEW_S, TTL_S
 from servobus.cli.jog_keys import MINUS, PLUS, QUIT, KeySource, TerminalKeys
 from servobus.cli.motion_guard import stop_on_interrupt
 from servobus.cli.open_axis import open_drive_machine
-from servobus.cli.output import emit, note
+from servobus.cli.output import emit, fixed, note
 from servobus.cli.param_types import Seconds
 from servobus.errors import LimitError
 
@@ -187,7 +187,7 @@ def jog_cmd(ctx: CliContext, speed: float | None, release: float) -> None:
     record = {"axis" if ctx.machine_mode else "drive_id":
               axis.name if ctx.machine_mode else axis.drive_id,
               "jogs": jogger.starts, "ended": ended, "position": position, "unit": unit}
-    emit(ctx, record, lambda con: con.print(f"jog ended at {position:.4f} {unit}"
+    emit(ctx, record, lambda con: con.print(f"jog ended at {fixed(position, 4)} {unit}"
                                             if unit != "counts" else
                                             f"jog ended at {int(position)} counts",
                                             markup=False))

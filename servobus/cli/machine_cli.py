@@ -36,20 +36,39 @@ from rich.console import Console
 
 from servobus.cli.context import CliContext
 from servobus.cli.failures import EXIT_FAULT, CliError
-from servobus.cli.output import emit, following_words, kv_text, note
+from servobus.cli.output import emit, fixed, following_words, id_words, kv_text, note
 from servobus.errors import DriveAlarm
 
 if TYPE_CHECKING:
     from servobus.axis.sync import Axis
     from servobus.machine import Machine, MachineAxis
+    from servobus.machine.config import AxisSpec, MachineSpec
 
-def spec_names(ctx: CliContext) -> tuple[str, list[str]]:
+def machine_spec(ctx: CliContext) -> tuple[str, MachineSpec]:
+    """The file named (or the built-in machine's source) and its spec; nothing is opened."""
     from servobus.machine.builtin import BUILTIN_SOURCE, builtin_spec
     from servobus.machine.config import load_machine_file
 
     path = ctx.machine_path
     spec = builtin_spec() if path is None else load_machine_file(path)
-    return (BUILTIN_SOURCE if path is None else path), [a.name for a in spec.axes]
+    return (BUILTIN_SOURCE if path is None else path), spec
+
+
+def spec_names(ctx: CliContext) -> tuple[str, list[str]]:
+    source, spec = machine_spec(ctx)
+    return source, [a.name for a in spec.axes]
+
+
+def chosen_spec(ctx: CliContext) -> AxisSpec:
+    """The file's spec of the axis a command acts on (nothing is opened)."""
+    name = chosen_axis(ctx)
+    return next(a for a in machine_spec(ctx)[1].axes if a.name == name)
+
+
+def chosen_unit(ctx: CliContext) -> str:
+    """The unit of the axis a command acts on, read from the file (nothing is opened): a
+    TARGET or SPEED in another unit is refused before any link opens."""
+    return chosen_spec(ctx).unit
 
 
 def chosen_axis(ctx: CliContext) -> str:
@@ -124,14 +143,17 @@ def note_builtin_machine_once() -> None:
 
 
 def label(axis: MachineAxis) -> str:
-    return f"axis {axis.name} ({axis.url}, id {axis.drive_id})"
+    core = axis.axis  # open: the id it talks to, the protocol's default included
+    return f"axis {axis.name} ({axis.url}, " \
+        f"{id_words(core.drive_id if core is not None else axis.drive_id)})"
 
 
 # ------------------------------------------------------------------ commands
 def axis_record(axis: MachineAxis) -> dict[str, object]:
     """One axis for ``status``: identity, position in the unit and counts, the status."""
     record: dict[str, object] = {"axis": axis.name, "unit": axis.unit, "url": axis.url,
-                                 "id": axis.drive_id, "online": axis.online,
+                                 "id": axis.drive_id if axis.axis is None
+                                 else axis.axis.drive_id, "online": axis.online,
                                  "limits": list(axis.limits) if axis.limits else None}
     if not axis.online:
         record["error"] = str(axis.last_error or "not opened")
@@ -200,14 +222,14 @@ def render_machine_table(con: Console, name: str, records: list[dict[str, object
             "link")
     rows: list[tuple[str, ...]] = []
     for r in records:
-        link = f"{r['url']} id {r['id']}"
+        link = f"{r['url']} {id_words(r['id'] if isinstance(r['id'], int) else None)}"
         if not r["online"]:
             rows.append((str(r["axis"]), "-", "-", "-", "-", "-", "-", "-",
                          f"{link} OFFLINE: {r.get('error', '')}"))
             continue
         position = r["position"]
         assert isinstance(position, float)
-        rows.append((str(r["axis"]), f"{position:.3f} {r['unit']}", str(r["counts"]),
+        rows.append((str(r["axis"]), f"{fixed(position, 3)} {r['unit']}", str(r["counts"]),
                      _yes(r["enabled"]), _yes(r["moving"]), _yes(r["in_position"]),
                      _error(r.get("following_error")), str(r["alarm"]) or "-",
                      f"{link} ({r['protocol']})"))
@@ -227,7 +249,7 @@ def _yes(value: object) -> str:
 
 def _error(value: object) -> str:
     """The following error in the table: ``-`` where the drive reports none."""
-    return f"{value:.4f}" if isinstance(value, int | float) else "-"
+    return f"{fixed(value, 4)}" if isinstance(value, int | float) else "-"
 
 
 def position(ctx: CliContext) -> None:
@@ -236,7 +258,7 @@ def position(ctx: CliContext) -> None:
         user = axis.to_user(counts)
         record = {"axis": axis.name, "position": user, "unit": axis.unit, "counts": counts}
     emit(ctx, record,
-         lambda con: con.print(f"{user:.4f} {axis.unit} ({counts} counts)", markup=False))
+         lambda con: con.print(f"{fixed(user, 4)} {axis.unit} ({counts} counts)", markup=False))
 
 
 def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: float,
@@ -248,6 +270,7 @@ def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: f
     from servobus.cli.move_profile import apply_profile
     from servobus.machine import parse_quantity
 
+    parse_quantity(text, chosen_unit(ctx), axis=chosen_axis(ctx))  # before a link opens
     with open_machine_axis(ctx) as axis:
         number, unit = parse_quantity(text, axis.unit, axis=axis.name)
         user = axis.to_user(number) if unit == "counts" and axis.online else number
@@ -285,12 +308,12 @@ def move(ctx: CliContext, text: str, relative: bool, wait: bool, wait_timeout: f
                 if wait_timeout > 0:  # the target was checked (finite) by the move
                     target = start + axis.to_counts(user)
                     check_arrival(who, core.drive_id, st, counts, target, window,
-                                  f" ({axis.to_user(counts):.4f} {axis.unit})")
+                                  f" ({fixed(axis.to_user(counts), 4)} {axis.unit})")
 
     def render(con: Console) -> None:
         verb = "moving by" if relative else "moving to"
-        done = (f"; done at {record['position']:.4f} {axis.unit} ({record['counts']} counts)"
-                if wait else "")
+        done = (f"; done at {fixed(record['position'], 4)} {axis.unit} "
+                f"({record['counts']} counts)" if wait else "")
         con.print(f"axis {axis.name} {verb} {user:g} {axis.unit}{done}", markup=False)
 
     emit(ctx, record, render)
@@ -310,9 +333,11 @@ def _confirmed_move(axis: MachineAxis, core: Axis, user: float, relative: bool,
         core.move_to(axis.to_counts(user), confirm=True)
 
 
-def speed(ctx: CliContext, value: float, for_s: float | None) -> None:
+def speed(ctx: CliContext, text: str, for_s: float | None) -> None:
     from servobus.cli.hold import hold_speed, speed_words
+    from servobus.machine.units import parse_speed
 
+    value = parse_speed(text, chosen_unit(ctx), axis=chosen_axis(ctx))  # before a link opens
     with open_machine_axis(ctx) as axis:
         unit = axis.speed_unit
         held = hold_speed(axis, value, for_s,
@@ -328,7 +353,7 @@ def speed(ctx: CliContext, value: float, for_s: float | None) -> None:
     def render(con: Console) -> None:
         if held.why == "limit":
             con.print(f"axis {axis.name} turned at {value:g} {unit}; stopped at its soft "
-                      f"limit, {record['stopped_at']:.3f} {axis.unit}", markup=False)
+                      f"limit, {fixed(record['stopped_at'], 3)} {axis.unit}", markup=False)
         else:
             con.print(f"axis {axis.name} " + speed_words(f"{value:g} {unit}", held),
                       markup=False)

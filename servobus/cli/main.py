@@ -137,8 +137,10 @@ def main(argv: list[str] | None = None) -> None:
     debug = debug_requested(args)
     configure_logging(debug)
     previous = signal.signal(signal.SIGTERM, _terminate)
+    made: list[click.Context] = []  # its obj: the global options, for link_of
     try:
         with cli.make_context("servobus", args) as ctx:
+            made.append(ctx)
             cli.invoke(ctx)
     except click.exceptions.Exit as exc:  # --help, --version, ctx.exit()
         sys.exit(exc.exit_code)
@@ -149,18 +151,35 @@ def main(argv: list[str] | None = None) -> None:
         raise
     except BrokenPipeError as exc:
         if not stdout_closed():  # a pipe to something else (a drive's link): a failure
-            _fail(exc, debug)
+            _fail(exc, debug, made)
         _quiet_stdout()  # `servobus ... | head`: the reader has all it wanted
         sys.exit(0)
     except BaseException as exc:  # the one place every failure is reported
-        _fail(exc, debug)
+        _fail(exc, debug, made)
     finally:
         signal.signal(signal.SIGTERM, previous)
     sys.exit(0)
 
 
-def _fail(exc: BaseException, debug: bool) -> NoReturn:
-    code, line = describe(exc)
+def link_of(made: list[click.Context]) -> str | None:
+    """The link the command used, for advice that names only what applies there
+    (servobus.cli.failures.LINK_ADVICE): ``"machine"`` for a machine file's axis."""
+    from servobus.axis.registry import link_kind
+    from servobus.axis.url import parse_url
+
+    options = made[0].obj if made else None
+    if not isinstance(options, CliContext):
+        return None
+    try:
+        if options.machine_mode:
+            return "machine"
+        return link_kind(parse_url(options.url))
+    except Exception:  # options that are themselves the mistake: the generic advice
+        return None
+
+
+def _fail(exc: BaseException, debug: bool, made: list[click.Context]) -> NoReturn:
+    code, line = describe(exc, link_of(made))
     if debug:
         traceback.print_exception(exc)
     click.echo(line, err=True)

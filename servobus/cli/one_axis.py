@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Protocol
 from servobus.cli import machine_cli
 from servobus.cli.context import CliContext
 from servobus.cli.open_axis import open_axis
+from servobus.cli.output import fixed
 from servobus.errors import DriveTimeout
 
 if TYPE_CHECKING:
@@ -55,7 +56,7 @@ class Opened:
 
     def where(self) -> str:
         value = self.position()
-        shown = f"{int(value)}" if self.unit == "counts" else f"{value:.4f}"
+        shown = f"{int(value)}" if self.unit == "counts" else fixed(value, 4)
         return f"{shown} {self.unit}"
 
 

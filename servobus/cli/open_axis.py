@@ -118,8 +118,23 @@ def note_builtin_once() -> None:
              "built-in virtual drive, which is gone now")
 
 
+def link_url(ctx: CliContext) -> str:
+    """The URL the command talks over: on a machine axis (--machine/--axis) the file's URL
+    of that axis, never the global options' (which name no drive then)."""
+    if ctx.machine_mode:
+        from servobus.cli.machine_cli import chosen_spec
+
+        return chosen_spec(ctx).url
+    return ctx.url
+
+
 def connection_label(ctx: CliContext, axis: Axis | None = None) -> str:
     drive = axis.drive_id if axis is not None else ctx.drive_id
-    label = f"{ctx.url}, id {drive if drive is not None else 'default'}"
+    url = link_url(ctx)
+    label = f"{url}, id {drive if drive is not None else 'default'}"
+    if ctx.machine_mode:
+        from servobus.cli.machine_cli import chosen_axis
+
+        label = f"axis {chosen_axis(ctx)} ({label})"
     address = axis.id_address if axis is not None else None
-    return label if address is None or address in ctx.url else f"{label} at {address}"
+    return label if address is None or address in url else f"{label} at {address}"

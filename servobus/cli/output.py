@@ -49,11 +49,23 @@ def _fmt(value: object) -> str:
     return str(value)
 
 
+def id_words(drive_id: int | None) -> str:
+    """``id 3``, or ``default id`` for a file or URL that names none (never ``id None``)."""
+    return "default id" if drive_id is None else f"id {drive_id}"
+
+
+def fixed(value: object, digits: int) -> str:
+    """``value`` with ``digits`` decimals, never ``-0.000`` (a position of -0.0 or -0.00004
+    is shown as 0.000, as a person would write it)."""
+    text = f"{value:.{digits}f}"
+    return text.lstrip("-") if float(text) == 0 else text  # "-0.000" and "-0.0000" too
+
+
 def following_words(value: object, unit: str) -> str:
     """The following error as ``status`` shows it (None: the drive reports none)."""
     if not isinstance(value, int | float):
         return "not reported by this drive"
-    return f"{value:.1f} {unit}" if unit == "counts" else f"{value:.4f} {unit}"
+    return f"{fixed(value, 1)} {unit}" if unit == "counts" else f"{fixed(value, 4)} {unit}"
 
 
 def note(message: str) -> None:

@@ -28,7 +28,7 @@ from rich.progress import (
 
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
-from servobus.cli.open_axis import connection_label, open_axis
+from servobus.cli.open_axis import link_url, open_axis
 from servobus.cli.output import console, emit, note
 from servobus.cli.param_types import Seconds
 
@@ -104,11 +104,13 @@ def scan_cmd(ctx: CliContext, first: int | None, last: int | None, ids_text: str
     listed = None if ids_text is None else parse_ids(ids_text)
     found: list[int] = []
     live = not ctx.json and sys.stderr.isatty()
-    opened_at = None if listed is None else listed[0]
-    with open_axis(ctx, drive_id=first if listed is None else opened_at) as axis:
+    # Opened as every command opens it (--id, else the protocol's default): the ids are
+    # pinged through siblings, and a virtual drive without ?ids= answers at the id it is
+    # opened with - so scan finds the drive `status` shows (issue 32), not one at --first.
+    with open_axis(ctx) as axis:
         ids = wanted_ids(axis.drive_ids, first, last, listed)
         wait = axis.ping_deadline() if per_id is None else per_id
-        where = connection_label(ctx).rsplit(", id", 1)[0]
+        where = link_url(ctx)
         if not live:
             note(f"scanning {len(ids)} id(s) ({id_text(ids)}) on {where}: about "
                  f"{len(ids) * wait:.1f} s ({wait * 1000:.0f} ms per absent id)")

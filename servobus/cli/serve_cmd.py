@@ -72,7 +72,7 @@ def serve(ctx: CliContext, machine_path: Path | None, endpoint: str, users_path:
     Anonymous OPC UA clients may browse, read and subscribe; methods that command an axis
     need a user of --users. Ctrl-C or SIGTERM stops every axis, then the gateway.
     """
-    from servobus.gateway.mqtt import MqttOptions
+    from servobus.gateway.mqtt import MqttOptions, parse_broker
     from servobus.gateway.opcua_server import OpcUaOptions, parse_endpoint
     from servobus.gateway.serve import GatewayOptions, open_and_serve
     from servobus.gateway.users import Users
@@ -86,6 +86,8 @@ def serve(ctx: CliContext, machine_path: Path | None, endpoint: str, users_path:
     if mqtt_commands and mqtt_url is None:
         raise click.UsageError("--mqtt-commands needs --mqtt")
     parse_endpoint(endpoint)
+    if mqtt_url is not None:
+        parse_broker(mqtt_url)  # a malformed URL: one line before anything starts
     check_identity(mqtt_prefix, gateway_id)
     users = Users.load(users_path) if users_path is not None else None
     stem = machine_path.stem if machine_path is not None else "servobus"

@@ -22,7 +22,7 @@ from servobus.cli import machine_cli
 from servobus.cli.context import CliContext
 from servobus.cli.motion_guard import stop_on_interrupt
 from servobus.cli.move_profile import apply_profile
-from servobus.cli.output import emit
+from servobus.cli.output import emit, fixed
 
 if TYPE_CHECKING:
     from servobus.machine import Machine
@@ -130,5 +130,5 @@ def render(con: Console, record: dict[str, object], report: TogetherReport) -> N
                   f"{f' ({together})' if together else ''}: {UNSYNCED}", markup=False)
     positions = record.get("positions")
     if isinstance(positions, dict):
-        done = ", ".join(f"{n} at {v:.4f} {units[n]}" for n, v in positions.items())
+        done = ", ".join(f"{n} at {fixed(v, 4)} {units[n]}" for n, v in positions.items())
         con.print(f"done: {done}", markup=False)

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import re
 
-from servobus.errors import ArgumentRangeError
+from servobus.errors import InvalidValue
 
 #: The namespace of servobus's browse names and types, shared by every gateway.
 TYPES_URI = "urn:servobus:gateway"
@@ -36,7 +36,7 @@ def gateway_id(machine_name: str, given: str | None = None) -> str:
     """The gateway's id: ``given`` (checked), else the machine's name made fit."""
     if given is not None:
         if not _ID.match(given):
-            raise ArgumentRangeError(f"--gateway-id {given!r}: 1-{MAX_ID} {ID_CHARS}")
+            raise InvalidValue(f"--gateway-id {given!r}: 1-{MAX_ID} {ID_CHARS}")
         return given
     return _NOT_ID.sub("-", machine_name)[:MAX_ID] or "gateway"
 
@@ -54,6 +54,6 @@ def application_uri(ident: str) -> str:
 def check_prefix(prefix: str) -> str:
     """``--mqtt-prefix``: one or more topic levels, no wildcard, no empty level."""
     if not _PREFIX.match(prefix) or "" in prefix.split("/"):
-        raise ArgumentRangeError(f"--mqtt-prefix {prefix!r}: topic levels without '+', '#' "
+        raise InvalidValue(f"--mqtt-prefix {prefix!r}: topic levels without '+', '#' "
                                  "or an empty level (e.g. servobus or plant/line-3)")
     return prefix

@@ -54,7 +54,7 @@ import aiomqtt
 from paho.mqtt.subscribeoptions import SubscribeOptions
 
 from servobus import bounded_json
-from servobus.errors import ArgumentRangeError, JsonRefused
+from servobus.errors import InvalidValue, JsonRefused
 from servobus.gateway.commands import Commander, Refused
 from servobus.gateway.identity import DEFAULT_PREFIX, check_prefix, gateway_id
 from servobus.gateway.link_events import LinkEvent
@@ -100,13 +100,13 @@ def parse_broker(url: str) -> Broker:
     """``mqtt://[user[:password]@]host[:port]`` (1883) or ``mqtts://...`` (TLS, 8883)."""
     parsed = urlparse(url)
     if parsed.scheme not in ("mqtt", "mqtts") or not parsed.hostname:
-        raise ArgumentRangeError(f"{url!r}: give the broker as mqtt://HOST:PORT or "
+        raise InvalidValue(f"{url!r}: give the broker as mqtt://HOST:PORT or "
                                  "mqtts://HOST:PORT")
     tls = parsed.scheme == "mqtts"
     try:
         port = parsed.port or (8883 if tls else 1883)
     except ValueError:
-        raise ArgumentRangeError(f"{url!r}: the port must be 1..65535") from None
+        raise InvalidValue(f"{url!r}: the port must be 1..65535") from None
     user = unquote(parsed.username) if parsed.username else None
     password = unquote(parsed.password) if parsed.password else None
     return Broker(parsed.hostname, port, tls, user, password)
@@ -114,8 +114,9 @@ def parse_broker(url: str) -> Broker:
 
 def check_topic_name(kind: str, name: str) -> None:
     if not name or BAD_TOPIC_CHARS & set(name):
-        raise ArgumentRangeError(f"{kind} name {name!r} cannot be an MQTT topic level "
-                                 "(no '/', '+', '#')")
+        raise InvalidValue(f"{kind} name {name!r} cannot be an MQTT topic level "
+                           "(no '/', '+', '#')",
+                           f"rename the {kind} in the machine file; nothing was sent")
 
 
 def state_json(sample: Sample, unit: str) -> bytes:
@@ -163,7 +164,7 @@ class MqttGateway:
         self.username = options.username or self.broker.username
         self.password = options.password or self.broker.password
         if options.commands and not (self.username and self.password):
-            raise ArgumentRangeError("--mqtt-commands needs the broker's authentication: "
+            raise InvalidValue("--mqtt-commands needs the broker's authentication: "
                                      "give --mqtt-user and a password")
         self.gate = CommandGate(options.max_age_s)
         self.base = f"{check_prefix(options.prefix)}/{machine.name}"

@@ -54,7 +54,7 @@ from asyncua.server.internal_server import InternalServer
 from asyncua.server.internal_session import InternalSession, SessionState
 from asyncua.server.user_managers import UserManager
 
-from servobus.errors import ArgumentRangeError
+from servobus.errors import InvalidValue
 from servobus.gateway.commands import Command, Commander, Refused
 from servobus.gateway.identity import application_uri, gateway_id
 from servobus.gateway.link_events import LinkEvent
@@ -217,11 +217,11 @@ def peer_host(name: object) -> str:
 def parse_endpoint(url: str) -> tuple[str, int]:
     parsed = urlparse(url)
     if parsed.scheme != "opc.tcp" or not parsed.hostname:
-        raise ArgumentRangeError(f"{url!r}: give the endpoint as opc.tcp://HOST:PORT")
+        raise InvalidValue(f"{url!r}: give the endpoint as opc.tcp://HOST:PORT")
     try:
         port = parsed.port if parsed.port is not None else 4840
     except ValueError:
-        raise ArgumentRangeError(f"{url!r}: the port must be 0..65535") from None
+        raise InvalidValue(f"{url!r}: the port must be 0..65535") from None
     return parsed.hostname, port
 
 

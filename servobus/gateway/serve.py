@@ -131,9 +131,11 @@ async def serve_machine(machine: Machine, options: GatewayOptions, say: Say,
             say(line)
         say(f"servobus serve: machine {machine.name} ({source}); axes "
             f"{', '.join(machine.axes)}; sampling {options.rate_hz:g} Hz per link at most")
+        users = gateway.opcua.options.users
         say(f"servobus serve: opcua {gateway.opcua.endpoint}"
-            + ("" if gateway.opcua.options.users and len(gateway.opcua.options.users)
-               else " (read-only: no --users)"))
+            + ("" if users is not None and len(users)
+               else " (read-only: no --users)" if users is None
+               else " (read-only: the --users file names no user)"))
         if gateway.mqtt is not None:
             say(f"servobus serve: mqtt {gateway.mqtt.broker.host}:{gateway.mqtt.broker.port} "
                 f"topics {gateway.mqtt.base}/... client id {gateway.mqtt.presence.client_id}")

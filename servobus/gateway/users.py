@@ -27,7 +27,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from servobus.errors import ArgumentRangeError, ServobusError
+from servobus.errors import InvalidValue, ServobusError
 
 SCHEME = "scrypt"
 N, R, P = 2**14, 8, 1
@@ -187,15 +187,20 @@ def _hash(password: str, salt: bytes, n: int, r: int, p: int) -> bytes:
                           maxmem=256 * 1024 * 1024)
 
 
+#: What the terminal adds to a refused user name or password (servobus.cli.failures).
+UNCHANGED = "the users file is unchanged"
+
+
 def check_name(name: str) -> str:
     if not NAME.fullmatch(name):
-        raise ArgumentRangeError(f"user name {name!r}: 1-64 letters, digits, '_', '.', '@', '-'")
+        raise InvalidValue(f"user name {name!r}: 1-64 letters, digits, '_', '.', '@', '-'",
+                           UNCHANGED)
     return name
 
 
 def check_password(password: str) -> str:
     if not MIN_PASSWORD <= len(password) <= MAX_PASSWORD:
-        raise ArgumentRangeError(f"a password has {MIN_PASSWORD}..{MAX_PASSWORD} characters")
+        raise InvalidValue(f"a password has {MIN_PASSWORD}..{MAX_PASSWORD} characters", UNCHANGED)
     return password
 
 
@@ -230,7 +235,8 @@ class Users:
 
     def remove(self, name: str) -> None:
         if name not in self.records:
-            raise ArgumentRangeError(f"no user {name!r} in the file")
+            raise InvalidValue(f"no user {name!r} in the file",
+                               "`servobus users list --file FILE` lists the names")
         del self.records[name]
 
     @classmethod
@@ -244,10 +250,12 @@ class Users:
         if len(raw) > MAX_FILE_BYTES:
             raise UsersFileError(f"users file {path} is larger than {MAX_FILE_BYTES} bytes")
         try:
-            data = json.loads(raw or b"{}")
-            users = data.get("users", {}) if isinstance(data, dict) else None
-            if not isinstance(users, dict):
+            data = json.loads(raw or b'{"users": {}}')
+            if not isinstance(data, dict) or not isinstance(data.get("users"), dict):
                 raise ValueError("no 'users' object")
+            if set(data) != {"users"}:  # {"robot": "x"}: not this file (issue 32)
+                raise ValueError(f"unknown keys {sorted(set(data) - {'users'})}")
+            users = data["users"]
             records = {}
             for name, entry in users.items():
                 if entry.get("scheme") != SCHEME:

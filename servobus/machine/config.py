@@ -117,12 +117,21 @@ def parse_machine(text: str, *, source: str = "<machine>", path: Path | None = N
 def _check_shared_ids(where: _Where, axes: list[AxisSpec]) -> None:
     seen: dict[tuple[str, int | None], str] = {}
     for spec in axes:
-        key = (spec.url, spec.drive_id)
+        key = (link_key(spec.url), spec.drive_id)  # `h:4001` and `h:4001/` are one drive
         if key in seen:
             raise _Where(where.source, spec.name).error(
                 "id", f"{spec.url} id {spec.drive_id if spec.drive_id is not None else 'default'}"
                 f" is already axis {seen[key]}; two axes cannot be one drive")
         seen[key] = spec.name
+
+
+def link_key(url: str) -> str:
+    """One key for the spellings of one link (DriveUrl.link_key); the URL itself when it
+    does not parse (its own check names the mistake)."""
+    try:
+        return parse_url(url).link_key
+    except ArgumentRangeError:
+        return url
 
 
 def _number(where: _Where, key: str, value: object) -> float:

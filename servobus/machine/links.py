@@ -17,6 +17,7 @@ from servobus.axis.connect import connect_async
 from servobus.axis.url import parse_url
 from servobus.errors import ArgumentRangeError, MachineFileError, MachineLinkError
 from servobus.machine.axis import AsyncMachineAxis
+from servobus.machine.config import link_key
 
 
 class Link:
@@ -117,8 +118,9 @@ class Link:
 
 
 def group_links(axes: Sequence[AsyncMachineAxis], source: str) -> list[Link]:
-    """One Link per URL, in the order the file first names it."""
-    by_url: dict[str, list[AsyncMachineAxis]] = {}
+    """One Link per URL (its spellings are one: config.link_key), in the order the file first
+    names it; the link opens the first spelling."""
+    by_key: dict[str, list[AsyncMachineAxis]] = {}
     for axis in axes:
-        by_url.setdefault(axis.url, []).append(axis)
-    return [Link(url, members, source) for url, members in by_url.items()]
+        by_key.setdefault(link_key(axis.url), []).append(axis)
+    return [Link(members[0].url, members, source) for members in by_key.values()]

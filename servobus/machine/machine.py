@@ -51,6 +51,7 @@ from servobus.errors import (
     ClosedError,
     LimitError,
     MachineLinkError,
+    NotSupported,
     ServobusError,
 )
 from servobus.machine.axis import AsyncMachineAxis
@@ -470,8 +471,10 @@ async def _close(cores: Sequence[AsyncAxis]) -> None:
 
 
 def _retryable(exc: BaseException) -> bool:
-    """A link that failed to open may come later; a mistake in the file will not."""
-    return not isinstance(exc, ArgumentRangeError | LimitError)
+    """A link that failed to open may come later; a mistake in the file will not, nor a
+    rule the drive cannot follow (``origin = "home"`` where the family has no homing:
+    NotSupported, never reported as a link problem)."""
+    return not isinstance(exc, ArgumentRangeError | LimitError | NotSupported)
 
 
 async def open_machine_async(path: str | Path | None = None, *, retry: bool = False,

@@ -12,7 +12,7 @@ import re
 from dataclasses import dataclass
 
 from servobus.axis.units import round_counts
-from servobus.errors import ArgumentRangeError
+from servobus.errors import InvalidValue
 
 _QUANTITY = re.compile(r"^([-+]?(?:\d+(?:\.\d*)?|\.\d+)(?:e[-+]?\d+)?)\s*([a-z]*)$")
 _ALIASES = {"": "", "count": "counts", "counts": "counts", "mm": "mm", "deg": "deg",
@@ -50,6 +50,19 @@ class Scale:
         return rpm * self.counts_per_rev / 60.0 / self.counts_per_unit
 
 
+_SPEED = re.compile(r"^([-+]?(?:\d+(?:\.\d*)?|\.\d+)(?:e[-+]?\d+)?)\s*([a-z]*)(?:/s)?$")
+
+
+def parse_speed(text: str, unit: str, *, axis: str = "") -> float:
+    """``"20"`` / ``"20mm"`` / ``"20mm/s"`` -> 20.0, in ``unit`` per second: a speed in any
+    other unit (``30deg`` on a mm axis, ``nan``) is one InvalidValue line naming the axis's."""
+    match = _SPEED.match(str(text).strip().lower())
+    if match is None or match.group(2) not in ("", unit):
+        where = f"axis {axis}'s " if axis else "the axis's "
+        raise InvalidValue(f"{text!r}: a speed is in {where}{unit}/s, e.g. 20 or 20{unit}")
+    return float(match.group(1))
+
+
 def parse_quantity(text: str, unit: str, *, axis: str = "") -> tuple[float, str]:
     """``"12.5"`` / ``"12.5mm"`` / ``"100counts"`` -> (number, unit) on an axis of ``unit``.
 
@@ -60,15 +73,15 @@ def parse_quantity(text: str, unit: str, *, axis: str = "") -> tuple[float, str]
     match = _QUANTITY.match(str(text).strip().lower())
     written = _ALIASES.get(match.group(2)) if match else None
     if match is None or written is None:
-        raise ArgumentRangeError(f"{text!r}: write a number in {where}units ({unit}), e.g. "
+        raise InvalidValue(f"{text!r}: write a number in {where}units ({unit}), e.g. "
                                  f"12.5 or 12.5{unit if unit != 'counts' else ''}")
     number = float(match.group(1))
     given = written or unit
     if given == "counts":
         if not number.is_integer():
-            raise ArgumentRangeError(f"{text!r}: counts are whole numbers")
+            raise InvalidValue(f"{text!r}: counts are whole numbers")
         return number, "counts"
     if given != unit:
-        raise ArgumentRangeError(f"{text!r}: {where}is in {unit}, not {given}; give "
+        raise InvalidValue(f"{text!r}: {where}is in {unit}, not {given}; give "
                                  f"{number:g}{unit if unit != 'counts' else ''} or counts")
     return number, given

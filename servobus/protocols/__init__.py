@@ -48,6 +48,10 @@ class ProtocolSpec:
     #: calls - one connection that speaks only when asked, no task left running - so the
     #: sync facade may run their calls on the caller's thread (servobus.axis.inline).
     inline_schemes: tuple[str, ...] = ()
+    #: What carries its frames, for advice that names only what applies (a DriveTimeout on
+    #: CAN says nothing of --baud): ``"serial"`` (a baud rate), ``"can"`` (the bus bitrate,
+    #: set on the interface) or ``"network"`` (an IP address).
+    link: str = "serial"
 
     @classmethod
     def conventional(cls, name: str, family: str, **fields: Any) -> ProtocolSpec:

@@ -101,9 +101,12 @@ def axis_status(output_enable: int, alarm_code: int, motor_speed_word: int,
     near = position_error is None or abs(position_error) <= yzaim.POSITION_TOLERANCE_COUNTS
     # The drive has no busy or on-position bit: a commanded target not yet reached is the
     # running profile, the +-10-count comparison (5.4a) the on-target test (motion_state).
-    moving, in_position = motion_state(not near, near, rpm)
+    # A disabled motor (output_enable 0, or a stopping alarm) runs no profile, whatever
+    # target it was given: off that target it is stopped, not "still moving" (issue 32).
+    enabled = output_enable == 1 and not stops
+    moving, in_position = motion_state(not near and enabled, near, rpm)
     return AxisStatus(
-        enabled=output_enable == 1 and not stops,
+        enabled=enabled,
         moving=moving,
         in_position=in_position,
         alarm_code=alarm_code,

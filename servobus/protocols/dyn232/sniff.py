@@ -31,7 +31,7 @@ from servobus.families.dmm import params as P
 from servobus.families.dmm.registers import DriveConfig, DriveStatus
 from servobus.families.dmm.vocabulary import DmmFunction
 from servobus.protocols.dyn232 import codec as c
-from servobus.sniff import ByteDecoder, ErrorEvent
+from servobus.sniff import ByteDecoder, ErrorEvent, raw_column
 
 REPLY, CODE, VALUE, AMBIGUOUS = "reply", "code", "value", "ambiguous"
 
@@ -55,7 +55,7 @@ class PacketEvent:
 
     def lines(self, prefix: str = "", width: int = 21) -> list[str]:
         """One line; an ambiguous packet gets a second line with the other reading."""
-        lines = [f"{prefix}{self.raw.hex(' '):<{width}}{self.text}"]
+        lines = [f"{prefix}{raw_column(self.raw.hex(' '), width)}{self.text}"]
         if self.ambiguous:
             lines[0] += "   [direction ambiguous]"
             lines.append(f"{prefix}{'':<{width}}or {self.alternative}")

@@ -8,4 +8,5 @@ URLs: ``dyncan+<python-can interface>://<channel>``, e.g. ``dyncan+pcan://PCAN_U
 from servobus.protocols import ProtocolSpec
 
 SPEC = ProtocolSpec.conventional("dyncan", "dmm-dyn2",
-                                  shortcuts=(("can", "dyncan+{interface}://{channel}"),))
+                                  shortcuts=(("can", "dyncan+{interface}://{channel}"),),
+                                  link="can")

@@ -16,4 +16,4 @@ runs virtual YZ-AIM motors on an in-process python-can virtual bus (docs/easycan
 
 from servobus.protocols import ProtocolSpec
 
-SPEC = ProtocolSpec.conventional("easycan", "yzaim")
+SPEC = ProtocolSpec.conventional("easycan", "yzaim", link="can")

@@ -13,4 +13,4 @@ from servobus.protocols import ProtocolSpec
 #: or on an AsyncAxis): the sync facade runs ``enip://`` calls on the caller's thread.
 SPEC = ProtocolSpec.conventional("enip", "dmm-dyn5",
                                   params="servobus.families.dyn5.family:PARAM_NAMES",
-                                  inline_schemes=("enip",))
+                                  inline_schemes=("enip",), link="network")

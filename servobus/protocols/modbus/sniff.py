@@ -23,7 +23,7 @@ from servobus.families.yzaim import registers as Y
 from servobus.protocols.modbus import codec as C
 from servobus.protocols.modbus.framer import GapFramer, TimedFrame
 from servobus.protocols.modbus.timing import DEFAULT_BAUD, char_time_s
-from servobus.sniff import ByteDecoder, ErrorEvent
+from servobus.sniff import ByteDecoder, ErrorEvent, raw_column
 
 #: Register address -> name, for describe().
 REGISTER_NAMES: Mapping[int, str] = {r.address: r.name for r in Y.REGISTERS}
@@ -50,7 +50,7 @@ class RtuFrameEvent:
                 "text": self.text}
 
     def lines(self, prefix: str = "", width: int = 21) -> list[str]:
-        return [f"{prefix}{self.raw.hex(' '):<{width}}{self.text}"]
+        return [f"{prefix}{raw_column(self.raw.hex(' '), width)}{self.text}"]
 
 
 def frame_event(raw: bytes, previous: bytes | None = None) -> RtuFrameEvent:
