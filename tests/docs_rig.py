@@ -19,7 +19,8 @@ How:
   SIGINT at the end of the block (they must still run then, or have ended with 0);
 - streams that run until Ctrl-C (``sniff``, ``io``) run for ``--duration`` STREAM_S;
 - other ``servobus`` lines run in-process (``servobus.cli.main.main``) and must exit 0;
-  lines with shell syntax (pipes, ``&``, ``$``) run under bash;
+  ``echo 'TEXT' | servobus ...`` runs in-process with TEXT on stdin; other lines with shell
+  syntax (pipes, ``&``, ``$``) run under bash;
 - drive URLs of servers in Python blocks (``dyn232+socket://127.0.0.1:4001``) stay as
   written: the block's ``first`` marker starts that server;
 - ``cell.toml`` and ``m.toml`` in the scratch directory are docs/machine.md's example
@@ -55,6 +56,7 @@ PORT_IN_TEXT = re.compile(
 STREAMS = {"sniff", "io"}  # commands that run until Ctrl-C: run for STREAM_S here
 STREAM_S = "0.5"
 SHELL_SYNTAX = re.compile(r"[|&$<>]")
+ECHO_PIPE = re.compile(r"^echo '([^']*)' \| (servobus [^|&$<>]*)$")
 BIN = Path(sys.executable).parent
 
 
@@ -118,7 +120,7 @@ def needs_processes(block: Block) -> bool:
     if block.kind == "python":
         return False
     for command in commands_of(block.text):
-        if SHELL_SYNTAX.search(command.split(" #", 1)[0]):
+        if SHELL_SYNTAX.search(command.split(" #", 1)[0]) and not ECHO_PIPE.match(command):
             return True
         with contextlib.suppress(ValueError):
             if is_background(words_of(command)):
@@ -272,6 +274,7 @@ class BlockRun:
     def __init__(self, cwd: Path) -> None:
         self.cwd = cwd
         self.background: list[tuple[str, subprocess.Popen[str]]] = []
+        self.pending: list[tuple[int, str, subprocess.Popen[str]]] = []
 
     def start(self, words: list[str]) -> None:
         words = server_words(words)
@@ -279,10 +282,18 @@ class BlockRun:
                                 env=subprocess_env(), stdout=subprocess.PIPE,
                                 stderr=subprocess.PIPE, text=True, start_new_session=True)
         self.background.append((shlex.join(words), proc))
-        for port in dict.fromkeys(ports_of(words)):
-            wait_until(lambda port=port: answers(port) or proc.poll() is not None,
-                       timeout=30, what=f"{shlex.join(words)} listening on {port}")
-            assert proc.poll() is None, self.failure(shlex.join(words), proc)
+        self.pending += [(port, shlex.join(words), proc) for port in
+                         dict.fromkeys(ports_of(words))]
+
+    def ready(self) -> None:
+        """Wait until every server started so far answers on its ports (servers started one
+        after the other start together: the next foreground command or the block's end
+        waits for them)."""
+        for port, command, proc in self.pending:
+            wait_until(lambda port=port, proc=proc: answers(port) or proc.poll() is not None,
+                       timeout=60, what=f"{command} listening on {port}")
+            assert proc.poll() is None, self.failure(command, proc)
+        self.pending.clear()
 
     def failure(self, command: str, proc: subprocess.Popen[str]) -> str:
         out, err = proc.communicate(timeout=10)
@@ -310,6 +321,14 @@ class BlockRun:
 
 def run_command(command: str, run: BlockRun) -> Outcome | None:
     """One line of a shell block; None for a background process."""
+    piped = ECHO_PIPE.match(command)
+    if piped:  # echo 'TEXT' | servobus ...: in-process, TEXT on its stdin
+        run.ready()
+        saved, sys.stdin = sys.stdin, io.StringIO(piped[1] + "\n")
+        try:
+            return run_command(piped[2], run)
+        finally:
+            sys.stdin = saved
     if SHELL_SYNTAX.search(command.split("#", 1)[0]) and not command.lstrip().startswith(
             "servobus"):
         proc = subprocess.run(["bash", "-c", command], cwd=run.cwd, env=subprocess_env(),
@@ -325,6 +344,7 @@ def run_command(command: str, run: BlockRun) -> Outcome | None:
     if is_background(words):
         run.start(words)
         return None
+    run.ready()
     assert words[0] == "servobus", f"not a servobus command: {command}"
     return run_in_process(stream_words(words), env)
 
@@ -343,6 +363,7 @@ def run_shell_block(block: Block, cwd: Path) -> list[tuple[str, Outcome]]:
             results.append((command, outcome))
             assert outcome.code == 0, (f"{block.id}: `{command}` exited {outcome.code}:\n"
                                        f"{outcome.stdout[-3000:]}\n{outcome.stderr[-3000:]}")
+        run.ready()
     finally:
         os.chdir(previous)
         problems = run.stop()
@@ -362,6 +383,7 @@ def run_python_block(block: Block, cwd: Path) -> str:
     try:
         for command in first:
             run_command(command, run)
+        run.ready()
         code = compile(source, block.id, "exec", flags=ast.PyCF_ALLOW_TOP_LEVEL_AWAIT)
         namespace: dict[str, object] = {"__name__": "__docs__"}
         with contextlib.redirect_stdout(out):
