@@ -302,12 +302,15 @@ class BlockRun:
     def stop(self) -> list[str]:
         """Stop every background process; the problems (one that died, or failed)."""
         problems: list[str] = []
+        running = {id(proc) for _, proc in self.background if proc.poll() is None}
+        for _, proc in self.background:  # every one at once: they shut down together
+            if id(proc) in running:
+                proc.send_signal(signal.SIGINT)
         for command, proc in reversed(self.background):
-            if proc.poll() is not None:
+            if id(proc) not in running:
                 if proc.returncode != 0:
                     problems.append(self.failure(command, proc))
                 continue
-            proc.send_signal(signal.SIGINT)
             try:
                 out, err = proc.communicate(timeout=20)
             except subprocess.TimeoutExpired:
