@@ -41,6 +41,7 @@ import signal
 import socket
 import subprocess
 import sys
+import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -50,7 +51,7 @@ ROOT = Path(__file__).resolve().parent.parent
 SHELL_FENCES = {"sh", "bash", "console", ""}
 PYTHON_FENCES = {"python", "py"}
 MARKER = re.compile(r"^<!--\s*docs-test:\s*(skip|first)\s+(.*?)\s*-->\s*$")
-FENCE = re.compile(r"^```(\w*)\s*$")
+FENCE = re.compile(r"^\s*```(\w*)\s*$")  # indented too (a block inside a list item)
 PORT_IN_TEXT = re.compile(
     r"(?:127\.0\.0\.1:|--tcp-port |--udp-port |--port |--gui-port )(\d{4,5})\b")
 STREAMS = {"sniff", "io"}  # commands that run until Ctrl-C: run for STREAM_S here
@@ -95,14 +96,14 @@ def blocks_of(path: Path) -> list[Block]:
             index += 1
             continue
         end = index + 1
-        while not lines[end].startswith("```"):
+        while not lines[end].lstrip().startswith("```"):
             end += 1
         lang = fence.group(1).lower()
         if lang in SHELL_FENCES | PYTHON_FENCES:
             block = Block(str(path.relative_to(ROOT)), index + 1, lang,
-                          "\n".join(lines[index + 1:end]))
+                          textwrap.dedent("\n".join(lines[index + 1:end])))
             above = index - 1
-            while above >= 0 and (marker := MARKER.match(lines[above])):
+            while above >= 0 and (marker := MARKER.match(lines[above].strip())):
                 if marker.group(1) == "skip":
                     block.skip = marker.group(2)
                 else:
