@@ -40,7 +40,7 @@ from collections.abc import Coroutine
 from typing import Any, TypeVar
 
 from servobus.axis.sync import LoopThread
-from servobus.errors import ClosedError
+from servobus.errors import ClosedError, DriveTimeout
 
 T = TypeVar("T")
 
@@ -131,7 +131,7 @@ class InlineRunner:
                 self._turn(task, end)
                 if not task.done():
                     if end is not None and loop.time() >= end:
-                        raise TimeoutError(f"no result within {timeout} s")
+                        raise DriveTimeout(f"no result within {timeout} s")
                     # another thread calls (self._wanted): it must not wait for this call
                     self._start_thread()
                     events._set_running_loop(None)
@@ -194,7 +194,7 @@ class InlineRunner:
                 if self._stopped:
                     raise ClosedError("the connection was closed during the call")
                 if end is not None and self.loop.time() >= end:
-                    raise TimeoutError(f"no result within {timeout} s")
+                    raise DriveTimeout(f"no result within {timeout} s")
         except BaseException:  # the timeout above, or Ctrl-C while waiting
             with contextlib.suppress(RuntimeError):
                 self.loop.call_soon_threadsafe(task.cancel)

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any, ParamSpec, Protocol, TypeVar
 
 from servobus import fastloop
 from servobus.axis.base import DEFAULT_POLL_S, DEFAULT_WAIT_TIMEOUT_S
-from servobus.errors import ClosedError, ConnectionLost
+from servobus.errors import ClosedError, ConnectionLost, DriveTimeout
 
 if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis, AxisTraceHook
@@ -108,7 +108,7 @@ class LoopThread:
             raise ClosedError("the connection is closed") from None
         try:
             if not call.done.acquire(timeout=-1 if timeout is None else timeout):
-                raise TimeoutError(f"no result within {timeout} s")
+                raise DriveTimeout(f"no result within {timeout} s")
         except BaseException:  # the timeout above, or Ctrl-C while waiting
             with contextlib.suppress(RuntimeError):
                 self.loop.call_soon_threadsafe(call.cancel)

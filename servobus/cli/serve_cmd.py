@@ -16,7 +16,22 @@ import click
 
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
-from servobus.cli.failures import Interrupted
+from servobus.cli.failures import CliError, Interrupted
+
+GATEWAY_LIBRARIES = ("asyncua", "aiomqtt")
+
+
+def _missing_library(exc: ModuleNotFoundError) -> Exception:
+    """asyncua and aiomqtt are in the default install (pyproject.toml, issue 32): one missing
+    means an environment installed otherwise (--no-deps, a broken venv); name the command
+    that installs them rather than calling it a servobus bug."""
+    if (exc.name or "").split(".")[0] not in GATEWAY_LIBRARIES:
+        return exc
+    return CliError(f"servobus serve needs the Python package {exc.name!r}, which is not "
+                    "installed in this environment",
+                    f"install the gateway's libraries with `{sys.executable} -m pip install "
+                    f"{' '.join(GATEWAY_LIBRARIES)}`")
+
 
 SHUTDOWN_NOTE = "every axis was stopped and the gateway closed"
 MQTT_PASSWORD_ENV = "SERVOBUS_MQTT_PASSWORD"
@@ -72,10 +87,13 @@ def serve(ctx: CliContext, machine_path: Path | None, endpoint: str, users_path:
     Anonymous OPC UA clients may browse, read and subscribe; methods that command an axis
     need a user of --users. Ctrl-C or SIGTERM stops every axis, then the gateway.
     """
-    from servobus.gateway.mqtt import MqttOptions, parse_broker
-    from servobus.gateway.opcua_server import OpcUaOptions, parse_endpoint
-    from servobus.gateway.serve import GatewayOptions, open_and_serve
-    from servobus.gateway.users import Users
+    try:
+        from servobus.gateway.mqtt import MqttOptions, parse_broker
+        from servobus.gateway.opcua_server import OpcUaOptions, parse_endpoint
+        from servobus.gateway.serve import GatewayOptions, open_and_serve
+        from servobus.gateway.users import Users
+    except ModuleNotFoundError as exc:
+        raise _missing_library(exc) from exc
 
     if machine_path is None and ctx.machine_path is not None:
         machine_path = Path(ctx.machine_path)

@@ -317,7 +317,10 @@ class OpcUaGateway:
             await setup_self_signed_certificate(
                 key, cert, self.application_uri, socket.gethostname(),
                 [ExtendedKeyUsageOID.SERVER_AUTH], {"commonName": "servobus gateway"})
+            # both 0600 as docs/gateway.md says: the key is the secret; the certificate is
+            # public, but nobody else on the PC needs it either (issue 32)
             key.chmod(0o600)
+            cert.chmod(0o600)
         await self.server.load_certificate(str(cert))
         await self.server.load_private_key(str(key))
         self.cert_path = cert

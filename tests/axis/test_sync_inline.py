@@ -12,6 +12,7 @@ import pytest
 
 from servobus.axis import inline
 from servobus.axis.inline import InlineRunner
+from servobus.errors import DriveTimeout
 
 pytestmark = pytest.mark.timeout(60)
 WAIT_S = 10.0  # generous: only a hang or a lost hand-over reaches it
@@ -154,7 +155,7 @@ def test_a_timeout_holds_after_a_hand_over_in_mid_call(runner: InlineRunner) -> 
     helper = threading.Thread(target=other)
     helper.start()
     try:
-        with pytest.raises(TimeoutError):
+        with pytest.raises(DriveTimeout):  # typed, as every servobus error
             runner.run(hang(), timeout=1.0)
     finally:
         helper.join(WAIT_S)

@@ -132,6 +132,7 @@ async def test_beyond_loopback_only_sign_and_encrypt_with_a_kept_certificate(
     cert = tmp_path / "cell.opcua-cert.der"
     first = cert.read_bytes()
     assert (tmp_path / "cell.opcua-key.pem").stat().st_mode & 0o077 == 0
+    assert (tmp_path / "cell.opcua-cert.der").stat().st_mode & 0o077 == 0
     again = OpcUaGateway(machine, Commander(machine), options)  # type: ignore[arg-type]
     await again._security()
     assert cert.read_bytes() == first  # kept, not made anew on the next start
