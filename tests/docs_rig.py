@@ -45,7 +45,7 @@ import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from conftest import wait_until
+from rig import free_port, wait_until
 
 ROOT = Path(__file__).resolve().parent.parent
 SHELL_FENCES = {"sh", "bash", "console", ""}
@@ -143,12 +143,6 @@ def all_blocks(names: tuple[str, ...] | None = None) -> list[Block]:
     if names is not None:
         files = [f for f in files if str(f.relative_to(ROOT)) in names]
     return [block for path in files for block in blocks_of(path)]
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
 
 
 def with_free_ports(text: str) -> str:
