@@ -45,6 +45,7 @@ import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import pytest
 from rig import free_port, wait_until
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -407,3 +408,13 @@ def scratch(tmp: Path) -> Path:
     for name in ("cell.toml", "m.toml"):
         (tmp / name).write_text(machine_file_text(), encoding="utf-8")
     return tmp
+
+
+def run_block(block: Block, tmp_path: Path) -> None:
+    """One block as a test: skipped with its marker's reason, else run in a scratch folder."""
+    if block.skip:
+        pytest.skip(block.skip)
+    if block.kind == "python":
+        run_python_block(block, scratch(tmp_path))
+    else:
+        run_shell_block(block, scratch(tmp_path))

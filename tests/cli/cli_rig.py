@@ -16,6 +16,22 @@ from servobus.axis import Axis
 from servobus.axis.base import AsyncAxis
 from servobus.cli.main import main
 
+#: A machine of one mm axis with soft limits (DMM, serial) and one deg axis without (YZ-AIM,
+#: CAN), on virtual drives.
+CELL = """\
+name = "cell"
+[axes.x]
+url = "sim://dyn232?fast=1"
+id = 1
+unit = "mm"
+per_rev = 5.0
+limits = [-10.0, 300.0]
+[axes.c]
+url = "sim://easycan?fast=1"
+id = 1
+unit = "deg"
+"""
+
 #: An async action on each AsyncAxis the CLI opens.
 Action = Callable[[AsyncAxis], Awaitable[Any]]
 ENV = ("SERVOBUS_MACHINE", "SERVOBUS_URL", "SERVOBUS_ID")

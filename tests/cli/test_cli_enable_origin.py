@@ -16,9 +16,9 @@ from collections.abc import Awaitable, Callable
 from pathlib import Path
 
 import pytest
+from cli_rig import CELL, run
 from cli_rig import no_env as no_env  # the fixture, for this module
 from cli_rig import on_connect as on_connect  # the fixture
-from cli_rig import run
 
 from servobus.axis.base import AsyncAxis
 from servobus.axis.types import AxisStatus
@@ -27,19 +27,6 @@ from servobus.families.dmm.registers import DriveConfig
 
 Action = Callable[[AsyncAxis], Awaitable[None]]
 URLS = ["sim://dyn232?fast=1", "sim://easycan?fast=1", "sim://enip"]
-MACHINE = """\
-[axes.x]
-url = "sim://dyn232?fast=1"
-id = 1
-unit = "mm"
-per_rev = 5.0
-limits = [-10.0, 300.0]
-
-[axes.c]
-url = "sim://easycan?fast=1"
-id = 1
-unit = "deg"
-"""
 
 
 
@@ -106,7 +93,7 @@ def test_enable_and_disable_a_machine_axis(capsys: pytest.CaptureFixture[str],
                                            on_connect: list[Action], tmp_path: Path,
                                            axis: str) -> None:
     machine = tmp_path / "m.toml"
-    machine.write_text(MACHINE, encoding="utf-8")
+    machine.write_text(CELL, encoding="utf-8")
     on_connect.append(disabled)
     code, out, err = run(capsys, "--machine", str(machine), "--axis", axis, "enable")
     assert code == 0, err
@@ -133,7 +120,7 @@ def test_origin_makes_where_the_motor_stands_zero(
 def test_origin_on_a_machine_axis_counts_the_limits_from_it(
         capsys: pytest.CaptureFixture[str], on_connect: list[Action], tmp_path: Path) -> None:
     machine = tmp_path / "m.toml"
-    machine.write_text(MACHINE, encoding="utf-8")
+    machine.write_text(CELL, encoding="utf-8")
     on_connect.append(one_rev_off)
     code, out, err = run(capsys, "--machine", str(machine), "--axis", "x", "origin")
     assert code == 0, err
@@ -172,7 +159,7 @@ def test_home_returns_a_dmm_drive_in_absolute_mode_to_its_stored_zero(
 def test_home_on_a_machine_axis(capsys: pytest.CaptureFixture[str], on_connect: list[Action],
                                 tmp_path: Path) -> None:
     machine = tmp_path / "m.toml"
-    machine.write_text(MACHINE, encoding="utf-8")
+    machine.write_text(CELL, encoding="utf-8")
     on_connect.append(absolute_off_zero)
     code, out, err = run(capsys, "--machine", str(machine), "--axis", "x", "home")
     assert code == 0, err
@@ -197,7 +184,7 @@ def test_status_shows_the_following_error_where_the_drive_reports_it(
 def test_machine_status_has_a_following_error_column(capsys: pytest.CaptureFixture[str],
                                                      tmp_path: Path) -> None:
     machine = tmp_path / "m.toml"
-    machine.write_text(MACHINE, encoding="utf-8")
+    machine.write_text(CELL, encoding="utf-8")
     code, out, err = run(capsys, "--machine", str(machine), "status")
     assert code == 0, err
     head, x, c = out.splitlines()[1:4]

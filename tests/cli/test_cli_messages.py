@@ -12,6 +12,7 @@ import json
 from pathlib import Path
 
 import pytest
+from cli_rig import CELL
 
 from servobus.cli import failures as F
 from servobus.cli.main import main
@@ -19,21 +20,6 @@ from servobus.errors import DriveTimeout, InvalidValue, NotSupported, ProtocolEr
 from servobus.families.yzaim.family import axis_status
 from servobus.machine import open_machine
 from servobus.machine.config import parse_machine
-
-#: One mm axis (DMM, serial) and one deg axis (YZ-AIM, CAN) on virtual drives.
-CELL = """\
-name = "cell"
-[axes.x]
-url = "sim://dyn232?fast=1"
-id = 1
-unit = "mm"
-per_rev = 5.0
-limits = [-10.0, 300.0]
-[axes.c]
-url = "sim://easycan?fast=1"
-id = 1
-unit = "deg"
-"""
 
 
 def run(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:

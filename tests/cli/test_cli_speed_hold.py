@@ -2,17 +2,22 @@
 
 In-process: ``--for`` streams targets, then stops; on a ``continuous`` axis the speed is
 open-ended and the command returns at once. With real processes: a virtual DYN CAN drive
-in its own process (socketcand), ``servobus speed`` in another, SIGKILLed while the motor
-cruises; a third client watches the drive come to rest within the documented bound
-(docs/safety.md: the lead of the last renewal plus one renewal period's travel).
+in its own process (socketcand), ``servobus speed`` (or ``servobus jog`` on a pseudo-terminal,
+its key held) in another, SIGKILLed while the motor cruises; a third client watches the drive
+come to rest within the documented bound (docs/safety.md: the lead of the last renewal plus
+one renewal period's travel).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
+import pty
 import signal
 import subprocess
 import sys
+import threading
 from collections.abc import Iterator
 from typing import Any
 
@@ -151,4 +156,54 @@ def test_a_killed_speed_command_stops_within_the_lead(drive_url: str) -> None:
     # at_death is read after the kill, so the travel from it is at most the last lead;
     # the bound adds one renewal period (docs/safety.md) and the margin 1/16 rev for the
     # drive's settling. A lease left streaming or an open-ended speed would run on for ever.
+    assert -cpr / 16 <= travel <= bound + cpr / 16, (travel, bound)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(120)
+def test_a_killed_jog_stops_within_the_lead(drive_url: str) -> None:
+    """``servobus jog`` on a terminal, its arrow key held (auto-repeat), SIGKILLed while the
+    motor cruises: the drive comes to rest by itself within the same bound as ``speed``."""
+    url = drive_url
+    master, slave = pty.openpty()
+    with connect(url, drive_id=1) as watcher:
+        cpr = watcher.counts_per_rev
+        profile = watcher.stream_profile()
+        start = watcher.position()
+        cli = subprocess.Popen([*SERVOBUS, "--url", url, "--id", "1", "jog", "--speed",
+                                str(RPM)], stdin=slave, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+        held = threading.Event()
+
+        def keyboard() -> None:  # a held Right key: the terminal's auto-repeat
+            while not held.wait(0.03):
+                with contextlib.suppress(OSError):
+                    os.write(master, b"\x1b[C")
+
+        typist = threading.Thread(target=keyboard, daemon=True)
+        typist.start()
+        try:
+            def cruising() -> bool:
+                assert cli.poll() is None, cli.communicate()
+                return watcher.position() - start > 2 * cpr  # 0.2 s at 600 rpm
+            wait_until(cruising, timeout=30, what="the jog to move the motor 2 rev")
+            cli.send_signal(signal.SIGKILL)
+            cli.wait(10)
+            at_death = watcher.position()
+        finally:
+            held.set()
+            typist.join(5)
+            stop_process(cli)
+            os.close(master)
+            os.close(slave)
+        samples: list[int] = []
+
+        def at_rest() -> bool:
+            samples.append(watcher.position())
+            return len(samples) > 3 and len(set(samples[-3:])) == 1 \
+                and not watcher.status().moving
+        wait_until(at_rest, timeout=30, poll=0.1, what="the motor at rest after the jog died")
+        travel = samples[-1] - at_death
+    v = RPM * cpr / 60  # counts/s
+    bound = lead(v, profile.accel_rpm_s * cpr / 60) + v * STREAM_S
     assert -cpr / 16 <= travel <= bound + cpr / 16, (travel, bound)

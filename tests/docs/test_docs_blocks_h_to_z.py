@@ -9,16 +9,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from docs_rig import Block, all_blocks, params, run_python_block, run_shell_block, scratch
+from docs_rig import Block, all_blocks, params, run_block
 
 BLOCKS = [b for b in all_blocks() if b.path.startswith("docs/") and b.path[5] > "g"]
 
 
 @pytest.mark.parametrize("block", params(BLOCKS))
 def test_docs_block_runs(block: Block, tmp_path: Path) -> None:
-    if block.skip:
-        pytest.skip(block.skip)
-    if block.kind == "python":
-        run_python_block(block, scratch(tmp_path))
-    else:
-        run_shell_block(block, scratch(tmp_path))
+    run_block(block, tmp_path)
