@@ -253,8 +253,12 @@ class ScopeSession:
         assert s is not None
         nb, pairs = self._buckets()
         rate = self._rate()
-        old_nb, _, old_rate = self._grid
-        if not self._decimators or (nb != old_nb and abs(rate - old_rate) > 0.2 * old_rate):
+        old_nb, old_pairs, old_rate = self._grid
+        # A new grid when the rate is first known or moves by a fifth (a polled rate jitters):
+        # the buckets may stay while min/max pairs start (a 2 s window of 400 px is 400
+        # buckets at 0 Hz and at 4 kHz), so the pairs count as much as the buckets.
+        if not self._decimators or ((nb, pairs) != (old_nb, old_pairs)
+                                    and abs(rate - old_rate) > 0.2 * old_rate):
             dt = s.window_s / nb
             self._decimators = {a: RollingDecimator(self.samplers[a].ring, names, dt, pairs, nb)
                                 for a, names in self._groups.items()}
