@@ -25,7 +25,7 @@ from servobus.sim.cli_options import SOCKETCAND, sim_banner, sim_options, stoppe
 from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS, fit_fd_limit, log_to_stderr
 from servobus.sim.socketcand_bus import socketcand_bus
 from servobus.sim.wall_clock import RealtimeClock
-from servobus.sim.yzaim.fleet import make_motors, parse_addresses
+from servobus.sim.yzaim.fleet import make_motors, parse_addresses, record_positions
 from servobus.sim.yzaim.motor import YzaimMotor
 
 
@@ -41,8 +41,7 @@ async def run_socketcand_motors(motors: Sequence[YzaimMotor], host: str, port: i
             await serve(network, bus.node_port, clock=RealtimeClock(network.motors),
                         stop=bus.stop)
         finally:
-            for motor in motors:  # 1: "communication mode: power-off record position"
-                motor.store.record_position(motor.position)
+            record_positions(motors)
     return network
 
 

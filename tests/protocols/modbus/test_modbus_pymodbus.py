@@ -8,9 +8,11 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
+from rig import wait_until
 
 from servobus.families.yzaim import registers as Y
 
@@ -148,3 +150,41 @@ def test_rtu_over_a_pseudo_terminal() -> None:
     finally:
         proc.terminate()
         proc.wait(10)
+
+
+def test_state_file_keeps_a_multi_turn_position_across_a_restart(tmp_path: Path) -> None:
+    """1: "communication mode: power-off record position": the 57AIM's multi-turn position
+    survives a restart of ``sim modbus --state`` as it does for ``sim easycan`` (issue 34:
+    the motor came back at 0). Written and read by pymodbus, the simulator SIGTERMed."""
+    state = str(tmp_path / "motors.json")
+    target = 3 * Y.COUNTS_PER_REV + 1234
+
+    def position(c: ModbusTcpClient) -> int:
+        regs = c.read_holding_registers(ABS, count=2, device_id=3).registers
+        return int(c.convert_from_registers(regs, INT32, word_order="little"))
+
+    def run(check: Callable[[ModbusTcpClient], int]) -> int:
+        proc, lines = _start("--ids", "3", "--fast", "--state", state)
+        try:
+            assert lines[0].startswith("listening on tcp://"), lines
+            host, port = lines[0].split("tcp://", 1)[1].rsplit(":", 1)
+            c = ModbusTcpClient(host, port=int(port), framer=FramerType.RTU, timeout=2,
+                                retries=1)
+            assert c.connect()
+            try:
+                return check(c)
+            finally:
+                c.close()
+        finally:
+            proc.terminate()
+            assert proc.wait(10) == 0
+
+    def move(c: ModbusTcpClient) -> int:
+        words = c.convert_to_registers(target, INT32, word_order="little")
+        assert not c.write_registers(ABS, words, device_id=3).isError()
+        wait_until(lambda: abs(position(c) - target) <= 10, timeout=20.0, what="the move")
+        wait_until(lambda: position(c) == position(c), timeout=20.0, what="the motor at rest")
+        return position(c)
+
+    before = run(move)
+    assert run(position) == before
