@@ -418,6 +418,10 @@ class YzaimMotor:
         self.supply_v = float(volts)
         self._check_supply()
 
+    def world(self) -> dict[str, float | bool]:
+        """The world around the motor as the simulator set it (control channel ``state``)."""
+        return {**self.drive.world(), "supply_v": self.supply_v, "battery_ok": self.battery_ok}
+
     def set_battery(self, ok: bool) -> None:
         """Multi-turn backup battery present and charged (False: warning 0x13)."""
         self.battery_ok = bool(ok)

@@ -15,6 +15,7 @@ import pytest
 from rig import wait_until
 
 from servobus.families.yzaim import registers as Y
+from servobus.sim.control_client import ControlClient
 
 pymodbus = pytest.importorskip("pymodbus")
 from pymodbus import FramerType  # noqa: E402
@@ -188,3 +189,43 @@ def test_state_file_keeps_a_multi_turn_position_across_a_restart(tmp_path: Path)
 
     before = run(move)
     assert run(position) == before
+
+
+def test_the_control_channel_injects_faults_pymodbus_reads() -> None:
+    """``--control`` as on ``sim dyn232``: a flat battery (warning 0x13, the motor keeps
+    running) through the control client, then a blocked shaft through ``servobus sim control``
+    (stall 0x14 after 0x18's units digit, 1 s here), each read by pymodbus from 0x0E."""
+    proc = subprocess.Popen([sys.executable, "-m", "servobus", "sim", "modbus", "--ids", "3",
+                             "--fast", "--control", "tcp://127.0.0.1:0", "--duration", "50"],
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        assert proc.stdout is not None
+        listening, control_line = proc.stdout.readline(), proc.stdout.readline()
+        host, port = listening.strip().split("tcp://", 1)[1].rsplit(":", 1)
+        assert control_line.startswith("control on tcp://127.0.0.1:"), control_line
+        url = control_line.strip().split(" ", 2)[2]
+        c = ModbusTcpClient(host, port=int(port), framer=FramerType.RTU, timeout=2, retries=1)
+        assert c.connect()
+        try:
+            def alarm() -> int:
+                return int(c.read_holding_registers(R["alarm_code"].address,
+                                                    device_id=3).registers[0])
+
+            with ControlClient(url) as control:
+                assert control.call("fault", fault="battery")["alarm_code"] == 0x13
+                assert alarm() == 0x13
+                assert control.call("battery", ok=True)["alarm"] == "none"
+            assert not c.write_register(R["standstill_max_output"].address, 301,
+                                        device_id=3).isError()
+            cli = subprocess.run([sys.executable, "-m", "servobus", "sim", "control", "--to",
+                                  url, "fault", "stall"], capture_output=True, text=True,
+                                 timeout=60)
+            assert cli.returncode == 0 and "fault: \"stall\"" in cli.stdout, cli.stderr
+            words = c.convert_to_registers(Y.COUNTS_PER_REV, INT32, word_order="little")
+            assert not c.write_registers(ABS, words, device_id=3).isError()
+            wait_until(lambda: alarm() == 0x14, timeout=20.0, what="stall 0x14")
+        finally:
+            c.close()
+    finally:
+        proc.terminate()
+        proc.wait(10)
