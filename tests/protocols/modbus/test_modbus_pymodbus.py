@@ -12,8 +12,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from click.testing import CliRunner
 from rig import wait_until
 
+from servobus.cli.main import cli
 from servobus.families.yzaim import registers as Y
 from servobus.sim.control_client import ControlClient
 
@@ -193,8 +195,9 @@ def test_state_file_keeps_a_multi_turn_position_across_a_restart(tmp_path: Path)
 
 def test_the_control_channel_injects_faults_pymodbus_reads() -> None:
     """``--control`` as on ``sim dyn232``: a flat battery (warning 0x13, the motor keeps
-    running) through the control client, then a blocked shaft through ``servobus sim control``
-    (stall 0x14 after 0x18's units digit, 1 s here), each read by pymodbus from 0x0E."""
+    running) through the control client, cleared and a blocked shaft injected through
+    ``servobus sim control`` (stall 0x14 after 0x18's units digit, 1 s here), each read by
+    pymodbus from 0x0E."""
     proc = subprocess.Popen([sys.executable, "-m", "servobus", "sim", "modbus", "--ids", "3",
                              "--fast", "--control", "tcp://127.0.0.1:0", "--duration", "50"],
                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
@@ -214,13 +217,13 @@ def test_the_control_channel_injects_faults_pymodbus_reads() -> None:
             with ControlClient(url) as control:
                 assert control.call("fault", fault="battery")["alarm_code"] == 0x13
                 assert alarm() == 0x13
-                assert control.call("battery", ok=True)["alarm"] == "none"
+            ok = CliRunner().invoke(cli, ["sim", "control", "--to", url, "battery", "ok"])
+            assert ok.exit_code == 0 and 'alarm: "none"' in ok.output, ok.output
+            assert alarm() == 0
             assert not c.write_register(R["standstill_max_output"].address, 301,
                                         device_id=3).isError()
-            cli = subprocess.run([sys.executable, "-m", "servobus", "sim", "control", "--to",
-                                  url, "fault", "stall"], capture_output=True, text=True,
-                                 timeout=60)
-            assert cli.returncode == 0 and "fault: \"stall\"" in cli.stdout, cli.stderr
+            stall = CliRunner().invoke(cli, ["sim", "control", "--to", url, "fault", "stall"])
+            assert stall.exit_code == 0 and 'fault: "stall"' in stall.output, stall.output
             words = c.convert_to_registers(Y.COUNTS_PER_REV, INT32, word_order="little")
             assert not c.write_registers(ABS, words, device_id=3).isError()
             wait_until(lambda: alarm() == 0x14, timeout=20.0, what="stall 0x14")
