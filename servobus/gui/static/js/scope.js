@@ -3,7 +3,7 @@
 // Frames arrive binary (frames.js); the page acks each one once drawn, so the server
 // never sends faster than this page draws.
 import { parseFrame, FLAG_TRIGGERED, FLAG_HOLDING, FLAG_FREE_RUN } from "./frames.js";
-import { $, el, fmt, download, readField, COLORS } from "./util.js";
+import { $, axisLabel, el, fmt, download, readField, signalUnit, COLORS } from "./util.js";
 
 const WINDOWS = [0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1, 2, 5, 10, 20];
 const MAX_CHANNELS = 8;
@@ -37,6 +37,7 @@ export class ScopePanel {
     for (const id of ["#scope-window", "#trig-mode", "#trig-source", "#trig-edge", "#trig-level", "#trig-pre"]) {
       $(id).addEventListener("change", () => this.configure());
     }
+    $("#trig-source").addEventListener("change", () => this.renderTriggerUnit());
     $("#scope-add").addEventListener("click", () => {
       if (this.channels.length >= MAX_CHANNELS) return;
       this.channels.push({ axis: this.ctx.selected, signal: "current" });
@@ -56,7 +57,8 @@ export class ScopePanel {
     ctx.link.on("hello", () => { if (this.visible) this.configure(); });
     ctx.link.on("error", (doc) => { if (doc.request && doc.request.startsWith("scope")) $("#scope-status").textContent = `scope: ${doc.message}`; });
     window.addEventListener("resize", () => { if (this.visible) { this.build(); this.configure(); } });
-    ctx.onSelect((id) => { $("#scope-jog-axis").textContent = `axis ${id}, speed from Motion`; });
+    ctx.onSelect((id) => { $("#scope-jog-axis").textContent = `${axisLabel(ctx.identity(id))}, speed from Motion`; });
+    ctx.onIdentity(() => { this.renderChannels(); if (this.visible) this.build(); });
     this.renderChannels();
   }
 
@@ -65,13 +67,19 @@ export class ScopePanel {
 
   signal(name) { return this.signals.find((s) => s.name === name); }
 
+  // A channel's unit as the server sends it (the axis's own: mm, mm/s, deg ...; issue 33).
+  unitOf(ch) { return signalUnit(this.ctx.identity(ch.axis), this.signal(ch.signal)); }
+
+  // "x position [mm]": how a channel is named in legends, cursors and exports.
+  channelName(ch) { return `${axisLabel(this.ctx.identity(ch.axis))} ${this.signal(ch.signal).label} [${this.unitOf(ch)}]`; }
+
   renderChannels() {
     const box = $("#scope-channels");
     box.replaceChildren(...this.channels.map((ch, i) => {
       const axisSel = el("select", { "data-ch": i, "data-field": "axis" },
         ...this.ctx.info.axes.map((a) => el("option", { value: a.id, text: a.name ? `${a.name} (${a.protocol})` : `axis ${a.id}`, selected: a.id === ch.axis })));
       const sigSel = el("select", { "data-ch": i, "data-field": "signal" },
-        ...this.signals.map((s) => el("option", { value: s.name, text: `${s.label} [${s.unit}]`, selected: s.name === ch.signal })));
+        ...this.signals.map((s) => el("option", { value: s.name, text: `${s.label} [${signalUnit(this.ctx.identity(ch.axis), s)}]`, selected: s.name === ch.signal })));
       axisSel.addEventListener("change", () => { ch.axis = Number(axisSel.value); this.channelsChanged(); });
       sigSel.addEventListener("change", () => { ch.signal = sigSel.value; this.channelsChanged(); });
       const remove = el("button", { text: "×", title: "remove channel", onclick: () => {
@@ -84,7 +92,13 @@ export class ScopePanel {
     const src = $("#trig-source");
     const keep = Math.min(Number(src.value || 0), this.channels.length - 1);
     src.replaceChildren(...this.channels.map((ch, i) =>
-      el("option", { value: i, text: `${i + 1}: axis ${ch.axis} ${this.signal(ch.signal).label}`, selected: i === keep })));
+      el("option", { value: i, text: `${i + 1}: ${axisLabel(this.ctx.identity(ch.axis))} ${this.signal(ch.signal).label}`, selected: i === keep })));
+    this.renderTriggerUnit();
+  }
+
+  renderTriggerUnit() {
+    const ch = this.channels[Number($("#trig-source").value || 0)];
+    $("#trig-unit").textContent = ch ? this.unitOf(ch) : "";
   }
 
   channelsChanged() { this.renderChannels(); this.build(); this.configure(); }
@@ -129,7 +143,7 @@ export class ScopePanel {
   build() {
     const host = $("#scope-plot");
     if (this.plot) { this.plot.destroy(); this.plot = null; }
-    const bits = this.channels.filter((c) => this.signal(c.signal).unit === "bit");
+    const bits = this.channels.filter((c) => this.unitOf(c) === "bit");
     this.bitSlot = new Map();
     bits.forEach((c, k) => this.bitSlot.set(c, k));
     const scales = { x: { time: false, range: () => this.xRange() } };
@@ -137,7 +151,7 @@ export class ScopePanel {
       values: (u, vals) => { const span = u.scales.x.max - u.scales.x.min; return vals.map((v) => fmtTick(v, span)); } }];
     const units = [];
     for (const c of this.channels) {
-      const unit = unitScale(this.signal(c.signal).unit);
+      const unit = unitScale(this.unitOf(c));
       if (!units.includes(unit)) units.push(unit);
     }
     units.forEach((unit, i) => {
@@ -150,9 +164,8 @@ export class ScopePanel {
     });
     const series = [{ label: "t", value: (u, v) => (v === null || v === undefined ? "–" : fmtTime(v)) },
       ...this.channels.map((c, i) => {
-        const sig = this.signal(c.signal);
-        return { label: `${i + 1}: A${c.axis} ${sig.label} [${sig.unit}]`, stroke: COLORS[i], width: 1.25,
-          scale: unitScale(sig.unit), points: { show: false },
+        return { label: `${i + 1}: ${this.channelName(c)}`, stroke: COLORS[i], width: 1.25,
+          scale: unitScale(this.unitOf(c)), points: { show: false },
           value: (u, v, si, idx) => fmt(this.rawValue(si - 1, idx)) };
       })];
     const width = Math.max(300, host.clientWidth || 900);
@@ -240,7 +253,7 @@ export class ScopePanel {
       ctx.beginPath(); ctx.moveTo(x, top); ctx.lineTo(x, top + height); ctx.stroke();
       const tc = this.channels[Number($("#trig-source").value || 0)];
       if (tc) {
-        const scale = unitScale(this.signal(tc.signal).unit);
+        const scale = unitScale(this.unitOf(tc));
         const slot = this.bitSlot.get(tc);
         const level = ((this.good || {})["#trig-level"] ?? 0) + (slot === undefined ? 0 : slot * 1.25);
         const y = u.valToPos(level, scale, true);
@@ -272,7 +285,7 @@ export class ScopePanel {
       ctx.globalAlpha = 0.45 - 0.12 * age;
       this.channels.forEach((ch, i) => {
         if (i >= o.ys.length) return;
-        const scale = unitScale(this.signal(ch.signal).unit);
+        const scale = unitScale(this.unitOf(ch));
         const slot = this.bitSlot.get(ch);
         const shift = slot === undefined ? 0 : slot * 1.25;
         const y = o.ys[i];
@@ -322,9 +335,8 @@ export class ScopePanel {
       el("td", { class: "num", text: dt === null ? "–" : `${fmtTime(dt)}  (1/Δt ${dt ? fmt(1 / Math.abs(dt)) : "–"} Hz)` }))];
     this.channels.forEach((c, i) => {
       const va = this.valueAt(i, a), vb = this.valueAt(i, b);
-      const sig = this.signal(c.signal);
       rows.push(el("tr", {}, el("td", {}, el("span", { class: "swatch", style: `display:inline-block;width:10px;height:10px;background:${COLORS[i]};margin-right:6px` }),
-        `A${c.axis} ${sig.label} [${sig.unit}]`),
+        this.channelName(c)),
       el("td", { class: "num", text: fmt(va) }), el("td", { class: "num", text: fmt(vb) }),
       el("td", { class: "num", text: va !== null && vb !== null ? fmt(vb - va) : "–" })));
     });
@@ -345,11 +357,11 @@ export class ScopePanel {
     const sources = s.sources || [];
     const src = sources.filter((x) => x.running || !x.error).map((x) => {
       const kind = x.source === "trace" ? "drive trace" : x.source === "poll" ? "polled" : "starting";
-      return `A${x.axis} ${kind} ${fmt(x.rate_hz)} Hz${x.error ? ` (${x.error})` : ""}`;
+      return `${axisLabel(this.ctx.identity(x.axis))} ${kind} ${fmt(x.rate_hz)} Hz${x.error ? ` (${x.error})` : ""}`;
     }).join(", ");
     // a sampler that stopped says why, in the status line, in the error colour (never silent)
     const stopped = sources.filter((x) => !x.running && x.error)
-      .map((x) => el("span", { class: "sampler-error", text: ` · A${x.axis} ${x.error}` }));
+      .map((x) => el("span", { class: "sampler-error", text: ` · ${axisLabel(this.ctx.identity(x.axis))} ${x.error}` }));
     const lat = s.latency_ms ? `delay ${s.latency_ms.median.toFixed(0)} ms (p95 ${s.latency_ms.p95.toFixed(0)})` : "";
     $("#scope-status").replaceChildren(el("span", { class: "state", text: state }), ...stopped,
       `${src ? " · " + src : ""} · ${f ? `${f.raw.toLocaleString("en-US")} samples in view` : "no data yet"} · ${this.stats.fps} frames/s drawn ${lat ? "· " + lat : ""}`);
@@ -368,8 +380,7 @@ export class ScopePanel {
     c.font = `${12 * devicePixelRatio}px sans-serif`;
     let x = 8 * devicePixelRatio;
     this.channels.forEach((ch, i) => {
-      const sig = this.signal(ch.signal);
-      const text = `${i + 1}: axis ${ch.axis} ${sig.label} [${sig.unit}]`;
+      const text = `${i + 1}: ${this.channelName(ch)}`;
       c.fillStyle = COLORS[i]; c.fillText(text, x, 18 * devicePixelRatio);
       x += c.measureText(text).width + 16 * devicePixelRatio;
     });
