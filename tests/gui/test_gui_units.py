@@ -8,8 +8,10 @@ level in mm, step size and wave amplitude in mm - and names the axis in its mess
 
 from __future__ import annotations
 
+import asyncio
 import json
 import math
+import re
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -166,3 +168,60 @@ def test_step_and_wave_in_mm(client: TestClient) -> None:
     post(client, wave, {"kind": "sine", "amplitude": 1.0, "unit": "mm", "hz": 2})
     post(client, wave, {"kind": "off"})
     post(client, f"/api/axes/{X}/command", {"action": "stop"})
+
+
+#: What a Python repr looks like in a line: ``Name(``, ``<Enum.X: 0>``, ``b'...'``.
+REPR = re.compile(r"[A-Za-z_]\(|<\w+\.\w+: |\bb'")
+
+
+def test_the_traffic_log_is_one_decoded_line_per_transaction(client: TestClient) -> None:
+    def lines() -> list[dict[str, Any]]:
+        traffic: list[dict[str, Any]] = client.get("/api/diagnostics").json()["traffic"]
+        return traffic
+
+    # the status monitor reads every axis: DMM DYN232M (x, y) and YZ-AIM EasyCan (c)
+    seen = wait_until(lambda: (t := lines()) and any("WRITE" in x["text"] or "READ" in x["text"]
+                                                     for x in t if "->" in x["text"]) and t,
+                      timeout=20, what="traffic of every link")
+    assert all(not REPR.search(x["text"]) for x in seen), [x["text"] for x in seen][:5]
+    pairs = [x for x in seen if x["dir"] == "pair"]
+    assert pairs and all("  =>  " in x["text"] for x in pairs)
+    assert len(pairs) > len(seen) / 2  # a read is one line with its answer
+
+
+def test_ethernet_ip_traffic_in_the_sniff_decoders_words() -> None:
+    from servobus.axis.connect import connect_async
+    from servobus.gui.traffic import TrafficLog
+
+    async def run() -> list[dict[str, object]]:
+        axis = await connect_async("sim://enip?fast=1", drive_id=1)
+        try:
+            log = TrafficLog()
+            await axis.add_trace(log.hook)
+            await axis.position()
+            await axis.move_by(100)
+            return log.recent(50, now=math.inf)
+        finally:
+            await axis.close()
+
+    shown = [str(x["text"]) for x in asyncio.run(run())]
+    assert shown and not [t for t in shown if REPR.search(t)], shown
+    assert any(t.startswith("SET_ATTRIBUTE_SINGLE") and "go_relative_pos" in t and
+               "=>  reply SET_ATTRIBUTE_SINGLE: ok" in t for t in shown), shown
+
+
+def test_favicon_and_an_owner_refusal_that_says_who(client: TestClient) -> None:
+    icon = client.get("/favicon.ico")
+    assert icon.status_code == 200 and icon.headers["content-type"] == "image/svg+xml"
+    assert client.get("/static/favicon.svg").status_code == 200
+    move_to(client, 0.0)
+    with client.websocket_connect(WS) as ws1, client.websocket_connect(WS) as ws2:
+        first, second = Page(ws1), Page(ws2)
+        owner = first.until(lambda: first.last("hello"), "hello")["owner"]
+        second.until(lambda: second.last("hello"), "hello")
+        first.send({"type": "jog", "axis": X, "speed": 5.0})
+        first.until(lambda: (s := first.last("status")) and s["leases"].get(str(X)), "jogging")
+        second.send({"type": "jog", "axis": X, "speed": 5.0})
+        refusal = second.until(lambda: second.last("error"), "the refusal")
+        assert f"axis x is held by page {owner}" in refusal["message"]
+        first.send({"type": "jog_stop", "axis": X})

@@ -23,6 +23,16 @@ from servobus.protocols.easycan.functions import (
 )
 
 
+class _Described:
+    """Every message says itself in the sniff decoder's words (what ``servobus sniff`` and
+    the GUI's traffic log show), not as a repr."""
+
+    def describe(self, from_drive: bool | None = None) -> str:
+        from servobus.protocols.easycan.describe import describe  # it imports this module
+
+        return describe(self)  # type: ignore[arg-type]
+
+
 def _check(name: str, value: int, lo: int, hi: int) -> None:
     if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
         raise ArgumentRangeError(f"{name} {value!r} is outside {lo}..{hi}")
@@ -42,7 +52,7 @@ def _check_ends(slave: int, host: int) -> None:
 
 # ------------------------------------------------------------------ requests (host -> drive)
 @dataclass(frozen=True)
-class ReadRequest:
+class ReadRequest(_Described):
     """0x03: read ``count`` consecutive registers from ``address`` (the drive allows 1..2)."""
 
     slave: int
@@ -58,7 +68,7 @@ class ReadRequest:
 
 
 @dataclass(frozen=True)
-class WriteRequest:
+class WriteRequest(_Described):
     """0x06: write 1 or 2 consecutive registers from ``address`` (16-bit wire words)."""
 
     slave: int
@@ -74,7 +84,7 @@ class WriteRequest:
 
 
 @dataclass(frozen=True)
-class EmergencyStop:
+class EmergencyStop(_Described):
     """0x10: stop immediately; the drive answers."""
 
     slave: int
@@ -86,7 +96,7 @@ class EmergencyStop:
 
 
 @dataclass(frozen=True)
-class ClearPosition:
+class ClearPosition(_Described):
     """0x11: clear the absolute position to 0; the drive does not answer."""
 
     slave: int
@@ -98,7 +108,7 @@ class ClearPosition:
 
 
 @dataclass(frozen=True)
-class ReadMultipleRequest:
+class ReadMultipleRequest(_Described):
     """0x12: read 1..3 arbitrary registers in one frame."""
 
     slave: int
@@ -116,7 +126,7 @@ class ReadMultipleRequest:
 
 
 @dataclass(frozen=True)
-class PositionCacheWrite:
+class PositionCacheWrite(_Described):
     """Identifier 0x100|slave (silent) or 0x300|slave (``reply``): absolute position cache."""
 
     slave: int
@@ -134,7 +144,7 @@ Request = (ReadRequest | WriteRequest | EmergencyStop | ClearPosition | ReadMult
 
 # ------------------------------------------------------------------ replies (drive -> host)
 @dataclass(frozen=True)
-class ReadReply:
+class ReadReply(_Described):
     """0x03 reply: the registers' words from ``address`` on."""
 
     slave: int
@@ -150,7 +160,7 @@ class ReadReply:
 
 
 @dataclass(frozen=True)
-class WriteReply:
+class WriteReply(_Described):
     """0x06 reply: the written words, or for 0x0C/0x16 the current absolute position."""
 
     slave: int
@@ -173,7 +183,7 @@ class WriteReply:
 
 
 @dataclass(frozen=True)
-class EmergencyStopReply:
+class EmergencyStopReply(_Described):
     slave: int
     host: int = HOST_ADDRESS
     function: ClassVar[Function] = Function.EMERGENCY_STOP
@@ -183,7 +193,7 @@ class EmergencyStopReply:
 
 
 @dataclass(frozen=True)
-class ReadMultipleReply:
+class ReadMultipleReply(_Described):
     """0x12 reply: one word per requested register, in request order (no addresses)."""
 
     slave: int
@@ -197,7 +207,7 @@ class ReadMultipleReply:
 
 
 @dataclass(frozen=True)
-class PositionReply:
+class PositionReply(_Described):
     """Reply to a 0x300|slave cache write: the current absolute position (no slave address)."""
 
     position: int
@@ -209,7 +219,7 @@ class PositionReply:
 
 
 @dataclass(frozen=True)
-class ErrorReply:
+class ErrorReply(_Described):
     """Function | 0x80 and an error code (5.5)."""
 
     slave: int

@@ -4,6 +4,8 @@ import { $, axisLabel, el, fmt } from "./util.js";
 
 const POLL_MS = 500;
 const KEEP_LINES = 1500;
+// A request alone, a reply alone, or one transaction (the server joins them: issue 33).
+const ARROWS = { tx: "→", rx: "←", pair: "⇄" };
 
 export class DiagnosticsPanel {
   constructor(ctx) {
@@ -42,7 +44,7 @@ export class DiagnosticsPanel {
 
   renderAlarms(log) {
     const rows = [...log].reverse().slice(0, 200).map((e) => el("tr", { class: e.kind },
-      el("td", { text: new Date(e.time * 1000).toLocaleTimeString() }), el("td", { text: axisLabel(this.ctx.identity(e.axis)) }),
+      el("td", { class: "time", text: new Date(e.time * 1000).toLocaleTimeString() }), el("td", { text: axisLabel(this.ctx.identity(e.axis)) }),
       el("td", { text: e.kind }), el("td", { text: e.code ?? "" }), el("td", { text: e.text })));
     $("#alarm-log").replaceChildren(el("tr", {}, ...["time", "axis", "event", "code", "text"].map((t) => el("th", { text: t }))),
       ...(rows.length ? rows : [el("tr", {}, el("td", { colspan: 5, class: "muted", text: "no alarm since the GUI started" }))]));
@@ -74,7 +76,7 @@ export class DiagnosticsPanel {
     const atBottom = pre.scrollTop + pre.clientHeight >= pre.scrollHeight - 4;
     const shown = filter ? this.lines.filter((l) => l.text.toLowerCase().includes(filter)) : this.lines;
     pre.replaceChildren(...shown.slice(-600).map((l) => el("span", { class: l.error ? "err" : l.dir },
-      `${l.t.toFixed(3).padStart(10)}  ${l.dir === "tx" ? "→" : "←"}  ${l.text}\n`)));
+      `${l.t.toFixed(3).padStart(10)} s  ${ARROWS[l.dir] || " "}  ${l.text}\n`)));
     if (atBottom) pre.scrollTop = pre.scrollHeight;
   }
 }

@@ -18,6 +18,7 @@ export function el(tag, attrs = {}, ...children) {
 export function fmt(v, digits = 3) {
   if (v === null || v === undefined || Number.isNaN(v)) return "–";
   if (typeof v !== "number") return String(v);
+  if (v === 0) v = 0;  // -0 (a reversed axis at rest) is shown as 0
   if (Number.isInteger(v)) return v.toLocaleString("en-US");
   const a = Math.abs(v);
   if (a >= 1e6 || (a !== 0 && a < 1e-3)) return v.toExponential(digits - 1);

@@ -1,0 +1,154 @@
+"""The page in the axis's own units and names, at any width (issue 33), in a real headless
+Chromium (Selenium + Debian's chromium-driver).
+
+One page load of a machine file (tests/machine/machine_rig.MIXED: axis x in mm on a virtual
+DYN232M drive, limits -10..300, speed 50 mm/s): the Motion, Scope and Tuning panels show
+mm and mm/s first, a jog held into the soft limit releases its button and says so, and the
+page at 1600x1000, 800x900 and 390x844 (the viewport set through the DevTools protocol)
+never scrolls sideways, with STOP ALL and the jog buttons on screen on the phone. Without
+Chromium, chromedriver or Selenium the module is skipped with one line saying which is
+missing.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import browser_rig
+import pytest
+from machine.machine_rig import write_machine
+from rig import wait_until
+
+browser_rig.skip_without_browser()
+
+from selenium.webdriver.common.action_chains import ActionChains  # noqa: E402
+from selenium.webdriver.common.by import By  # noqa: E402
+from selenium.webdriver.remote.webdriver import WebDriver  # noqa: E402
+
+pytestmark = [pytest.mark.timeout(180), pytest.mark.slow]
+
+
+class Gui:
+    """``servobus gui --machine FILE`` in this process (uvicorn on a thread)."""
+
+    def __init__(self, machine: Path) -> None:
+        import uvicorn
+
+        from servobus.gui.app import create_app
+        from servobus.gui.server import bind, uvicorn_config
+
+        self.app = create_app(machine=machine)
+        self.sock = bind("127.0.0.1", 0)
+        self.url = f"http://127.0.0.1:{self.sock.getsockname()[1]}/"
+        self.server = uvicorn.Server(uvicorn_config(self.app))
+        self.loop = asyncio.new_event_loop()
+        self.thread = threading.Thread(
+            target=lambda: self.loop.run_until_complete(self.server.serve(sockets=[self.sock])),
+            daemon=True)
+        self.thread.start()
+        wait_until(lambda: self.server.started, timeout=20, what="the GUI server started")
+
+    def close(self) -> None:
+        self.server.should_exit = True
+        self.thread.join(timeout=15)
+        self.sock.close()
+
+
+@pytest.fixture(scope="module")
+def page(tmp_path_factory: pytest.TempPathFactory) -> Iterator[WebDriver]:
+    gui = Gui(write_machine(tmp_path_factory.mktemp("browser-units")))
+    try:
+        with browser_rig.chrome() as driver:
+            viewport(driver, 1600, 1000)
+            driver.get(gui.url)
+            wait_until(lambda: driver.execute_script("return document.body.dataset.ready"),
+                       timeout=20, what="page ready")
+            wait_until(lambda: driver.execute_script("return window.servobus.link.open"),
+                       timeout=20, what="WebSocket open")
+            yield driver
+    finally:
+        gui.close()
+
+
+def viewport(driver: WebDriver, width: int, height: int) -> None:
+    driver.execute_cdp_cmd("Emulation.setDeviceMetricsOverride", {
+        "width": width, "height": height, "deviceScaleFactor": 1, "mobile": False})
+
+
+def js(driver: WebDriver, script: str, *args: object) -> Any:
+    return driver.execute_script(script, *args)
+
+
+def text(driver: WebDriver, selector: str) -> str:
+    return str(js(driver, "return document.querySelector(arguments[0]).textContent", selector))
+
+
+def tab(driver: WebDriver, name: str) -> None:
+    driver.find_element(By.CSS_SELECTOR, f'#tabs button[data-tab="{name}"]').click()
+
+
+def options(driver: WebDriver, selector: str) -> list[str]:
+    return list(js(driver, "return [...document.querySelector(arguments[0]).options]"
+                           ".map((o) => o.textContent)", selector))
+
+
+#: Sideways overflow of the page, and the rectangles of the elements named (in the viewport).
+LAYOUT = """const d = document.documentElement;
+    return [d.scrollWidth - window.innerWidth, window.innerWidth, window.innerHeight,
+      arguments[0].map((s) => { const r = document.querySelector(s).getBoundingClientRect();
+        return [s, r.left, r.top, r.right, r.bottom]; })];"""
+
+
+def test_a_mm_axis_speaks_mm_and_fits_every_width(page: WebDriver) -> None:
+    # Motion: x's own units first, the jog from the file's speed (50 mm/s)
+    assert (text(page, "#jog-unit"), text(page, "#turn-unit")) == ("mm/s", "mm/s")
+    assert js(page, "return document.querySelector('#jog-rpm').value") == "50"
+    assert text(page, "#wave-unit") == "mm" and options(page, "#move-unit")[0] == "mm"
+    wait_until(lambda: " mm" in text(page, "#motion-readout"), what="the readout in mm")
+    # a jog held into the soft limit at -10 mm: the button goes dark and the page says so
+    jog = page.find_element(By.ID, "jog-minus")
+    hold = ActionChains(page).click_and_hold(jog)
+    hold.perform()
+    try:
+        wait_until(lambda: "stopped at soft limit" in text(page, "#motion-msg"), timeout=30,
+                   what="the page says the jog stopped at the soft limit")
+        assert "x" in text(page, "#motion-msg")
+        assert "held" not in (jog.get_attribute("class") or "")
+    finally:
+        ActionChains(page).release(jog).perform()
+    # Scope: channels, legend and trigger level in mm and mm/s, named x
+    tab(page, "scope")
+    wait_until(lambda: "x position [mm]" in text(page, ".u-legend"), what="the legend in mm")
+    legend = text(page, ".u-legend")
+    assert "x speed [mm/s]" in legend and "rpm" not in legend and "counts" not in legend
+    assert "position [mm]" in options(page, "#scope-channels select[data-field=signal]")
+    assert text(page, "#trig-unit") == "mm"
+    # Tuning: the step in mm first
+    tab(page, "tuning")
+    assert options(page, "#step-unit")[0] == "mm"
+    # lights: a shape besides the colour (lit and unlit differ in more than colour)
+    shapes = js(page, "return [...document.querySelectorAll('.light')].map((n) => "
+                      "[n.classList.contains('on'), getComputedStyle(n, '::before').content])")
+    assert {on for on, _ in shapes} == {True, False}  # x is enabled, never in alarm
+    assert len({shape for _, shape in shapes}) >= 2
+    assert all(shape != "none" for _, shape in shapes)
+    # 800 px: no sideways scroll, every tab visible
+    tab(page, "motion")
+    viewport(page, 800, 900)
+    over, width, _, rects = js(page, LAYOUT, [f'#tabs button[data-tab="{t}"]' for t in
+                                              ("motion", "params", "scope", "tuning", "diag")])
+    assert over <= 0 and width == 800
+    assert all(0 <= left and right <= width for _, left, _, right, _ in rects), rects
+    # 390 px: STOP ALL and both jog buttons inside the viewport, no sideways scroll
+    viewport(page, 390, 844)
+    over, width, height, rects = js(page, LAYOUT, ["#stop-all", "#jog-minus", "#jog-plus"])
+    assert over <= 0 and width == 390
+    for name, left, top, right, bottom in rects:
+        assert 0 <= left and right <= width and 0 <= top and bottom <= height, name
+    for name in ("scope", "tuning", "diag", "params"):  # every panel fits the phone
+        tab(page, name)
+        assert js(page, LAYOUT, [])[0] <= 0, name
