@@ -13,6 +13,7 @@ missing.
 from __future__ import annotations
 
 import asyncio
+import re
 import threading
 from collections.abc import Iterator
 from pathlib import Path
@@ -91,6 +92,16 @@ def tab(driver: WebDriver, name: str) -> None:
     driver.find_element(By.CSS_SELECTOR, f'#tabs button[data-tab="{name}"]').click()
 
 
+#: What a Python repr looks like in a line: ``Name(``, ``<Enum.X: 0>``, ``b'...'``.
+REPR = re.compile(r"[A-Za-z_]\(|<\w+\.\w+: |\bb'")
+
+
+def card(driver: WebDriver, name: str) -> None:
+    """Select the axis ``name`` by its card."""
+    driver.find_element(By.XPATH, f'//div[@class="axis-card" or contains(@class, "axis-card ")]'
+                                  f'[.//span[@class="name" and text()="{name}"]]').click()
+
+
 def options(driver: WebDriver, selector: str) -> list[str]:
     return list(js(driver, "return [...document.querySelector(arguments[0]).options]"
                            ".map((o) => o.textContent)", selector))
@@ -127,6 +138,43 @@ def test_a_mm_axis_speaks_mm_and_fits_every_width(page: WebDriver) -> None:
     assert "x speed [mm/s]" in legend and "rpm" not in legend and "counts" not in legend
     assert "position [mm]" in options(page, "#scope-channels select[data-field=signal]")
     assert text(page, "#trig-unit") == "mm"
+    # channels follow the selected axis unless pinned (choosing a channel's axis pins it)
+    channel_axes = "return [...document.querySelectorAll('#scope-channels " \
+                   "select[data-field=axis]')].map((s) => s.value)"
+    card(page, "c")
+    wait_until(lambda: js(page, channel_axes) == ["3", "3"], what="channels follow c")
+    wait_until(lambda: "c position [deg]" in text(page, ".u-legend"), what="c in deg")
+    js(page, """const s = document.querySelector('#scope-channels select[data-field=axis]');
+                s.value = '1'; s.dispatchEvent(new Event('change'));""")
+    card(page, "y")
+    wait_until(lambda: js(page, channel_axes) == ["1", "2"], what="x pinned, y followed")
+    # a capture survives the tabs: armed here, caught while Motion shows, kept on return
+    js(page, """document.querySelector('#trig-mode').value = 'normal';
+                document.querySelector('#trig-level').value = '-5';
+                window.servobus.scope.configure();""")
+    wait_until(lambda: js(page, "return window.servobus.scope.stats.state?.waiting"),
+               what="the trigger armed")
+    tab(page, "motion")
+    card(page, "x")  # channel 1 is pinned to x; channel 2 follows
+    js(page, """document.querySelector('#move-value').value = '10';
+                document.querySelector('#move-unit').value = 'mm';
+                document.querySelector('#move-rel').click();""")  # -10 mm up through -5 mm
+    wait_until(lambda: js(page, "return window.servobus.scope.lastTriggered !== null"),
+               timeout=30, what="the move caught while the Motion tab shows")
+    tab(page, "scope")
+    caught = js(page, "const f = window.servobus.scope.frame; return [f.flags & 1, "
+                      "Math.min(...f.ys[0].filter((v) => v === v)), "
+                      "Math.max(...f.ys[0].filter((v) => v === v))]")
+    assert caught[0] == 1 and caught[1] < -5 < caught[2], caught  # in mm, through -5
+    # a move from the Scope tab itself, in x's unit
+    assert text(page, "#scope-move-unit") == "mm"
+    page.find_element(By.ID, "scope-move-minus").click()
+    wait_until(lambda: "move by -1 mm: sent to x" in text(page, "#scope-msg"),
+               what="the move from the Scope tab")
+    # Diagnostics: one decoded line per transaction, no Python repr, times that do not wrap
+    tab(page, "diag")
+    wait_until(lambda: "⇄" in text(page, "#traffic"), what="transactions in the log")
+    assert not REPR.search(text(page, "#traffic"))
     # Tuning: the step in mm first
     tab(page, "tuning")
     assert options(page, "#step-unit")[0] == "mm"
@@ -142,13 +190,13 @@ def test_a_mm_axis_speaks_mm_and_fits_every_width(page: WebDriver) -> None:
     over, width, _, rects = js(page, LAYOUT, [f'#tabs button[data-tab="{t}"]' for t in
                                               ("motion", "params", "scope", "tuning", "diag")])
     assert over <= 0 and width == 800
-    assert all(0 <= left and right <= width for _, left, _, right, _ in rects), rects
+    assert all(left >= 0 and right <= width for _, left, _, right, _ in rects), rects
     # 390 px: STOP ALL and both jog buttons inside the viewport, no sideways scroll
     viewport(page, 390, 844)
     over, width, height, rects = js(page, LAYOUT, ["#stop-all", "#jog-minus", "#jog-plus"])
     assert over <= 0 and width == 390
     for name, left, top, right, bottom in rects:
-        assert 0 <= left and right <= width and 0 <= top and bottom <= height, name
+        assert left >= 0 and right <= width and top >= 0 and bottom <= height, name
     for name in ("scope", "tuning", "diag", "params"):  # every panel fits the phone
         tab(page, name)
         assert js(page, LAYOUT, [])[0] <= 0, name

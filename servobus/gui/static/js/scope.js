@@ -3,7 +3,8 @@
 // Frames arrive binary (frames.js); the page acks each one once drawn, so the server
 // never sends faster than this page draws.
 import { parseFrame, FLAG_TRIGGERED, FLAG_HOLDING, FLAG_FREE_RUN } from "./frames.js";
-import { $, axisLabel, el, fmt, download, readField, signalUnit, COLORS } from "./util.js";
+import { api } from "./net.js";
+import { $, axisLabel, el, fmt, download, fieldError, message, readField, signalUnit, unitsOf, COLORS } from "./util.js";
 
 const WINDOWS = [0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1, 2, 5, 10, 20];
 const MAX_CHANNELS = 8;
@@ -57,13 +58,67 @@ export class ScopePanel {
     ctx.link.on("hello", () => { if (this.visible) this.configure(); });
     ctx.link.on("error", (doc) => { if (doc.request && doc.request.startsWith("scope")) $("#scope-status").textContent = `scope: ${doc.message}`; });
     window.addEventListener("resize", () => { if (this.visible) { this.build(); this.configure(); } });
-    ctx.onSelect((id) => { $("#scope-jog-axis").textContent = `${axisLabel(ctx.identity(id))}, speed from Motion`; });
+    ctx.onSelect((id) => {
+      $("#scope-jog-axis").textContent = `${axisLabel(ctx.identity(id))}, speed from Motion`;
+      $("#scope-move-unit").textContent = unitsOf(ctx.identity(id)).position;
+      this.follow(id);
+    });
+    $("#scope-move-plus").addEventListener("click", () => this.move(1));
+    $("#scope-move-minus").addEventListener("click", () => this.move(-1));
     ctx.onIdentity(() => { this.renderChannels(); if (this.visible) this.build(); });
     this.renderChannels();
   }
 
-  show() { this.visible = true; this.build(); this.configure(); }
-  hide() { this.visible = false; this.ctx.link.send({ type: "scope_run", running: false }); }
+  // Leaving the tab keeps what the scope caught (issue 33): a trigger (auto, normal,
+  // single) stays armed, so a move started from another tab is caught, and only triggered
+  // captures are kept meanwhile; a rolling scope pauses (no frames nobody sees). Coming
+  // back shows the last capture (auto: paused on it, Run goes on) and sends only settings
+  // that changed.
+  show() {
+    this.visible = true;
+    this.build();
+    if (this.data && this.data.length === this.channels.length + 1) this.plot.setData(this.data);
+    if (JSON.stringify(this.settings()) !== this.sent) this.configure();
+    else if (this.caughtAway && $("#trig-mode").value === "auto" && this.running) this.setRunning(false);
+    else if (this.pausedHidden && this.running) this.ctx.link.send({ type: "scope_run", running: true });
+    this.pausedHidden = this.caughtAway = false;
+  }
+  hide() {
+    this.visible = false;
+    this.caughtAway = false;
+    this.pausedHidden = $("#trig-mode").value === "roll";
+    if (this.pausedHidden) this.ctx.link.send({ type: "scope_run", running: false });
+  }
+
+  // Channels not pinned follow the axis selected on the page (issue 33); choosing a
+  // channel's axis pins it.
+  follow(id) {
+    let changed = false;
+    for (const ch of this.channels) if (!ch.pinned && ch.axis !== id) { ch.axis = id; changed = true; }
+    if (!changed) return;
+    this.renderChannels();
+    if (this.visible) this.build();
+    // hidden: an armed scope takes the new channels at once, to catch the next move
+    if (this.visible || (this.sent && $("#trig-mode").value !== "roll")) this.configure(true);
+    else this.sent = null;
+  }
+
+  // A relative move of the selected axis from here, to watch it (issue 33).
+  async move(sign) {
+    const field = $("#scope-move-value");
+    const value = readField(field);
+    const msg = $("#scope-msg");
+    if (value === null) { message(msg, "move: not sent - correct the marked field", "error"); return; }
+    const id = this.ctx.selected;
+    const unit = unitsOf(this.ctx.identity(id)).position;
+    try {
+      await api(`/api/axes/${id}/move`, { value: sign * value, unit, relative: true });
+      message(msg, `move by ${sign * value} ${unit}: sent to ${axisLabel(this.ctx.identity(id))}`, "ok");
+    } catch (err) {
+      message(msg, `move: ${err.message}`, "error");
+      if (err.status === 400) fieldError(field, err.message);
+    }
+  }
 
   signal(name) { return this.signals.find((s) => s.name === name); }
 
@@ -80,13 +135,17 @@ export class ScopePanel {
         ...this.ctx.info.axes.map((a) => el("option", { value: a.id, text: a.name ? `${a.name} (${a.protocol})` : `axis ${a.id}`, selected: a.id === ch.axis })));
       const sigSel = el("select", { "data-ch": i, "data-field": "signal" },
         ...this.signals.map((s) => el("option", { value: s.name, text: `${s.label} [${signalUnit(this.ctx.identity(ch.axis), s)}]`, selected: s.name === ch.signal })));
-      axisSel.addEventListener("change", () => { ch.axis = Number(axisSel.value); this.channelsChanged(); });
+      axisSel.addEventListener("change", () => { ch.axis = Number(axisSel.value); ch.pinned = true; this.channelsChanged(); });
       sigSel.addEventListener("change", () => { ch.signal = sigSel.value; this.channelsChanged(); });
       const remove = el("button", { text: "×", title: "remove channel", onclick: () => {
         if (this.channels.length > 1) { this.channels.splice(i, 1); this.channelsChanged(); }
       } });
       remove.disabled = this.channels.length === 1;
-      return el("div", { class: "chan" }, el("span", { class: "swatch", style: `background:${COLORS[i]}` }), axisSel, sigSel, remove);
+      const pin = el("button", { class: `pin${ch.pinned ? " on" : ""}`, "aria-pressed": ch.pinned ? "true" : "false",
+        text: ch.pinned ? "pinned" : "follows",
+        title: ch.pinned ? "pinned to its axis: click to follow the selected axis" : "follows the selected axis: click to pin it",
+        onclick: () => { ch.pinned = !ch.pinned; if (!ch.pinned) ch.axis = this.ctx.selected; this.channelsChanged(); } });
+      return el("div", { class: "chan" }, el("span", { class: "swatch", style: `background:${COLORS[i]}` }), axisSel, sigSel, pin, remove);
     }));
     $("#scope-add").disabled = this.channels.length >= MAX_CHANNELS;
     const src = $("#trig-source");
@@ -110,7 +169,7 @@ export class ScopePanel {
       edge: $("#trig-edge").value, level: this.fieldValue("#trig-level", 0),
       pre: this.fieldValue("#trig-pre", 10) / 100,
       trigger_channel: Number($("#trig-source").value || 0),
-      width: Math.round($("#scope-plot").clientWidth || 1000),
+      width: this.plotWidth(),
     };
   }
 
@@ -123,13 +182,23 @@ export class ScopePanel {
     return this.good[sel] ?? fallback;
   }
 
-  configure() {
-    if (!this.visible) return;
+  // The plot's width in pixels (the last one seen while the tab showed, when hidden).
+  plotWidth() {
+    const w = $("#scope-plot").clientWidth;
+    if (w) this.lastWidth = Math.round(w);
+    return this.lastWidth || 1000;
+  }
+
+  // ``hidden``: sent while another tab shows (follow) - the plot is built on return.
+  configure(hidden = false) {
+    if (!this.visible && !hidden) return;
     this.frame = null;
     this.overlays = [];
     this.lastTriggered = null;
     this.pendingAck = null;
-    this.ctx.link.send({ type: "scope", settings: this.settings() });
+    const settings = this.settings();
+    this.sent = JSON.stringify(settings);
+    this.ctx.link.send({ type: "scope", settings });
     if (!this.running) this.ctx.link.send({ type: "scope_run", running: false });
   }
 
@@ -186,6 +255,11 @@ export class ScopePanel {
 
   onFrame(buf) {
     const f = parseFrame(buf);
+    if (!this.visible) {  // another tab: acked at once; a triggered capture is kept
+      this.ctx.link.send({ type: "ack", seq: f.seq });
+      if (!(f.flags & FLAG_TRIGGERED) || !this.plot || f.ys.length !== this.channels.length) return;
+      this.caughtAway = true;
+    }
     if (!this.plot || f.ys.length !== this.channels.length) {  // from before a change: drop,
       this.ctx.link.send({ type: "ack", seq: f.seq });          // but never hold the server up
       return;
@@ -203,6 +277,7 @@ export class ScopePanel {
     const data = [f.x];
     f.ys.forEach((y, i) => data.push(this.display(i, y)));
     this.data = data;
+    if (!this.visible) return;  // kept for when the tab shows again
     this.pendingAck = f.seq;
     this.setDataAt = performance.now();
     this.plot.setData(data);
