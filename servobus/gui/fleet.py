@@ -224,7 +224,7 @@ class Fleet:
             owner = link.owner
             if owner is not None and owner not in self._traced:
                 self._traced.add(owner)
-                await owner.add_trace(self.traffic.hook)
+                await owner.add_trace(self.traffic.hook_for(owner))
 
     @classmethod
     async def open_machine(cls, path: str | Path | None = None) -> Fleet:
@@ -236,7 +236,7 @@ class Fleet:
             traffic = TrafficLog()
             for link in machine.links:  # siblings share their owner's trace
                 if link.owner is not None:
-                    await link.owner.add_trace(traffic.hook)
+                    await link.owner.add_trace(traffic.hook_for(link.owner))
             machine.guard_limits()
         except BaseException:
             await machine.close()
@@ -261,7 +261,7 @@ class Fleet:
             traffic = TrafficLog()
             for link in machine.links:  # siblings share the connection's trace
                 if link.owner is not None:
-                    await link.owner.add_trace(traffic.hook)
+                    await link.owner.add_trace(traffic.hook_for(link.owner))
         except BaseException:
             await machine.close()
             raise

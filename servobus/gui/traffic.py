@@ -13,13 +13,22 @@ from __future__ import annotations
 import itertools
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from servobus.transport.base import Direction
+
+if TYPE_CHECKING:
+    from servobus.axis.base import AsyncAxis
 
 KEEP = 2000
 #: How long the newest request waits for its reply before it is shown alone.
 REPLY_WAIT_S = 0.3
+
+
+#: An Axis's ``describe_traced``: a traced item in its protocol's words, or None.
+Words = Callable[[object, bool], "str | None"]
 
 
 @dataclass(frozen=True)
@@ -28,13 +37,20 @@ class Entry:
     t: float  # time.monotonic()
     direction: Direction
     item: object
+    words: Words | None = None  # the tracing Axis's describe_traced
 
 
-def describe(item: object, direction: Direction) -> tuple[str, bool]:
-    """(text, is_error) of one traced item."""
+def describe(item: object, direction: Direction,
+             words: Words | None = None) -> tuple[str, bool]:
+    """(text, is_error) of one traced item: the tracing Axis's words for it (``words``),
+    else the item's own ``describe``/``lines``."""
     if isinstance(item, BaseException):
         return f"{type(item).__name__}: {item}", True
     is_error = bool(getattr(item, "is_error", False))
+    if words is not None:
+        text = words(item, direction is Direction.RX)
+        if text is not None:
+            return text, is_error
     describe_fn = getattr(item, "describe", None)
     if callable(describe_fn):
         try:
@@ -54,8 +70,19 @@ class TrafficLog:
         self._seq = itertools.count(1)
         self.t0 = time.monotonic()
 
-    def hook(self, direction: Direction, item: object, t: float) -> None:
-        self.entries.append(Entry(next(self._seq), t, direction, item))
+    def hook_for(self, axis: AsyncAxis) -> Callable[[Direction, object, float], None]:
+        """The trace hook for ``axis``'s link: its items are described by the Axis
+        (``describe_traced``, formatted only when a page asks)."""
+        words = axis.describe_traced
+
+        def hook(direction: Direction, item: object, t: float) -> None:
+            self.hook(direction, item, t, words)
+
+        return hook
+
+    def hook(self, direction: Direction, item: object, t: float,
+             words: Words | None = None) -> None:
+        self.entries.append(Entry(next(self._seq), t, direction, item, words))
         self.counts[direction.value] += 1
         if isinstance(item, BaseException) or getattr(item, "is_error", False):
             self.counts["errors"] += 1
@@ -72,7 +99,7 @@ class TrafficLog:
         out: list[dict[str, object]] = []
         last: Entry | None = None
         for e in picked:
-            text, error = describe(e.item, e.direction)
+            text, error = describe(e.item, e.direction, e.words)
             head = out[-1] if out else None
             if (head is not None and last is not None and e.direction is Direction.RX
                     and last.direction is Direction.TX and last.seq == e.seq - 1

@@ -197,7 +197,7 @@ def test_ethernet_ip_traffic_in_the_sniff_decoders_words() -> None:
         axis = await connect_async("sim://enip?fast=1", drive_id=1)
         try:
             log = TrafficLog()
-            await axis.add_trace(log.hook)
+            await axis.add_trace(log.hook_for(axis))
             await axis.position()
             await axis.move_by(100)
             return log.recent(50, now=math.inf)

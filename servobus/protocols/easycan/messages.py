@@ -23,16 +23,6 @@ from servobus.protocols.easycan.functions import (
 )
 
 
-class _Described:
-    """Every message says itself in the sniff decoder's words (what ``servobus sniff`` and
-    the GUI's traffic log show), not as a repr."""
-
-    def describe(self, from_drive: bool | None = None) -> str:
-        from servobus.protocols.easycan.describe import describe  # it imports this module
-
-        return describe(self)  # type: ignore[arg-type]
-
-
 def _check(name: str, value: int, lo: int, hi: int) -> None:
     if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
         raise ArgumentRangeError(f"{name} {value!r} is outside {lo}..{hi}")
@@ -52,7 +42,7 @@ def _check_ends(slave: int, host: int) -> None:
 
 # ------------------------------------------------------------------ requests (host -> drive)
 @dataclass(frozen=True)
-class ReadRequest(_Described):
+class ReadRequest:
     """0x03: read ``count`` consecutive registers from ``address`` (the drive allows 1..2)."""
 
     slave: int
@@ -68,7 +58,7 @@ class ReadRequest(_Described):
 
 
 @dataclass(frozen=True)
-class WriteRequest(_Described):
+class WriteRequest:
     """0x06: write 1 or 2 consecutive registers from ``address`` (16-bit wire words)."""
 
     slave: int
@@ -84,7 +74,7 @@ class WriteRequest(_Described):
 
 
 @dataclass(frozen=True)
-class EmergencyStop(_Described):
+class EmergencyStop:
     """0x10: stop immediately; the drive answers."""
 
     slave: int
@@ -96,7 +86,7 @@ class EmergencyStop(_Described):
 
 
 @dataclass(frozen=True)
-class ClearPosition(_Described):
+class ClearPosition:
     """0x11: clear the absolute position to 0; the drive does not answer."""
 
     slave: int
@@ -108,7 +98,7 @@ class ClearPosition(_Described):
 
 
 @dataclass(frozen=True)
-class ReadMultipleRequest(_Described):
+class ReadMultipleRequest:
     """0x12: read 1..3 arbitrary registers in one frame."""
 
     slave: int
@@ -126,7 +116,7 @@ class ReadMultipleRequest(_Described):
 
 
 @dataclass(frozen=True)
-class PositionCacheWrite(_Described):
+class PositionCacheWrite:
     """Identifier 0x100|slave (silent) or 0x300|slave (``reply``): absolute position cache."""
 
     slave: int
@@ -144,7 +134,7 @@ Request = (ReadRequest | WriteRequest | EmergencyStop | ClearPosition | ReadMult
 
 # ------------------------------------------------------------------ replies (drive -> host)
 @dataclass(frozen=True)
-class ReadReply(_Described):
+class ReadReply:
     """0x03 reply: the registers' words from ``address`` on."""
 
     slave: int
@@ -160,7 +150,7 @@ class ReadReply(_Described):
 
 
 @dataclass(frozen=True)
-class WriteReply(_Described):
+class WriteReply:
     """0x06 reply: the written words, or for 0x0C/0x16 the current absolute position."""
 
     slave: int
@@ -183,7 +173,7 @@ class WriteReply(_Described):
 
 
 @dataclass(frozen=True)
-class EmergencyStopReply(_Described):
+class EmergencyStopReply:
     slave: int
     host: int = HOST_ADDRESS
     function: ClassVar[Function] = Function.EMERGENCY_STOP
@@ -193,7 +183,7 @@ class EmergencyStopReply(_Described):
 
 
 @dataclass(frozen=True)
-class ReadMultipleReply(_Described):
+class ReadMultipleReply:
     """0x12 reply: one word per requested register, in request order (no addresses)."""
 
     slave: int
@@ -207,7 +197,7 @@ class ReadMultipleReply(_Described):
 
 
 @dataclass(frozen=True)
-class PositionReply(_Described):
+class PositionReply:
     """Reply to a 0x300|slave cache write: the current absolute position (no slave address)."""
 
     position: int
@@ -219,7 +209,7 @@ class PositionReply(_Described):
 
 
 @dataclass(frozen=True)
-class ErrorReply(_Described):
+class ErrorReply:
     """Function | 0x80 and an error code (5.5)."""
 
     slave: int

@@ -56,12 +56,6 @@ class MessageRouterRequest:
     path: tuple[Segment, ...]
     data: bytes = b""
 
-    def describe(self, from_drive: bool | None = None) -> str:
-        """In the sniff decoder's words (``servobus sniff``, the GUI's traffic log)."""
-        from servobus.protocols.enip.sniff import message_text  # it imports this module
-
-        return message_text(self.encode())
-
     def encode(self) -> bytes:
         if not 0 <= self.service < REPLY_FLAG:
             raise FramingError(f"service 0x{self.service:02X} is not a request service")
@@ -90,12 +84,6 @@ class MessageRouterResponse:
     @property
     def ok(self) -> bool:
         return self.general_status == GeneralStatus.SUCCESS
-
-    def describe(self, from_drive: bool | None = None) -> str:
-        """In the sniff decoder's words (``servobus sniff``, the GUI's traffic log)."""
-        from servobus.protocols.enip.sniff import message_text  # it imports this module
-
-        return message_text(self.encode())
 
     def encode(self) -> bytes:
         if not 0 <= self.service < REPLY_FLAG or not 0 <= self.general_status <= 0xFF:

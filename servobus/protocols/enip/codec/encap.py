@@ -98,15 +98,6 @@ class EncapPacket:
     def encode(self) -> bytes:
         return self.header.encode() + self.data
 
-    def describe(self, from_drive: bool | None = None) -> str:
-        """In the sniff decoder's words (``servobus sniff``, the GUI's traffic log)."""
-        from servobus.protocols.enip.sniff import packet_text  # it imports this module
-
-        try:
-            return packet_text(self)
-        except FramingError as exc:
-            return f"{self.command:#06x} packet, malformed: {exc}"
-
     @classmethod
     def decode(cls, raw: bytes) -> EncapPacket:
         """One whole packet (UDP datagram or a framed TCP packet); exact length."""
