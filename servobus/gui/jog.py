@@ -113,7 +113,8 @@ class JogControl:
             try:
                 await m.release(owner)
             except ServobusError as exc:  # the lease ends anyway; the log says why
-                log.warning("release of axis %s by %s failed: %s", key[1], owner, exc)
+                label = self.fleet.get(key[1]).label
+                log.warning("release of %s by %s failed: %s", label, owner, exc)
 
     # ------------------------------------------------------------- what the page is shown
     def active(self) -> dict[int, dict[str, object]]:

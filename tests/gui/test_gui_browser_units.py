@@ -120,6 +120,7 @@ def test_a_mm_axis_speaks_mm_and_fits_every_width(page: WebDriver) -> None:
     assert js(page, "return document.querySelector('#jog-rpm').value") == "50"
     assert text(page, "#wave-unit") == "mm" and options(page, "#move-unit")[0] == "mm"
     wait_until(lambda: " mm" in text(page, "#motion-readout"), what="the readout in mm")
+    assert "counts" in text(page, "#motion-readout")  # the secondary readout
     # a jog held into the soft limit at -10 mm: the button goes dark and the page says so
     jog = page.find_element(By.ID, "jog-minus")
     hold = ActionChains(page).click_and_hold(jog)

@@ -227,7 +227,9 @@ export class MotionPanel {
     box.replaceChildren(
       item(`${axisLabel(this.ctx.identity(this.ctx.selected))} position`,
         s.unit !== undefined ? `${fmt(s.user_position)} ${s.unit}` : `${fmt(s.position)} counts`),
-      item("revolutions", s.revolutions === undefined ? "–" : s.revolutions.toFixed(4)),
+      // counts stay as the secondary readout of an axis in its own unit (issue 33)
+      s.unit !== undefined ? item("counts", fmt(s.position), false)
+        : item("revolutions", s.revolutions === undefined ? "–" : s.revolutions.toFixed(4)),
       item("speed", s.unit !== undefined ? `${fmt(s.user_speed)} ${s.speed_unit}` : `${fmt(s.speed)} rpm`),
       item("current", `${fmt(s.current)} A`),
       item("state", stale ? seenText(this.ctx, s) : s.link ? "link error" : s.alarm_code ? `ALARM ${s.alarm_code}` :
