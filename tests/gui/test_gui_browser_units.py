@@ -53,6 +53,13 @@ class Gui:
         self.thread.start()
         wait_until(lambda: self.server.started, timeout=20, what="the GUI server started")
 
+    def note_alarm(self) -> None:
+        """An alarm-log entry of axis x, written on the server's loop (as the monitor does)."""
+        async def note() -> None:
+            self.app.state.gui.monitor.note(1, "alarm", "over-current (a test entry)", 5)
+
+        asyncio.run_coroutine_threadsafe(note(), self.loop).result(10)
+
     def close(self) -> None:
         self.server.should_exit = True
         self.thread.join(timeout=15)
@@ -60,19 +67,24 @@ class Gui:
 
 
 @pytest.fixture(scope="module")
-def page(tmp_path_factory: pytest.TempPathFactory) -> Iterator[WebDriver]:
-    gui = Gui(write_machine(tmp_path_factory.mktemp("browser-units")))
+def gui(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Gui]:
+    server = Gui(write_machine(tmp_path_factory.mktemp("browser-units")))
     try:
-        with browser_rig.chrome() as driver:
-            viewport(driver, 1600, 1000)
-            driver.get(gui.url)
-            wait_until(lambda: driver.execute_script("return document.body.dataset.ready"),
-                       timeout=20, what="page ready")
-            wait_until(lambda: driver.execute_script("return window.servobus.link.open"),
-                       timeout=20, what="WebSocket open")
-            yield driver
+        yield server
     finally:
-        gui.close()
+        server.close()
+
+
+@pytest.fixture(scope="module")
+def page(gui: Gui) -> Iterator[WebDriver]:
+    with browser_rig.chrome() as driver:
+        viewport(driver, 1600, 1000)
+        driver.get(gui.url)
+        wait_until(lambda: driver.execute_script("return document.body.dataset.ready"),
+                   timeout=20, what="page ready")
+        wait_until(lambda: driver.execute_script("return window.servobus.link.open"),
+                   timeout=20, what="WebSocket open")
+        yield driver
 
 
 def viewport(driver: WebDriver, width: int, height: int) -> None:
@@ -114,7 +126,7 @@ LAYOUT = """const d = document.documentElement;
         return [s, r.left, r.top, r.right, r.bottom]; })];"""
 
 
-def test_a_mm_axis_speaks_mm_and_fits_every_width(page: WebDriver) -> None:
+def test_a_mm_axis_speaks_mm_and_fits_every_width(page: WebDriver, gui: Gui) -> None:
     # Motion: x's own units first, the jog from the file's speed (50 mm/s)
     assert (text(page, "#jog-unit"), text(page, "#turn-unit")) == ("mm/s", "mm/s")
     assert js(page, "return document.querySelector('#jog-rpm').value") == "50"
@@ -201,3 +213,12 @@ def test_a_mm_axis_speaks_mm_and_fits_every_width(page: WebDriver) -> None:
     for name in ("scope", "tuning", "diag", "params"):  # every panel fits the phone
         tab(page, name)
         assert js(page, LAYOUT, [])[0] <= 0, name
+    # the alarm log on the phone: named, its time on one line
+    gui.note_alarm()
+    tab(page, "diag")
+    row = wait_until(lambda: js(page, "const r = document.querySelector('#alarm-log tr.alarm');"
+                                      "if (!r) return null; const t = document.createRange();"
+                                      "t.selectNodeContents(r.cells[0]);"
+                                      "return [t.getClientRects().length, r.cells[1].textContent]"),
+                     what="the alarm row")
+    assert row == [1, "x"]  # the time's text is one line box
