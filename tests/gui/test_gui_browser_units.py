@@ -184,6 +184,22 @@ def test_a_mm_axis_speaks_mm_and_fits_every_width(page: WebDriver, gui: Gui) -> 
     page.find_element(By.ID, "scope-move-minus").click()
     wait_until(lambda: "move by -1 mm: sent to x" in text(page, "#scope-msg"),
                what="the move from the Scope tab")
+    # auto (the default mode): the capture caught on another tab is held on return, paused
+    wait_until(lambda: abs(float(text(page, '.axis-card[data-axis="1"] [data-v=position]')
+                                 .split()[0]) + 1) < 0.01, timeout=30, what="x at -1 mm")
+    js(page, """document.querySelector('#trig-mode').value = 'auto';
+                document.querySelector('#trig-level').value = '-0.5';
+                window.servobus.scope.configure();""")
+    before = js(page, "return window.servobus.scope.lastTriggered?.seq ?? 0")
+    tab(page, "motion")
+    js(page, """document.querySelector('#move-value').value = '1';
+                document.querySelector('#move-rel').click();""")  # -1 mm up through -0.5
+    wait_until(lambda: js(page, "return window.servobus.scope.lastTriggered?.seq ?? 0") != before,
+               timeout=30, what="the move caught in auto mode while Motion shows")
+    tab(page, "scope")
+    held = js(page, "const s = window.servobus.scope; return [s.running, s.frame.flags & 1]")
+    assert held == [False, 1]  # paused on the capture: a free-running frame does not replace it
+    page.find_element(By.ID, "scope-run").click()  # Run goes on
     # Diagnostics: one decoded line per transaction, no Python repr, times that do not wrap
     tab(page, "diag")
     wait_until(lambda: "⇄" in text(page, "#traffic"), what="transactions in the log")

@@ -255,6 +255,10 @@ export class ScopePanel {
 
   onFrame(buf) {
     const f = parseFrame(buf);
+    if (!this.running) {  // paused: the picture holds (a frame on its way is only acked)
+      this.ctx.link.send({ type: "ack", seq: f.seq });
+      return;
+    }
     if (!this.visible) {  // another tab: acked at once; a triggered capture is kept
       this.ctx.link.send({ type: "ack", seq: f.seq });
       if (!(f.flags & FLAG_TRIGGERED) || !this.plot || f.ys.length !== this.channels.length) return;
