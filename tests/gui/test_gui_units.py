@@ -148,6 +148,29 @@ def test_a_trigger_typed_as_75_mm_fires_at_75_mm(client: TestClient) -> None:
     wait_until(lambda: abs(user_position(client) - 100.0) < 0.01, timeout=20, what="at 100")
 
 
+def test_a_rising_trigger_in_mm_on_a_reversed_axis(client: TestClient) -> None:
+    """Axis y has ``direction = -1``: its counts fall while its mm rise, and a rising
+    trigger typed in mm still fires on the rise in mm."""
+    y = 2
+    post(client, f"/api/axes/{y}/move", {"value": 0.0, "unit": "mm"})
+    wait_until(lambda: abs(user_position(client, y)) < 0.01, timeout=20, what="y at 0")
+    with client.websocket_connect(WS) as ws:
+        page = Page(ws)
+        page.send({"type": "scope", "settings": {
+            "channels": [{"axis": y, "signal": "position"}], "window_s": 0.5,
+            "mode": "single", "edge": "rising", "level": 5.0, "pre": 0.5, "width": 200}})
+        page.until(lambda: (s := page.last("scope_state")) and s["waiting"], "armed")
+        post(client, f"/api/axes/{y}/move", {"value": 10.0, "unit": "mm"})
+        frame = page.until(lambda: next((f for f in page.frames
+                                         if f.flags & frames.FLAG_TRIGGERED), None),
+                           "the triggered capture")
+        at_zero = min(range(len(frame.x)), key=lambda i: abs(frame.x[i]))
+        assert frame.ys[0][at_zero] == pytest.approx(5.0, abs=1.0)
+        seen = [v for v in frame.ys[0] if math.isfinite(v)]
+        assert seen[0] < 5.0 < seen[-1]  # rising, in mm
+    wait_until(lambda: abs(user_position(client, y) - 10.0) < 0.01, timeout=20, what="at 10")
+
+
 def test_step_and_wave_in_mm(client: TestClient) -> None:
     move_to(client, 0.0)
     info = client.get("/api/info").json()["axes"][0]
