@@ -15,14 +15,14 @@ from __future__ import annotations
 import asyncio
 import re
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import browser_rig
 import pytest
+import rig
 from machine.machine_rig import write_machine
-from rig import wait_until
 
 browser_rig.skip_without_browser()
 
@@ -30,7 +30,14 @@ from selenium.webdriver.common.action_chains import ActionChains  # noqa: E402
 from selenium.webdriver.common.by import By  # noqa: E402
 from selenium.webdriver.remote.webdriver import WebDriver  # noqa: E402
 
-pytestmark = [pytest.mark.timeout(180), pytest.mark.slow]
+pytestmark = [pytest.mark.timeout(300), pytest.mark.slow]
+#: Every wait's deadline: generous, for a machine shared with other jobs (a wait ends as
+#: soon as its condition holds).
+WAIT = 60.0
+
+
+def wait_until(predicate: Callable[[], Any], *, what: str, timeout: float = WAIT) -> Any:
+    return rig.wait_until(predicate, timeout=timeout, what=what)
 
 
 class Gui:
@@ -51,7 +58,7 @@ class Gui:
             target=lambda: self.loop.run_until_complete(self.server.serve(sockets=[self.sock])),
             daemon=True)
         self.thread.start()
-        wait_until(lambda: self.server.started, timeout=20, what="the GUI server started")
+        wait_until(lambda: self.server.started, timeout=WAIT, what="the GUI server started")
 
     def note_alarm(self) -> None:
         """An alarm-log entry of axis x, written on the server's loop (as the monitor does)."""
@@ -81,9 +88,9 @@ def page(gui: Gui) -> Iterator[WebDriver]:
         viewport(driver, 1600, 1000)
         driver.get(gui.url)
         wait_until(lambda: driver.execute_script("return document.body.dataset.ready"),
-                   timeout=20, what="page ready")
+                   timeout=WAIT, what="page ready")
         wait_until(lambda: driver.execute_script("return window.servobus.link.open"),
-                   timeout=20, what="WebSocket open")
+                   timeout=WAIT, what="WebSocket open")
         yield driver
 
 
@@ -138,7 +145,7 @@ def test_a_mm_axis_speaks_mm_and_fits_every_width(page: WebDriver, gui: Gui) -> 
     hold = ActionChains(page).click_and_hold(jog)
     hold.perform()
     try:
-        wait_until(lambda: "stopped at soft limit" in text(page, "#motion-msg"), timeout=30,
+        wait_until(lambda: "stopped at soft limit" in text(page, "#motion-msg"), timeout=WAIT,
                    what="the page says the jog stopped at the soft limit")
         assert "x" in text(page, "#motion-msg")
         assert "held" not in (jog.get_attribute("class") or "")
@@ -173,7 +180,7 @@ def test_a_mm_axis_speaks_mm_and_fits_every_width(page: WebDriver, gui: Gui) -> 
                 document.querySelector('#move-unit').value = 'mm';
                 document.querySelector('#move-rel').click();""")  # -10 mm up through -5 mm
     wait_until(lambda: js(page, "return window.servobus.scope.lastTriggered !== null"),
-               timeout=30, what="the move caught while the Motion tab shows")
+               timeout=WAIT, what="the move caught while the Motion tab shows")
     tab(page, "scope")
     caught = js(page, "const f = window.servobus.scope.frame; return [f.flags & 1, "
                       "Math.min(...f.ys[0].filter((v) => v === v)), "
@@ -186,7 +193,7 @@ def test_a_mm_axis_speaks_mm_and_fits_every_width(page: WebDriver, gui: Gui) -> 
                what="the move from the Scope tab")
     # auto (the default mode): the capture caught on another tab is held on return, paused
     wait_until(lambda: abs(float(text(page, '.axis-card[data-axis="1"] [data-v=position]')
-                                 .split()[0]) + 1) < 0.01, timeout=30, what="x at -1 mm")
+                                 .split()[0]) + 1) < 0.01, timeout=WAIT, what="x at -1 mm")
     js(page, """document.querySelector('#trig-mode').value = 'auto';
                 document.querySelector('#trig-level').value = '-0.5';
                 window.servobus.scope.configure();""")
@@ -195,7 +202,7 @@ def test_a_mm_axis_speaks_mm_and_fits_every_width(page: WebDriver, gui: Gui) -> 
     js(page, """document.querySelector('#move-value').value = '1';
                 document.querySelector('#move-rel').click();""")  # -1 mm up through -0.5
     wait_until(lambda: js(page, "return window.servobus.scope.lastTriggered?.seq ?? 0") != before,
-               timeout=30, what="the move caught in auto mode while Motion shows")
+               timeout=WAIT, what="the move caught in auto mode while Motion shows")
     tab(page, "scope")
     held = js(page, "const s = window.servobus.scope; return [s.running, s.frame.flags & 1]")
     assert held == [False, 1]  # paused on the capture: a free-running frame does not replace it

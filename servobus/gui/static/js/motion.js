@@ -214,7 +214,7 @@ export class MotionPanel {
     $("#jog-rpm").value = rpm ? "120" : speed(120);
     $("#turn-rpm").value = rpm ? "300" : speed(300);
     const perRev = ident.counts_per_rev * Math.abs(u.per_count);
-    $("#wave-amp").value = String(u.position === "counts" ? Math.round(perRev / 32) : roundFor(perRev / 32));
+    $("#wave-amp").value = String(u.position === "counts" ? Math.round(perRev / 32) : Number((perRev / 32).toPrecision(2)));
   }
 
   renderReadout() {

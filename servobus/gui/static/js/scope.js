@@ -132,7 +132,7 @@ export class ScopePanel {
     const box = $("#scope-channels");
     box.replaceChildren(...this.channels.map((ch, i) => {
       const axisSel = el("select", { "data-ch": i, "data-field": "axis" },
-        ...this.ctx.info.axes.map((a) => el("option", { value: a.id, text: a.name ? `${a.name} (${a.protocol})` : `axis ${a.id}`, selected: a.id === ch.axis })));
+        ...this.ctx.info.axes.map((a) => el("option", { value: a.id, text: axisLabel(a), title: `${a.protocol} · ${a.family_title}`, selected: a.id === ch.axis })));
       const sigSel = el("select", { "data-ch": i, "data-field": "signal" },
         ...this.signals.map((s) => el("option", { value: s.name, text: `${s.label} [${signalUnit(this.ctx.identity(ch.axis), s)}]`, selected: s.name === ch.signal })));
       axisSel.addEventListener("change", () => { ch.axis = Number(axisSel.value); ch.pinned = true; this.channelsChanged(); });
