@@ -227,6 +227,9 @@ def test_a_mm_axis_speaks_mm_and_fits_every_width(page: WebDriver, gui: Gui) -> 
                                               ("motion", "params", "scope", "tuning", "diag")])
     assert over <= 0 and width == 800
     assert all(left >= 0 and right <= width for _, left, _, right, _ in rects), rects
+    for name in ("scope", "tuning", "diag", "params", "motion"):  # every panel at 800 px
+        tab(page, name)
+        assert js(page, LAYOUT, [])[0] <= 0, name
     # 390 px: STOP ALL and both jog buttons inside the viewport, no sideways scroll
     viewport(page, 390, 844)
     over, width, height, rects = js(page, LAYOUT, ["#stop-all", "#jog-minus", "#jog-plus"])
