@@ -196,6 +196,12 @@ class AsyncAxis(ABC):
     @abstractmethod
     async def add_trace(self, hook: AxisTraceHook) -> None: ...
 
+    def describe_traced(self, item: object, from_drive: bool) -> str | None:
+        """One item an :meth:`add_trace` hook got, in the protocol's sniff decoder's words
+        (what ``servobus sniff`` shows; the GUI's traffic log asks). None: the item says
+        itself (its ``describe``/``lines``), as most protocols' packets do."""
+        return None
+
     @abstractmethod
     async def close(self) -> None: ...
 

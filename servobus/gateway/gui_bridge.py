@@ -40,7 +40,7 @@ async def machine_fleet(machine: Machine) -> MachineFleet:
     traffic = TrafficLog()
     for link in machine.links:  # siblings share their owner's trace
         if link.owner is not None:
-            await link.owner.add_trace(traffic.hook)
+            await link.owner.add_trace(traffic.hook_for(link.owner))
     machine.guard_limits()
     handles = [AxisHandle(None, key=i, machine_axis=a)
                for i, a in enumerate(machine.axes.values(), start=1)]

@@ -12,6 +12,7 @@ from starlette.routing import Route
 from servobus import __version__
 from servobus.axis.units import DRIVE_UNITS, to_counts
 from servobus.errors import ArgumentRangeError
+from servobus.gui.fleet import AxisHandle
 from servobus.gui.http_util import api, body, handle, integer, number, ok, state
 from servobus.gui.signals import SIGNALS
 from servobus.gui.soft_limits import check_wave
@@ -90,16 +91,18 @@ async def move(request: Request) -> Response:
 
 @api
 async def turn(request: Request) -> Response:
-    """Constant speed: a lease owned by the page ``page`` (its ``hello`` owner; the page
+    """Constant speed at ``speed`` (the axis's speed unit; ``rpm`` still taken): a lease
+    owned by the page ``page`` (its ``hello`` owner; the page
     renews it over its WebSocket) or, without ``page``, by this REST client (renewed by
     posting again within ``ttl`` s, at most 1). Open-ended on a continuous axis."""
     h = handle(request)
     doc = await body(request)
-    rpm = integer(doc, "rpm")
+    units = h.units()
+    speed = number(doc, "speed") if "speed" in doc else integer(doc, "rpm") * units.per_rpm
     page = integer(doc, "page") if doc.get("page") is not None else None
     ttl = number(doc, "ttl") if doc.get("ttl") is not None else None
-    result = await state(request).jog.turn(h.id, rpm, page=page, ttl=ttl)
-    return ok(rpm=rpm, **result)
+    result = await state(request).jog.turn(h.id, speed, page=page, ttl=ttl)
+    return ok(rpm=round(speed / units.per_rpm), speed=speed, speed_unit=units.speed, **result)
 
 
 @api
@@ -116,7 +119,7 @@ async def wave(request: Request) -> Response:
     if kind == "off":
         await h.call(h.axis.wave_frequency(0))
         return ok()
-    hz, amplitude = integer(doc, "hz"), integer(doc, "amplitude")  # both before any send
+    hz, amplitude = integer(doc, "hz"), _wave_amplitude(h, doc)  # both before any send
     if hz < 1:
         raise ArgumentRangeError(f"hz={hz}: a wave runs at 1 Hz or more (\"off\" stops it)")
     await check_wave(h, amplitude)  # soft limits and leases, before anything is sent
@@ -126,6 +129,29 @@ async def wave(request: Request) -> Response:
     else:
         await h.call(h.axis.sine_wave(amplitude))
     return ok()
+
+
+def _wave_amplitude(h: AxisHandle, doc: dict[str, object]) -> int:
+    """The amplitude in the drive's wave units: given in the axis's shown unit when the
+    body names ``unit`` (the page does: mm, deg, counts), else in wave units as before."""
+    if doc.get("unit") is None:
+        return integer(doc, "amplitude")
+    value, unit = number(doc, "amplitude"), str(doc.get("unit"))
+    units = h.units()
+    if unit != units.position:
+        raise ArgumentRangeError(f"{h.label}: a wave's amplitude is in {units.position}, "
+                                 f"not {unit}")
+    per_unit = h.axis.family.wave_counts_per_unit
+    if per_unit <= 0:
+        raise ArgumentRangeError(f"{h.label}: the family gives no wave scale; nothing "
+                                 "was sent")
+    amplitude = round(abs(h.to_counts(value)) / per_unit)
+    if amplitude < 1 and value != 0:
+        raise ArgumentRangeError(f"{h.label}: a wave amplitude of {value:g} {unit} is less "
+                                 f"than the drive's smallest "
+                                 f"({per_unit * abs(units.per_count):g} {unit}); nothing "
+                                 "was sent")
+    return amplitude
 
 
 @api

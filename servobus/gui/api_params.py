@@ -82,7 +82,7 @@ async def restore(request: Request) -> Response:
     apply = bool(doc.get("apply", False))
     saved = PF.parse(doc.get("backup"), "the uploaded file")
     if saved.family != h.axis.family.name:
-        raise ArgumentRangeError(f"the file holds {saved.family} parameters; axis {h.id} is "
+        raise ArgumentRangeError(f"the file holds {saved.family} parameters; {h.label} is "
                                  f"{h.axis.family.name}")
     names = list(saved.params)
     for n in names:
@@ -118,8 +118,10 @@ async def step(request: Request) -> Response:
     h = handle(request)
     gui = state(request)
     doc = await body(request)
-    distance = to_counts(number(doc, "distance"), str(doc.get("unit", "counts")),
-                         h.axis.counts_per_rev)
+    value, unit = number(doc, "distance"), str(doc.get("unit", "counts"))
+    units = h.units()
+    distance = h.to_counts(value) if unit == units.position \
+        else to_counts(value, unit, h.axis.counts_per_rev)
     result = await tuning.run_step(h, gui.samplers[h.id], gui.tuning[h.id], distance,
                                    number(doc, "duration_s", 1.0))
     return JSONResponse(result)

@@ -36,6 +36,12 @@ async def index(request: Request) -> Response:
     return FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store"})
 
 
+async def favicon(request: Request) -> Response:
+    """The page names /static/favicon.svg; a browser that asks /favicon.ico gets it too."""
+    return FileResponse(STATIC / "favicon.svg", media_type="image/svg+xml",
+                        headers={"Cache-Control": "max-age=86400"})
+
+
 def create_app(url: str | None = None, ids: Sequence[int] | None = None, *,
                fleet: Fleet | None = None, token: str | None = None,
                jog_lease_s: float = LEASE_S, machine: str | Path | None = None) -> Starlette:
@@ -60,6 +66,7 @@ def create_app(url: str | None = None, ids: Sequence[int] | None = None, *,
 
     app = Starlette(routes=[
         Route("/", index),
+        Route("/favicon.ico", favicon),
         *api_axes.ROUTES,
         *api_params.ROUTES,
         *api_io.ROUTES,

@@ -30,14 +30,46 @@ from typing import TYPE_CHECKING, TypeVar, cast
 
 from servobus.axis.base import AsyncAxis
 from servobus.axis.capabilities import Capability
+from servobus.axis.units import round_counts
 from servobus.errors import ArgumentRangeError
 from servobus.gui.link_stats import CallStats, client_counters
+from servobus.gui.signals import SIGNALS
 from servobus.gui.traffic import TrafficLog
 
 if TYPE_CHECKING:
     from servobus.machine import AsyncMachine, AsyncMachineAxis
 
 T = TypeVar("T")
+#: The scope signals shown in the axis's position unit, and in its speed unit.
+POSITION_SIGNALS = ("position", "position_error")
+SPEED_SIGNALS = ("speed",)
+
+
+@dataclass(frozen=True)
+class Units:
+    """What the page shows an axis in (issue 33): a machine file's axis in its own unit
+    (mm, deg, ...) and that unit per second; an axis of a bare URL in its drive family's
+    counts and rpm. ``per_count``/``per_rpm``: the shown value of one count / one rpm."""
+
+    position: str = "counts"
+    speed: str = "rpm"
+    per_count: float = 1.0
+    per_rpm: float = 1.0
+
+    def signal(self, name: str, unit: str) -> tuple[str, float]:
+        """A scope signal's shown unit and factor (raw value x factor); ``unit``: its
+        raw unit (servobus.gui.signals)."""
+        if name in POSITION_SIGNALS:
+            return self.position, self.per_count
+        if name in SPEED_SIGNALS:
+            return self.speed, self.per_rpm
+        return unit, 1.0
+
+    def as_dict(self, signals: dict[str, str]) -> dict[str, object]:
+        return {"position": self.position, "speed": self.speed,
+                "per_count": self.per_count, "per_rpm": self.per_rpm,
+                "signals": {n: self.signal(n, u)[0] for n, u in signals.items()}}
+
 DEFAULT_URL = "sim://dyn232?fast=1"
 DEFAULT_IDS = (1, 2, 3)
 
@@ -84,6 +116,29 @@ class AxisHandle:
     def id(self) -> int:
         return self.key if self.key is not None else self.axis.drive_id
 
+    @property
+    def label(self) -> str:
+        """How messages name the axis: ``axis x`` (its machine name) or ``axis 2``."""
+        m = self.machine_axis
+        return f"axis {m.name}" if m is not None and self.named else f"axis {self.id}"
+
+    def units(self) -> Units:
+        """The units the page shows this axis in (counts and rpm until a machine axis's
+        link is online: its counts per revolution come from the drive)."""
+        m = self.machine_axis
+        if m is None or not self.named or not m.online:
+            return Units()
+        scale = m.scale
+        return Units(m.unit, m.speed_unit, 1.0 / scale.counts_per_unit, scale.from_rpm(1.0))
+
+    def to_rpm(self, speed: float) -> float:
+        """A speed in the axis's shown speed unit -> motor rpm."""
+        return speed / self.units().per_rpm
+
+    def to_counts(self, value: float) -> int:
+        """A distance in the axis's shown position unit -> counts (rounded)."""
+        return round_counts(value / self.units().per_count)
+
     def user_values(self, position: float, speed: float) -> dict[str, object]:
         """Position and speed in the machine axis's unit (nothing on a plain connection)."""
         m = self.machine_axis
@@ -97,7 +152,9 @@ class AxisHandle:
 
     def identity(self) -> dict[str, object]:
         m = self.machine_axis
-        named: dict[str, object] = {}
+        named: dict[str, object] = {
+            "title": self.label,
+            "units": self.units().as_dict({n: g.unit for n, g in SIGNALS.items()})}
         if m is not None:
             named["continuous"] = m.continuous  # constant speed is open-ended (issue 27)
         if m is not None and self.named:
@@ -167,7 +224,7 @@ class Fleet:
             owner = link.owner
             if owner is not None and owner not in self._traced:
                 self._traced.add(owner)
-                await owner.add_trace(self.traffic.hook)
+                await owner.add_trace(self.traffic.hook_for(owner))
 
     @classmethod
     async def open_machine(cls, path: str | Path | None = None) -> Fleet:
@@ -179,7 +236,7 @@ class Fleet:
             traffic = TrafficLog()
             for link in machine.links:  # siblings share their owner's trace
                 if link.owner is not None:
-                    await link.owner.add_trace(traffic.hook)
+                    await link.owner.add_trace(traffic.hook_for(link.owner))
             machine.guard_limits()
         except BaseException:
             await machine.close()
@@ -204,7 +261,7 @@ class Fleet:
             traffic = TrafficLog()
             for link in machine.links:  # siblings share the connection's trace
                 if link.owner is not None:
-                    await link.owner.add_trace(traffic.hook)
+                    await link.owner.add_trace(traffic.hook_for(link.owner))
         except BaseException:
             await machine.close()
             raise

@@ -28,6 +28,7 @@ process dies. Decisions:
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 
 from servobus.errors import ArgumentRangeError, ConnectionLost, ServobusError
@@ -57,7 +58,7 @@ class Held:
     """What one page holds on one axis: the lease the GUI started for it."""
 
     kind: str  # "jog" or "turn"
-    rpm: int
+    speed: float  # in the axis's shown speed unit (servobus.gui.fleet.Units)
     lease: Lease | None
 
 
@@ -83,11 +84,12 @@ class JogControl:
         self.closed = True
 
     # ------------------------------------------------------------- from a page
-    async def jog(self, page: int, axis_id: int, rpm: int) -> None:
-        """Start or renew ``page``'s jog of ``axis_id`` at ``rpm`` (0 = release)."""
-        await self._hold("jog", page, axis_id, rpm, start=None)
+    async def jog(self, page: int, axis_id: int, speed: float) -> None:
+        """Start or renew ``page``'s jog of ``axis_id`` at ``speed`` (the axis's shown
+        speed unit: a machine axis's unit per second, rpm on a bare URL; 0 = release)."""
+        await self._hold("jog", page, axis_id, speed, start=None)
 
-    async def turn(self, axis_id: int, rpm: int, *, page: int | None = None,
+    async def turn(self, axis_id: int, speed: float, *, page: int | None = None,
                    ttl: float | None = None, start: bool = True) -> dict[str, object]:
         """Constant speed: started by Run (REST, ``start``) and renewed by the page's
         ``turn`` messages; without ``page`` a REST client's (owner ``rest``, renewed by
@@ -96,8 +98,8 @@ class JogControl:
             raise ArgumentRangeError(f"no page {page} is connected: constant speed needs "
                                      "the page's WebSocket, which renews it")
         if page is None:
-            return await self._rest_turn(axis_id, rpm, ttl)
-        return await self._hold("turn", page, axis_id, rpm, start=start)
+            return await self._rest_turn(axis_id, speed, ttl)
+        return await self._hold("turn", page, axis_id, speed, start=start)
 
     async def release(self, page: int, axis_id: int | None = None) -> None:
         """The button went up (``axis_id``), or every motion of ``page`` (it left)."""
@@ -111,17 +113,22 @@ class JogControl:
             try:
                 await m.release(owner)
             except ServobusError as exc:  # the lease ends anyway; the log says why
-                log.warning("release of axis %s by %s failed: %s", key[1], owner, exc)
+                label = self.fleet.get(key[1]).label
+                log.warning("release of %s by %s failed: %s", label, owner, exc)
 
     # ------------------------------------------------------------- what the page is shown
     def active(self) -> dict[int, dict[str, object]]:
-        """Every axis's running lease: owner, rpm, at the soft limit."""
+        """Every axis's running lease: owner, rpm, speed in the axis's shown unit, at the
+        soft limit."""
         out: dict[int, dict[str, object]] = {}
         for i, h in self.fleet.handles.items():
             m = h.machine_axis
             lease = m.lease if m is not None else None
             if m is not None and lease is not None and m.online:
-                out[i] = {"owner": lease.owner, "rpm": round(m.scale.to_rpm(lease.speed)),
+                rpm = m.scale.to_rpm(lease.speed)
+                units = h.units()
+                out[i] = {"owner": lease.owner, "rpm": round(rpm),
+                          "speed": rpm * units.per_rpm, "speed_unit": units.speed,
                           "at_limit": lease.at_limit}
         return out
 
@@ -135,37 +142,42 @@ class JogControl:
     def _machine_axis(self, handle: AxisHandle) -> AsyncMachineAxis:
         m = handle.machine_axis
         if m is None:
-            raise ArgumentRangeError(f"axis {handle.id} has no machine axis: no jog")
+            raise ArgumentRangeError(f"{handle.label} has no machine axis: no jog")
         return m
 
-    def _check(self, rpm: int) -> None:
+    def _check(self, handle: AxisHandle, speed: float) -> float:
+        """``speed`` (shown unit) -> the machine axis's user units per second, checked."""
         if self.closed:
             raise ConnectionLost("the GUI is shutting down: every axis is being stopped")
-        if isinstance(rpm, bool) or not isinstance(rpm, int) or abs(rpm) > MAX_JOG_RPM:
-            raise ArgumentRangeError(f"jog speed must be an integer rpm within "
-                                     f"+-{MAX_JOG_RPM}")
+        units = handle.units()
+        if isinstance(speed, bool) or not isinstance(speed, int | float) \
+                or not math.isfinite(speed) or abs(speed / units.per_rpm) > MAX_JOG_RPM:
+            top = MAX_JOG_RPM * abs(units.per_rpm)
+            raise ArgumentRangeError(f"{handle.label}: a jog speed is a number of "
+                                     f"{units.speed} within +-{top:g}, got {speed!r}")
+        m = self._machine_axis(handle)
+        return float(speed) if handle.named else m.scale.from_rpm(speed / units.per_rpm)
 
-    async def _hold(self, kind: str, page: int, axis_id: int, rpm: int,
+    async def _hold(self, kind: str, page: int, axis_id: int, shown: float,
                     *, start: bool | None) -> dict[str, object]:
         """``start``: True a new Run (replaces an ended one), False a renewal only, None a
         jog message (a renewal while held, else a new press)."""
         handle = self.fleet.get(axis_id)
-        self._check(rpm)
+        speed = self._check(handle, shown)
         m = self._machine_axis(handle)
         key, owner = (page, axis_id), page_owner(page)
         held = self.held.get(key)
-        if rpm == 0:
+        if speed == 0:
             await self.release(page, axis_id)
             return {"open_ended": False}
         if held is not None and (held.lease is None or not held.lease.alive) and not start:
             why = held.lease.ended if held.lease is not None else ""
             again = "release and press again" if held.kind == "jog" else "press Run again"
-            raise MotionEnded(f"the {held.kind} of axis {axis_id} ended"
+            raise MotionEnded(f"the {held.kind} of {handle.label} ended"
                               f"{f' ({why})' if why else ''}; {again}")
         if held is None and start is False:
-            raise MotionEnded(f"no {kind} of this page on axis {axis_id} to renew; "
+            raise MotionEnded(f"no {kind} of this page on {handle.label} to renew; "
                               "press Run again")
-        speed = m.scale.from_rpm(rpm)
         if kind == "turn" and m.continuous:
             m.check_owner(owner)
             await handle.call(m.turn(speed, owner=owner, ttl=self.lease_s))
@@ -175,16 +187,16 @@ class JogControl:
             await handle.call(m.turn(speed, owner=owner, ttl=self.lease_s))
         else:
             await handle.call(m.jog(speed, owner=owner, ttl=self.lease_s))
-        self.held[key] = Held(kind, rpm, m.lease)
+        self.held[key] = Held(kind, shown, m.lease)
         return {"open_ended": False, "ttl": self.lease_s}
 
-    async def _rest_turn(self, axis_id: int, rpm: int,
+    async def _rest_turn(self, axis_id: int, shown: float,
                          ttl: float | None) -> dict[str, object]:
         handle = self.fleet.get(axis_id)
-        self._check(rpm)
+        speed = self._check(handle, shown)
         m = self._machine_axis(handle)
         ttl = check_ttl(self.lease_s if ttl is None else ttl)
         if m.continuous:
             m.check_owner(REST_OWNER)
-        await handle.call(m.turn(m.scale.from_rpm(rpm), owner=REST_OWNER, ttl=ttl))
+        await handle.call(m.turn(speed, owner=REST_OWNER, ttl=ttl))
         return {"open_ended": m.continuous, "ttl": None if m.continuous else ttl}

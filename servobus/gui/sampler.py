@@ -128,12 +128,12 @@ class AxisSampler:
             self.error = f"sampling stopped: link lost: {exc}"
         except Exception as exc:  # never silent: the scope's status line shows it
             self.error = f"sampling stopped: {type(exc).__name__}: {exc}"
-            log.error("GUI sampler of axis %s: %s", self.handle.id, self.error)
+            log.error("GUI sampler of %s: %s", self.handle.label, self.error)
 
     def _fall_back(self, exc: Exception) -> None:
         self.error = f"trace: {type(exc).__name__}: {exc}; polling instead"
         self.source = "poll"
-        log.warning("GUI sampler of axis %s: %s", self.handle.id, self.error)
+        log.warning("GUI sampler of %s: %s", self.handle.label, self.error)
 
     async def _run_trace(self) -> None:
         axis = self.handle.axis

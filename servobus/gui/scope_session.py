@@ -12,6 +12,7 @@ reduced onto one bucket grid, so the page gets one x array.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import io
 import math
 import statistics
@@ -153,11 +154,29 @@ class ScopeSession:
         self._decimators.clear()
         self._grid = (0, False, -1.0)
         trig = settings.channels[settings.trigger_channel]
-        self._tracker = TriggerTracker(settings.trigger, self.samplers[trig.axis].ring,
-                                       trig.signal)
+        self._tracker = TriggerTracker(self._raw_trigger(settings.trigger, trig),
+                                       self.samplers[trig.axis].ring, trig.signal)
         self._pending = None
         self._last_capture = -math.inf  # auto mode rolls at once, until a first trigger
         self._unacked.clear()
+
+    def scale(self, channel: Channel) -> tuple[str, float]:
+        """A channel's shown unit and the factor from its raw samples (counts, rpm) to it:
+        the axis's own unit (issue 33, servobus.gui.fleet.Units)."""
+        units = self.samplers[channel.axis].handle.units()
+        return units.signal(channel.signal, SIGNALS[channel.signal].unit)
+
+    def _raw_trigger(self, trigger: TriggerSettings, channel: Channel) -> TriggerSettings:
+        """The level the page typed in the channel's shown unit, in its raw samples' unit
+        (a trigger at 75 mm fires at 75 mm); a negative factor (``direction = -1``) turns
+        a rising edge into a falling one."""
+        _, factor = self.scale(channel)
+        if factor == 1.0:
+            return trigger
+        edge = trigger.edge
+        if factor < 0 and edge is not Edge.EITHER:
+            edge = Edge.FALLING if edge is Edge.RISING else Edge.RISING
+        return dataclasses.replace(trigger, level=trigger.level / factor, edge=edge)
 
     def close(self) -> None:
         for axis, token in self._tokens.items():
@@ -246,7 +265,12 @@ class ScopeSession:
                  ) -> list[Sequence[float]]:
         s = self.settings
         assert s is not None
-        return [per_axis[ch.axis][ch.signal] for ch in s.channels]
+        out: list[Sequence[float]] = []
+        for ch in s.channels:
+            values = per_axis[ch.axis][ch.signal]
+            factor = self.scale(ch)[1]
+            out.append(values if factor == 1.0 else [v * factor for v in values])
+        return out
 
     def _roll_frame(self, now: float, *, free_run: bool) -> frames.ScopeFrame | None:
         s = self.settings
@@ -359,10 +383,14 @@ class ScopeSession:
             ring = self.samplers[axis].ring
             i0, i1 = ring.index_at(t_start), ring.index_at(t_end)
             i0 = max(i0, i1 - CSV_MAX_ROWS)
-            columns.append((f"axis{axis}.t_s", [t - t_ref for t in ring.time_slice(i0, i1)]))
+            handle = self.samplers[axis].handle  # a machine axis by its name: x.t_s
+            m = handle.machine_axis
+            title = m.name if m is not None and handle.named else f"axis{axis}"
+            columns.append((f"{title}.t_s", [t - t_ref for t in ring.time_slice(i0, i1)]))
             for name in names:
-                columns.append((f"axis{axis}.{name}_{SIGNALS[name].unit}",
-                                list(ring.column(name, i0, i1))))
+                unit, factor = self.scale(Channel(axis, name))
+                columns.append((f"{title}.{name}_{unit.replace('/', '_per_')}",
+                                [v * factor for v in ring.column(name, i0, i1)]))
         out = io.StringIO()
         out.write(",".join(name for name, _ in columns) + "\n")
         rows = max((len(values) for _, values in columns), default=0)

@@ -63,7 +63,7 @@ async def check_wave(handle: AxisHandle, amplitude: int) -> None:
         return
     per_unit = handle.axis.family.wave_counts_per_unit
     if per_unit <= 0:
-        raise LimitError(f"axis {handle.id}: the family gives no wave travel to check "
+        raise LimitError(f"{handle.label}: the family gives no wave travel to check "
                          "against the soft limits; nothing was sent")
     offset = float(await handle.call(handle.axis.position()))
     swing = abs(amplitude) * per_unit

@@ -63,8 +63,25 @@ async def _wait_for(sampler: AxisSampler, t: float, timeout: float) -> None:
         await asyncio.sleep(0.01)
 
 
-def _thin(values: list[float], step: int) -> list[float | None]:
-    return [None if math.isnan(v) else v for v in values[::step]]
+def _thin(values: list[float], step: int, factor: float = 1.0) -> list[float | None]:
+    return [None if math.isnan(v) else v * factor for v in values[::step]]
+
+
+#: Step figures that are positions (signed) and sizes (the band, the largest error).
+_POSITIONS, _SIZES = ("start", "target", "final", "steady_state_error"), \
+    ("settle_band", "following_error_max")
+
+
+def _shown_metrics(metrics: dict[str, float | None], per_count: float
+                   ) -> dict[str, float | None]:
+    """The step's figures in the axis's unit (counts x ``per_count``); times and % as
+    they are."""
+    out = dict(metrics)
+    for key in (*_POSITIONS, *_SIZES):
+        v = out.get(key)
+        if v is not None:
+            out[key] = v * (per_count if key in _POSITIONS else abs(per_count))
+    return out
 
 
 async def run_step(handle: AxisHandle, sampler: AxisSampler, state: TuningState,
@@ -111,16 +128,20 @@ async def run_step(handle: AxisHandle, sampler: AxisSampler, state: TuningState,
                            position_errors=err if has_err else None)
     step = max(1, len(times) // TRACE_POINTS)
     state.runs += 1
+    units = handle.units()  # positions in the axis's unit, speeds in its speed unit
+    f, fs = units.per_count, units.per_rpm
     result: dict[str, object] = {
-        "run": state.runs, "axis": handle.id,
+        "run": state.runs, "axis": handle.id, "name": handle.label,
         "time": datetime.now(UTC).isoformat(timespec="seconds"),
-        "distance": distance, "duration_s": duration_s, "gains": gains,
+        "distance": distance, "step": distance * f, "unit": units.position,
+        "speed_unit": units.speed, "duration_s": duration_s, "gains": gains,
         "source": sampler.source, "rate_hz": sampler.rate_hz, "samples": len(times),
-        "metrics": metrics.as_dict(),
+        "metrics": _shown_metrics(metrics.as_dict(), f),
         "trace": {"t": [t - t_cmd for t in times[::step]],
-                  "position": [None if math.isnan(p) else p - start for p in pos[::step]],
-                  "position_error": _thin(err, step) if has_err else None,
-                  "speed": _thin(list(ring.column("speed", i0, i1)), step)},
+                  "position": [None if math.isnan(p) else (p - start) * f
+                               for p in pos[::step]],
+                  "position_error": _thin(err, step, f) if has_err else None,
+                  "speed": _thin(list(ring.column("speed", i0, i1)), step, fs)},
     }
     state.results.append(result)
     return result

@@ -1,8 +1,9 @@
 """The page's WebSocket: live status out, jog and scope control in, scope frames out.
 
-Messages from the page (JSON): ``jog`` {axis, rpm} (repeated while the button is held),
-``jog_stop`` {axis}, ``turn`` {axis, rpm} (renews the constant speed the page started with
-``POST /api/axes/N/turn`` {rpm, page}, repeated while it is on), ``turn_stop`` {axis},
+Messages from the page (JSON): ``jog`` {axis, speed} (``speed`` in the axis's speed
+unit, servobus.gui.fleet.Units; ``rpm`` instead is still taken; repeated while the button is held),
+``jog_stop`` {axis}, ``turn`` {axis, speed} (renews the constant speed the page started with
+``POST /api/axes/N/turn`` {speed, page}, repeated while it is on), ``turn_stop`` {axis},
 ``stop_all``, ``scope`` {settings}, ``scope_run`` {running},
 ``scope_arm``, ``scope_csv``, ``ack`` {seq}, ``io_watch`` {axis or null}. To the page:
 ``hello``, ``status`` (every :data:`STATUS_PERIOD_S`; each axis as StatusMonitor.view
@@ -103,10 +104,11 @@ class PageLink:
             if isinstance(seq, int):
                 session.ack(seq)
         elif kind == "jog":
-            await gui.jog.jog(self.owner, _int(doc, "axis"), _int(doc, "rpm"))
+            axis = _int(doc, "axis")
+            await gui.jog.jog(self.owner, axis, _speed(gui, doc, axis))
         elif kind == "turn":
-            await gui.jog.turn(_int(doc, "axis"), _int(doc, "rpm"), page=self.owner,
-                               start=False)
+            axis = _int(doc, "axis")
+            await gui.jog.turn(axis, _speed(gui, doc, axis), page=self.owner, start=False)
         elif kind in ("jog_stop", "turn_stop"):
             await gui.jog.release(self.owner, _int(doc, "axis"))
         elif kind == "stop_all":
@@ -123,8 +125,7 @@ class PageLink:
         elif kind == "scope_arm":
             session.rearm()
         elif kind == "io_watch":
-            axis = doc.get("axis")
-            self.io_axis = None if axis is None else _int(doc, "axis")
+            self.io_axis = None if doc.get("axis") is None else _int(doc, "axis")
         elif kind == "scope_csv":
             await self.send_json({"type": "csv", "text": session.csv()})
         else:
@@ -234,6 +235,18 @@ def _int(doc: dict[str, object], key: str) -> int:
     if isinstance(value, bool) or not isinstance(value, int):
         raise ValueError(f"{key} must be an integer, got {value!r}")
     return value
+
+
+def _speed(gui: GuiState, doc: dict[str, object], axis: int) -> float:
+    """A jog's or constant speed's ``speed`` in the axis's shown speed unit (issue 33), or
+    ``rpm`` (an integer, as before) converted to it."""
+    if "speed" in doc:
+        value = doc["speed"]
+        if isinstance(value, bool) or not isinstance(value, int | float) \
+                or not math.isfinite(value):
+            raise ValueError(f"speed must be a finite number, got {value!r}")
+        return float(value)
+    return _int(doc, "rpm") * gui.fleet.get(axis).units().per_rpm
 
 
 def _finite(snap: dict[str, object]) -> dict[str, object]:

@@ -116,6 +116,11 @@ def api(server: str, path: str, body: object | None = None) -> Any:
         return json.loads(r.read())
 
 
+def counts_per_unit(server: str, axis: int) -> float:
+    """Counts in one of the axis's units (the built-in machine's x and y: mm)."""
+    return float(api(server, "/api/info")["axes"][axis - 1]["counts_per_unit"])
+
+
 def status(server: str, axis: int) -> dict[str, Any]:
     doc: dict[str, Any] = api(server, "/api/axes")[axis - 1]["status"]
     return doc
@@ -174,13 +179,15 @@ def test_jog_one_axis_and_see_its_position_on_the_scope(page: WebDriver, server:
     wait_until(lambda: abs(status(server, 1)["speed"]) < 1, timeout=5, what="released jog stops")
     moved = status(server, 1)["position"]
     assert moved - start > 2000  # held until it had gone that far, and it stopped past it
-    # the scope's position channel (channel 1) shows the jog: its newest point is where the
-    # drive is, and the window holds the ramp from where it started
+    # the scope's position channel (channel 1) shows the jog in the axis's unit (x: mm,
+    # issue 33): its newest point is where the drive is, and the window holds the ramp
+    # from where it started
+    per_unit = counts_per_unit(server, 1)
     wait_until(lambda: abs(js(page, "const f = window.servobus.scope.frame;"
-                                    "return f.ys[0][f.n - 1]") - moved) <= 8,
+                                    "return f.ys[0][f.n - 1]") * per_unit - moved) <= 8,
                timeout=5, what="the scope at the drive's position")
     low = js(page, "return Math.min(...window.servobus.scope.frame.ys[0].filter(v => v === v))")
-    assert low < start + 200
+    assert low * per_unit < start + 200
     # The scope keeps drawing (its frame rate is a benchmark figure, not a test assertion).
     wait_until(lambda: js(page, "return window.servobus.scope.stats.frames") > frames + 3,
                what="the scope still drawing")
@@ -202,9 +209,10 @@ def test_jog_one_axis_and_see_its_position_on_the_scope(page: WebDriver, server:
 def test_triggered_captures_overlay_the_last_runs(page: WebDriver, server: str) -> None:
     tab(page, "scope")
     start = status(server, 1)["position"]
+    level = (start + 1000) / counts_per_unit(server, 1)  # typed in the axis's unit (mm)
     js(page, f"""
         document.querySelector('#trig-mode').value = 'normal';
-        document.querySelector('#trig-level').value = '{start + 1000}';
+        document.querySelector('#trig-level').value = '{level:.4f}';
         document.querySelector('#scope-window').value = '0.5';
         document.querySelector('#trig-overlay').checked = true;
         window.servobus.scope.configure();""")
@@ -307,7 +315,7 @@ def test_diagnostics_show_traffic_links_and_alarms(page: WebDriver) -> None:
     wait_until(lambda: "host -> id" in traffic.text, what="decoded traffic")
     rows = js(page, "return [...document.querySelectorAll('#link-stats tr')]"
                     ".map(r => r.textContent)")  # one read: the table is redrawn twice a second
-    assert "round trips" in rows[0] and rows[1].startswith("axis 1")
+    assert "round trips" in rows[0] and rows[1].startswith("x")  # the machine's names
     shot(page, "diagnostics")
 
 
@@ -438,7 +446,7 @@ def test_a_sampler_that_stops_shows_why_on_the_page(broken_sampler_server: str,
                                            "'#scope-status .sampler-error');"
                                            "return e && e.textContent"),
                        timeout=10, what="the sampler's error on the page")
-    assert "A3 sampling stopped: RuntimeError: poll bug" in shown
+    assert "axis 3 sampling stopped: RuntimeError: poll bug" in shown
     # in one script: the status line is redrawn at every scope_state (a found element goes
     # stale between two WebDriver calls)
     error, line = js(browser, "const c = (s) => getComputedStyle(document.querySelector(s))"

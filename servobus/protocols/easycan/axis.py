@@ -23,6 +23,8 @@ from servobus.axis.base import AsyncAxis
 from servobus.families.yzaim.axis import YzaimAxis
 from servobus.protocols.easycan import commands as cmds
 from servobus.protocols.easycan.client import AsyncEasyCanClient
+from servobus.protocols.easycan.describe import describe
+from servobus.protocols.easycan.messages import Message
 from servobus.protocols.easycan.sync import SyncGroup
 
 
@@ -63,6 +65,10 @@ class EasyCanAxis(YzaimAxis[AsyncEasyCanClient]):
         """The client's per-attempt deadline, ``timeout`` (a frame each way takes well under
         a millisecond on the bus; the rest is the motor's reply time and the adapter's)."""
         return self.client.timeout
+
+    def describe_traced(self, item: object, from_drive: bool) -> str | None:
+        """A traced EasyCan message in the sniff decoder's words (not its repr)."""
+        return describe(item) if isinstance(item, Message) else None
 
     async def _probe(self, timeout: float) -> None:
         await self.client.execute(self._read_cmd(cmds.make_read, "alarm_code"), retries=0,

@@ -50,9 +50,10 @@ from servobus.families.dyn5.params import Instance
 from servobus.link.stats import TransactionStats
 from servobus.link.transaction import DEFAULT_RETRIES
 from servobus.protocols.enip.client import CONNECT_TIMEOUT_S, DEFAULT_TIMEOUT_S, AsyncEnipClient
-from servobus.protocols.enip.codec.cip import ClassCode
-from servobus.protocols.enip.codec.encap import TCP_PORT
+from servobus.protocols.enip.codec.cip import ClassCode, MessageRouterRequest, MessageRouterResponse
+from servobus.protocols.enip.codec.encap import TCP_PORT, EncapPacket
 from servobus.protocols.enip.codec.identity import IdentityReply
+from servobus.protocols.enip.sniff import message_text, packet_text
 
 if TYPE_CHECKING:
     from servobus.protocols.enip.scanner import CyclicIo, InputFrame
@@ -310,6 +311,18 @@ class EnipAxis(Dyn5Axis):
             return cyclic.stats.as_dict()
 
     # ------------------------------------------------------------- housekeeping
+    def describe_traced(self, item: object, from_drive: bool) -> str | None:
+        """A traced Message Router request or reply (or another encapsulation packet) in
+        the sniff decoder's words (not its repr)."""
+        try:
+            if isinstance(item, MessageRouterRequest | MessageRouterResponse):
+                return message_text(item.encode())
+            if isinstance(item, EncapPacket):
+                return packet_text(item)
+        except FramingError as exc:
+            return f"malformed: {exc}"
+        return None
+
     async def add_trace(self, hook: AxisTraceHook) -> None:
         self._hooks.append(hook)
         if self._client is not None:

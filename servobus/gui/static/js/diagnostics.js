@@ -1,9 +1,11 @@
 // Diagnostics panel: alarm log, link statistics, decoded traffic (what `servobus sniff` shows).
 import { api } from "./net.js";
-import { $, el, fmt } from "./util.js";
+import { $, axisLabel, el, fmt } from "./util.js";
 
 const POLL_MS = 500;
 const KEEP_LINES = 1500;
+// A request alone, a reply alone, or one transaction (the server joins them: issue 33).
+const ARROWS = { tx: "→", rx: "←", pair: "⇄" };
 
 export class DiagnosticsPanel {
   constructor(ctx) {
@@ -42,7 +44,7 @@ export class DiagnosticsPanel {
 
   renderAlarms(log) {
     const rows = [...log].reverse().slice(0, 200).map((e) => el("tr", { class: e.kind },
-      el("td", { text: new Date(e.time * 1000).toLocaleTimeString() }), el("td", { text: `axis ${e.axis}` }),
+      el("td", { class: "time", text: new Date(e.time * 1000).toLocaleTimeString() }), el("td", { text: axisLabel(this.ctx.identity(e.axis)) }),
       el("td", { text: e.kind }), el("td", { text: e.code ?? "" }), el("td", { text: e.text })));
     $("#alarm-log").replaceChildren(el("tr", {}, ...["time", "axis", "event", "code", "text"].map((t) => el("th", { text: t }))),
       ...(rows.length ? rows : [el("tr", {}, el("td", { colspan: 5, class: "muted", text: "no alarm since the GUI started" }))]));
@@ -52,8 +54,8 @@ export class DiagnosticsPanel {
     const errors = [];
     const rows = Object.entries(doc.links).map(([id, l]) => {
       const g = l.gui, c = l.client || {};
-      if (g.last_error) errors.push(`axis ${id}: ${g.last_error}`);
-      return el("tr", {}, el("td", { text: `axis ${id}` }), el("td", { class: "num", text: fmt(g.calls) }),
+      if (g.last_error) errors.push(`${axisLabel(this.ctx.identity(Number(id)))}: ${g.last_error}`);
+      return el("tr", {}, el("td", { text: axisLabel(this.ctx.identity(Number(id))) }), el("td", { class: "num", text: fmt(g.calls) }),
         el("td", { class: "num", text: fmt(g.calls_per_s) }),
         el("td", { class: "num", text: g.mean_ms === null ? "–" : fmt(g.mean_ms) }),
         el("td", { class: "num", text: fmt(g.max_ms) }), el("td", { class: "num", text: g.timeouts }),
@@ -63,7 +65,7 @@ export class DiagnosticsPanel {
       .map((t, i) => el("th", { class: i ? "num" : "", text: t }))), ...rows);
     const first = Object.values(doc.links)[0];
     const client = first && first.client ? Object.entries(first.client).map(([k, v]) => `${k} ${v}`).join(" · ") : "";
-    const samplers = doc.samplers.filter((s) => s.running).map((s) => `axis ${s.axis} ${s.source} ${fmt(s.rate_hz)} Hz`).join(", ");
+    const samplers = doc.samplers.filter((s) => s.running).map((s) => `${axisLabel(this.ctx.identity(s.axis))} ${s.source} ${fmt(s.rate_hz)} Hz`).join(", ");
     $("#link-extra").textContent = [errors.length ? `last errors: ${errors.join("; ")}.` : "",
       client ? `connection counters: ${client}.` : "", samplers ? `sampling: ${samplers}.` : ""].filter(Boolean).join(" ");
   }
@@ -74,7 +76,7 @@ export class DiagnosticsPanel {
     const atBottom = pre.scrollTop + pre.clientHeight >= pre.scrollHeight - 4;
     const shown = filter ? this.lines.filter((l) => l.text.toLowerCase().includes(filter)) : this.lines;
     pre.replaceChildren(...shown.slice(-600).map((l) => el("span", { class: l.error ? "err" : l.dir },
-      `${l.t.toFixed(3).padStart(10)}  ${l.dir === "tx" ? "→" : "←"}  ${l.text}\n`)));
+      `${l.t.toFixed(3).padStart(10)} s  ${ARROWS[l.dir] || " "}  ${l.text}\n`)));
     if (atBottom) pre.scrollTop = pre.scrollHeight;
   }
 }

@@ -1,7 +1,7 @@
 // I/O panel: a virtual drive's JP3 inputs (analog, pulse train, ENA) and live outputs/state.
 // The tab shows only for an axis with virtual I/O (identity.virtual_io).
 import { api } from "./net.js";
-import { $, el, fmt, message, readField, readFields } from "./util.js";
+import { $, axisLabel, el, fmt, message, readField, readFields } from "./util.js";
 
 const OUTPUTS = [  // [label, outputs field, title]
   ["ALM", "alarm", "JP3-8: LOW while an alarm is latched"],
@@ -157,7 +157,7 @@ export class IoPanel {
       const p = doc.replies.pulses;
       const extra = p ? (p.ignored ? " – ignored (not in a pulse command mode, or servo off)"
         : ` – ${fmt(p.taken)} pulses taken over ${fmt(p.seconds)} s (${p.format})`) : "";
-      message(this.msg, `${what}: sent to axis ${this.ctx.selected}${extra}`, p && p.ignored ? "error" : "ok");
+      message(this.msg, `${what}: sent to ${axisLabel(this.ctx.identity(this.ctx.selected))}${extra}`, p && p.ignored ? "error" : "ok");
     } catch (err) {
       message(this.msg, `${what}: ${err.message}`, "error");
     }

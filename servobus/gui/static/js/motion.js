@@ -1,6 +1,6 @@
 // Motion panel: servo on/off, jog while held, moves in counts/rev/deg, constant speed, waves.
 import { api } from "./net.js";
-import { $, $$, axisLabel, el, fieldError, fmt, message, readField, readFields } from "./util.js";
+import { $, $$, axisLabel, el, fieldError, fmt, message, readField, readFields, roundFor, setRules, unitsOf } from "./util.js";
 import { gateReason, seenText } from "./gate.js";
 
 // The page renews its jog / constant speed this often; the server's lease ends one not
@@ -28,7 +28,8 @@ export class MotionPanel {
       const values = readFields([$("#wave-amp"), $("#wave-hz")]);
       if (values === null) { this.refused("test motion"); return; }
       const [amplitude, hz] = values;
-      this.run("/wave", { kind: $("#wave-kind").value, amplitude, hz }, "test motion");
+      const unit = unitsOf(this.ctx.identity(this.ctx.selected)).position;
+      this.run("/wave", { kind: $("#wave-kind").value, amplitude, unit, hz }, `test motion of ${amplitude} ${unit}`, $("#wave-amp"));
     });
     $("#wave-off").addEventListener("click", () => this.run("/wave", { kind: "off" }, "test motion off"));
     for (const [id, sign] of [["#jog-plus", 1], ["#jog-minus", -1]]) this.bindJog($(id), sign);
@@ -92,12 +93,13 @@ export class MotionPanel {
     this.jogEnd();
     const why = gateReason(this.ctx, "motion");
     if (why) { message(this.msg, `jog: not sent: ${why}`, "error"); return; }
-    const speed = readField($("#jog-rpm"));
-    if (speed === null) { this.refused("jog"); return; }
-    const rpm = sign * speed;
+    const field = readField($("#jog-rpm"));
+    if (field === null) { this.refused("jog"); return; }
+    const speed = sign * field;
     const axis = this.ctx.selected;
+    const ident = this.ctx.identity(axis);
     const send = () => {
-      if (!this.ctx.link.send({ type: "jog", axis, rpm })) {
+      if (!this.ctx.link.send({ type: "jog", axis, speed })) {
         message(this.msg, "jog: no connection to the server", "error");
         this.jogEnd();
       }
@@ -105,7 +107,7 @@ export class MotionPanel {
     this.jogAxis = axis;
     send();
     this.jogTimer = setInterval(send, JOG_REPEAT_MS);
-    message(this.msg, `jogging axis ${axis} at ${rpm} rpm`, "ok");
+    message(this.msg, `jogging ${axisLabel(ident)} at ${speed} ${unitsOf(ident).speed}`, "ok");
   }
 
   jogEnd(text, kind = "") {
@@ -114,35 +116,37 @@ export class MotionPanel {
     this.jogTimer = null;
     this.ctx.link.send({ type: "jog_stop", axis: this.jogAxis });
     for (const b of $$("button.jog")) b.classList.remove("held");
-    message(this.msg, text ?? `jog of axis ${this.jogAxis} released`, kind);
+    message(this.msg, text ?? `jog of ${axisLabel(this.ctx.identity(this.jogAxis))} released`, kind);
     this.jogAxis = null;
   }
 
   async turnStart() {
     this.turnEnd();
-    const rpm = readField($("#turn-rpm"));
-    if (rpm === null) { this.refused("constant speed"); return; }
+    const speed = readField($("#turn-rpm"));
+    if (speed === null) { this.refused("constant speed"); return; }
     const axis = this.ctx.selected;
     const label = axisLabel(this.ctx.identity(axis));
+    const said = `${speed} ${unitsOf(this.ctx.identity(axis)).speed}`;
     if (this.ctx.owner === null) {
       message(this.msg, "constant speed: no connection to the server", "error");
       return;
     }
     try {
-      const doc = await api(`/api/axes/${axis}/turn`, { rpm, page: this.ctx.owner });
+      const doc = await api(`/api/axes/${axis}/turn`, { speed, page: this.ctx.owner });
       if (doc.open_ended) {
-        message(this.msg, `constant speed ${rpm} rpm on ${label}: open-ended (continuous axis), runs until Stop`, "ok");
+        message(this.msg, `constant speed ${said} on ${label}: open-ended (continuous axis), runs until Stop`, "ok");
         return;
       }
-      if (rpm === 0) { message(this.msg, `constant speed of ${label} stopped`, "ok"); return; }
+      if (speed === 0) { message(this.msg, `constant speed of ${label} stopped`, "ok"); return; }
       this.turnAxis = axis;
       $("#turn-run").classList.add("held");
       this.turnTimer = setInterval(() => {
-        if (!this.ctx.link.send({ type: "turn", axis, rpm })) this.turnEnd("constant speed: no connection to the server", "error");
+        if (!this.ctx.link.send({ type: "turn", axis, speed })) this.turnEnd("constant speed: no connection to the server", "error");
       }, JOG_REPEAT_MS);
-      message(this.msg, `constant speed ${rpm} rpm on ${label}: held while this page stays open`, "ok");
+      message(this.msg, `constant speed ${said} on ${label}: held while this page stays open`, "ok");
     } catch (err) {
       message(this.msg, `constant speed: ${err.message}`, "error");
+      if (err.status === 400) fieldError($("#turn-rpm"), err.message);
     }
   }
 
@@ -165,7 +169,7 @@ export class MotionPanel {
       const why = this.ctx.ended[String(axis)];
       const lease = this.ctx.leases[String(axis)];
       if (why) end(`${what} of ${label} ended: ${why}`, "error");
-      else if (lease && lease.mine && lease.at_limit) end(`${what} of ${label}: at soft limit`, "error");
+      else if (lease && lease.mine && lease.at_limit) end(`${what} of ${label}: stopped at soft limit`, "error");
     };
     seen(this.jogAxis, "jog", (t, k) => this.jogEnd(t, k));
     seen(this.turnAxis, "constant speed", (t, k) => this.turnEnd(t, k));
@@ -173,10 +177,11 @@ export class MotionPanel {
 
   renderSelection() {
     const ident = this.ctx.identity(this.ctx.selected);
+    this.renderUnits(ident);
     const waves = ident.capabilities.includes("waves");
     for (const node of $$("#wave-box button, #wave-box input, #wave-box select")) node.disabled = !waves;
     $("#wave-hint").textContent = waves
-      ? "Amplitude in the drive's own wave units (DMM: 4096 = 180°); the wave runs until Off or Stop."
+      ? `Amplitude in ${unitsOf(ident).position}, each way from where it starts; the wave runs until Off or Stop.`
       : `${ident.family_title} drives have no drive-generated test motion.`;
     // a machine axis moves in its own unit first (limits checked by the server)
     const units = [...new Set([ident.unit, "rev", "deg", "counts"].filter(Boolean))];
@@ -192,6 +197,26 @@ export class MotionPanel {
     this.renderReadout();
   }
 
+  // The speed and amplitude fields in the axis's own units (issue 33): on another axis or
+  // unit their values start from the machine file's ``speed`` (else 120/300 rpm worth).
+  renderUnits(ident) {
+    const u = unitsOf(ident);
+    for (const id of ["#jog-unit", "#turn-unit"]) $(id).textContent = u.speed;
+    $("#wave-unit").textContent = u.position;
+    const rpm = u.speed === "rpm";
+    const top = roundFor(6000 * Math.abs(u.per_rpm));
+    setRules($("#jog-rpm"), rpm ? { integer: true, min: 1, max: 6000 } : { min: 0, max: top, nonzero: true });
+    setRules($("#turn-rpm"), rpm ? { integer: true, min: -6000, max: 6000 } : { min: -top, max: top });
+    const key = `${ident.id}:${u.speed}:${u.position}`;
+    if (key === this.unitsKey) return;
+    this.unitsKey = key;
+    const speed = (v) => String(roundFor(ident.default_speed ?? v * Math.abs(u.per_rpm)));
+    $("#jog-rpm").value = rpm ? "120" : speed(120);
+    $("#turn-rpm").value = rpm ? "300" : speed(300);
+    const perRev = ident.counts_per_rev * Math.abs(u.per_count);
+    $("#wave-amp").value = String(u.position === "counts" ? Math.round(perRev / 32) : Number((perRev / 32).toPrecision(2)));
+  }
+
   renderReadout() {
     const s = this.ctx.status.get(this.ctx.selected) || {};
     const box = $("#motion-readout");
@@ -202,7 +227,9 @@ export class MotionPanel {
     box.replaceChildren(
       item(`${axisLabel(this.ctx.identity(this.ctx.selected))} position`,
         s.unit !== undefined ? `${fmt(s.user_position)} ${s.unit}` : `${fmt(s.position)} counts`),
-      item("revolutions", s.revolutions === undefined ? "–" : s.revolutions.toFixed(4)),
+      // counts stay as the secondary readout of an axis in its own unit (issue 33)
+      s.unit !== undefined ? item("counts", fmt(s.position), false)
+        : item("revolutions", s.revolutions === undefined ? "–" : s.revolutions.toFixed(4)),
       item("speed", s.unit !== undefined ? `${fmt(s.user_speed)} ${s.speed_unit}` : `${fmt(s.speed)} rpm`),
       item("current", `${fmt(s.current)} A`),
       item("state", stale ? seenText(this.ctx, s) : s.link ? "link error" : s.alarm_code ? `ALARM ${s.alarm_code}` :

@@ -1,7 +1,7 @@
 // Parameters panel: the family's table (ranges, units, RAM/EEPROM), edit with range check,
 // read, write (EEPROM writes counted before), backup download, restore/compare a file.
 import { api } from "./net.js";
-import { $, el, download, message } from "./util.js";
+import { $, axisLabel, el, download, message } from "./util.js";
 
 export class ParamsPanel {
   constructor(ctx) {
@@ -26,7 +26,7 @@ export class ParamsPanel {
       const doc = await api(this.url());
       this.rows = doc.params;
       this.render();
-      message(this.msg, `read ${this.rows.length} parameters from axis ${doc.axis}`, "ok");
+      message(this.msg, `read ${this.rows.length} parameters from ${axisLabel(this.ctx.identity(doc.axis))}`, "ok");
     } catch (err) {
       message(this.msg, `read: ${err.message}`, "error");
     }
@@ -160,7 +160,7 @@ export class ParamsPanel {
       onclick: () => this.restore(backup, name, true) });
     apply.disabled = doc.changes === 0;
     box.replaceChildren(
-      el("div", { class: "row" }, el("b", { text: `${name} vs axis ${this.ctx.selected}` }),
+      el("div", { class: "row" }, el("b", { text: `${name} vs ${axisLabel(this.ctx.identity(this.ctx.selected))}` }),
         el("span", { class: "muted", text: ` saved from drive ${doc.saved_from} (${doc.protocol}) · ${doc.changes} of ${doc.rows.length} differ` })),
       el("table", {}, el("thead", {}, el("tr", {}, ...["parameter", "file", "drive", "", "stored"].map((t) => el("th", { text: t })))),
         el("tbody", {}, ...rows)),

@@ -3,7 +3,8 @@
 // Frames arrive binary (frames.js); the page acks each one once drawn, so the server
 // never sends faster than this page draws.
 import { parseFrame, FLAG_TRIGGERED, FLAG_HOLDING, FLAG_FREE_RUN } from "./frames.js";
-import { $, el, fmt, download, readField, COLORS } from "./util.js";
+import { api } from "./net.js";
+import { $, axisLabel, el, fmt, download, fieldError, message, readField, signalUnit, unitsOf, COLORS } from "./util.js";
 
 const WINDOWS = [0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1, 2, 5, 10, 20];
 const MAX_CHANNELS = 8;
@@ -37,6 +38,7 @@ export class ScopePanel {
     for (const id of ["#scope-window", "#trig-mode", "#trig-source", "#trig-edge", "#trig-level", "#trig-pre"]) {
       $(id).addEventListener("change", () => this.configure());
     }
+    $("#trig-source").addEventListener("change", () => this.renderTriggerUnit());
     $("#scope-add").addEventListener("click", () => {
       if (this.channels.length >= MAX_CHANNELS) return;
       this.channels.push({ axis: this.ctx.selected, signal: "current" });
@@ -56,35 +58,106 @@ export class ScopePanel {
     ctx.link.on("hello", () => { if (this.visible) this.configure(); });
     ctx.link.on("error", (doc) => { if (doc.request && doc.request.startsWith("scope")) $("#scope-status").textContent = `scope: ${doc.message}`; });
     window.addEventListener("resize", () => { if (this.visible) { this.build(); this.configure(); } });
-    ctx.onSelect((id) => { $("#scope-jog-axis").textContent = `axis ${id}, speed from Motion`; });
+    ctx.onSelect((id) => {
+      $("#scope-jog-axis").textContent = `${axisLabel(ctx.identity(id))}, speed from Motion`;
+      $("#scope-move-unit").textContent = unitsOf(ctx.identity(id)).position;
+      this.follow(id);
+    });
+    $("#scope-move-plus").addEventListener("click", () => this.move(1));
+    $("#scope-move-minus").addEventListener("click", () => this.move(-1));
+    ctx.onIdentity(() => { this.renderChannels(); if (this.visible) this.build(); });
     this.renderChannels();
   }
 
-  show() { this.visible = true; this.build(); this.configure(); }
-  hide() { this.visible = false; this.ctx.link.send({ type: "scope_run", running: false }); }
+  // Leaving the tab keeps what the scope caught (issue 33): a trigger (auto, normal,
+  // single) stays armed, so a move started from another tab is caught, and only triggered
+  // captures are kept meanwhile; a rolling scope pauses (no frames nobody sees). Coming
+  // back shows the last capture (auto: paused on it, Run goes on) and sends only settings
+  // that changed.
+  show() {
+    this.visible = true;
+    this.build();
+    if (this.data && this.data.length === this.channels.length + 1) this.plot.setData(this.data);
+    if (JSON.stringify(this.settings()) !== this.sent) this.configure();
+    else if (this.caughtAway && $("#trig-mode").value === "auto" && this.running) this.setRunning(false);
+    else if (this.pausedHidden && this.running) this.ctx.link.send({ type: "scope_run", running: true });
+    this.pausedHidden = this.caughtAway = false;
+  }
+  hide() {
+    this.visible = false;
+    this.caughtAway = false;
+    this.pausedHidden = $("#trig-mode").value === "roll";
+    if (this.pausedHidden) this.ctx.link.send({ type: "scope_run", running: false });
+  }
+
+  // Channels not pinned follow the axis selected on the page (issue 33); choosing a
+  // channel's axis pins it.
+  follow(id) {
+    let changed = false;
+    for (const ch of this.channels) if (!ch.pinned && ch.axis !== id) { ch.axis = id; changed = true; }
+    if (!changed) return;
+    this.renderChannels();
+    if (this.visible) this.build();
+    // hidden: an armed scope takes the new channels at once, to catch the next move
+    if (this.visible || (this.sent && $("#trig-mode").value !== "roll")) this.configure(true);
+    else this.sent = null;
+  }
+
+  // A relative move of the selected axis from here, to watch it (issue 33).
+  async move(sign) {
+    const field = $("#scope-move-value");
+    const value = readField(field);
+    const msg = $("#scope-msg");
+    if (value === null) { message(msg, "move: not sent - correct the marked field", "error"); return; }
+    const id = this.ctx.selected;
+    const unit = unitsOf(this.ctx.identity(id)).position;
+    try {
+      await api(`/api/axes/${id}/move`, { value: sign * value, unit, relative: true });
+      message(msg, `move by ${sign * value} ${unit}: sent to ${axisLabel(this.ctx.identity(id))}`, "ok");
+    } catch (err) {
+      message(msg, `move: ${err.message}`, "error");
+      if (err.status === 400) fieldError(field, err.message);
+    }
+  }
 
   signal(name) { return this.signals.find((s) => s.name === name); }
+
+  // A channel's unit as the server sends it (the axis's own: mm, mm/s, deg ...; issue 33).
+  unitOf(ch) { return signalUnit(this.ctx.identity(ch.axis), this.signal(ch.signal)); }
+
+  // "x position [mm]": how a channel is named in legends, cursors and exports.
+  channelName(ch) { return `${axisLabel(this.ctx.identity(ch.axis))} ${this.signal(ch.signal).label} [${this.unitOf(ch)}]`; }
 
   renderChannels() {
     const box = $("#scope-channels");
     box.replaceChildren(...this.channels.map((ch, i) => {
       const axisSel = el("select", { "data-ch": i, "data-field": "axis" },
-        ...this.ctx.info.axes.map((a) => el("option", { value: a.id, text: a.name ? `${a.name} (${a.protocol})` : `axis ${a.id}`, selected: a.id === ch.axis })));
+        ...this.ctx.info.axes.map((a) => el("option", { value: a.id, text: axisLabel(a), title: `${a.protocol} · ${a.family_title}`, selected: a.id === ch.axis })));
       const sigSel = el("select", { "data-ch": i, "data-field": "signal" },
-        ...this.signals.map((s) => el("option", { value: s.name, text: `${s.label} [${s.unit}]`, selected: s.name === ch.signal })));
-      axisSel.addEventListener("change", () => { ch.axis = Number(axisSel.value); this.channelsChanged(); });
+        ...this.signals.map((s) => el("option", { value: s.name, text: `${s.label} [${signalUnit(this.ctx.identity(ch.axis), s)}]`, selected: s.name === ch.signal })));
+      axisSel.addEventListener("change", () => { ch.axis = Number(axisSel.value); ch.pinned = true; this.channelsChanged(); });
       sigSel.addEventListener("change", () => { ch.signal = sigSel.value; this.channelsChanged(); });
       const remove = el("button", { text: "×", title: "remove channel", onclick: () => {
         if (this.channels.length > 1) { this.channels.splice(i, 1); this.channelsChanged(); }
       } });
       remove.disabled = this.channels.length === 1;
-      return el("div", { class: "chan" }, el("span", { class: "swatch", style: `background:${COLORS[i]}` }), axisSel, sigSel, remove);
+      const pin = el("button", { class: `pin${ch.pinned ? " on" : ""}`, "aria-pressed": ch.pinned ? "true" : "false",
+        text: ch.pinned ? "pinned" : "follows",
+        title: ch.pinned ? "pinned to its axis: click to follow the selected axis" : "follows the selected axis: click to pin it",
+        onclick: () => { ch.pinned = !ch.pinned; if (!ch.pinned) ch.axis = this.ctx.selected; this.channelsChanged(); } });
+      return el("div", { class: "chan" }, el("span", { class: "swatch", style: `background:${COLORS[i]}` }), axisSel, sigSel, pin, remove);
     }));
     $("#scope-add").disabled = this.channels.length >= MAX_CHANNELS;
     const src = $("#trig-source");
     const keep = Math.min(Number(src.value || 0), this.channels.length - 1);
     src.replaceChildren(...this.channels.map((ch, i) =>
-      el("option", { value: i, text: `${i + 1}: axis ${ch.axis} ${this.signal(ch.signal).label}`, selected: i === keep })));
+      el("option", { value: i, text: `${i + 1}: ${axisLabel(this.ctx.identity(ch.axis))} ${this.signal(ch.signal).label}`, selected: i === keep })));
+    this.renderTriggerUnit();
+  }
+
+  renderTriggerUnit() {
+    const ch = this.channels[Number($("#trig-source").value || 0)];
+    $("#trig-unit").textContent = ch ? this.unitOf(ch) : "";
   }
 
   channelsChanged() { this.renderChannels(); this.build(); this.configure(); }
@@ -96,7 +169,7 @@ export class ScopePanel {
       edge: $("#trig-edge").value, level: this.fieldValue("#trig-level", 0),
       pre: this.fieldValue("#trig-pre", 10) / 100,
       trigger_channel: Number($("#trig-source").value || 0),
-      width: Math.round($("#scope-plot").clientWidth || 1000),
+      width: this.plotWidth(),
     };
   }
 
@@ -109,13 +182,23 @@ export class ScopePanel {
     return this.good[sel] ?? fallback;
   }
 
-  configure() {
-    if (!this.visible) return;
+  // The plot's width in pixels (the last one seen while the tab showed, when hidden).
+  plotWidth() {
+    const w = $("#scope-plot").clientWidth;
+    if (w) this.lastWidth = Math.round(w);
+    return this.lastWidth || 1000;
+  }
+
+  // ``hidden``: sent while another tab shows (follow) - the plot is built on return.
+  configure(hidden = false) {
+    if (!this.visible && !hidden) return;
     this.frame = null;
     this.overlays = [];
     this.lastTriggered = null;
     this.pendingAck = null;
-    this.ctx.link.send({ type: "scope", settings: this.settings() });
+    const settings = this.settings();
+    this.sent = JSON.stringify(settings);
+    this.ctx.link.send({ type: "scope", settings });
     if (!this.running) this.ctx.link.send({ type: "scope_run", running: false });
   }
 
@@ -129,7 +212,7 @@ export class ScopePanel {
   build() {
     const host = $("#scope-plot");
     if (this.plot) { this.plot.destroy(); this.plot = null; }
-    const bits = this.channels.filter((c) => this.signal(c.signal).unit === "bit");
+    const bits = this.channels.filter((c) => this.unitOf(c) === "bit");
     this.bitSlot = new Map();
     bits.forEach((c, k) => this.bitSlot.set(c, k));
     const scales = { x: { time: false, range: () => this.xRange() } };
@@ -137,7 +220,7 @@ export class ScopePanel {
       values: (u, vals) => { const span = u.scales.x.max - u.scales.x.min; return vals.map((v) => fmtTick(v, span)); } }];
     const units = [];
     for (const c of this.channels) {
-      const unit = unitScale(this.signal(c.signal).unit);
+      const unit = unitScale(this.unitOf(c));
       if (!units.includes(unit)) units.push(unit);
     }
     units.forEach((unit, i) => {
@@ -150,9 +233,8 @@ export class ScopePanel {
     });
     const series = [{ label: "t", value: (u, v) => (v === null || v === undefined ? "–" : fmtTime(v)) },
       ...this.channels.map((c, i) => {
-        const sig = this.signal(c.signal);
-        return { label: `${i + 1}: A${c.axis} ${sig.label} [${sig.unit}]`, stroke: COLORS[i], width: 1.25,
-          scale: unitScale(sig.unit), points: { show: false },
+        return { label: `${i + 1}: ${this.channelName(c)}`, stroke: COLORS[i], width: 1.25,
+          scale: unitScale(this.unitOf(c)), points: { show: false },
           value: (u, v, si, idx) => fmt(this.rawValue(si - 1, idx)) };
       })];
     const width = Math.max(300, host.clientWidth || 900);
@@ -173,6 +255,15 @@ export class ScopePanel {
 
   onFrame(buf) {
     const f = parseFrame(buf);
+    if (!this.running) {  // paused: the picture holds (a frame on its way is only acked)
+      this.ctx.link.send({ type: "ack", seq: f.seq });
+      return;
+    }
+    if (!this.visible) {  // another tab: acked at once; a triggered capture is kept
+      this.ctx.link.send({ type: "ack", seq: f.seq });
+      if (!(f.flags & FLAG_TRIGGERED) || !this.plot || f.ys.length !== this.channels.length) return;
+      this.caughtAway = true;
+    }
     if (!this.plot || f.ys.length !== this.channels.length) {  // from before a change: drop,
       this.ctx.link.send({ type: "ack", seq: f.seq });          // but never hold the server up
       return;
@@ -190,6 +281,7 @@ export class ScopePanel {
     const data = [f.x];
     f.ys.forEach((y, i) => data.push(this.display(i, y)));
     this.data = data;
+    if (!this.visible) return;  // kept for when the tab shows again
     this.pendingAck = f.seq;
     this.setDataAt = performance.now();
     this.plot.setData(data);
@@ -240,7 +332,7 @@ export class ScopePanel {
       ctx.beginPath(); ctx.moveTo(x, top); ctx.lineTo(x, top + height); ctx.stroke();
       const tc = this.channels[Number($("#trig-source").value || 0)];
       if (tc) {
-        const scale = unitScale(this.signal(tc.signal).unit);
+        const scale = unitScale(this.unitOf(tc));
         const slot = this.bitSlot.get(tc);
         const level = ((this.good || {})["#trig-level"] ?? 0) + (slot === undefined ? 0 : slot * 1.25);
         const y = u.valToPos(level, scale, true);
@@ -272,7 +364,7 @@ export class ScopePanel {
       ctx.globalAlpha = 0.45 - 0.12 * age;
       this.channels.forEach((ch, i) => {
         if (i >= o.ys.length) return;
-        const scale = unitScale(this.signal(ch.signal).unit);
+        const scale = unitScale(this.unitOf(ch));
         const slot = this.bitSlot.get(ch);
         const shift = slot === undefined ? 0 : slot * 1.25;
         const y = o.ys[i];
@@ -322,9 +414,8 @@ export class ScopePanel {
       el("td", { class: "num", text: dt === null ? "–" : `${fmtTime(dt)}  (1/Δt ${dt ? fmt(1 / Math.abs(dt)) : "–"} Hz)` }))];
     this.channels.forEach((c, i) => {
       const va = this.valueAt(i, a), vb = this.valueAt(i, b);
-      const sig = this.signal(c.signal);
       rows.push(el("tr", {}, el("td", {}, el("span", { class: "swatch", style: `display:inline-block;width:10px;height:10px;background:${COLORS[i]};margin-right:6px` }),
-        `A${c.axis} ${sig.label} [${sig.unit}]`),
+        this.channelName(c)),
       el("td", { class: "num", text: fmt(va) }), el("td", { class: "num", text: fmt(vb) }),
       el("td", { class: "num", text: va !== null && vb !== null ? fmt(vb - va) : "–" })));
     });
@@ -345,11 +436,11 @@ export class ScopePanel {
     const sources = s.sources || [];
     const src = sources.filter((x) => x.running || !x.error).map((x) => {
       const kind = x.source === "trace" ? "drive trace" : x.source === "poll" ? "polled" : "starting";
-      return `A${x.axis} ${kind} ${fmt(x.rate_hz)} Hz${x.error ? ` (${x.error})` : ""}`;
+      return `${axisLabel(this.ctx.identity(x.axis))} ${kind} ${fmt(x.rate_hz)} Hz${x.error ? ` (${x.error})` : ""}`;
     }).join(", ");
     // a sampler that stopped says why, in the status line, in the error colour (never silent)
     const stopped = sources.filter((x) => !x.running && x.error)
-      .map((x) => el("span", { class: "sampler-error", text: ` · A${x.axis} ${x.error}` }));
+      .map((x) => el("span", { class: "sampler-error", text: ` · ${axisLabel(this.ctx.identity(x.axis))} ${x.error}` }));
     const lat = s.latency_ms ? `delay ${s.latency_ms.median.toFixed(0)} ms (p95 ${s.latency_ms.p95.toFixed(0)})` : "";
     $("#scope-status").replaceChildren(el("span", { class: "state", text: state }), ...stopped,
       `${src ? " · " + src : ""} · ${f ? `${f.raw.toLocaleString("en-US")} samples in view` : "no data yet"} · ${this.stats.fps} frames/s drawn ${lat ? "· " + lat : ""}`);
@@ -368,8 +459,7 @@ export class ScopePanel {
     c.font = `${12 * devicePixelRatio}px sans-serif`;
     let x = 8 * devicePixelRatio;
     this.channels.forEach((ch, i) => {
-      const sig = this.signal(ch.signal);
-      const text = `${i + 1}: axis ${ch.axis} ${sig.label} [${sig.unit}]`;
+      const text = `${i + 1}: ${this.channelName(ch)}`;
       c.fillStyle = COLORS[i]; c.fillText(text, x, 18 * devicePixelRatio);
       x += c.measureText(text).width + 16 * devicePixelRatio;
     });

@@ -1,14 +1,16 @@
 // Tuning panel: step test with its figures, before/after comparison, gains apply/revert.
 import { api } from "./net.js";
-import { $, el, fieldError, fmt, ms, message, readField, readFields, COLORS } from "./util.js";
+import { $, axisLabel, el, fieldError, fmt, ms, message, readField, readFields, COLORS } from "./util.js";
 
+// A run's figures; positions in the run's own unit (the server converts: issue 33).
 const METRICS = [
   ["rise_time_s", "rise time (10–90 %)", ms], ["overshoot_pct", "overshoot", (v) => `${fmt(v)} %`],
   ["settling_time_s", "settling time", (v) => (v === null ? "not settled" : ms(v))],
   ["peak_time_s", "peak time", ms], ["delay_s", "delay (to 2 %)", ms],
-  ["following_error_max", "max following error", (v) => (v === null ? "n/a" : `${fmt(v)} counts`)],
-  ["steady_state_error", "steady-state error", (v) => `${fmt(v)} counts`],
+  ["following_error_max", "max following error", (v, unit) => (v === null ? "n/a" : `${fmt(v)} ${unit}`)],
+  ["steady_state_error", "steady-state error", (v, unit) => `${fmt(v)} ${unit}`],
 ];
+const runUnit = (r) => r.unit || "counts";
 
 export class TuningPanel {
   constructor(ctx) {
@@ -23,7 +25,19 @@ export class TuningPanel {
     $("#step-minus").addEventListener("click", () => this.step(-1));
     $("#gains-apply").addEventListener("click", () => this.apply());
     $("#gains-revert").addEventListener("click", () => this.revert());
-    ctx.onSelect(() => { this.selected.clear(); if (this.visible) this.load(); });
+    ctx.onSelect(() => { this.selected.clear(); this.renderUnits(); if (this.visible) this.load(); });
+    ctx.onIdentity(() => this.renderUnits());
+    this.renderUnits();
+  }
+
+  // The step in the axis's own unit first (a mm axis: mm), then the drive's units.
+  renderUnits() {
+    const ident = this.ctx.identity(this.ctx.selected);
+    const units = [...new Set([ident.unit, "rev", "deg", "counts"].filter(Boolean))];
+    const sel = $("#step-unit");
+    if ([...sel.options].map((o) => o.value).join() === units.join()) return;
+    sel.replaceChildren(...units.map((u) => el("option", { value: u, text: u })));
+    sel.value = units[0];
   }
   show() { this.visible = true; this.load(); }
   hide() { this.visible = false; }
@@ -53,7 +67,7 @@ export class TuningPanel {
       const r = await api(this.url("/step"), {
         distance: sign * Math.abs(size), unit: $("#step-unit").value, duration_s: duration });
       const m = r.metrics;
-      message(this.msg, `run ${r.run}: overshoot ${fmt(m.overshoot_pct)} %, rise ${ms(m.rise_time_s)}, settling ${m.settling_time_s === null ? "not settled" : ms(m.settling_time_s)} (${r.samples} samples, ${r.source === "trace" ? "drive trace" : "polled"} ${fmt(r.rate_hz)} Hz)`, "ok");
+      message(this.msg, `${axisLabel(this.ctx.identity(r.axis))} run ${r.run}, step ${fmt(r.step ?? r.distance)} ${runUnit(r)}: overshoot ${fmt(m.overshoot_pct)} %, rise ${ms(m.rise_time_s)}, settling ${m.settling_time_s === null ? "not settled" : ms(m.settling_time_s)} (${r.samples} samples, ${r.source === "trace" ? "drive trace" : "polled"} ${fmt(r.rate_hz)} Hz)`, "ok");
       $("#tuning-msg").dataset.overshoot = m.overshoot_pct;
       this.selected.add(r.run);
       while (this.selected.size > 2) this.selected.delete([...this.selected][0]);
@@ -128,12 +142,12 @@ export class TuningPanel {
       });
       const m = r.metrics;
       return el("tr", { "data-run": r.run }, el("td", {}, box), el("td", { text: `#${r.run}` }),
-        el("td", { class: "num", text: fmt(r.distance) }),
+        el("td", { class: "num", text: `${fmt(r.step ?? r.distance)} ${runUnit(r)}` }),
         el("td", { class: "gains", text: Object.entries(r.gains).map(([k, v]) => `${k.replace("_gain", "")} ${v}`).join(" · ") }),
         el("td", { class: "num overshoot", text: `${fmt(m.overshoot_pct)} %` }),
         el("td", { class: "num", text: ms(m.rise_time_s) }),
         el("td", { class: "num", text: m.settling_time_s === null ? "–" : ms(m.settling_time_s) }),
-        el("td", { class: "num", text: m.following_error_max === null ? "n/a" : fmt(m.following_error_max) }));
+        el("td", { class: "num", text: m.following_error_max === null ? "n/a" : `${fmt(m.following_error_max)} ${runUnit(r)}` }));
     });
     const picked = this.results.filter((r) => this.selected.has(r.run));
     const compare = [];
@@ -146,8 +160,8 @@ export class TuningPanel {
         if (a.gains[g] !== b.gains[g]) compare.push(el("tr", {}, el("td", { text: g }), el("td", { class: "num", text: a.gains[g] }), el("td", { class: "num", text: b.gains[g] })));
       }
       for (const [key, label, show] of METRICS) {
-        compare.push(el("tr", {}, el("td", { text: label }), el("td", { class: "num", text: show(a.metrics[key]) }),
-          el("td", { class: "num", text: show(b.metrics[key]) })));
+        compare.push(el("tr", {}, el("td", { text: label }), el("td", { class: "num", text: show(a.metrics[key], runUnit(a)) }),
+          el("td", { class: "num", text: show(b.metrics[key], runUnit(b)) })));
       }
     }
     table.replaceChildren(head, ...rows, ...(compare.length ? [el("tr", {}, el("td", { colspan: 8 }, el("b", { text: "comparison" }))), ...compare] : []));
@@ -162,9 +176,10 @@ export class TuningPanel {
     const tables = picked.map((r) => [r.trace.t.map((t) => t * 1000), r.trace.position]);
     const data = picked.length === 1 ? tables[0] : uPlot.join(tables);
     const series = [{ label: "t (ms)" }, ...picked.map((r, i) => ({
-      label: `#${r.run} position − start [counts]`, stroke: COLORS[i * 2], width: 1.5, spanGaps: true,
+      label: `#${r.run} position − start [${runUnit(r)}]`, stroke: COLORS[i * 2], width: 1.5, spanGaps: true,
       points: { show: false } }))];
-    const target = picked[picked.length - 1].distance;
+    const last = picked[picked.length - 1];
+    const target = last.step ?? last.distance;
     this.plot = new uPlot({
       width: Math.max(300, host.clientWidth || 500), height: 300, series,
       scales: { x: { time: false } },

@@ -18,6 +18,7 @@ export function el(tag, attrs = {}, ...children) {
 export function fmt(v, digits = 3) {
   if (v === null || v === undefined || Number.isNaN(v)) return "–";
   if (typeof v !== "number") return String(v);
+  if (v === 0) v = 0;  // -0 (a reversed axis at rest) is shown as 0
   if (Number.isInteger(v)) return v.toLocaleString("en-US");
   const a = Math.abs(v);
   if (a >= 1e6 || (a !== 0 && a < 1e-3)) return v.toExponential(digits - 1);
@@ -42,6 +43,26 @@ export function download(name, blob) {
 }
 
 // An axis as people know it: its name in the machine file, else its number.
+// The units the server shows an axis in (issue 33): a machine file's axis in its own unit
+// (mm, deg) and that per second, a bare URL's in counts and rpm; the server converts.
+const DRIVE_UNITS = { position: "counts", speed: "rpm", per_count: 1, per_rpm: 1, signals: {} };
+export function unitsOf(ident) { return (ident && ident.units) || DRIVE_UNITS; }
+
+// A signal's shown unit on an axis (the server's), else its raw unit.
+export function signalUnit(ident, signal) { return unitsOf(ident).signals[signal.name] || signal.unit; }
+
+// A field's checks (see fieldRules), set when the selected axis's unit changes.
+export function setRules(input, { integer = false, min, max, nonzero = false } = {}) {
+  const d = input.dataset;
+  if (integer) d.integer = ""; else delete d.integer;
+  if (nonzero) d.nonzero = ""; else delete d.nonzero;
+  if (min === undefined) delete d.min; else d.min = min;
+  if (max === undefined) delete d.max; else d.max = max;
+}
+
+// A number rounded for a field (no float noise such as 49.99999999).
+export function roundFor(v) { return Number(v.toPrecision(6)); }
+
 export function axisLabel(ident) {
   return ident && ident.name ? ident.name : `axis ${ident ? ident.id : "?"}`;
 }
