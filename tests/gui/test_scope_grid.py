@@ -5,8 +5,16 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from servobus.gui import frames
+from servobus.gui.fleet import Units
 from servobus.gui.ring import SampleRing
 from servobus.gui.scope_session import ScopeSession, ScopeSettings
+
+
+class Handle:
+    """An axis shown in counts and rpm, as a bare drive URL is."""
+
+    def units(self) -> Units:
+        return Units()
 
 
 @dataclass
@@ -15,6 +23,7 @@ class Sampler:
 
     ring: SampleRing = field(default_factory=lambda: SampleRing(100_000))
     rate_hz: float = 0.0
+    handle: Handle = field(default_factory=Handle)
 
     def subscribe(self, signals: object) -> int:
         return 1
