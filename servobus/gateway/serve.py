@@ -52,7 +52,8 @@ class Gateway:
         self.options = options
         self.sampler = Sampler(machine, options.rate_hz)
         self.commander = Commander(machine)
-        self.opcua = OpcUaGateway(machine, self.commander, options.opcua, source)
+        self.opcua = OpcUaGateway(machine, self.commander, options.opcua, source,
+                                  options.rate_hz)
         self.sampler.listeners.append(self.opcua.on_sample)
         self.sampler.link_listeners.append(self.opcua.on_link)
         self.mqtt = (MqttGateway(machine, self.sampler, self.commander, options.mqtt)
