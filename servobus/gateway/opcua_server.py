@@ -2,13 +2,14 @@
 
 Security (decision, docs/gateway.md "Security"):
 
-* on a loopback address the endpoint offers security policy None (and Basic256Sha256
-  Sign&Encrypt as well when a certificate is given); anonymous sessions may browse, read
+* on a loopback address the endpoint offers security policy None (and the Sign&Encrypt
+  policies as well when a certificate is given); anonymous sessions may browse, read
   and subscribe, nothing else;
-* beyond loopback, policy None is refused: only Basic256Sha256 Sign&Encrypt is served, with
-  the given certificate or one generated on first start and kept next to the machine file
-  (``<machine>.opcua-cert.der`` / ``.opcua-key.pem``; for the built-in machine in
-  ``~/.config/servobus/``);
+* beyond loopback, policy None is refused: only Sign&Encrypt is served (Basic256Sha256,
+  Aes128_Sha256_RsaOaep, Aes256_Sha256_RsaPss), with the given certificate or one generated
+  on first start and kept next to the machine file (``<machine>.opcua-cert.der`` /
+  ``.opcua-key.pem``; for the built-in machine in ``~/.config/servobus/``), its SAN naming
+  the ApplicationUri, host names and addresses served (servobus.gateway.opcua_cert);
 * every method (anything that moves, stops or powers an axis) needs a user of the users
   file (``--users``), on loopback too; without one it answers BadUserAccessDenied. The
   address space itself cannot be changed by any client (no writable node, no AddNodes).
@@ -39,7 +40,6 @@ import contextvars
 import datetime
 import logging
 import math
-import socket
 from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
@@ -60,6 +60,7 @@ from servobus.gateway.commands import Command, Commander, Refused
 from servobus.gateway.identity import application_uri, gateway_id
 from servobus.gateway.link_events import LinkEvent
 from servobus.gateway.opcua_alarms import AxisAlarms
+from servobus.gateway.opcua_cert import ensure_certificate
 from servobus.gateway.opcua_limits import LimitedSession, SessionRoom, apply_limits
 from servobus.gateway.opcua_model import SERVOBUS_URI, AxisNodes, build_model
 from servobus.gateway.sampler import Sample
@@ -71,6 +72,11 @@ log = logging.getLogger(__name__)
 
 DEFAULT_ENDPOINT = "opc.tcp://127.0.0.1:4840"
 PRODUCT_URI = "urn:servobus"
+#: Sign&Encrypt only (decision, docs/gateway.md "Security"): Basic256Sha256 and the two Aes
+#: policies of OPC UA 1.04 that current clients prefer.
+SECURE_POLICIES = (ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt,
+                   ua.SecurityPolicyType.Aes128Sha256RsaOaep_SignAndEncrypt,
+                   ua.SecurityPolicyType.Aes256Sha256RsaPss_SignAndEncrypt)
 
 
 def build_date() -> datetime.datetime:
@@ -322,31 +328,25 @@ class OpcUaGateway:
 
     async def _security(self) -> list[ua.SecurityPolicyType]:
         o = self.options
-        secure = ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt
         if self.loopback and o.cert is None:
             return [ua.SecurityPolicyType.NoSecurity]
         cert, key = o.cert, o.key
         if cert is None or key is None:
-            from asyncua.crypto.cert_gen import setup_self_signed_certificate
-            from cryptography.x509.oid import ExtendedKeyUsageOID
-
             folder = o.cert_dir or Path.home() / ".config" / "servobus"
             folder.mkdir(parents=True, exist_ok=True)
             cert = folder / f"{o.cert_stem}.opcua-cert.der"
             key = folder / f"{o.cert_stem}.opcua-key.pem"
-            await setup_self_signed_certificate(
-                key, cert, self.application_uri, socket.gethostname(),
-                [ExtendedKeyUsageOID.SERVER_AUTH], {"commonName": "servobus gateway"})
             # both 0600 as docs/gateway.md says: the key is the secret; the certificate is
-            # public, but nobody else on the PC needs it either (issue 32)
-            key.chmod(0o600)
-            cert.chmod(0o600)
+            # public, but nobody else on the PC needs it either (issue 32); its SAN names
+            # what is served (servobus.gateway.opcua_cert)
+            await asyncio.to_thread(ensure_certificate, key, cert, self.application_uri,
+                                    self.host)
         await self.server.load_certificate(str(cert))
         await self.server.load_private_key(str(key))
         self.cert_path = cert
         if self.loopback:
-            return [ua.SecurityPolicyType.NoSecurity, secure]
-        return [secure]
+            return [ua.SecurityPolicyType.NoSecurity, *SECURE_POLICIES]
+        return list(SECURE_POLICIES)
 
     async def _link_events(self) -> None:
         s = self.server
