@@ -1,41 +1,45 @@
-"""The OPC UA address space of one machine, after OPC 40010-1 (Robotics) and OPC 10000-100 (DI).
+"""The OPC UA address space of one machine: OPC 40010-1 (Robotics) and OPC 10000-100 (DI)
+objects, typed from the official NodeSets.
 
-Decision (docs/gateway.md "Information model"): the companion specifications' NodeSets are
-not imported (they are large, and a client that does not know them gains nothing); the model
-is built in code with their browse names in their namespaces, so a client that browses by
-the standard names finds what it expects::
+Decision (issue 36, docs/gateway.md "Information model"; it reverses the earlier one,
+"browse names only, no NodeSets"): the DI, IA and Robotics NodeSets are imported at start
+(servobus.gateway.opcua_nodesets), so a client that looks for types finds them; each object
+is added with its TypeDefinition and this module adds the type's mandatory members itself
+(servobus.gateway.opcua_nodes says why not asyncua's instantiation)::
 
     Objects
-      DeviceSet                         (DI)
-        MotionDeviceSystem              (Robotics)
-          MotionDevices                 (Robotics)
-            <machine>                   (servobus)   one MotionDevice per machine
-              Identification            (DI)         Manufacturer, Model, ProductInstanceUri, ...
-              Axes                      (Robotics)
-                <axis>                  (servobus)   named as in the machine file
-                  ParameterSet          (DI)
-                    ActualPosition      (Robotics)   Double, axis unit, EngineeringUnits, EURange
-                    ActualSpeed         (Robotics)   Double, axis unit per second
-                    ActualCurrent, Enabled, Moving, InPosition, AlarmCode, AlarmText
-                                        (servobus)   readings: Bad while they cannot be read
-                    Online, LastError, PowerLost, PowerLostReason, Interrupted
-                                        (servobus)   the link's health: always Good
-                  Identification        (DI)         Manufacturer, Model (family), Protocol,
-                                                     DeviceAddress (link and drive id)
-                  MoveAbsolute(Double), MoveRelative(Double), SetSpeed(Double, Ttl
-                  Double), Stop(), Enable(), Disable(), ResetAlarm(), Acknowledge()
-                                        (servobus)
-              StopAll()                 (servobus)
+      DeviceSet (DI i=5001)
+        MotionDeviceSystem            MotionDeviceSystemType
+          MotionDevices
+            <machine>                 MotionDeviceType: Manufacturer, Model, ProductCode,
+                                      SerialNumber, MotionDeviceCategory, ParameterSet
+                                      (SpeedOverride), Identification, StopAll()
+              Axes
+                <axis>                AxisType: MotionProfile, Identification, Alarm
+                                      (servobus.gateway.opcua_alarms), the methods
+                  ParameterSet        ActualPosition, ActualSpeed (Robotics), ActualCurrent
+                                      (AnalogUnitType: EngineeringUnits, EURange);
+                                      Enabled, Moving, InPosition, AlarmCode, AlarmText
+                                      (readings: Bad while they cannot be read); Online,
+                                      LastError, PowerLost, PowerLostReason, Interrupted
+                                      (HEALTH_VARIABLES: the link's health, always Good)
+              PowerTrains
+                <axis>                PowerTrainType, Moves the axis
+                  Motor               MotorType, IsDrivenBy the axis's controller
+          Controllers
+            <axis>                    ControllerType: the axis's drive; Controls the device
+          SafetyStates
+            <machine>                 SafetyStateType (EmergencyStop, ProtectiveStop: Bad,
+                                      the gateway sees no safety circuit)
 
-Node ids are strings in the gateway's own namespace, ``urn:servobus:gateway:<gateway id>``
-(``<machine>.<axis>.ActualPosition``), so they stay the same from one start to the next and
-an aggregating server keeps the nodes of many gateways apart; browse names and types live
-in the servobus namespace, ``urn:servobus:gateway``, the same in every gateway
-(servobus.gateway.identity). Alarms are events of AxisAlarmEventType (servobus namespace,
-a BaseEventType) emitted by the axis object; a link going down or coming back is an event
-of LinkEventType emitted by the machine object (one per link, not per axis). A method runs
-only when called on its own object (its axis, or the machine for StopAll); on any other
-object it answers BadMethodInvalid and nothing runs.
+Node ids are strings in the gateway's own namespace, ``urn:servobus:gateway:<gateway id>``:
+the machine ``<machine>``, an axis ``<machine>.<axis>``, any member its parent's id, a dot
+and its browse name; so they stay the same from one start to the next and an aggregating
+server keeps the nodes of many gateways apart. servobus's own browse names and types live
+in ``urn:servobus:gateway``, the same in every gateway (servobus.gateway.identity). A link
+going down or coming back is an event of LinkEventType emitted by the machine object (one
+per link, not per axis). A method runs only when called on its own object (its axis, or
+the machine for StopAll); on any other object it answers BadMethodInvalid and nothing runs.
 """
 
 from __future__ import annotations
@@ -322,9 +326,9 @@ async def _add_axis(folder: Node, ns: Namespaces, m: str, axis: MachineAxis,
     a = f"{m}.{axis.name}"
     obj = await add_object(folder, ua.NodeId(a, ns.nodes), qn(ns.servobus, axis.name),
                            _rob(ns, NodeSetIds.AXIS_TYPE))
-    continuous = bool(getattr(axis, "continuous", False))
     await add_property(obj, qn(ns.robotics, "MotionProfile"),
-                       ua.Variant(motion_profile(axis.unit, continuous), ua.VariantType.Int32),
+                       ua.Variant(motion_profile(axis.unit, axis.continuous),
+                                  ua.VariantType.Int32),
                        _rob(ns, AXIS_MOTION_PROFILE))
     await add_identification(obj, ns, a, {
         "Manufacturer": family_title(axis), "Model": family_name(axis),

@@ -285,7 +285,6 @@ class OpcUaGateway:
         self.sampling_ms = 1000.0 / rate_hz if rate_hz else 0.0
         self.alarms = AxisAlarms(self.server, self._acknowledge)
         self._health: dict[str, tuple[object, ...]] = {}
-        self._events: dict[str, Any] = {}
         self._link_event: Any = None
         self.notifications = 0  # value writes that changed something (for the benchmark)
 
