@@ -78,9 +78,10 @@ async def typedef(node: Node) -> ua.NodeId:
     return (await node.read_type_definition())  # type: ignore[no-any-return]
 
 
-async def find_by_type(root: Node, wanted: ua.NodeId) -> list[Node]:
-    """Every node below ``root`` (hierarchical references) whose TypeDefinition is
-    ``wanted``: a client that knows the type and no browse name."""
+async def find_by_type(root: Node, wanted: ua.NodeId,
+                       nodeclass: ua.NodeClass = ua.NodeClass.Object) -> list[Node]:
+    """Every node of ``nodeclass`` below ``root`` (hierarchical references) whose
+    TypeDefinition is ``wanted``: a client that knows the type and no browse name."""
     found, todo, seen = [], [root], {root.nodeid}
     while todo:
         node = todo.pop()
@@ -88,9 +89,10 @@ async def find_by_type(root: Node, wanted: ua.NodeId) -> list[Node]:
             if child.nodeid in seen:
                 continue
             seen.add(child.nodeid)
-            if await child.read_node_class() == ua.NodeClass.Object:
-                if await typedef(child) == wanted:
-                    found.append(child)
+            kind = await child.read_node_class()
+            if kind == nodeclass and await typedef(child) == wanted:
+                found.append(child)
+            if kind in (ua.NodeClass.Object, ua.NodeClass.Variable):
                 todo.append(child)
     return found
 
@@ -128,12 +130,16 @@ async def test_every_axis_is_found_by_its_type_with_the_mandatory_members(
                 assert await typedef(var) == ANALOG_UNIT_TYPE
                 eu = await (await var.get_child("0:EngineeringUnits")).read_value()
                 assert eu.UnitId != -1, (name, reading)
-                await (await var.get_child("0:EURange")).read_value()
-                assert await var.read_attribute(ua.AttributeIds.MinimumSamplingInterval) \
-                    is not None
-            rate = await (await params.get_child(f"{rob}:ActualPosition")).read_attribute(
-                ua.AttributeIds.MinimumSamplingInterval)
-            assert rate.Value.Value == 20.0  # --rate 50
+                assert isinstance(await (await var.get_child("0:EURange")).read_value(),
+                                  ua.Range)
+                rate = await var.read_attribute(ua.AttributeIds.MinimumSamplingInterval)
+                assert rate.Value.Value == 20.0  # --rate 50: the sampler's period
+        analog = await find_by_type(device_set, ANALOG_UNIT_TYPE, ua.NodeClass.Variable)
+        assert len(analog) == 2 * 4  # per axis: position, speed, current, motor temperature
+        for var in analog:  # every analog item: its unit and its range
+            assert isinstance(await (await var.get_child("0:EngineeringUnits")).read_value(),
+                              ua.EUInformation)
+            assert isinstance(await (await var.get_child("0:EURange")).read_value(), ua.Range)
         spin = await (await by_name["spin"].get_child(
             [f"{di}:ParameterSet", f"{rob}:ActualPosition", "0:EngineeringUnits"])).read_value()
         assert spin.UnitId == 0x4D3434  # UNECE M44, revolution
