@@ -11,7 +11,9 @@ Decisions (issue 36, docs/gateway.md "Alarms"):
   unacknowledged. Retain is true while it is active or unacknowledged.
 * Every state change is one event, delivered to subscriptions on the axis and on the
   Server object (asyncua delivers an event only to the node that emits it: the gateway
-  emits it from both, with one EventId), and kept for ConditionRefresh.
+  emits it from both, with one EventId), and kept for ConditionRefresh of either while
+  Retain is true (asyncua's table of retained conditions holds the axis's; the Server
+  object's copy sits beside it).
 * Acknowledge (the condition's method, or AcknowledgeableConditionType's on the condition
   object) runs the gateway's ``ack`` command, the same path as the axis's Acknowledge
   method (a user of the users file; it clears a power-loss flag, nothing is sent to the
@@ -21,6 +23,7 @@ Decisions (issue 36, docs/gateway.md "Alarms"):
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Any
@@ -105,15 +108,21 @@ class AxisAlarms:
                                       else f"axis {cond.axis}: alarm cleared")
 
     async def _trigger(self, cond: AxisCondition) -> str:
+        """The event from the axis (asyncua keeps it for ConditionRefresh of subscriptions
+        on the axis), then a copy from the Server object, kept beside it for theirs."""
         gen = cond.generator
         await gen.trigger()
         ev = gen.event
-        source = ev.emitting_node
-        ev.emitting_node = self.server.nodes.server.nodeid
-        try:
-            await self.server.iserver.subscription_service.trigger_event(ev)
-        finally:
-            ev.emitting_node = source
+        from_server = copy.copy(ev)
+        from_server.emitting_node = self.server.nodes.server.nodeid
+        service = self.server.iserver.subscription_service
+        for sub in list(service.subscriptions.values()):
+            await sub.monitored_item_srv.trigger_event(from_server)
+        key = (ev.NodeId, "Server")  # asyncua's own entry is keyed by the ConditionId
+        if ev.Retain:
+            service._conditions[key] = from_server
+        else:
+            service._conditions.pop(key, None)
         await self._mirror(cond)
         return str(ev.Message.Text)
 

@@ -202,6 +202,14 @@ async def test_a_fault_on_the_control_channel_is_a_condition_on_the_server_objec
             for e in on_server.events)), timeout=30, what="the acknowledged event")
         acked = await condition.get_child(["0:AckedState", "0:Id"])
         assert await acked.read_value() is True
+        # still active (the drive's alarm is latched): ConditionRefresh replays it
+        before = len(on_server.events)
+        await client.get_node(ua.ObjectIds.ConditionType).call_method(
+            ua.NodeId(ua.ObjectIds.ConditionType_ConditionRefresh),
+            ua.Variant(sub.subscription_id, ua.VariantType.UInt32))
+        await wait_until_async(lambda: _true(any(
+            getattr(e, "AlarmCode", 0) == 2 for e in on_server.events[before:])),
+            timeout=30, what="the retained alarm replayed by ConditionRefresh")
 
 
 async def _true(value: bool) -> bool:
