@@ -116,6 +116,12 @@ async def test_one_client_reads_two_gateways(plant: tuple[RunningGateway, ...],
         assert units == ["mm", "deg"]
         n = await names(secure)
         await axes_b["lift"].call_method(f"{n.servobus}:MoveRelative", 1.0)  # a user, encrypted
+    for policy in ("Aes128Sha256RsaOaep", "Aes256Sha256RsaPss"):  # offered and served too
+        aes = Client(b.endpoint)
+        aes.application_uri = "urn:test:client"
+        await aes.set_security_string(f"{policy},SignAndEncrypt,{client_cert},{client_key}")
+        async with aes:
+            assert sorted(await axes_of(aes, "packer")) == ["lift", "turntable"], policy
 
 
 async def test_beyond_loopback_only_sign_and_encrypt_with_a_kept_certificate(
