@@ -2,13 +2,14 @@
 
 Security (decision, docs/gateway.md "Security"):
 
-* on a loopback address the endpoint offers security policy None (and Basic256Sha256
-  Sign&Encrypt as well when a certificate is given); anonymous sessions may browse, read
+* on a loopback address the endpoint offers security policy None (and the Sign&Encrypt
+  policies as well when a certificate is given); anonymous sessions may browse, read
   and subscribe, nothing else;
-* beyond loopback, policy None is refused: only Basic256Sha256 Sign&Encrypt is served, with
-  the given certificate or one generated on first start and kept next to the machine file
-  (``<machine>.opcua-cert.der`` / ``.opcua-key.pem``; for the built-in machine in
-  ``~/.config/servobus/``);
+* beyond loopback, policy None is refused: only Sign&Encrypt is served (Basic256Sha256,
+  Aes128_Sha256_RsaOaep, Aes256_Sha256_RsaPss), with the given certificate or one generated
+  on first start and kept next to the machine file (``<machine>.opcua-cert.der`` /
+  ``.opcua-key.pem``; for the built-in machine in ``~/.config/servobus/``), its SAN naming
+  the ApplicationUri, host names and addresses served (servobus.gateway.opcua_cert);
 * every method (anything that moves, stops or powers an axis) needs a user of the users
   file (``--users``), on loopback too; without one it answers BadUserAccessDenied. The
   address space itself cannot be changed by any client (no writable node, no AddNodes).
@@ -39,7 +40,6 @@ import contextvars
 import datetime
 import logging
 import math
-import socket
 from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
@@ -54,10 +54,13 @@ from asyncua.server.internal_server import InternalServer
 from asyncua.server.internal_session import InternalSession, SessionState
 from asyncua.server.user_managers import UserManager
 
+from servobus import __version__
 from servobus.errors import InvalidValue
 from servobus.gateway.commands import Command, Commander, Refused
 from servobus.gateway.identity import application_uri, gateway_id
 from servobus.gateway.link_events import LinkEvent
+from servobus.gateway.opcua_alarms import AxisAlarms
+from servobus.gateway.opcua_cert import ensure_certificate
 from servobus.gateway.opcua_limits import LimitedSession, SessionRoom, apply_limits
 from servobus.gateway.opcua_model import SERVOBUS_URI, AxisNodes, build_model
 from servobus.gateway.sampler import Sample
@@ -68,6 +71,21 @@ from servobus.transport.address import is_loopback
 log = logging.getLogger(__name__)
 
 DEFAULT_ENDPOINT = "opc.tcp://127.0.0.1:4840"
+PRODUCT_URI = "urn:servobus"
+#: Sign&Encrypt only (decision, docs/gateway.md "Security"): Basic256Sha256 and the two Aes
+#: policies of OPC UA 1.04 that current clients prefer.
+SECURE_POLICIES = (ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt,
+                   ua.SecurityPolicyType.Aes128Sha256RsaOaep_SignAndEncrypt,
+                   ua.SecurityPolicyType.Aes256Sha256RsaPss_SignAndEncrypt)
+
+
+def build_date() -> datetime.datetime:
+    """BuildInfo's BuildDate: servobus records no build time, so the time its installed
+    package was written (docs/gateway.md "Identity")."""
+    import servobus
+
+    return datetime.datetime.fromtimestamp(Path(servobus.__file__).stat().st_mtime,
+                                           datetime.UTC)
 #: Bounds (decision): no request to this model needs more than a few hundred kB; a session
 #: that is not activated within 10 s is dropped; at most 200 subscriptions in all.
 MAX_MESSAGE_BYTES = 4 * 1024 * 1024
@@ -153,6 +171,7 @@ class GatewayServer(InternalServer):  # type: ignore[misc]
 
     def __init__(self, user_manager: UserManager, on_close: SessionGone) -> None:
         super().__init__(user_manager=user_manager)
+        self.bind_condition_methods = True  # ConditionRefresh for the axes' alarms
         self.on_session_close = on_close
         self.session_room = SessionRoom()
 
@@ -244,7 +263,7 @@ class OpcUaGateway:
     """Build, serve and update the address space of one machine."""
 
     def __init__(self, machine: Machine, commander: Commander, options: OpcUaOptions,
-                 source: str = "") -> None:
+                 source: str = "", rate_hz: float | None = None) -> None:
         self.machine = machine
         self.commander = commander
         self.options = options
@@ -261,9 +280,11 @@ class OpcUaGateway:
         self._links: deque[LinkEvent] = deque(maxlen=MAX_PENDING_LINK_EVENTS)
         self._wake = asyncio.Event()
         self._last: dict[tuple[str, str], tuple[object, ...]] = {}
-        self._alarm: dict[str, int] = {}
+        #: the readings' MinimumSamplingInterval: the sampler's period per link (a slow
+        #: link's rounds take longer; none is sampled faster)
+        self.sampling_ms = 1000.0 / rate_hz if rate_hz else 0.0
+        self.alarms = AxisAlarms(self.server, self._acknowledge)
         self._health: dict[str, tuple[object, ...]] = {}
-        self._events: dict[str, Any] = {}
         self._link_event: Any = None
         self.notifications = 0  # value writes that changed something (for the benchmark)
 
@@ -284,17 +305,21 @@ class OpcUaGateway:
         await apply_limits(s)
         s.set_endpoint(f"opc.tcp://{self.host}:{self.port}")
         s.set_server_name(f"servobus gateway {self.machine.name}")
+        await s.set_build_info(PRODUCT_URI, "servobus", "servobus gateway", __version__,
+                               __version__, build_date())
         await s.set_application_uri(self.application_uri)
         s.set_identity_tokens([ua.AnonymousIdentityToken, ua.UserNameIdentityToken])
         policies = await self._security()
         s.set_security_policy(policies, permission_ruleset=GatewayRules())
         self.device, self.axes = await build_model(s, self.machine, self.source, self._call,
-                                         self.application_uri)
+                                                   self.application_uri, self.sampling_ms)
         waiting = ua.DataValue(StatusCode=ua.StatusCode(ua.StatusCodes.BadWaitingForInitialData))
         for nodes in self.axes.values():  # until the first sample of the axis
             for node in (*nodes.variables.values(), *nodes.health.values()):
                 await s.write_attribute_value(node.nodeid, waiting)
-        await self._alarm_events()
+        await self.alarms.build(await s.get_namespace_index(SERVOBUS_URI),
+                                await s.get_namespace_index(self.application_uri),
+                                {name: nodes.node for name, nodes in self.axes.items()})
         await self._link_events()
         await s.start()
         if s.bserver is not None:
@@ -302,41 +327,25 @@ class OpcUaGateway:
 
     async def _security(self) -> list[ua.SecurityPolicyType]:
         o = self.options
-        secure = ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt
         if self.loopback and o.cert is None:
             return [ua.SecurityPolicyType.NoSecurity]
         cert, key = o.cert, o.key
         if cert is None or key is None:
-            from asyncua.crypto.cert_gen import setup_self_signed_certificate
-            from cryptography.x509.oid import ExtendedKeyUsageOID
-
             folder = o.cert_dir or Path.home() / ".config" / "servobus"
             folder.mkdir(parents=True, exist_ok=True)
             cert = folder / f"{o.cert_stem}.opcua-cert.der"
             key = folder / f"{o.cert_stem}.opcua-key.pem"
-            await setup_self_signed_certificate(
-                key, cert, self.application_uri, socket.gethostname(),
-                [ExtendedKeyUsageOID.SERVER_AUTH], {"commonName": "servobus gateway"})
             # both 0600 as docs/gateway.md says: the key is the secret; the certificate is
-            # public, but nobody else on the PC needs it either (issue 32)
-            key.chmod(0o600)
-            cert.chmod(0o600)
+            # public, but nobody else on the PC needs it either (issue 32); its SAN names
+            # what is served (servobus.gateway.opcua_cert)
+            await asyncio.to_thread(ensure_certificate, key, cert, self.application_uri,
+                                    self.host)
         await self.server.load_certificate(str(cert))
         await self.server.load_private_key(str(key))
         self.cert_path = cert
         if self.loopback:
-            return [ua.SecurityPolicyType.NoSecurity, secure]
-        return [secure]
-
-    async def _alarm_events(self) -> None:
-        s = self.server
-        ns = await s.get_namespace_index(SERVOBUS_URI)
-        etype = await s.create_custom_event_type(
-            ns, "AxisAlarmEventType", ua.ObjectIds.BaseEventType,
-            [("AxisName", ua.VariantType.String), ("AlarmCode", ua.VariantType.Int32),
-             ("AlarmText", ua.VariantType.String)])
-        for name, nodes in self.axes.items():
-            self._events[name] = await s.get_event_generator(etype, nodes.node)
+            return [ua.SecurityPolicyType.NoSecurity, *SECURE_POLICIES]
+        return list(SECURE_POLICIES)
 
     async def _link_events(self) -> None:
         s = self.server
@@ -382,6 +391,10 @@ class OpcUaGateway:
         except Refused as exc:
             return _status(exc.code)
         return ua.StatusCode(ua.StatusCodes.Good)
+
+    async def _acknowledge(self, axis: str) -> ua.StatusCode:
+        """A condition's Acknowledge: the axis's Acknowledge method's path."""
+        return await self._call(axis, "ack", ())
 
     async def _session_closed(self, owner: str) -> None:
         await self.commander.release(owner, "opcua")
@@ -431,9 +444,10 @@ class OpcUaGateway:
             if name in values or not sample.ok:
                 await self._write((sample.axis, name), node, values.get(name), sample)
         await self._apply_health(nodes, sample)
-        if sample.ok and st is not None and self._alarm.get(sample.axis, 0) != st.alarm_code:
-            self._alarm[sample.axis] = st.alarm_code
-            await self._raise_event(sample.axis, st.alarm_code, st.alarm_text)
+        if sample.ok and st is not None:
+            message = await self.alarms.update(sample.axis, st.alarm_code, st.alarm_text)
+            if message is not None:
+                log.warning("%s", message)
 
     async def _write(self, key: tuple[str, str], node: Any, value: object, sample: Sample
                      ) -> None:
@@ -477,17 +491,6 @@ class OpcUaGateway:
             self.notifications += 1
             await self.server.write_attribute_value(node.nodeid, ua.DataValue(
                 ua.Variant(value, _variant_type(value)), SourceTimestamp=_utc(sample.time)))
-
-    async def _raise_event(self, axis: str, code: int, text: str) -> None:
-        gen = self._events[axis]
-        gen.event.AxisName = axis
-        gen.event.AlarmCode = code
-        gen.event.AlarmText = text
-        gen.event.Severity = 800 if code else 100
-        gen.event.Message = ua.LocalizedText(
-            f"axis {axis}: alarm {code} {text}" if code else f"axis {axis}: alarm cleared")
-        await gen.trigger()
-        log.warning("axis %s: %s", axis, gen.event.Message.Text)
 
     async def _raise_link_event(self, event: LinkEvent) -> None:
         """One event per link change; the machine's own log line is its line."""

@@ -52,7 +52,8 @@ class Gateway:
         self.options = options
         self.sampler = Sampler(machine, options.rate_hz)
         self.commander = Commander(machine)
-        self.opcua = OpcUaGateway(machine, self.commander, options.opcua, source)
+        self.opcua = OpcUaGateway(machine, self.commander, options.opcua, source,
+                                  options.rate_hz)
         self.sampler.listeners.append(self.opcua.on_sample)
         self.sampler.link_listeners.append(self.opcua.on_link)
         self.mqtt = (MqttGateway(machine, self.sampler, self.commander, options.mqtt)
@@ -97,7 +98,7 @@ def exposure_warning(opcua: OpcUaGateway, mqtt: MqttGateway | None) -> list[str]
         lines.append(f"warning: OPC UA on {opcua.host}: every axis's state is readable by "
                      "anyone who trusts the server certificate and reaches this address; users "
                      "of the users file can move, stop and power the axes "
-                     "(Basic256Sha256 Sign&Encrypt only)")
+                     "(Sign&Encrypt only)")
     if mqtt is not None and mqtt.options.commands:
         lines.append(f"warning: MQTT commands on: whoever the broker {mqtt.broker.host} lets "
                      f"publish to {mqtt.base}/+/cmd can move the axes")

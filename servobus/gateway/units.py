@@ -19,8 +19,8 @@ CODES: dict[str, tuple[str, str]] = {
     "in": ("INH", "inch"), "in/s": ("IU", "inch per second"),
     "deg": ("DD", "degree"), "deg/s": ("E96", "degree per second"),
     "rad": ("C81", "radian"), "rad/s": ("2A", "radian per second"),
-    "rev": ("M94", "revolution"), "rev/s": ("RPS", "revolutions per second"),
-    "A": ("AMP", "ampere"),
+    "rev": ("M44", "revolution"), "rev/s": ("RPS", "revolutions per second"),
+    "A": ("AMP", "ampere"), "°C": ("CEL", "degree Celsius"),
 }
 
 

@@ -372,6 +372,10 @@ NOT_AN_AXIS = {
     ("gateway/mqtt_presence.py", "getattr(code, 'is_failure', False)"):
         "a paho reason code (an int or a ReasonCode by paho version)",
     ("gateway/opcua_model.py", "getattr(arg, 'Value', arg)"): "an OPC UA Variant or value",
+    ("gateway/opcua_alarms.py", "getattr(args[0], 'Value', args[0])"):
+        "an OPC UA Variant or value",
+    ("gateway/opcua_alarms.py", "getattr(args[1], 'Value', args[1])"):
+        "an OPC UA Variant or value",
     ("gateway/mqtt.py", "getattr(client, '_client', None)"):
         "the aiomqtt client's paho client (an MQTT client, not a drive's)",
     ("gateway/mqtt.py", "getattr(paho, 'publish', None)"): "the paho client",

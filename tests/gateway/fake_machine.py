@@ -18,6 +18,7 @@ class FakeAxis:
                  drive_id: int = 1, limits: tuple[float, float] | None = (0.0, 100.0)) -> None:
         self.name, self.url, self.drive_id, self.limits = name, url, drive_id, limits
         self.unit, self.speed_unit = "mm", "mm/s"
+        self.continuous = False
         self.axis: AsyncAxis | None = None
         self.online = True
         self.family: Family | None = None

@@ -70,8 +70,8 @@ async def test_a_cut_link_reads_bad_alarms_are_events_and_sigterm_stops_first() 
 
             await wait_until_async(lambda: reads(ua.StatusCodes.Good, 5.0), timeout=10,
                                    what="a0 at 5 mm")
-            etype = await client.nodes.base_event_type.get_child(
-                [f"{n.servobus}:AxisAlarmEventType"])
+            etype = await client.get_node(ua.ObjectIds.AlarmConditionType).get_child(
+                [f"{n.servobus}:AxisAlarmConditionType"])
             subscription = await client.create_subscription(20, Handler())
             await subscription.subscribe_events(axes["a0"], etype)
             a0.cut = True

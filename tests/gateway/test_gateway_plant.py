@@ -4,6 +4,7 @@ second serves Basic256Sha256 Sign&Encrypt with its own certificate."""
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import signal
 import socket
 from collections.abc import Iterator
@@ -13,6 +14,7 @@ from pathlib import Path
 import pytest
 from asyncua import Client, ua
 from asyncua.crypto.cert_gen import setup_self_signed_certificate
+from cryptography import x509
 from cryptography.x509.oid import ExtendedKeyUsageOID
 from gateway_rig import (
     PASSWORD,
@@ -114,6 +116,12 @@ async def test_one_client_reads_two_gateways(plant: tuple[RunningGateway, ...],
         assert units == ["mm", "deg"]
         n = await names(secure)
         await axes_b["lift"].call_method(f"{n.servobus}:MoveRelative", 1.0)  # a user, encrypted
+    for policy in ("Aes128Sha256RsaOaep", "Aes256Sha256RsaPss"):  # offered and served too
+        aes = Client(b.endpoint)
+        aes.application_uri = "urn:test:client"
+        await aes.set_security_string(f"{policy},SignAndEncrypt,{client_cert},{client_key}")
+        async with aes:
+            assert sorted(await axes_of(aes, "packer")) == ["lift", "turntable"], policy
 
 
 async def test_beyond_loopback_only_sign_and_encrypt_with_a_kept_certificate(
@@ -128,7 +136,9 @@ async def test_beyond_loopback_only_sign_and_encrypt_with_a_kept_certificate(
     gateway = OpcUaGateway(machine, Commander(machine), options)  # type: ignore[arg-type]
     assert not gateway.loopback
     policies = await gateway._security()
-    assert policies == [ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt]
+    assert policies == [ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt,
+                        ua.SecurityPolicyType.Aes128Sha256RsaOaep_SignAndEncrypt,
+                        ua.SecurityPolicyType.Aes256Sha256RsaPss_SignAndEncrypt]
     cert = tmp_path / "cell.opcua-cert.der"
     first = cert.read_bytes()
     assert (tmp_path / "cell.opcua-key.pem").stat().st_mode & 0o077 == 0
@@ -136,3 +146,19 @@ async def test_beyond_loopback_only_sign_and_encrypt_with_a_kept_certificate(
     again = OpcUaGateway(machine, Commander(machine), options)  # type: ignore[arg-type]
     await again._security()
     assert cert.read_bytes() == first  # kept, not made anew on the next start
+    san = x509.load_der_x509_certificate(first).extensions.get_extension_for_class(
+        x509.SubjectAlternativeName).value
+    assert san.get_values_for_type(x509.UniformResourceIdentifier) == [
+        "urn:servobus:gateway:bench"]
+    assert socket.gethostname() in san.get_values_for_type(x509.DNSName)
+    addresses = {str(a) for a in san.get_values_for_type(x509.IPAddress)}
+    resolved = {info[4][0] for info in socket.getaddrinfo(socket.gethostname(), None)}
+    assert addresses == resolved  # 0.0.0.0: every address of the host name
+    # another gateway id in the same files: a certificate for its own ApplicationUri
+    other = OpcUaGateway(machine, Commander(machine), dataclasses.replace(  # type: ignore[arg-type]
+        options, gateway_id="bench-2"))
+    await other._security()
+    san = x509.load_der_x509_certificate(cert.read_bytes()).extensions.get_extension_for_class(
+        x509.SubjectAlternativeName).value
+    assert san.get_values_for_type(x509.UniformResourceIdentifier) == [
+        "urn:servobus:gateway:bench-2"]

@@ -1,0 +1,44 @@
+"""The NodeSet import's cache (servobus.gateway.opcua_nodesets): a start served from it has
+the same address space as one that imported the XML, and an unreadable cache is an import."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import pytest
+from asyncua import Server, ua
+
+from servobus.gateway.opcua_nodesets import import_nodesets
+
+pytestmark = pytest.mark.slow  # three asyncua address spaces: seconds of CPU
+
+
+async def address_space(cache: Path) -> tuple[bool, Server]:
+    server = Server()
+    await server.init()
+    await server.set_application_uri("urn:servobus:gateway:cache-test")
+    return await import_nodesets(server, cache), server
+
+
+def snapshot(server: Server) -> dict[ua.NodeId, list[tuple[object, ...]]]:
+    return {nodeid: sorted((str(r.ReferenceTypeId), str(r.NodeId), r.IsForward)
+                           for r in data.references)
+            for nodeid, data in server.iserver.aspace._nodes.items()}
+
+
+async def test_a_cached_import_is_the_import(tmp_path: Path,
+                                              caplog: pytest.LogCaptureFixture) -> None:
+    cache = tmp_path / "nodesets.pickle"
+    served, imported = await address_space(cache)
+    assert not served and cache.is_file()
+    served, cached = await address_space(cache)
+    assert served
+    assert snapshot(cached) == snapshot(imported)
+    axis_type = ua.NodeId(16601, await cached.get_namespace_index(
+        "http://opcfoundation.org/UA/Robotics/"))
+    assert (await cached.get_node(axis_type).read_browse_name()).Name == "AxisType"
+    cache.write_bytes(b"not a pickle")
+    with caplog.at_level(logging.WARNING):
+        served, _ = await address_space(cache)
+    assert not served and "unreadable" in caplog.text
