@@ -59,7 +59,7 @@ class AxisBridge:
         self._enable = False
         self._reset = False
         self._alarm = False
-        self._cycles = 0
+        self.cycles = 0
         self._target: float | None = None
         self._guard: StepGuard | None = None
         if self.position_mode:
@@ -84,7 +84,7 @@ class AxisBridge:
 
     async def cycle(self) -> None:
         """One round: inputs, streaming, readings, outputs."""
-        self._cycles += 1
+        self.cycles += 1
         try:
             await self._inputs()
             if self.streaming:
@@ -184,7 +184,7 @@ class AxisBridge:
         if self.position_mode:
             command = float(pins[self.pin("position-cmd")])
             pins[self.pin("following-error")] = command - position if self.streaming else 0.0
-        if self._cycles % SLOW_EVERY == 1:
+        if self.cycles % SLOW_EVERY == 1:
             pins[self.pin("current")] = await self.axis.current()
             if not self.position_mode:
                 error = await self.axis.following_error()

@@ -1,0 +1,155 @@
+"""The component's loop on in-process virtual drives, its pins a dict (no LinuxCNC): the
+position stream, the refused step, fault-reset, the watchdog, monitor axes left alone."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator
+from pathlib import Path
+
+import pytest
+from rig import wait_until_async
+
+from servobus.hal.bridge import AxisBridge, Bridge
+from servobus.hal.pins import AXIS_PINS, COMPONENT_PINS, Pins, axis_pin
+from servobus.machine import AsyncMachine, open_machine_async
+
+CELL = """\
+[axes.c]
+url = "sim://easycan?fast=1"
+id = 1
+unit = "deg"
+speed = 360.0
+accel = 3600.0
+hal = "position"
+
+[axes.x]
+url = "sim://dyn232?fast=1"
+id = 1
+unit = "mm"
+per_rev = 5.0
+"""
+
+
+def blank_pins(axes: list[str]) -> Pins:
+    pins: Pins = {p.name: (0.0 if p.kind == "float" else False) for p in COMPONENT_PINS}
+    for axis in axes:
+        for p in AXIS_PINS:
+            pins[axis_pin(axis, p.name)] = {"float": 0.0, "bit": False, "s32": 0}[p.kind]
+    return pins
+
+
+@pytest.fixture
+async def machine(tmp_path: Path) -> AsyncIterator[AsyncMachine]:
+    path = tmp_path / "cell.toml"
+    path.write_text(CELL)
+    m = await open_machine_async(path)
+    try:
+        yield m
+    finally:
+        await m.close()
+
+
+async def running(machine: AsyncMachine, pins: Pins, watchdog_s: float = 60.0,
+                  ) -> tuple[Bridge, asyncio.Task[None]]:
+    bridge = Bridge([machine["c"], machine["x"]], pins, watchdog_s)
+    return bridge, asyncio.create_task(bridge.run())
+
+
+async def stopped(task: asyncio.Task[None]) -> None:
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
+
+
+async def cycles(bridge: AxisBridge, count: int) -> None:
+    """Until the axis's loop has run ``count`` more cycles (what it would do, it did)."""
+    until = bridge.cycles + count
+    await wait_until_async(lambda: bridge.cycles >= until, what=f"{count} cycles")
+
+
+async def ramp(pins: Pins, to: float, speed: float) -> None:
+    """position-cmd from where it stands to ``to`` at ``speed`` deg/s (a LinuxCNC joint)."""
+    loop = asyncio.get_running_loop()
+    start, began = float(pins["c.position-cmd"]), loop.time()
+    while True:
+        x = start + speed * (loop.time() - began)
+        pins["c.position-cmd"] = min(x, to)
+        if x >= to:
+            return
+        await asyncio.sleep(0.002)  # the joint's servo period (a producer, no wait)
+
+
+async def test_a_position_axis_follows_its_command(machine: AsyncMachine) -> None:
+    pins = blank_pins(["c", "x"])
+    _, task = await running(machine, pins)
+    try:
+        await wait_until_async(lambda: pins["c.online"] and pins["x.online"], what="online")
+        pins["c.enable"] = True
+        await wait_until_async(lambda: pins["c.enabled"], what="servo on")
+        await ramp(pins, 90.0, 180.0)
+        await wait_until_async(lambda: abs(float(pins["c.position-fb"]) - 90.0) < 0.5,
+                               timeout=20, what="position-fb at 90 deg")
+        assert abs(await machine["c"].position() - 90.0) < 0.5
+        assert not pins["fault"] and not pins["c.fault"]
+    finally:
+        await stopped(task)
+
+
+async def test_a_step_beyond_speed_is_refused_and_faults(machine: AsyncMachine) -> None:
+    pins = blank_pins(["c", "x"])
+    bridge, task = await running(machine, pins)
+    try:
+        await wait_until_async(lambda: pins["c.online"], what="online")
+        pins["c.enable"] = True
+        await wait_until_async(lambda: pins["c.enabled"], what="servo on")
+        pins["c.position-cmd"] = 180.0  # half a turn at once: far beyond 360 deg/s
+        await wait_until_async(lambda: pins["c.fault"] and pins["fault"], what="fault")
+        await wait_until_async(lambda: not pins["c.moving"], what="at rest")
+        assert abs(await machine["c"].position()) < 1.0  # nothing was sent
+        pins["c.fault-reset"] = True
+        await wait_until_async(lambda: not pins["c.fault"] and not pins["fault"],
+                               what="fault cleared")
+        pins["c.position-cmd"] = 0.5  # a faulted axis never resumes by itself
+        await cycles(bridge.axes[0], 10)
+        assert abs(await machine["c"].position()) < 0.2
+    finally:
+        await stopped(task)
+
+
+async def test_a_starved_watchdog_stops_position_axes_and_faults_all(
+        machine: AsyncMachine) -> None:
+    pins = blank_pins(["c", "x"])
+    bridge, task = await running(machine, pins, watchdog_s=0.3)
+    try:
+        pins["c.enable"] = True
+        await wait_until_async(lambda: bridge.axes[0].streaming, what="streaming")
+        await ramp(pins, 30.0, 180.0)
+        # nobody toggles the watchdog: after 0.3 s every axis faults, c stops streaming
+        await wait_until_async(lambda: pins["fault"] and pins["x.fault"] and pins["c.fault"],
+                               timeout=20, what="watchdog fault")
+        assert not bridge.axes[0].streaming
+        assert bridge.axes[1].latched is not None and "watchdog" in bridge.axes[1].latched
+        pins["watchdog"] = True  # toggling again: the fault holds until fault-reset
+        await cycles(bridge.axes[0], 5)
+        assert pins["c.fault"]
+        pins["c.fault-reset"] = pins["x.fault-reset"] = True
+        await wait_until_async(lambda: not pins["c.fault"] and not pins["x.fault"],
+                               what="cleared")
+    finally:
+        await stopped(task)
+
+
+async def test_a_monitor_axis_is_read_and_never_commanded(machine: AsyncMachine) -> None:
+    pins = blank_pins(["c", "x"])
+    bridge, task = await running(machine, pins)
+    try:
+        await wait_until_async(lambda: pins["x.online"], what="online")
+        await machine["x"].move_to(10.0)  # step/dir from elsewhere, here the machine API
+        await wait_until_async(lambda: abs(float(pins["x.position-fb"]) - 10.0) < 0.01,
+                               timeout=20, what="x.position-fb at 10 mm")
+        pins["x.position-cmd"] = 50.0  # ignored: monitor mode
+        await cycles(bridge.axes[1], 10)
+        assert abs(await machine["x"].position() - 10.0) < 0.01
+    finally:
+        await stopped(task)

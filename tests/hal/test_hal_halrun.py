@@ -1,0 +1,126 @@
+"""``servobus hal`` in a real HAL session (halrun): siggen drives two position axes on
+virtual drives in their own processes (a DMM drive on DYN232M, a YZ-AIM motor on EasyCan);
+position-fb reaches the command, a fault injected through the simulator's control channel
+raises fault and fault-reset clears it, and the component's end stops every axis."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from hal_rig import HalSession, needs_halrun
+from rig import free_port, wait_until
+from subprocess_rig import read_line, stop_process
+
+import servobus
+from servobus.sim.control_client import ControlClient
+
+pytestmark = [needs_halrun, pytest.mark.slow, pytest.mark.timeout(180)]
+
+CELL = """\
+name = "hal-cell"
+
+[axes.x]
+url = "dyn232+socket://127.0.0.1:{dyn232}"
+id = 1
+unit = "deg"
+speed = 720.0
+accel = 7200.0
+hal = "position"
+
+[axes.c]
+url = "easycan+socketcand://127.0.0.1:{can}"
+id = 1
+unit = "deg"
+speed = 720.0
+accel = 7200.0
+hal = "position"
+"""
+
+HAL = """\
+loadrt threads name1=servo period1=1000000
+loadrt siggen num_chan=2
+addf siggen.0.update servo
+addf siggen.1.update servo
+setp siggen.0.frequency 0.1
+setp siggen.0.amplitude 45
+setp siggen.1.frequency 20
+loadusr -Wn servobus {servobus} hal --machine cell.toml --watchdog 2
+net cmd siggen.0.sine => servobus.x.position-cmd servobus.c.position-cmd
+net wd siggen.1.clock => servobus.watchdog
+setp servobus.x.enable 1
+setp servobus.c.enable 1
+start
+"""
+
+
+def start(*args: str) -> subprocess.Popen[str]:
+    return subprocess.Popen([sys.executable, "-m", "servobus", "sim", *args, "--fast",
+                             "--duration", "300"],  # a safety net only
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+@pytest.fixture
+def sims() -> Iterator[tuple[int, int, str]]:
+    """(DYN232M port, socketcand port, control URL) of two virtual drives."""
+    dyn232, can = free_port(), free_port()
+    drive = start("dyn232", "--listen", f"tcp://127.0.0.1:{dyn232}", "--ids", "1",
+                  "--control", "tcp://127.0.0.1:0")
+    motor = start("easycan", "--socketcand", f"127.0.0.1:{can}", "--ids", "1")
+    try:
+        read_line(drive, "listening on")
+        control = read_line(drive, "control on").split()[-1]
+        read_line(motor, "listening on")
+        yield dyn232, can, control
+    finally:
+        stop_process(drive)
+        stop_process(motor)
+
+
+def follows(pins: dict[str, str], axis: str) -> bool:
+    command = float(pins[f"servobus.{axis}.position-cmd"])
+    return abs(command) > 3.0 and abs(float(pins[f"servobus.{axis}.position-fb"]) - command) < 3.0
+
+
+def test_halrun_streams_faults_resets_and_stops(tmp_path: Path,
+                                                sims: tuple[int, int, str]) -> None:
+    dyn232, can, control = sims
+    (tmp_path / "cell.toml").write_text(CELL.format(dyn232=dyn232, can=can))
+    (tmp_path / "cell.hal").write_text(HAL.format(servobus=Path(sys.executable).parent
+                                                  / "servobus"))
+    session = HalSession(tmp_path / "cell.hal")
+    outside = servobus.connect(f"easycan+socketcand://127.0.0.1:{can}", drive_id=1)
+    try:
+        wait_until(lambda: (p := session.pins("servobus")) and follows(p, "x")
+                   and follows(p, "c"), timeout=60, poll=0.05,
+                   what="position-fb reaching position-cmd" + session.output())
+
+        with ControlClient(control) as drive:  # a surge trips the DMM drive's alarm 5
+            drive.call("fault", 1, fault="over_voltage", seconds=0.01)
+        pins = wait_until(lambda: (p := session.pins("servobus"))["servobus.x.fault"] == "TRUE"
+                          and p, timeout=30, poll=0.05, what="fault raised")
+        assert pins["servobus.fault"] == "TRUE" and pins["servobus.x.alarm-code"] == "5"
+        assert pins["servobus.c.fault"] == "FALSE"
+        session.halcmd("setp", "servobus.x.fault-reset", "1")
+        wait_until(lambda: (p := session.pins("servobus"))["servobus.x.fault"] == "FALSE"
+                   and p["servobus.fault"] == "FALSE", timeout=30, poll=0.05,
+                   what="fault-reset clearing it" + session.output())
+
+        before = outside.position()  # c still streams siggen's sine
+        wait_until(lambda: outside.position() != before, timeout=30, what="c streaming")
+        session.halcmd("unloadusr", "servobus")  # SIGTERM, as halrun's exit and LinuxCNC's
+        wait_until(lambda: not session.pins("servobus"), timeout=30, what="component gone")
+        wait_until(lambda: not outside.status().moving and outside.speed() == 0, timeout=30,
+                   what="c at rest")
+        rest = outside.position()
+        assert all(outside.position() == rest for _ in range(20))  # and nothing moves it
+        with ControlClient(control) as drive:
+            state = drive.call("state", 1)
+        assert not state["motion_busy"] and abs(state["speed_rpm"]) < 1
+        assert "every position axis stopped" in session.log.read_text()
+    finally:
+        outside.close()
+        session.close()
