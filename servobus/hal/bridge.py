@@ -96,7 +96,7 @@ class AxisBridge:
             self.streaming = False
         except ServobusError as exc:  # a timeout, a refused call: next cycle tries again
             log.debug("axis %s: %s", self.axis.name, exc)
-        self._outputs()
+        self.outputs()
 
     async def _inputs(self) -> None:
         enable = bool(self.pins[self.pin("enable")])
@@ -190,13 +190,19 @@ class AxisBridge:
                 error = await self.axis.following_error()
                 pins[self.pin("following-error")] = 0.0 if error is None else error
 
-    def _outputs(self) -> None:
+    def outputs(self) -> None:
         self.pins[self.pin("online")] = self.axis.online
         self.pins[self.pin("fault")] = self.fault
 
 
 class Watchdog:
-    """``<name>.watchdog``: starved when it has not toggled for ``timeout_s``."""
+    """``<name>.watchdog``: starved when it has not toggled for ``timeout_s``.
+
+    Decision: until its first toggle it counts as starved (every axis shows ``fault``, no
+    position axis streams) without tripping: LinuxCNC starts its threads after loading the
+    component, so a trip there would only ask for a fault-reset at every start. Once fed,
+    a gap longer than ``timeout_s`` trips (:meth:`poll` returns True once): every position
+    axis stops and every axis latches a fault until fault-reset."""
 
     def __init__(self, pins: Pins, timeout_s: float, clock: Clock = time.monotonic) -> None:
         self.pins = pins
@@ -204,7 +210,8 @@ class Watchdog:
         self._clock = clock
         self._value = bool(pins["watchdog"])
         self._changed = clock()
-        self.starved = False
+        self.fed = False  # toggled at least once
+        self.starved = True
 
     def poll(self) -> bool:
         """True when it starved just now (a toggle ends the starving)."""
@@ -214,10 +221,11 @@ class Watchdog:
             self._value = value
             self._changed = now
             if self.starved:
-                log.warning("watchdog: toggling again")
+                log.warning("watchdog: toggling%s", " again" if self.fed else "")
+            self.fed = True
             self.starved = False
             return False
-        if not self.starved and now - self._changed > self.timeout_s:
+        if self.fed and not self.starved and now - self._changed > self.timeout_s:
             self.starved = True
             log.warning("watchdog: no toggle for %g s: every position axis stops",
                         self.timeout_s)
@@ -233,6 +241,9 @@ class Bridge:
         self.pins = pins
         self.watchdog = Watchdog(pins, watchdog_s, clock)
         self.axes = [AxisBridge(a, pins, lambda: self.watchdog.starved, clock) for a in axes]
+        for bridge in self.axes:  # what holds before the first cycle: faulted, not fed
+            bridge.outputs()
+        self._component_fault()
 
     async def run(self) -> None:
         """Until cancelled; the caller stops the position axes afterwards (:meth:`stop`)."""

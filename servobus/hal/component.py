@@ -35,6 +35,8 @@ def make_pins(hal: ModuleType, name: str, spec: MachineSpec) -> Any:
     for axis in spec.axes:
         for pin in AXIS_PINS:
             _new_pin(hal, component, axis_pin(axis.name, pin.name), pin)
+        component[axis_pin(axis.name, "fault")] = True  # until the first cycle says otherwise
+    component["fault"] = True
     return component
 
 
@@ -61,9 +63,9 @@ async def serve(hal: ModuleType, machine_path: Path, name: str, watchdog_s: floa
         loop.add_signal_handler(sig, on_signal, sig)
     try:
         machine = await open_machine_async(machine_path, retry=True)
-        component.ready()  # loadusr -W goes on once the links were tried
         try:
             bridge = Bridge([machine[a.name] for a in spec.axes], pins, watchdog_s)
+            component.ready()  # loadusr -W goes on once the links were tried
             runner = asyncio.create_task(bridge.run(), name="hal bridge")
             waiter = asyncio.create_task(stopped.wait())
             await asyncio.wait({runner, waiter}, return_when=asyncio.FIRST_COMPLETED)

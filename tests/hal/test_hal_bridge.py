@@ -53,7 +53,11 @@ async def machine(tmp_path: Path) -> AsyncIterator[AsyncMachine]:
 async def running(machine: AsyncMachine, pins: Pins, watchdog_s: float = 60.0,
                   ) -> tuple[Bridge, asyncio.Task[None]]:
     bridge = Bridge([machine["c"], machine["x"]], pins, watchdog_s)
-    return bridge, asyncio.create_task(bridge.run())
+    task = asyncio.create_task(bridge.run())
+    assert pins["fault"] or not bridge.axes[0].cycles  # not fed yet: faulted
+    pins["watchdog"] = True  # fed once (LinuxCNC's threads started)
+    await wait_until_async(lambda: not pins["fault"], what="fed, online, no fault")
+    return bridge, task
 
 
 async def stopped(task: asyncio.Task[None]) -> None:
@@ -69,14 +73,12 @@ async def cycles(bridge: AxisBridge, count: int) -> None:
 
 
 async def ramp(pins: Pins, to: float, speed: float) -> None:
-    """position-cmd from where it stands to ``to`` at ``speed`` deg/s (a LinuxCNC joint)."""
-    loop = asyncio.get_running_loop()
-    start, began = float(pins["c.position-cmd"]), loop.time()
-    while True:
-        x = start + speed * (loop.time() - began)
-        pins["c.position-cmd"] = min(x, to)
-        if x >= to:
-            return
+    """position-cmd from where it stands to ``to``, one step of ``speed`` x 2 ms per servo
+    period of a LinuxCNC joint (a stalled loop slows the ramp down, never steps it)."""
+    x = float(pins["c.position-cmd"])
+    while x < to:
+        x = min(x + speed * 0.002, to)
+        pins["c.position-cmd"] = x
         await asyncio.sleep(0.002)  # the joint's servo period (a producer, no wait)
 
 
@@ -117,6 +119,24 @@ async def test_a_step_beyond_speed_is_refused_and_faults(machine: AsyncMachine) 
         await stopped(task)
 
 
+async def test_an_unfed_watchdog_faults_every_axis_without_latching(
+        machine: AsyncMachine) -> None:
+    pins = blank_pins(["c", "x"])
+    bridge = Bridge([machine["c"], machine["x"]], pins, 0.05)
+    task = asyncio.create_task(bridge.run())
+    try:
+        await cycles(bridge.axes[0], 50)  # far beyond 0.05 s
+        assert pins["fault"] and pins["c.fault"] and pins["x.fault"]
+        pins["c.enable"] = True  # refused: an enable edge while faulted streams nothing
+        await cycles(bridge.axes[0], 5)
+        assert not bridge.axes[0].streaming
+        pins["watchdog"] = True
+        await wait_until_async(lambda: not pins["fault"], what="fed: no fault, no reset")
+        assert bridge.axes[0].latched is None
+    finally:
+        await stopped(task)
+
+
 async def test_a_starved_watchdog_stops_position_axes_and_faults_all(
         machine: AsyncMachine) -> None:
     pins = blank_pins(["c", "x"])
@@ -125,12 +145,12 @@ async def test_a_starved_watchdog_stops_position_axes_and_faults_all(
         pins["c.enable"] = True
         await wait_until_async(lambda: bridge.axes[0].streaming, what="streaming")
         await ramp(pins, 30.0, 180.0)
-        # nobody toggles the watchdog: after 0.3 s every axis faults, c stops streaming
+        # nobody toggles the watchdog again: after 0.3 s every axis faults, c stops
         await wait_until_async(lambda: pins["fault"] and pins["x.fault"] and pins["c.fault"],
                                timeout=20, what="watchdog fault")
         assert not bridge.axes[0].streaming
         assert bridge.axes[1].latched is not None and "watchdog" in bridge.axes[1].latched
-        pins["watchdog"] = True  # toggling again: the fault holds until fault-reset
+        pins["watchdog"] = False  # toggling again: the fault holds until fault-reset
         await cycles(bridge.axes[0], 5)
         assert pins["c.fault"]
         pins["c.fault-reset"] = pins["x.fault-reset"] = True

@@ -45,14 +45,12 @@ loadrt threads name1=servo period1=1000000
 loadrt siggen num_chan=2
 addf siggen.0.update servo
 addf siggen.1.update servo
-setp siggen.0.frequency 0.1
+setp siggen.0.frequency 0
 setp siggen.0.amplitude 45
 setp siggen.1.frequency 20
 loadusr -Wn servobus {servobus} hal --machine cell.toml --watchdog 2
 net cmd siggen.0.sine => servobus.x.position-cmd servobus.c.position-cmd
 net wd siggen.1.clock => servobus.watchdog
-setp servobus.x.enable 1
-setp servobus.c.enable 1
 start
 """
 
@@ -94,6 +92,17 @@ def test_halrun_streams_faults_resets_and_stops(tmp_path: Path,
     session = HalSession(tmp_path / "cell.hal")
     outside = servobus.connect(f"easycan+socketcand://127.0.0.1:{can}", drive_id=1)
     try:
+        # the watchdog fed (the thread runs) and both links up: no fault; then enable, and
+        # siggen's sine starts from 0 where the motors stand (LinuxCNC's joints start at
+        # their feedback)
+        wait_until(lambda: session.pins("servobus").get("servobus.fault") == "FALSE",
+                   timeout=30, poll=0.05, what="no fault" + session.output())
+        session.halcmd("setp", "servobus.x.enable", "1")
+        session.halcmd("setp", "servobus.c.enable", "1")
+        wait_until(lambda: (p := session.pins("servobus"))["servobus.x.enabled"] == "TRUE"
+                   and p["servobus.c.enabled"] == "TRUE", timeout=30, poll=0.05,
+                   what="servo on")
+        session.halcmd("setp", "siggen.0.frequency", "0.1")
         wait_until(lambda: (p := session.pins("servobus")) and follows(p, "x")
                    and follows(p, "c"), timeout=60, poll=0.05,
                    what="position-fb reaching position-cmd" + session.output())
