@@ -14,6 +14,7 @@ import os
 import pwd
 import shutil
 import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
@@ -23,6 +24,12 @@ HALRUN = shutil.which("halrun")
 HALCMD = shutil.which("halcmd")
 needs_halrun = pytest.mark.skipif(HALRUN is None or HALCMD is None,
                                   reason="LinuxCNC's halrun is missing (Debian linuxcnc-uspace)")
+
+
+LINUXCNC = shutil.which("linuxcnc")
+SCRIPT = shutil.which("script")
+needs_linuxcnc = pytest.mark.skipif(LINUXCNC is None or SCRIPT is None,
+                                    reason="LinuxCNC (linuxcnc-uspace) or script is missing")
 
 
 def hal_env(fifo: Path) -> dict[str, str]:
@@ -35,6 +42,19 @@ def hal_env(fifo: Path) -> dict[str, str]:
     if os.geteuid() == 0:
         env["RTAPI_UID"] = str(pwd.getpwnam("nobody").pw_uid)
     return env
+
+
+def run_linuxcnc(ini: Path, *, timeout: float = 150.0) -> str:
+    """``linuxcnc INI`` under a pseudo-terminal (without a tty its launcher opens a terminal
+    window), servobus on PATH; its output (it ends when the INI's display exits)."""
+    assert SCRIPT is not None
+    with tempfile.TemporaryDirectory(prefix="servobus-rtapi-") as fifo:
+        env = hal_env(Path(fifo))
+        env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
+        done = subprocess.run([SCRIPT, "-qec", f"linuxcnc {ini.name}", "/dev/null"],
+                              cwd=ini.parent, env=env, capture_output=True, text=True,
+                              timeout=timeout, check=False)
+    return done.stdout + done.stderr
 
 
 class HalSession:

@@ -1,17 +1,21 @@
 """``servobus hal`` in a real HAL session (halrun): siggen drives two position axes on
 virtual drives in their own processes (a DMM drive on DYN232M, a YZ-AIM motor on EasyCan);
 position-fb reaches the command, a fault injected through the simulator's control channel
-raises fault and fault-reset clears it, and the component's end stops every axis."""
+raises fault and fault-reset clears it, and the component's end stops every axis. Then the
+full LinuxCNC runs the rotary example's G-code on a virtual YZ-AIM motor, headless.
+
+One file: HAL's shared memory is one per host, so these run one after the other."""
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from hal_rig import HalSession, needs_halrun
+from hal_rig import HalSession, needs_halrun, needs_linuxcnc, run_linuxcnc
 from rig import free_port, wait_until
 from subprocess_rig import read_line, stop_process
 
@@ -78,6 +82,9 @@ def sims() -> Iterator[tuple[int, int, str]]:
         stop_process(motor)
 
 
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples" / "linuxcnc"
+
+
 def follows(pins: dict[str, str], axis: str) -> bool:
     command = float(pins[f"servobus.{axis}.position-cmd"])
     return abs(command) > 3.0 and abs(float(pins[f"servobus.{axis}.position-fb"]) - command) < 3.0
@@ -133,3 +140,26 @@ def test_halrun_streams_faults_resets_and_stops(tmp_path: Path,
     finally:
         outside.close()
         session.close()
+
+
+@needs_linuxcnc
+def test_linuxcnc_runs_the_rotary_example_on_a_virtual_motor(tmp_path: Path) -> None:
+    can = free_port()
+    motor = start("easycan", "--socketcand", f"127.0.0.1:{can}", "--ids", "1")
+    try:
+        read_line(motor, "listening on")
+        config = tmp_path / "rotary"
+        shutil.copytree(EXAMPLES / "rotary", config)
+        toml = config / "rotary.toml"
+        toml.write_text(toml.read_text().replace(
+            'url = "sim://easycan"', f'url = "easycan+socketcand://127.0.0.1:{can}"'))
+        ini = config / "rotary.ini"
+        ini.write_text(ini.read_text().replace("DISPLAY = axis", "DISPLAY = ./run_program.py"))
+        output = run_linuxcnc(ini)
+        assert "run_program: done at joint 0 135.000" in output, output
+        assert "every position axis stopped" in output, output
+        with servobus.connect(f"easycan+socketcand://127.0.0.1:{can}", drive_id=1) as outside:
+            angle = outside.position() * 360 / outside.counts_per_rev
+        assert abs(angle - 135.0) < 0.1, (angle, output)  # the program's last line: A135
+    finally:
+        stop_process(motor)
