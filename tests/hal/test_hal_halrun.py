@@ -35,6 +35,12 @@ speed = 720.0
 accel = 7200.0
 hal = "position"
 
+[axes.m]
+url = "dyn232+socket://127.0.0.1:{dyn232}"
+id = 2
+unit = "mm"
+per_rev = 5.0
+
 [axes.c]
 url = "easycan+socketcand://127.0.0.1:{can}"
 id = 1
@@ -69,7 +75,7 @@ def start(*args: str) -> subprocess.Popen[str]:
 def sims() -> Iterator[tuple[int, int, str]]:
     """(DYN232M port, socketcand port, control URL) of two virtual drives."""
     dyn232, can = free_port(), free_port()
-    drive = start("dyn232", "--listen", f"tcp://127.0.0.1:{dyn232}", "--ids", "1",
+    drive = start("dyn232", "--listen", f"tcp://127.0.0.1:{dyn232}", "--ids", "1,2",
                   "--control", "tcp://127.0.0.1:0")
     motor = start("easycan", "--socketcand", f"127.0.0.1:{can}", "--ids", "1")
     try:
@@ -114,16 +120,19 @@ def test_halrun_streams_faults_resets_and_stops(tmp_path: Path,
                    and follows(p, "c"), timeout=60, poll=0.05,
                    what="position-fb reaching position-cmd" + session.output())
 
-        with ControlClient(control) as drive:  # a surge trips the DMM drive's alarm 5
-            drive.call("fault", 1, fault="over_voltage", seconds=0.01)
+        with ControlClient(control) as drives:  # a surge trips alarm 5 on both DMM drives
+            drives.call("fault", 1, fault="over_voltage", seconds=0.01)
+            drives.call("fault", 2, fault="over_voltage", seconds=0.01)
         pins = wait_until(lambda: (p := session.pins("servobus"))["servobus.x.fault"] == "TRUE"
-                          and p, timeout=30, poll=0.05, what="fault raised")
+                          and p["servobus.m.fault"] == "TRUE" and p, timeout=30, poll=0.05,
+                          what="fault raised on x (position) and m (monitor)")
         assert pins["servobus.fault"] == "TRUE" and pins["servobus.x.alarm-code"] == "5"
-        assert pins["servobus.c.fault"] == "FALSE"
+        assert pins["servobus.m.alarm-code"] == "5" and pins["servobus.c.fault"] == "FALSE"
         session.halcmd("setp", "servobus.x.fault-reset", "1")
+        session.halcmd("setp", "servobus.m.fault-reset", "1")
         wait_until(lambda: (p := session.pins("servobus"))["servobus.x.fault"] == "FALSE"
-                   and p["servobus.fault"] == "FALSE", timeout=30, poll=0.05,
-                   what="fault-reset clearing it" + session.output())
+                   and p["servobus.m.fault"] == "FALSE" and p["servobus.fault"] == "FALSE",
+                   timeout=30, poll=0.05, what="fault-reset clearing it" + session.output())
 
         before = outside.position()  # c still streams siggen's sine
         wait_until(lambda: outside.position() != before, timeout=30, what="c streaming")
