@@ -8,9 +8,13 @@ measured is everything after it). A producer plays LinuxCNC's servo thread: ever
 writes the next position-cmd of a sine (90 deg, 0.5 Hz) and the watchdog. Figures:
 
 * period: the time between two target updates sent to the drive (p50 / p99) - the rate
-  the link reaches - and its jitter (p99 - p50);
+  the link reaches - and its jitter (p99 - p50); on EasyCan, whose axis streams the 2 ms
+  synchronous cache (Capability.CYCLIC_POSITION), the time between two cycles taking
+  their target, and how many cycles the stream skipped (a cycle whose slot passed by more
+  than 1.5 ms is skipped, not sent late: servobus.protocols.easycan.sync);
 * cmd -> drive: from the moment a position-cmd value was written to the moment the update
-  carrying it was handed to the link (p50 / p99);
+  carrying it was handed to the link (p50 / p99); on EasyCan, to the moment a cycle took
+  it (its frame goes out at that cycle's slot, within 2 ms);
 * drive -> fb: from the moment the position read was sent to the moment position-fb holds
   its answer (p50 / p99): how old position-fb is when written.
 
@@ -43,9 +47,11 @@ KINDS: dict[str, str] = {
     "Modbus RTU (38,400 baud)": "sim://modbus",
     "DYN5 EtherNet/IP (loopback)": "sim://enip",
 }
-#: What a userspace loop should reach on the fastest link: a target update every 10 ms at
-#: p99 (LinuxCNC's own userspace Modbus components poll far slower).
+#: What a userspace loop should reach on a CAN bus: a target update every 10 ms at p99
+#: (LinuxCNC's own userspace Modbus components poll far slower).
 PERIOD_TARGET_S = 0.010
+#: EasyCan's cyclic stream: one cycle every 2 ms; p99 - p50 of the interval within 1 ms.
+JITTER_TARGET_S = 0.001
 
 
 def percentile(values: list[float], q: float) -> float:
@@ -89,6 +95,17 @@ async def measure(url: str, seconds: float) -> dict[str, list[float]]:
     axis.stream_target = timed_stream  # type: ignore[method-assign]
     axis.readings = timed_readings  # type: ignore[method-assign]
     bridge = Bridge([axis], pins, watchdog_s=1.0)
+    next_cyclic = bridge.axes[0]._next_cyclic
+
+    def timed_cycle() -> float | None:  # a cyclic stream's cycle takes its target
+        target = next_cyclic()
+        now = time.perf_counter()
+        sends.append(now)
+        if target is not None and target in written:
+            to_drive.append(now - written[target])
+        return target
+
+    bridge.axes[0]._next_cyclic = timed_cycle  # type: ignore[method-assign]
     task = asyncio.create_task(bridge.run())
     try:
         pins["watchdog"] = True
@@ -114,7 +131,9 @@ async def measure(url: str, seconds: float) -> dict[str, list[float]]:
         await bridge.stop()
         await machine.close()
     periods = [b - a for a, b in itertools.pairwise(sends)]
-    return {"period": periods, "to_drive": to_drive, "to_fb": to_fb}
+    stats = bridge.axes[0].cyclic_stats
+    skipped = [float(stats.skipped), float(stats.cycles)] if stats is not None else []
+    return {"period": periods, "to_drive": to_drive, "to_fb": to_fb, "skipped": skipped}
 
 
 def ms(values: list[float], q: float) -> str:
@@ -133,8 +152,14 @@ async def run(seconds: float) -> None:
                 f"{ms(figures['to_drive'], 0.99)}  drive->fb {ms(figures['to_fb'], 0.5)} / "
                 f"{ms(figures['to_fb'], 0.99)}  ({len(period) + 1} updates, "
                 f"{statistics.mean(period) and 1 / statistics.mean(period):.0f}/s)")
-        if url == "sim://easycan":
-            line += "  " + mark("hal period EasyCan p99", percentile(period, 0.99),
+        if figures["skipped"]:
+            skipped, cycles = figures["skipped"]
+            line += (f"  cyclic: {cycles:.0f} cycles sent, {skipped:.0f} skipped "
+                     f"(late)  " + mark("hal EasyCan 2 ms cycle jitter p99",
+                                        jitter, at_most=JITTER_TARGET_S,
+                                        show=lambda s: f"{s * 1000:g} ms"))
+        elif url == "sim://dyncan":
+            line += "  " + mark("hal period DYN CAN p99", percentile(period, 0.99),
                                 at_most=PERIOD_TARGET_S, show=lambda s: f"{s * 1000:g} ms")
         print(line)
 

@@ -31,6 +31,7 @@ from servobus.axis.capabilities import Capability
 from servobus.errors import MachineLinkError, ServobusError
 from servobus.hal.pins import Pins, axis_pin
 from servobus.hal.step_guard import StepGuard, StepRefused
+from servobus.link.stats import StreamStats
 from servobus.machine.axis import AsyncMachineAxis
 
 log = logging.getLogger(__name__)
@@ -40,6 +41,8 @@ log = logging.getLogger(__name__)
 PERIOD_S = 0.002
 #: Current and the drive's following error are read every this many cycles (extra reads).
 SLOW_EVERY = 10
+#: How long a stop waits for a cyclic stream to end (it ends at its next cycle: 2 ms).
+CYCLIC_END_S = 1.0
 
 Clock = Callable[[], float]
 
@@ -62,6 +65,9 @@ class AxisBridge:
         self.cycles = 0
         self._target: float | None = None
         self._guard: StepGuard | None = None
+        #: The running cyclic stream (Capability.CYCLIC_POSITION), None otherwise.
+        self._cyclic: asyncio.Task[None] | None = None
+        self.cyclic_stats: StreamStats | None = None  # the last cyclic stream's figures
         if self.position_mode:
             speed, accel = axis.spec.speed, axis.spec.accel
             assert speed is not None and accel is not None  # the machine file requires them
@@ -135,13 +141,18 @@ class AxisBridge:
             return
         self._target = None
         self.streaming = True
-        log.info("axis %s: enabled, streaming position-cmd", self.axis.name)
+        core = self.axis.axis
+        if core is not None and core.supports(Capability.CYCLIC_POSITION):
+            self._cyclic = asyncio.create_task(self._run_cyclic(),
+                                               name=f"hal cyclic {self.axis.name}")
+            log.info("axis %s: enabled, streaming position-cmd every cycle of the drive",
+                     self.axis.name)
+        else:
+            log.info("axis %s: enabled, streaming position-cmd as target updates",
+                     self.axis.name)
 
     async def _disabled(self) -> None:
-        if self.position_mode:
-            self.streaming = False
-            with contextlib.suppress(ServobusError):
-                await self.axis.stop()
+        await self.stop()
         await self.axis.disable()
 
     async def _refuse(self, exc: StepRefused) -> None:
@@ -149,17 +160,52 @@ class AxisBridge:
         await self.stop()
 
     async def stop(self) -> None:
-        """Stop a position axis (nothing for a monitor axis: step/dir drives it)."""
+        """Stop a position axis (nothing for a monitor axis: step/dir drives it); a cyclic
+        stream ends first (its next cycle sees ``streaming`` off)."""
         self.streaming = False
+        cyclic, self._cyclic = self._cyclic, None
+        if cyclic is not None and cyclic is not asyncio.current_task():
+            try:
+                await asyncio.wait_for(cyclic, CYCLIC_END_S)
+            except TimeoutError:
+                log.warning("axis %s: the cyclic stream did not end within %g s: cancelled",
+                            self.axis.name, CYCLIC_END_S)
         if self.position_mode:
             with contextlib.suppress(ServobusError):
                 await self.axis.stop()
+
+    async def _run_cyclic(self) -> None:
+        """The drive's cyclic stream, fed by :meth:`_next_cyclic` until it returns None."""
+        try:
+            self.cyclic_stats = await self.axis.stream_cycles(self._next_cyclic)
+        except ServobusError as exc:
+            self.latch(f"the cyclic stream failed: {exc}")
+        if self.latched is not None:
+            self._cyclic = None  # stop() from here must not wait for itself
+            await self.stop()
+
+    def _next_cyclic(self) -> float | None:
+        """One cycle's target: position-cmd, checked; None ends the stream."""
+        assert self._guard is not None
+        if not self.streaming or self.fault:
+            return None
+        target = float(self.pins[self.pin("position-cmd")])
+        if target != self._target:
+            try:
+                self._guard.check(self._clock(), target)
+            except StepRefused as exc:
+                self.latch(f"refused: {exc}; nothing was sent, the axis stopped")
+                return None
+            self._target = target
+        return self._target
 
     async def _stream(self) -> None:
         assert self._guard is not None and self.axis.spec.speed is not None
         if self.fault:
             await self.stop()
             return
+        if self._cyclic is not None:
+            return  # the cyclic stream sends (its own task)
         target = float(self.pins[self.pin("position-cmd")])
         if self._target is not None and target == self._target:
             return  # no new command: nothing to send (never re-sent)

@@ -54,6 +54,7 @@ from servobus.machine.units import Scale
 if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis
     from servobus.axis.types import AxisStatus, Family
+    from servobus.link.stats import StreamStats
 
 log = logging.getLogger(__name__)
 
@@ -438,6 +439,25 @@ class AsyncMachineAxis:
         self._commanded()
         with self._watch():
             await core.stream_to(counts, rpm)
+
+    async def stream_cycles(self, next_target: Callable[[], float | None]) -> StreamStats:
+        """Cyclic synchronous position (AsyncAxis.stream_cycles, Capability.CYCLIC_POSITION):
+        every cycle of the drive, ``next_target()`` in user units, checked against the
+        limits (LimitError ends the stream, the drive resting at the last position), until
+        it returns None. As :meth:`stream_target`, the caller owns the stream's safety."""
+        core = self._motion()
+        core.require(Capability.CYCLIC_POSITION)
+        self.check_owner("stream")
+
+        def next_position() -> int | None:
+            target = next_target()
+            if target is None:
+                return None
+            return self.to_counts(self.check_target(target))
+
+        self._commanded()
+        with self._watch():
+            return await core.stream_cycles(next_position)
 
     async def move_to(self, target: float, *, wait: bool = False,
                       timeout: float | None = None) -> None:

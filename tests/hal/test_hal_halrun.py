@@ -145,7 +145,11 @@ def test_halrun_streams_faults_resets_and_stops(tmp_path: Path,
         with ControlClient(control) as drive:
             state = drive.call("state", 1)
         assert not state["motion_busy"] and abs(state["speed_rpm"]) < 1
-        assert "every position axis stopped" in session.log.read_text()
+        log = session.log.read_text()
+        assert "every position axis stopped" in log
+        # EasyCan streams its 2 ms cache, DYN232M target updates (docs/linuxcnc.md)
+        assert "axis c: enabled, streaming position-cmd every cycle of the drive" in log, log
+        assert "axis x: enabled, streaming position-cmd as target updates" in log, log
     finally:
         outside.close()
         session.close()
