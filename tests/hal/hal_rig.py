@@ -78,6 +78,24 @@ class HalSession:
         assert done.returncode == 0, f"halcmd {' '.join(args)}: {done.stderr}{self.output()}"
         return done.stdout
 
+    def loadusr(self, *args: str) -> None:
+        """``halcmd loadusr ARGS``, the component's output appended to the log (halcmd's
+        pipes would stay open as long as the component runs)."""
+        assert HALCMD is not None
+        with self.log.open("a") as log:
+            done = subprocess.run([HALCMD, "loadusr", *args], cwd=self.folder, env=self.env,
+                                  stdout=log, stderr=subprocess.STDOUT, timeout=120,
+                                  check=False)
+        assert done.returncode == 0, f"halcmd loadusr {' '.join(args)}{self.output()}"
+
+    def user_pid(self, name: str) -> int:
+        """The process id of the userspace component ``name`` (``halcmd show comp``)."""
+        for line in self.halcmd("show", "comp").splitlines():
+            parts = line.split()
+            if len(parts) >= 4 and parts[1] == "User" and parts[2] == name:
+                return int(parts[3])
+        raise AssertionError(f"no userspace component {name}{self.output()}")
+
     def pins(self, prefix: str) -> dict[str, str]:
         """``halcmd show pin PREFIX``: name -> value as halcmd prints it."""
         found = {}

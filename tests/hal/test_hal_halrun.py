@@ -8,7 +8,9 @@ One file: HAL's shared memory is one per host, so these run one after the other.
 
 from __future__ import annotations
 
+import os
 import shutil
+import signal
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -100,8 +102,8 @@ def test_halrun_streams_faults_resets_and_stops(tmp_path: Path,
                                                 sims: tuple[int, int, str]) -> None:
     dyn232, can, control = sims
     (tmp_path / "cell.toml").write_text(CELL.format(dyn232=dyn232, can=can))
-    (tmp_path / "cell.hal").write_text(HAL.format(servobus=Path(sys.executable).parent
-                                                  / "servobus"))
+    servobus_path = Path(sys.executable).parent / "servobus"
+    (tmp_path / "cell.hal").write_text(HAL.format(servobus=servobus_path))
     session = HalSession(tmp_path / "cell.hal")
     outside = servobus.connect(f"easycan+socketcand://127.0.0.1:{can}", drive_id=1)
     try:
@@ -136,6 +138,7 @@ def test_halrun_streams_faults_resets_and_stops(tmp_path: Path,
 
         before = outside.position()  # c still streams siggen's sine
         wait_until(lambda: outside.position() != before, timeout=30, what="c streaming")
+        session.halcmd("setp", "siggen.0.frequency", "0")  # the command holds (see SIGKILL)
         session.halcmd("unloadusr", "servobus")  # SIGTERM, as halrun's exit and LinuxCNC's
         wait_until(lambda: not session.pins("servobus"), timeout=30, what="component gone")
         wait_until(lambda: not outside.status().moving and outside.speed() == 0, timeout=30,
@@ -150,6 +153,25 @@ def test_halrun_streams_faults_resets_and_stops(tmp_path: Path,
         # EasyCan streams its 2 ms cache, DYN232M target updates (docs/linuxcnc.md)
         assert "axis c: enabled, streaming position-cmd every cycle of the drive" in log, log
         assert "axis x: enabled, streaming position-cmd as target updates" in log, log
+
+        # SIGKILL: nothing can stop the motor; it rests at the last position it was sent
+        session.loadusr("-Wn", "servobus", str(servobus_path), "hal", "--machine", "cell.toml",
+                        "--watchdog", "2")
+        session.halcmd("net", "cmd", "=>", "servobus.c.position-cmd")
+        session.halcmd("net", "wd", "=>", "servobus.watchdog")
+        wait_until(lambda: session.pins("servobus").get("servobus.fault") == "FALSE",
+                   timeout=60, poll=0.05, what="reloaded, no fault" + session.output())
+        session.halcmd("setp", "servobus.c.enable", "1")
+        wait_until(lambda: "axis c: enabled, streaming" in session.log.read_text()[len(log):],
+                   timeout=30, what="c streaming again" + session.output())
+        session.halcmd("setp", "siggen.0.frequency", "0.1")
+        before = outside.position()
+        wait_until(lambda: outside.position() != before, timeout=30, what="c moving")
+        os.kill(session.user_pid("servobus"), signal.SIGKILL)
+        wait_until(lambda: not outside.status().moving and outside.speed() == 0, timeout=30,
+                   what="c at rest after SIGKILL")
+        rest = outside.position()
+        assert all(outside.position() == rest for _ in range(20))
     finally:
         outside.close()
         session.close()
