@@ -41,11 +41,13 @@ def hal(ctx: CliContext, name: str, machine_path: Path | None, watchdog_s: float
     from servobus.errors import NotSupported
     from servobus.hal.component import serve
     from servobus.hal.module import import_hal
+    from servobus.machine.config import load_machine_file
 
     if machine_path is None and ctx.machine_path is not None:
         machine_path = Path(ctx.machine_path)
     if machine_path is None or not machine_path.is_file():
         raise click.UsageError("servobus hal needs --machine FILE (or SERVOBUS_MACHINE)")
+    load_machine_file(machine_path)  # a mistake is one line, LinuxCNC or not
     try:
         hal_module = import_hal()
     except NotSupported as exc:

@@ -45,17 +45,27 @@ def hal_folder() -> Path | None:
 
 def import_hal() -> ModuleType:
     """LinuxCNC's ``hal`` module, or NotSupported saying how to get it."""
-    try:
-        return importlib.import_module("hal")
-    except ImportError:
-        pass
+    found = _linuxcnc_hal()
+    if found is not None:
+        return found
     folder = hal_folder()
     if folder is not None and str(folder) not in sys.path:
         sys.path.append(str(folder))
+    sys.modules.pop("hal", None)  # not LinuxCNC's (a folder named hal is a namespace package)
+    importlib.invalidate_caches()
+    found = _linuxcnc_hal()
+    if found is not None:
+        return found
+    where = f"{folder}" if folder is not None else "no folder found"
+    raise NotSupported(
+        f"LinuxCNC's Python hal module cannot be imported ({where}); install the Debian "
+        f"package {PACKAGE} or name its folder in {PATH_ENV}")
+
+
+def _linuxcnc_hal() -> ModuleType | None:
+    """``import hal`` where it is LinuxCNC's (it makes components), else None."""
     try:
-        return importlib.import_module("hal")
-    except ImportError as exc:
-        where = f"{folder}" if folder is not None else "no folder found"
-        raise NotSupported(
-            f"LinuxCNC's Python hal module cannot be imported ({where}: {exc}); install the "
-            f"Debian package {PACKAGE} or name its folder in {PATH_ENV}") from None
+        module = importlib.import_module("hal")
+    except ImportError:
+        return None
+    return module if callable(getattr(module, "component", None)) else None
