@@ -28,7 +28,7 @@ import time
 from collections.abc import Callable, Sequence
 
 from servobus.axis.capabilities import Capability
-from servobus.errors import MachineLinkError, ServobusError
+from servobus.errors import LimitError, MachineLinkError, ServobusError
 from servobus.hal.pins import Pins, axis_pin
 from servobus.hal.step_guard import StepGuard, StepRefused
 from servobus.link.stats import StreamStats
@@ -215,7 +215,11 @@ class AxisBridge:
             await self._refuse(exc)
             return
         self._target = target
-        await self.axis.stream_target(target, self.axis.spec.speed)
+        try:
+            await self.axis.stream_target(target, self.axis.spec.speed)
+        except LimitError as exc:  # checked before sending: nothing went out
+            self.latch(f"refused: {exc}")
+            await self.stop()
 
     async def _read(self) -> None:
         position, speed, status = await self.axis.readings()

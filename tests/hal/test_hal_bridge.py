@@ -28,6 +28,16 @@ url = "sim://dyn232?fast=1"
 id = 1
 unit = "mm"
 per_rev = 5.0
+
+[axes.y]
+url = "sim://dyn232?fast=1"
+id = 2
+unit = "mm"
+per_rev = 5.0
+limits = [-1.0, 1.0]
+speed = 1000.0
+accel = 1000000.0
+hal = "position"
 """
 
 
@@ -171,5 +181,26 @@ async def test_a_monitor_axis_is_read_and_never_commanded(machine: AsyncMachine)
         pins["x.position-cmd"] = 50.0  # ignored: monitor mode
         await cycles(bridge.axes[1], 10)
         assert abs(await machine["x"].position() - 10.0) < 0.01
+    finally:
+        await stopped(task)
+
+
+async def test_a_command_past_a_soft_limit_is_refused_and_faults(machine: AsyncMachine) -> None:
+    pins = blank_pins(["c", "x", "y"])
+    bridge = Bridge([machine["c"], machine["x"], machine["y"]], pins, 60.0)
+    task = asyncio.create_task(bridge.run())
+    try:
+        pins["watchdog"] = True
+        await wait_until_async(lambda: not pins["fault"], what="fed, online, no fault")
+        pins["y.enable"] = True  # y streams target updates (DYN232M)
+        await wait_until_async(lambda: bridge.axes[2].streaming, what="streaming")
+        x = 0.0
+        while not pins["y.fault"] and x < 1.5:  # towards the limit at 1 mm
+            x += 0.05
+            pins["y.position-cmd"] = x
+            await cycles(bridge.axes[2], 1)
+        assert pins["y.fault"] and bridge.axes[2].latched is not None
+        assert "outside the soft limits" in bridge.axes[2].latched
+        assert await machine["y"].position() <= 1.0 + 0.01
     finally:
         await stopped(task)
