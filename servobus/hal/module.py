@@ -63,9 +63,11 @@ def import_hal() -> ModuleType:
 
 
 def _linuxcnc_hal() -> ModuleType | None:
-    """``import hal`` where it is LinuxCNC's (it makes components), else None."""
+    """``import hal`` where it is a module, else None: a folder named ``hal`` on the path
+    (a test folder, a checkout) imports as a namespace package, which has no origin."""
     try:
         module = importlib.import_module("hal")
     except ImportError:
         return None
-    return module if callable(getattr(module, "component", None)) else None
+    spec = module.__spec__
+    return module if spec is not None and spec.origin not in (None, "namespace") else None
