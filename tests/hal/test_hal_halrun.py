@@ -9,6 +9,7 @@ One file: HAL's shared memory is one per host, so these run one after the other.
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -189,9 +190,17 @@ def test_linuxcnc_runs_the_rotary_example_on_a_virtual_motor(tmp_path: Path) -> 
         toml.write_text(toml.read_text().replace(
             'url = "sim://easycan"', f'url = "easycan+socketcand://127.0.0.1:{can}"'))
         ini = config / "rotary.ini"
-        ini.write_text(ini.read_text().replace("DISPLAY = axis", "DISPLAY = ./run_program.py"))
+        # headless; and the margins of a loaded 2-core host, as --watchdog 2 above: a
+        # servo thread woken late by 1 s trips 0.5 s and the example's following error
+        ini.write_text(ini.read_text().replace("DISPLAY = axis", "DISPLAY = ./run_program.py")
+                       .replace("WATCHDOG = 0.5", "WATCHDOG = 2")
+                       .replace("FERROR = 20", "FERROR = 180")
+                       .replace("MIN_FERROR = 10", "MIN_FERROR = 90"))
+        assert all(line in ini.read_text().splitlines() for line in (
+            "DISPLAY = ./run_program.py", "WATCHDOG = 2", "FERROR = 180", "MIN_FERROR = 90"))
         output = run_linuxcnc(ini)
-        assert "run_program: done at joint 0 135.000" in output, output
+        done = re.search(r"run_program: done at joint 0 (-?[\d.]+)", output)
+        assert done is not None and abs(float(done[1]) - 135.0) < 0.05, output
         assert "every position axis stopped" in output, output
         with servobus.connect(f"easycan+socketcand://127.0.0.1:{can}", drive_id=1) as outside:
             angle = outside.position() * 360 / outside.counts_per_rev

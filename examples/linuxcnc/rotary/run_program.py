@@ -16,10 +16,14 @@ from collections.abc import Callable
 import linuxcnc  # type: ignore[import-not-found]
 
 POLL_S = 0.05
+#: How near its command a joint's feedback must stand before the display exits (LinuxCNC
+#: then shuts down and servobus hal stops the axes): two counts of a YZ-AIM motor, in degrees.
+SETTLED = 0.022
 
 command = linuxcnc.command()
 status = linuxcnc.stat()
 errors = linuxcnc.error_channel()
+seen: list[str] = []  # LinuxCNC's error messages (a following error, an amplifier fault)
 
 
 def until(done: Callable[[], bool], what: str, timeout: float = 60.0) -> None:
@@ -29,6 +33,7 @@ def until(done: Callable[[], bool], what: str, timeout: float = 60.0) -> None:
         error = errors.poll()
         if error:
             print(f"linuxcnc: {error[1]}", flush=True)
+            seen.append(str(error[1]))
         if done():
             return
         time.sleep(POLL_S)
@@ -65,8 +70,11 @@ def main() -> None:
     command.auto(linuxcnc.AUTO_RUN, 0)
     until(lambda: status.interp_state != linuxcnc.INTERP_IDLE, "program started", 10.0)
     until(lambda: status.interp_state == linuxcnc.INTERP_IDLE, "program ended", 120.0)
-    until(lambda: all(abs(status.joint[j]["output"] - status.joint[j]["input"]) < 0.05
+    until(lambda: all(abs(status.joint[j]["output"] - status.joint[j]["input"]) < SETTLED
                       for j in range(status.joints)), "feedback on the command")
+    if seen:
+        print(f"run_program: failed: {seen[0]}", flush=True)
+        sys.exit(1)
     print("run_program: done at " + " ".join(
         f"joint {j} {status.joint[j]['input']:.3f}" for j in range(status.joints)), flush=True)
 
