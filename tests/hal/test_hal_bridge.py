@@ -150,23 +150,34 @@ async def test_an_unfed_watchdog_faults_every_axis_without_latching(
 async def test_a_starved_watchdog_stops_position_axes_and_faults_all(
         machine: AsyncMachine) -> None:
     pins = blank_pins(["c", "x"])
-    bridge, task = await running(machine, pins, watchdog_s=0.3)
+
+    async def feed() -> None:  # LinuxCNC's servo thread toggling the watchdog
+        while True:
+            pins["watchdog"] = not pins["watchdog"]
+            await asyncio.sleep(0.02)  # its clock's half period (a producer, no wait)
+
+    bridge = Bridge([machine["c"], machine["x"]], pins, 0.3)
+    task = asyncio.create_task(bridge.run())
+    feeder = asyncio.create_task(feed())
     try:
+        await wait_until_async(lambda: not pins["fault"], what="fed, online, no fault")
         pins["c.enable"] = True
         await wait_until_async(lambda: bridge.axes[0].streaming, what="streaming")
         await ramp(pins, 30.0, 180.0)
-        # nobody toggles the watchdog again: after 0.3 s every axis faults, c stops
+        feeder.cancel()  # LinuxCNC stops feeding: 0.3 s later every axis faults, c stops
         await wait_until_async(lambda: pins["fault"] and pins["x.fault"] and pins["c.fault"],
                                timeout=20, what="watchdog fault")
         assert not bridge.axes[0].streaming
         assert bridge.axes[1].latched is not None and "watchdog" in bridge.axes[1].latched
-        pins["watchdog"] = False  # toggling again: the fault holds until fault-reset
+        feeder = asyncio.create_task(feed())  # toggling again: the fault holds
+        await wait_until_async(lambda: not bridge.watchdog.starved, what="fed again")
         await cycles(bridge.axes[0], 5)
         assert pins["c.fault"]
         pins["c.fault-reset"] = pins["x.fault-reset"] = True
         await wait_until_async(lambda: not pins["c.fault"] and not pins["x.fault"],
                                what="cleared")
     finally:
+        feeder.cancel()
         await stopped(task)
 
 
