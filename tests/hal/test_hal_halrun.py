@@ -23,6 +23,7 @@ from rig import free_port, wait_until
 from subprocess_rig import read_line, stop_process
 
 import servobus
+from servobus.axis import Axis
 from servobus.sim.control_client import ControlClient
 
 pytestmark = [needs_halrun, pytest.mark.slow, pytest.mark.timeout(180)]
@@ -94,6 +95,14 @@ def sims() -> Iterator[tuple[int, int, str]]:
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples" / "linuxcnc"
 
 
+def at_rest(axis: Axis) -> bool:
+    """Standing: not moving, speed 0, and the same position over 20 reads in a row."""
+    if axis.status().moving or axis.speed() != 0:
+        return False
+    first = axis.position()
+    return all(axis.position() == first for _ in range(20))
+
+
 def follows(pins: dict[str, str], axis: str) -> bool:
     command = float(pins[f"servobus.{axis}.position-cmd"])
     return abs(command) > 3.0 and abs(float(pins[f"servobus.{axis}.position-fb"]) - command) < 3.0
@@ -142,10 +151,7 @@ def test_halrun_streams_faults_resets_and_stops(tmp_path: Path,
         session.halcmd("setp", "siggen.0.frequency", "0")  # the command holds (see SIGKILL)
         session.halcmd("unloadusr", "servobus")  # SIGTERM, as halrun's exit and LinuxCNC's
         wait_until(lambda: not session.pins("servobus"), timeout=30, what="component gone")
-        wait_until(lambda: not outside.status().moving and outside.speed() == 0, timeout=30,
-                   what="c at rest")
-        rest = outside.position()
-        assert all(outside.position() == rest for _ in range(20))  # and nothing moves it
+        wait_until(lambda: at_rest(outside), timeout=30, what="c at rest")
         with ControlClient(control) as drive:
             state = drive.call("state", 1)
         assert not state["motion_busy"] and abs(state["speed_rpm"]) < 1
@@ -169,10 +175,7 @@ def test_halrun_streams_faults_resets_and_stops(tmp_path: Path,
         before = outside.position()
         wait_until(lambda: outside.position() != before, timeout=30, what="c moving")
         os.kill(session.user_pid("servobus"), signal.SIGKILL)
-        wait_until(lambda: not outside.status().moving and outside.speed() == 0, timeout=30,
-                   what="c at rest after SIGKILL")
-        rest = outside.position()
-        assert all(outside.position() == rest for _ in range(20))
+        wait_until(lambda: at_rest(outside), timeout=30, what="c at rest after SIGKILL")
     finally:
         outside.close()
         session.close()
