@@ -51,7 +51,7 @@ from servobus.errors import (
     MoveFailed,
     NotSupported,
 )
-from servobus.link.stats import TransactionStats
+from servobus.link.stats import StreamStats, TransactionStats
 from servobus.transport.base import Direction
 
 log = logging.getLogger(__name__)
@@ -319,6 +319,15 @@ class AsyncAxis(ABC):
         counts = self._check_move(position, relative=False)
         checks.positive("rpm", abs(rpm) if isinstance(rpm, int | float) else rpm, "rpm")
         await self._send_move_to(counts)
+
+    async def stream_cycles(self, next_position: Callable[[], int | None]) -> StreamStats:
+        """Cyclic synchronous position (Capability.CYCLIC_POSITION): every cycle of the
+        drive's own time base, ``next_position()`` (counts, range-checked before it is
+        sent) is the position the drive takes; the stream ends when it returns None, and
+        the drive rests at the last position. Returns the stream's figures. A position is a
+        setpoint of its cycle, not a command that could be re-sent: each cycle sends the
+        one ``next_position()`` gives."""
+        raise self.unsupported(Capability.CYCLIC_POSITION)
 
     async def square_wave(self, amplitude: int) -> None:
         """Drive-generated square-wave test motion (families with "waves")."""

@@ -57,6 +57,9 @@ class Capability(StrEnum):
     COMMAND_UNITS = "command_units"
     #: Cyclic I/O (an implicit EtherNet/IP connection; DYN5 section 5).
     CYCLIC_IO = "cyclic_io"
+    #: A position every fixed cycle, taken by the drive on its own time base
+    #: (``stream_cycles``; YZ-AIM EasyCan's 2 ms position cache with the sync signal).
+    CYCLIC_POSITION = "cyclic_position"
 
     @property
     def words(self) -> str:

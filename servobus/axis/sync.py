@@ -38,7 +38,7 @@ if TYPE_CHECKING:
     from servobus.axis.capture import Capture
     from servobus.axis.types import AxisStatus, Family, ParamInfo, StreamProfile
     from servobus.axis.virtual_io import VirtualIo
-    from servobus.link.stats import TransactionStats
+    from servobus.link.stats import StreamStats, TransactionStats
 
 T = TypeVar("T")
 P = ParamSpec("P")
@@ -269,6 +269,11 @@ class Axis:
         """Move the drive's running target to ``position`` counts (a lease's primitive;
         docs/safety.md)."""
         return self._call(self._core.stream_to, position, rpm)
+
+    def stream_cycles(self, next_position: Callable[[], int | None]) -> StreamStats:
+        """Cyclic synchronous position: ``next_position()`` every cycle of the drive, until
+        it returns None (:meth:`AsyncAxis.stream_cycles`)."""
+        return self._call(self._core.stream_cycles, next_position)
 
     def turn(self, rpm: int) -> None:
         """Constant speed in rpm (0 ramps down and holds)."""

@@ -39,6 +39,7 @@ COMMAND_MODULES: list[str] = [
     "servobus.cli.profile_cmd",
     "servobus.cli.gui_cmd",
     "servobus.cli.serve_cmd",
+    "servobus.cli.hal_cmd",
     "servobus.cli.users_cmd",
     "servobus.cli.enable_cmd",
     "servobus.cli.origin_cmd",

@@ -34,6 +34,7 @@ import time
 from collections.abc import Awaitable, Callable, Iterator
 from typing import TYPE_CHECKING
 
+from servobus.axis.capabilities import Capability
 from servobus.errors import (
     ArgumentRangeError,
     ClosedError,
@@ -53,6 +54,7 @@ from servobus.machine.units import Scale
 if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis
     from servobus.axis.types import AxisStatus, Family
+    from servobus.link.stats import StreamStats
 
 log = logging.getLogger(__name__)
 
@@ -407,7 +409,56 @@ class AsyncMachineAxis:
         self._seen(position, status, since)
         return self.to_user(position), self.scale.from_rpm(speed), status
 
+    async def current(self) -> float:
+        """The motor current, A (AsyncAxis.current)."""
+        with self._watch():
+            return await self.core().current()
+
+    async def following_error(self) -> float | None:
+        """Commanded minus actual position in user units as the drive reports it, None
+        where it reports none (AsyncAxis.following_error)."""
+        with self._watch():
+            counts = await self.core().following_error()
+        return None if counts is None else self.to_user(counts)
+
     # ------------------------------------------------------------- motion
+    async def stream_target(self, target: float, speed: float) -> None:
+        """One target update of a position stream from outside (``servobus hal``: LinuxCNC's
+        position command): ``target`` user units, checked against the limits, run by the
+        drive's own target update (AsyncAxis.stream_to, Capability.STREAM_TARGETS) at
+        ``speed`` user units per second (the cruise speed where the family takes one).
+        Sent once, never re-sent. The caller owns the stream's safety (its own speed and
+        acceleration checks, a stop when its feed stops): unlike :meth:`jog` nothing here
+        ends by itself but the drive, which rests at the last target."""
+        self.check_target(target)
+        core = self._motion()
+        core.require(Capability.STREAM_TARGETS)
+        self.check_owner("stream")
+        counts = self.to_counts(target)
+        rpm = abs(self.scale.to_rpm(speed))
+        self._commanded()
+        with self._watch():
+            await core.stream_to(counts, rpm)
+
+    async def stream_cycles(self, next_target: Callable[[], float | None]) -> StreamStats:
+        """Cyclic synchronous position (AsyncAxis.stream_cycles, Capability.CYCLIC_POSITION):
+        every cycle of the drive, ``next_target()`` in user units, checked against the
+        limits (LimitError ends the stream, the drive resting at the last position), until
+        it returns None. As :meth:`stream_target`, the caller owns the stream's safety."""
+        core = self._motion()
+        core.require(Capability.CYCLIC_POSITION)
+        self.check_owner("stream")
+
+        def next_position() -> int | None:
+            target = next_target()
+            if target is None:
+                return None
+            return self.to_counts(self.check_target(target))
+
+        self._commanded()
+        with self._watch():
+            return await core.stream_cycles(next_position)
+
     async def move_to(self, target: float, *, wait: bool = False,
                       timeout: float | None = None) -> None:
         """Absolute move to ``target`` user units (checked against the limits first)."""

@@ -25,9 +25,12 @@ UNITS = ("mm", "deg", "rev", "counts")
 #: per_rev when the file gives none: a degree axis turns 360 deg per revolution, ...
 DEFAULT_PER_REV: Mapping[str, float] = {"deg": 360.0, "rev": 1.0}
 ORIGINS = ("none", "set", "home")
+#: What ``servobus hal`` does with the axis (docs/linuxcnc.md): read and report only, or
+#: stream LinuxCNC's position command to the drive.
+HAL_MODES = ("monitor", "position")
 NAME = re.compile(r"^[A-Za-z0-9_-]+$")
 AXIS_KEYS = frozenset({"url", "id", "unit", "per_rev", "gear", "direction", "limits", "speed",
-                       "accel", "origin", "label", "continuous"})
+                       "accel", "origin", "label", "continuous", "hal"})
 TOP_KEYS = frozenset({"name", "axes"})
 
 
@@ -50,6 +53,8 @@ class AxisSpec:
     #: The axis may turn for ever (a spindle, a conveyor): only then is constant speed
     #: open-ended (docs/safety.md). Allowed only on an axis without limits.
     continuous: bool = False
+    #: ``servobus hal``'s mode for the axis: "monitor" (report only) or "position".
+    hal: str = "monitor"
 
 
 @dataclass(frozen=True)
@@ -195,12 +200,19 @@ def _axis(where: _Where, name: str, table: object) -> AxisSpec:
     if not isinstance(continuous, bool):
         raise where.error("continuous", f"must be true or false, got {continuous!r}")
     continuous = continuous or url_continuous(url)
+    hal = table.get("hal", "monitor")
+    if hal not in HAL_MODES:
+        raise where.error("hal", f"must be one of {', '.join(HAL_MODES)}, got {hal!r}")
+    if hal == "position" and (speed is None or accel is None):
+        raise where.error("hal", "a position axis needs speed and accel: servobus hal refuses "
+                          "a command step beyond them")
     if continuous and limits is not None:
         raise where.error("continuous", "an axis that turns for ever has no soft limits; "
                           "remove limits or continuous")
     return AxisSpec(name=name, url=url.strip(), drive_id=drive_id, unit=unit, per_rev=per_rev,
                     gear=gear, direction=int(direction), limits=limits, speed=speed,
-                    accel=accel, origin=origin, label=label, continuous=continuous)
+                    accel=accel, origin=origin, label=label, continuous=continuous,
+                    hal=hal)
 
 
 def url_continuous(url: str) -> bool:

@@ -20,14 +20,15 @@ import servobus
 from tools import import_graph as graph
 
 ROOT = Path(servobus.__file__).parent
-SHARED = ("axis", "cli", "families", "transport", "sim", "gui", "link", "machine", "gateway")
+SHARED = ("axis", "cli", "families", "transport", "sim", "gui", "link", "machine", "gateway",
+          "hal")
 #: Everything above transport/: it moves bytes and frames and knows none of these.
 ABOVE_TRANSPORT = ("sim", "axis", "protocols", "families", "cli", "gui", "link", "sniff",
-                   "machine", "gateway")
+                   "machine", "gateway", "hal")
 #: Everything above link/: the rules of a conversation know no Axis, family or protocol.
 ABOVE_LINK = ("axis", "protocols", "families", "sim", "cli", "gui", "machine", "gateway",
-              "sniff")
-FRONT_ENDS = ("cli", "gui", "machine", "gateway")
+              "sniff", "hal")
+FRONT_ENDS = ("cli", "gui", "machine", "gateway", "hal")
 CLIENT_MODULES = ("client.py", "opener.py", "commands.py", "codec.py")
 
 

@@ -38,7 +38,7 @@ EXPECTED: dict[str, set[Capability]] = {
     "enip": DMM | VIRTUAL | {C.VIRTUAL_IO, C.TORQUE_MODE, C.CYCLIC_IO,
                              C.POWER_LOSS_DETECTION},
     # YZ-AIM over EasyCan: the position caches start together
-    "easycan": YZ | VIRTUAL | {C.SYNC_START},
+    "easycan": YZ | VIRTUAL | {C.SYNC_START, C.CYCLIC_POSITION},
     "modbus": YZ | VIRTUAL,
 }
 
@@ -79,6 +79,9 @@ def test_the_typed_calls_of_a_missing_capability_raise_before_sending(axis: Axis
             axis.stream_profile()
     if not axis.supports(C.POWER_LOSS_DETECTION):
         assert axis.power_marker() is None
+    if not axis.supports(C.CYCLIC_POSITION):
+        with pytest.raises(NotSupported, match="cyclic position"):
+            axis.stream_cycles(lambda: 0)
     assert axis.position() is not None  # the link is fine: nothing half-sent
 
 
@@ -95,7 +98,7 @@ def test_a_family_declares_no_connection_capability(family: Family) -> None:
 
 #: A capability that is a method of AsyncAxis: declared exactly where it is implemented.
 METHODS = {C.HOMING: "home", C.WAVES: "square_wave", C.STREAM_TARGETS: "stream_profile",
-           C.POWER_LOSS_DETECTION: "power_marker"}
+           C.POWER_LOSS_DETECTION: "power_marker", C.CYCLIC_POSITION: "stream_cycles"}
 
 
 def test_a_declared_capability_is_implemented(axis: Axis) -> None:

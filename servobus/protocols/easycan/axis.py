@@ -16,11 +16,13 @@ mapping of the Axis calls onto the YZ-AIM registers is :mod:`servobus.families.y
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 from servobus.axis.base import AsyncAxis
+from servobus.axis.capabilities import Capability
 from servobus.families.yzaim.axis import YzaimAxis
+from servobus.link.stats import StreamStats
 from servobus.protocols.easycan import commands as cmds
 from servobus.protocols.easycan.client import AsyncEasyCanClient
 from servobus.protocols.easycan.describe import describe
@@ -31,6 +33,7 @@ from servobus.protocols.easycan.sync import SyncGroup
 class EasyCanAxis(YzaimAxis[AsyncEasyCanClient]):
     protocol_name = "easycan"
     reachable_params = cmds.REACHABLE_PARAMS
+    protocol_capabilities = YzaimAxis.protocol_capabilities | {Capability.CYCLIC_POSITION}
 
     def __init__(self, client: AsyncEasyCanClient, address: int, *,
                  owns_client: bool = True) -> None:
@@ -99,6 +102,29 @@ class EasyCanAxis(YzaimAxis[AsyncEasyCanClient]):
         for axis, counts in motors:
             axis._target = counts
         await group.stop()
+
+    async def stream_cycles(self, next_position: Callable[[], int | None]) -> StreamStats:
+        """The 2 ms position cache with the sync signal (5.4c/d, SyncGroup.stream), this
+        motor alone: position mode, its cache loaded with where it stands and sync on (so
+        the first cycle moves nothing), then ``next_position()`` every cycle until None;
+        sync off again whatever ends the stream (the motor keeps the last cache it took)."""
+        await self._position_mode()
+        self._target = None
+        group = SyncGroup(self.client, [self._id])
+        await group.move({self._id: await self.position()})
+        address = self._id
+
+        def cycles() -> Iterator[dict[int, int]]:
+            while True:
+                position = next_position()
+                if position is None:
+                    return
+                yield {address: self._check_move(position, relative=False)}
+
+        try:
+            return await group.stream(cycles())
+        finally:
+            await group.stop()
 
     # ------------------------------------------------------------- EasyCan's own frames
     async def emergency_stop(self) -> None:
