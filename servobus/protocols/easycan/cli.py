@@ -21,7 +21,7 @@ from servobus.families.yzaim import registers as yzaim
 from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.functions import BITRATE
 from servobus.protocols.easycan.server import serve
-from servobus.sim.cli_options import SOCKETCAND, sim_banner, sim_options, stopped_line
+from servobus.sim.cli_options import SOCKETCAND, apply_load, sim_banner, sim_options, stopped_line
 from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS, fit_fd_limit, log_to_stderr
 from servobus.sim.socketcand_bus import socketcand_bus
 from servobus.sim.wall_clock import RealtimeClock
@@ -47,11 +47,13 @@ async def run_socketcand_motors(motors: Sequence[YzaimMotor], host: str, port: i
 
 
 def run_sim(io: CommandIO, *, address: tuple[str, int], ids: tuple[int, ...], fast: bool,
-            state: str | None, model: str, duration: float | None, max_clients: int) -> None:
+            state: str | None, model: str, duration: float | None, max_clients: int,
+            **load: object) -> None:
     """Virtual YZ-AIM motors on one CAN bus (EasyCan protocol, socketcand rawmode)."""
     log_to_stderr()
     host, port = address
     motors = make_motors(ids, state=state, model=model)
+    apply_load(motors, load)
     banner = sim_banner("easycan", len(motors), "motor", model, "addresses",
                         (m.address for m in motors), fast, "1 Mbit/s timing model")
     network = asyncio.run(run_socketcand_motors(

@@ -20,6 +20,7 @@ from servobus.protocols.modbus.inprocess import FACTORY_ADDRESS, make_motors, pa
 from servobus.protocols.modbus.server import serve
 from servobus.protocols.modbus.timing import DEFAULT_BAUD
 from servobus.sim.cli_options import (
+    apply_load,
     line_endpoint,
     serial_line_options,
     sim_banner,
@@ -33,10 +34,12 @@ from servobus.sim.wire import FINE_COARSE_S
 
 def run_sim(io: CommandIO, *, listen: tuple[str, int] | None, pty: bool,
             tap: tuple[str, int] | None, baud: int, ids: tuple[int, ...], fast: bool,
-            state: str | None, model: str, duration: float | None, max_clients: int) -> None:
+            state: str | None, model: str, duration: float | None, max_clients: int,
+            **load: object) -> None:
     """Virtual YZ-AIM motors sharing one Modbus RTU line (RS-485 multi-drop)."""
     log_to_stderr()
     motors = make_motors(ids, state=state, model=model)
+    apply_load(motors, load)
     banner = sim_banner("modbus", len(motors), "motor", model, "addresses",
                         (m.address for m in motors), fast, f"paced at {baud} 8N1")
     server = run_in_fine_loop(serve(
