@@ -11,6 +11,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Sequence
+from pathlib import Path
 
 import pytest
 
@@ -25,6 +26,7 @@ from servobus.sim.core.steps import StepTrace, record
 from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.yzaim import physics as phys
 from servobus.sim.yzaim.motor import YzaimMotor
+from tools import plot_steps
 
 MODEL = U.MODELS["DYN2-TL"]
 PEAK_A = MODEL.peak_current_a
@@ -68,7 +70,7 @@ def cruise_current(m: Motor, rpm: float = 300.0, seconds: float = 0.5) -> tuple[
 
 # ------------------------------------------------------------------ Main Gain (5.2)
 def test_1_a_higher_main_gain_rises_faster_and_past_a_point_overshoots_and_rings() -> None:
-    # Measured: 10% to 90% rise 86.5 / 17.5 / 4.75 ms, overshoot 0 / 0 / 13 % at 10 / 40 / 127.
+    # Measured: 10% to 90% rise 87.5 / 22.5 / 4.9 ms, overshoot 0 / 0 / 13.5 % at 10 / 40 / 127.
     soft, base, hard = (raw_step(motor(main=g)) for g in (10, 40, 127))
     assert soft.rise_time_s and base.rise_time_s and hard.rise_time_s
     assert soft.rise_time_s > 2 * base.rise_time_s > 4 * hard.rise_time_s
@@ -83,7 +85,7 @@ def test_1_a_higher_main_gain_rises_faster_and_past_a_point_overshoots_and_rings
 
 # ------------------------------------------------------------------ Speed Gain (5.1, 5.2)
 def test_2_at_a_heavy_load_more_speed_gain_calms_the_overshoot() -> None:
-    # Load 10 x rotor. Measured: overshoot 25.5 % at Speed Gain 40, 0.1 % at 127.
+    # Load 10 x rotor. Measured: overshoot 25.7 % at Speed Gain 40, 0.2 % at 127.
     slow = raw_step(motor(speed=40, inertia=10.0), seconds=0.6)
     stiff = raw_step(motor(speed=127, inertia=10.0), seconds=0.6)
     assert slow.overshoot_pct > 15.0
@@ -204,8 +206,8 @@ def belt_step(main: int) -> StepTrace:
 
 
 def test_9_a_compliant_load_shows_its_resonance_and_the_load_overshoots_more() -> None:
-    # Measured at Main Gain 40: motor overshoot 3.8 %, load 11.2 %; the twist of the belt
-    # rings at 23 Hz, between the antiresonance (60 / sqrt(1.1 x 10) = 18 Hz) and 60 Hz.
+    # Measured at Main Gain 40: motor overshoot 3.7 %, load 11.1 %; the twist of the belt
+    # rings at 15 Hz, near the antiresonance (60 Hz / sqrt(1 + 10) = 18 Hz).
     tr = belt_step(40)
     motor_m, load_m = metrics(tr, QUARTER_REV), metrics(tr, QUARTER_REV, load=True)
     assert load_m.overshoot_pct > motor_m.overshoot_pct + 3.0
@@ -220,8 +222,8 @@ def test_9_a_compliant_load_shows_its_resonance_and_the_load_overshoots_more() -
 
 def test_10_the_step_test_shows_the_main_gain_on_a_belt() -> None:
     # The GUI step test's figures (servobus.gui.step_metrics) of the drive's own move.
-    # Measured Main Gain 10 / 40 / 80: motor overshoot 9.2 / 3.8 / 1.5 %, largest following
-    # error 1515 / 986 / 570 counts, load overshoot 14.8 / 11.2 / 6.9 %.
+    # Measured Main Gain 10 / 40 / 80: motor overshoot 9.0 / 3.7 / 1.5 %, largest following
+    # error 1482 / 972 / 563 counts, load overshoot 14.6 / 11.1 / 6.8 % (docs/tuning.md).
     runs = [belt_step(g) for g in (10, 40, 80)]
     motor_m = [metrics(tr, QUARTER_REV) for tr in runs]
     load_m = [metrics(tr, QUARTER_REV, load=True) for tr in runs]
@@ -234,7 +236,7 @@ def test_10_the_step_test_shows_the_main_gain_on_a_belt() -> None:
 # ------------------------------------------------------------------ the loop itself
 def test_11_the_following_error_is_not_a_period_off() -> None:
     # At 300 rpm a period is 82 counts: the motor used to read that much ahead of its command.
-    # The reference and the encoder are now sampled at the same instant (measured: +0.3).
+    # The reference and the encoder are now sampled at the same instant (measured: +0.4).
     d = VirtualDrive(1)
     d.turn_const_speed(300)
     d.advance(0.5)
@@ -291,3 +293,13 @@ def test_14_every_gain_acts_over_its_whole_register_range() -> None:
             m.set_gains(*gains, 127)
             seen[i].add(m.loop)
     assert all(len(s) == 127 for s in seen)
+
+
+def test_15_docs_tuning_md_carries_the_table_tools_plot_steps_prints(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    # The step metrics on a belt at inertia ratio 10 at Main Gain 10 / 40 / 80, as documented.
+    assert plot_steps.main([]) == 0
+    printed = capsys.readouterr().out.strip()
+    text = (Path(__file__).resolve().parents[2] / "docs" / "tuning.md").read_text()
+    documented = text.split("<!-- steps-table -->\n")[1].split("\n<!-- /steps-table -->")[0]
+    assert printed == documented
