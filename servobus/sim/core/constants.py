@@ -10,7 +10,7 @@ from servobus.families.dmm import units as U
 
 #: Fixed control period. 4 kHz: the torque filter pole (26 x 127 = 3302 rad/s) and a speed loop
 #: of up to ~400 Hz are resolved (>= 2 samples per pole time constant), and 16 drives still fit
-#: in well under half a core of pure Python (benchmarks/bench_core.py).
+#: in half a core of pure Python (benchmarks/bench_core.py).
 CONTROL_HZ = 4_000
 CONTROL_DT = 1.0 / CONTROL_HZ
 
@@ -19,10 +19,12 @@ CONTROL_DT = 1.0 / CONTROL_HZ
 KP_PER_MAIN_GAIN = 100.0 / 40
 #: Speed loop bandwidth per Speed Gain unit on the bare rotor (rad/s). The speed loop torque gain
 #: is rotor inertia x this x SpeedGain, so with load inertia J_L the bandwidth falls by
-#: J_m / (J_m + J_L): a heavier load needs a larger Speed Gain (manual 5.1, 5.2).
+#: J_m / (J_m + J_L): a heavier load needs a larger Speed Gain (manual 5.1, 5.2). 20 rad/s
+#: puts the light-load limit of the loop (its delay, filter and current loop) near Speed
+#: Gain 100: at 127 the bare rotor buzzes near full torque, as 5.1 warns (docs/tuning.md).
 SPEED_BW_PER_SPEED_GAIN = 20.0
 #: Speed loop integrator zero per Integration Gain unit (rad/s). Default 20 -> 100 rad/s.
-#: The defaults keep position : speed bandwidth at 1 : 4 with the zero well below crossover,
+#: The defaults keep position : speed bandwidth at 1 : 8 with the zero well below crossover,
 #: a well-damped step; raising Main Gain or Integration Gain towards the speed loop
 #: bandwidth brings overshoot and ringing, as 5.2 warns.
 KI_PER_INT_GAIN = 100.0 / 20
@@ -99,10 +101,9 @@ _X_PEAK = (192.0 - 10944.0 ** 0.5) / 360.0
 HANDOVER_Q2_PEAK = abs(-36.0 * _X_PEAK + 96.0 * _X_PEAK**2 - 60.0 * _X_PEAK**3)
 
 # ---------------------------------------------------------------- settling (quiescent path)
-#: A drive whose position error, speed and torque change are below these is at an exact
-#: equilibrium: stepping it changes nothing, so time is skipped in O(1).
-SETTLED_ERROR_COUNTS = 1e-3
-SETTLED_SPEED_CPS = 1e-3
+#: A drive whose position error is 0 counts, whose shafts are held by friction and whose
+#: torque changes by less than this is at an exact equilibrium: stepping it changes nothing,
+#: so time is skipped in O(1).
 SETTLED_TORQUE_NM = 1e-7
 
 # ---------------------------------------------------------------- signals

@@ -5,20 +5,27 @@ loops keep all state in local variables and allocate nothing, which is what lets
 run in real time in pure Python. Everything is in encoder counts (65,536 per rev), seconds
 and newton-metres.
 
-Per control period, in position servo mode:
+Per control period, in position servo mode (docs/tuning.md has the model and its numbers):
 
-1. reference: S-curve generator (an online trapezoid: accelerate/cruise at Max Accel/Max
+1. mechanics over the last period under the torque then applied: one inertia, or two masses
+   coupled by a spring and a damper (a compliant load); Coulomb friction that holds a shaft
+   at rest and stops a sliding one dead, viscous friction, a load torque on the load side
+   (semi-implicit Euler), or a blocked shaft;
+2. feedback: the encoder (the shaft in the family's counts) and the speed from counts per
+   period;
+3. reference: S-curve generator (an online trapezoid: accelerate/cruise at Max Accel/Max
    Speed, brake at the last moment so it lands exactly; a new target simply replaces the old
    one, which is DTPU) -> moving-average smoothing -> optional path mapping (line/arc), or a
-   wave, or external pulses/analog;
-   A new path during motion hands the reference's speed over (see :meth:`go_path`);
-2. position loop P (Main Gain) with velocity feed-forward -> speed loop PI (Speed Gain,
-   Integration Gain) -> torque clamp (peak current x Kt, torque limit; above the corner
-   speed the motoring torque falls with the back-EMF to zero at the no-load speed, which
-   scales with the bus voltage) -> torque filter a/(s+a), a = 26 x TrqCons;
-3. mechanics: J dw/dt = torque - friction + disturbance (semi-implicit Euler), or a blocked
-   shaft;
-4. alarms: lost phase (> 180 deg at once, >= 90 deg for 2 s), over current (peak current
+   wave, or external pulses/analog; a new path during motion hands the reference's speed
+   over (see :meth:`go_path`);
+4. loops: position P (Main Gain) with velocity feed-forward, plus an acceleration
+   feed-forward through the drive's inertia estimate (Adaptive Tuning) -> speed loop PI
+   (Speed Gain, Integration Gain) -> torque clamp (peak current x Kt, torque limit; above
+   the corner speed the motoring torque falls with the back-EMF to zero at the no-load
+   speed, which scales with the bus voltage; the integrator frozen while clamped) -> a
+   transport delay of 2 periods -> torque filter a/(s+a), a = 26 x TrqCons -> a 1.5 kHz
+   current loop;
+5. alarms: lost phase (> 180 deg at once, >= 90 deg for 2 s), over current (peak current
    while stalled for 1 s), I^2 t over power.
 
 A drive at rest with nothing to do reaches an exact equilibrium; ``settled`` then lets time
@@ -120,6 +127,7 @@ class ServoEngine:
         self.tq_d1 = self.tq_d2 = 0.0  # transport delay line, N m
         self.enc_prev = self.encoder_counts()  # encoder reading of the last period
         self.w_est = 0.0  # speed from counts per period, counts/s
+        self.j_hat = self.model.rotor_inertia_kgm2  # Adaptive Tuning starts afresh
         self.ref_mode = Ref.HOLD
         self.gen = Gen.IDLE
         self.gp = self.p  # generator coordinate (counts, or path units with a path)
