@@ -57,8 +57,12 @@ LOAD_OPTIONS = (
 )
 
 
-def apply_load(motors: Iterable[object], options: dict[str, object]) -> None:
-    """Set the :data:`LOAD_OPTIONS` given on every motor (a core or a front with ``drive``)."""
+def apply_load(motors: Iterable[object], *, load: str | None, inertia: float | None,
+               resonance: float | None, load_torque: float | None) -> None:
+    """Set the :data:`LOAD_OPTIONS` given on every motor (a core or a front with ``drive``);
+    ArgumentRangeError for a bad combination."""
+    options = {"load": load, "inertia": inertia, "resonance": resonance,
+               "load_torque": load_torque}
     try:
         settings = loads.load_settings(options)
     except ServobusError as exc:
