@@ -40,7 +40,8 @@ _META = "servobus.sim_control"
               help="reply deadline in seconds")
 @click.pass_context
 def control_group(ctx: click.Context, url: str, drive_id: int | None, timeout: float) -> None:
-    """JP3 inputs and outputs, internal state and faults of a running virtual drive server."""
+    """The world around a running simulator's drives: JP3 inputs and outputs (DMM), supply
+    and battery (YZ-AIM), loads, internal state and faults (docs/sim-control.md)."""
     ctx.meta[_META] = (url, drive_id, timeout)
 
 
@@ -130,8 +131,16 @@ def ena_cmd(state: str) -> None:
 @_command("bus")
 @click.argument("volts", type=float)
 def bus_cmd(volts: float) -> None:
-    """Set the supply / DC bus voltage (over voltage above 80 V)."""
+    """Set the supply / DC bus voltage (DMM: over voltage above 80 V; YZ-AIM: above the
+    model's supply range + 10 %)."""
     _send("bus", volts=volts)
+
+
+@_command("battery")
+@click.argument("state", type=click.Choice(["ok", "flat"]))
+def battery_cmd(state: str) -> None:
+    """YZ-AIM: the multi-turn backup battery (flat: warning 0x13, the motor keeps running)."""
+    _send("battery", ok=state == "ok")
 
 
 @_command("load")

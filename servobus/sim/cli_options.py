@@ -93,6 +93,13 @@ CONTROL = listen_option(
     "outputs, internal state, faults; `servobus sim control`); PORT 0 picks a free port; a "
     "missing host means 127.0.0.1")
 
+#: ``--control`` of the YZ-AIM simulators (servobus.sim.yzaim.control).
+CONTROL_YZAIM = listen_option(
+    "--control", "control",
+    "also serve the control channel here (JSON lines: supply, battery, load, blocked "
+    "shaft, internal state, faults; `servobus sim control`); PORT 0 picks a free port; a "
+    "missing host means 127.0.0.1")
+
 
 def serial_line_options(*, connects: str, tap_carries: str) -> tuple[Option, ...]:
     """``--listen``, ``--pty`` and ``--tap`` of a virtual serial line (``listen``, ``pty``,
