@@ -25,6 +25,7 @@ from servobus.cli.param_types import Seconds
 from servobus.sim.control_client import DEFAULT_TIMEOUT_S, FAULTS, ControlClient
 from servobus.sim.core.control import Arg, ControlError, Reply
 from servobus.sim.core.io import PulseFormat
+from servobus.sim.core.loads import PRESETS
 
 CONTROL_ENV = "SERVOBUS_CONTROL"
 _META = "servobus.sim_control"
@@ -144,11 +145,20 @@ def battery_cmd(state: str) -> None:
 
 @_command("load")
 @click.option("--torque", "torque_nm", type=float, default=None, help="external torque, N m")
-@click.option("--inertia", type=float, default=None, help="load inertia, kg m^2")
 @click.option("--friction", type=float, default=None, help="Coulomb friction, N m")
-def load_cmd(torque_nm: float | None, inertia: float | None, friction: float | None) -> None:
-    """Load torque, inertia and friction at the motor shaft."""
-    _send("load", torque_nm=torque_nm, inertia=inertia, friction=friction)
+@click.option("--load", "preset", type=click.Choice(sorted(PRESETS)), default=None,
+              help="a sample load (docs/tuning.md)")
+@click.option("--inertia", type=float, default=None, help="load inertia / rotor inertia")
+@click.option("--resonance", type=float, default=None,
+              help="resonance of a compliant coupling, Hz (0: rigid)")
+@click.option("--load-torque", "load_torque", type=float, default=None,
+              help="torque on the load side, N m, against +")
+def load_cmd(torque_nm: float | None, friction: float | None, preset: str | None,
+             inertia: float | None, resonance: float | None,
+             load_torque: float | None) -> None:
+    """External torque and friction at the shaft; the load to tune on (docs/tuning.md)."""
+    _send("load", torque_nm=torque_nm, friction=friction, load=preset, inertia=inertia,
+          resonance=resonance, load_torque=load_torque)
 
 
 @_command("block")

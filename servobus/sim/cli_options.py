@@ -7,6 +7,9 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from servobus.axis.cli_spec import Option
+from servobus.errors import ArgumentRangeError, ServobusError
+from servobus.sim.core import loads
+from servobus.sim.core.motor import EngineShaft
 from servobus.sim.line_server import parse_listen_url
 from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS
 from servobus.sim.socketcand_hub import parse_socketcand_address
@@ -17,8 +20,9 @@ def sim_options(*, parse_ids: Callable[[str], Any], ids_default: str | None, ids
                 model_help: str, clients_help: str) -> tuple[Option, ...]:
     """``--ids``, ``--fast``, ``--state``, ``--model``, ``--duration``, ``--max-clients``
     (received as ``ids`` - ``parse_ids(text)``, None when not given and no default -,
-    ``fast``, ``state``, ``model``, ``duration``, ``max_clients``). Only the help texts,
-    defaults and id parsing differ between protocols."""
+    ``fast``, ``state``, ``model``, ``duration``, ``max_clients``), then
+    :data:`LOAD_OPTIONS`. Only the help texts, defaults and id parsing differ between
+    protocols."""
     return (
         Option("--ids", "ids", ids_help, default=ids_default,
                show_default=ids_default is not None, metavar="1,2,3", parse=parse_ids),
@@ -31,7 +35,44 @@ def sim_options(*, parse_ids: Callable[[str], Any], ids_default: str | None, ids
                type=float, minimum=0.0, metavar="SECONDS"),
         Option("--max-clients", "max_clients", clients_help, type=int, minimum=1,
                default=DEFAULT_MAX_CLIENTS, show_default=True),
+        *LOAD_OPTIONS,
     )
+
+
+#: ``--load``, ``--inertia``, ``--resonance``, ``--load-torque``: the load every motor of the
+#: server drives (servobus.sim.core.loads, docs/tuning.md); received as ``load``,
+#: ``inertia``, ``resonance``, ``load_torque`` (None when not given), for :func:`apply_load`.
+LOAD_OPTIONS = (
+    Option("--load", "load", "sample load: " + ", ".join(
+        f"{k} ({p.doc})" for k, p in loads.PRESETS.items()), choices=tuple(loads.PRESETS)),
+    Option("--inertia", "inertia", "load inertia / rotor inertia (overrides --load's)",
+           type=float, minimum=loads.RANGES["inertia"][0], maximum=loads.RANGES["inertia"][1],
+           metavar="RATIO"),
+    Option("--resonance", "resonance", "resonance of a compliant coupling, Hz (0: rigid)",
+           type=float, minimum=loads.RANGES["resonance"][0],
+           maximum=loads.RANGES["resonance"][1], metavar="HZ"),
+    Option("--load-torque", "load_torque", "torque on the load side, N m, against +",
+           type=float, minimum=loads.RANGES["load_torque"][0],
+           maximum=loads.RANGES["load_torque"][1], metavar="NM"),
+)
+
+
+def apply_load(motors: Iterable[object], *, load: str | None, inertia: float | None,
+               resonance: float | None, load_torque: float | None) -> None:
+    """Set the :data:`LOAD_OPTIONS` given on every motor (a core or a front with ``drive``);
+    ArgumentRangeError for a bad combination."""
+    options = {"load": load, "inertia": inertia, "resonance": resonance,
+               "load_torque": load_torque}
+    try:
+        settings = loads.load_settings(options)
+    except ServobusError as exc:
+        raise ArgumentRangeError(str(exc)) from None
+    if settings.empty:
+        return
+    for motor in motors:
+        shaft = motor if isinstance(motor, EngineShaft) else getattr(motor, "drive", None)
+        if isinstance(shaft, EngineShaft):
+            shaft.set_mechanics(settings)
 
 
 def listen_option(flag: str, dest: str, help: str) -> Option:

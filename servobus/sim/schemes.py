@@ -6,7 +6,10 @@ opener of its in-process virtual drive (``sim``: ``sim://dyn232``, ``sim://dynca
 
 Options every protocol's virtual drive takes: ``ids=1,2,3`` (default: the id asked for, else
 the protocol's factory id), ``fast=1`` (no wire pacing), ``state=FILE`` (EEPROM kept in a
-JSON file), ``model=NAME`` (motor/drive model).
+JSON file), ``model=NAME`` (motor/drive model), and the load its motors drive:
+``load=screw|direct|belt``, ``inertia`` (load / rotor inertia), ``resonance`` (Hz) and
+``load_torque`` (N m), e.g. ``sim://dyn232?load=belt&inertia=10`` (servobus.sim.core.loads,
+docs/tuning.md).
 
 Every ``sim://`` axis reads its virtual drives' 4 kHz trace with ``trace_buffer()``
 (servobus.sim.core.capture), whatever the protocol; the axes of the DMM families reach their
@@ -15,12 +18,16 @@ drives' JP3 inputs and outputs with ``virtual_io()`` (servobus.sim.dmm.virtual_i
 
 from __future__ import annotations
 
+import dataclasses
+from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
 
 from servobus.axis import registry
 from servobus.axis.url import DriveUrl
 from servobus.errors import ArgumentRangeError
 from servobus.sim.core import capture
+from servobus.sim.core.loads import split_load_options
+from servobus.sim.core.motor import EngineShaft
 from servobus.sim.dmm import virtual_io
 from servobus.sim.dmm.drive import VirtualDrive
 
@@ -42,9 +49,15 @@ async def open_axis(url: DriveUrl, *, drive_id: int | None = None, **keywords: A
         raise ArgumentRangeError(
             f"no virtual drive {name!r} in {url.raw!r}; known: sim://"
             + ", sim://".join(sorted(sim_protocols())))
+    options, load = split_load_options(url.options)
+    url = dataclasses.replace(url, options=MappingProxyType(options))
     opener = registry.load(target)
     with capture.collecting() as traced:  # the virtual drives (or motors) this axis talks to
         axis: AsyncAxis = await opener(url, drive_id=drive_id, **keywords)
+    if not load.empty:
+        for made in traced:
+            if isinstance(made.drive, EngineShaft):
+                made.drive.set_mechanics(load)
     if traced and axis.capture_source is None:
         axis.capture_source = capture.SimCapture(traced)  # trace_buffer(): their 4 kHz trace
     if traced and axis.io_source is None and virtual_io.has_jp3(axis.family.name):

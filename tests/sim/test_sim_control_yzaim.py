@@ -8,6 +8,7 @@ import pytest
 
 from servobus.families.yzaim import registers as Y
 from servobus.sim.core.control import ControlError
+from servobus.sim.core.loads import PRESETS
 from servobus.sim.yzaim.control import COMMANDS, FAULTS, MotorControl
 from servobus.sim.yzaim.motor import YzaimMotor
 
@@ -84,8 +85,13 @@ def test_a_blocked_shaft_stalls_after_the_units_digit_of_0x18() -> None:
 
 def test_load_and_load_step_show_in_the_state_and_the_current() -> None:
     ctl, (m,) = bench(1)
-    world = ctl.call("load", inertia=1e-3, friction=0.01, torque_nm=0.2)["world"]
-    assert world["load_inertia_kgm2"] == 1e-3 and world["load_torque_nm"] == 0.2
+    reply = ctl.call("load", inertia=30.0, friction=0.01, torque_nm=0.2)  # 30 x the rotor
+    world, mechanics = reply["world"], reply["mechanics"]
+    assert world["load_inertia_kgm2"] == pytest.approx(30 * m.drive.model.rotor_inertia_kgm2)
+    assert world["load_torque_nm"] == 0.2 and mechanics["inertia"] == pytest.approx(30.0)
+    reply = ctl.call("load", load="belt", load_torque=0.05)  # the keys of sim:// URLs
+    assert reply["mechanics"]["resonance"] == PRESETS["belt"].resonance
+    assert reply["mechanics"]["load_torque"] == 0.05
     m.advance(0.5)
     assert ctl.state()["current_a"] < -0.5  # holding against +0.2 N m (0.218 N m/A)
     ctl.fault(None, "load_step", torque_nm=-0.2)

@@ -153,36 +153,7 @@ def test_square_wave_alternates_by_amplitude() -> None:
     assert d.position == 0
 
 
-def step(load: float = 0.0, **params: int) -> tuple[float, float]:
-    """(overshoot fraction, 90 % rise time) of a +2048-count step (square wave start)."""
-    d = VirtualDrive(1)
-    d.set_load(inertia=load)
-    for name, value in params.items():
-        d.set_param(name, value)
-    d.set_wave_frequency(1)
-    d.square_wave(512)
-    rows = trace(d, 0.3)
-    return (max(r[1] for r in rows) / 2048 - 1, first(rows, lambda r: r[1] >= 0.9 * 2048)[0])
-
-
-def test_main_gain_raises_bandwidth_then_overshoot() -> None:
-    base_os, base_rise = step()
-    hard_os, hard_rise = step(main_gain=120)
-    soft_os, soft_rise = step(main_gain=10)
-    assert hard_rise < base_rise < soft_rise
-    assert hard_os > base_os + 0.05  # over-tuned: overshoot (5.2)
-    assert soft_os <= base_os
-
-
-def test_integration_gain_raises_overshoot_with_a_load() -> None:
-    assert step(3e-4, int_gain=100)[0] > step(3e-4)[0] + 0.05
-
-
-def test_heavy_load_needs_more_speed_gain() -> None:
-    light = step(0.0)[0]
-    heavy = step(1e-3)[0]  # 9 x rotor inertia at default gains: rings
-    assert heavy > light + 0.5
-    assert step(1e-3, speed_gain=127)[0] < heavy / 2
+# The servo gains' effects (5.1, 5.2) are tested on the load models in test_tuning.py.
 
 
 def test_readouts_come_from_the_model() -> None:

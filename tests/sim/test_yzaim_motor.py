@@ -110,8 +110,9 @@ def test_absolute_move_follows_the_drives_trapezoid() -> None:
     took = run_until(m, lambda: abs(m.position - 2 * REV) <= Y.POSITION_TOLERANCE_COUNTS,
                      2.0, 0.001)
     # 1000 rpm, 10000 rpm/s: 0.1 s ramps over 5/6 rev, so 2 rev: 0.1 + 1/6 rev at 1000 rpm
-    # + 0.1 s = 0.22 s (the servo lags a few ms behind its reference)
-    assert 0.21 <= took <= 0.26
+    # + 0.1 s = 0.22 s; the P position loop (no feed-forward, docs/tuning.md) lags its
+    # reference and closes the last counts in a few 1 / kp = 10 ms: 0.28 s
+    assert 0.21 <= took <= 0.30
     run_until(m, lambda: m.position == 2 * REV and abs(m.speed_rpm) < 0.5, 1.0)
 
 
@@ -120,8 +121,9 @@ def test_no_internal_curve_at_60000_moves_much_faster() -> None:
     write(m, "acceleration", Y.NO_PROFILE_ACCEL)
     m.write_words(ABS, Y.split32(REV // 2))
     took = run_until(m, lambda: abs(m.position - REV // 2) <= 10, 1.0, 0.0005)
-    # half a turn at 1000 rpm is 30 ms; with the 10000 rpm/s curve it would be 77 ms
-    assert took < 0.045
+    # half a turn at 1000 rpm is 30 ms of reference, then the P loop's lag (v / kp) closes
+    # in about 90 ms: 0.12 s; with the 10000 rpm/s curve it takes 0.17 s
+    assert took < 0.13
 
 
 def test_speed_is_capped_by_the_model() -> None:
@@ -155,7 +157,9 @@ def test_gear_numerator_0_specials_stop_and_clear() -> None:
     moving_at = m.position
     m.write_words(INC, [0, 0])  # 4.7: emergency stop
     m.advance(0.5)
-    assert abs(m.position - moving_at) < REV // 8  # a short braking distance
+    # a short braking distance: the following error v / kp = REV / 6 at 1000 rpm (4.7: "The
+    # length of the deceleration distance is controlled by the position loop KP")
+    assert abs(m.position - moving_at) < REV // 5
     assert abs(m.speed_rpm) < 0.5
     m.write_words(ABS, [0, 0])  # 4.7: clear the absolute position
     assert m.position == 0
@@ -175,7 +179,7 @@ def test_emergency_stop_function_and_clear_position_function() -> None:
     m.emergency_stop()
     m.advance(0.5)
     here = m.position
-    assert abs(here - moving_at) < REV // 8 and abs(m.speed_rpm) < 0.5
+    assert abs(here - moving_at) < REV // 5 and abs(m.speed_rpm) < 0.5  # v / kp, as above
     m.advance(0.5)
     assert abs(m.position - here) <= 1
     assert m.clear_position()

@@ -125,7 +125,7 @@ class MotorModel:
 
 
 MODELS: dict[str, MotorModel] = {
-    "DYN2-T1": MotorModel("DYN2-T1", 10.0, 1.0, 3.3, 0.25, 1.6e-5, 0.01, 5000.0),
-    "DYN2-TL": MotorModel("DYN2-TL", 20.0, 2.0, 6.6, 0.36, 1.1e-4, 0.02, 5000.0),
+    "DYN2-T1": MotorModel("DYN2-T1", 10.0, 1.0, 3.3, 0.25, 1.6e-5, 0.001, 5000.0),
+    "DYN2-TL": MotorModel("DYN2-TL", 20.0, 2.0, 6.6, 0.36, 1.1e-4, 0.002, 5000.0),
 }
 DEFAULT_MODEL = "DYN2-TL"

@@ -25,6 +25,7 @@ from servobus.protocols.easycan.server import serve
 from servobus.sim.cli_options import (
     CONTROL_YZAIM,
     SOCKETCAND,
+    apply_load,
     sim_banner,
     sim_options,
     stopped_line,
@@ -62,11 +63,14 @@ async def run_socketcand_motors(motors: Sequence[YzaimMotor], host: str, port: i
 
 def run_sim(io: CommandIO, *, address: tuple[str, int], ids: tuple[int, ...], fast: bool,
             state: str | None, model: str, duration: float | None, max_clients: int,
-            control: tuple[str, int] | None) -> None:
+            control: tuple[str, int] | None, load: str | None, inertia: float | None,
+            resonance: float | None, load_torque: float | None) -> None:
     """Virtual YZ-AIM motors on one CAN bus (EasyCan protocol, socketcand rawmode)."""
     log_to_stderr()
     host, port = address
     motors = make_motors(ids, state=state, model=model)
+    apply_load(motors, load=load, inertia=inertia, resonance=resonance,
+               load_torque=load_torque)
     banner = sim_banner("easycan", len(motors), "motor", model, "addresses",
                         (m.address for m in motors), fast, "1 Mbit/s timing model")
     network = asyncio.run(run_socketcand_motors(

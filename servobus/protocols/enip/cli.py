@@ -21,7 +21,7 @@ import signal
 import sys
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from servobus import fastloop
 from servobus.axis.capabilities import Capability
@@ -31,7 +31,7 @@ from servobus.families.dmm import units as U
 from servobus.families.dyn5 import params as dyn5
 from servobus.protocols.enip.codec import io as cip_io
 from servobus.protocols.enip.codec.encap import TCP_PORT
-from servobus.sim.cli_options import CONTROL
+from servobus.sim.cli_options import CONTROL, LOAD_OPTIONS, apply_load
 from servobus.sim.control_server import start_control
 from servobus.sim.fine_selector import fine_event_loop
 from servobus.thread_priority import request_realtime
@@ -42,8 +42,12 @@ if TYPE_CHECKING:
 
 
 # ---------------------------------------------------------------- sim enip
-def _ready(servers: list[EnipServer], control: tuple[str, int] | None) -> None:
-    """Say where the adapters listen; serve the control channel (JP3 I/O, faults) if asked."""
+def _ready(servers: list[EnipServer], control: tuple[str, int] | None,
+           load: dict[str, Any] | None = None) -> None:
+    """Give the drives their load (``--load`` ...), say where the adapters listen; serve the
+    control channel (JP3 I/O, faults) if asked."""
+    if load:
+        apply_load([s.drive for s in servers], **load)
     _listening(servers)
     if servers:
         start_control(control, [s.drive for s in servers], clock=servers[0].clock)
@@ -58,7 +62,8 @@ def _listening(servers: list[EnipServer]) -> None:
 
 async def run_adapters(hosts: str, tcp_port: int, udp_port: int, state: str | None,
                        model: str, duration: float | None, reset_downtime_s: float,
-                       control: tuple[str, int] | None = None) -> None:
+                       control: tuple[str, int] | None = None,
+                       load: dict[str, Any] | None = None) -> None:
     from servobus.protocols.enip.server import serve
 
     stop = asyncio.Event()
@@ -69,7 +74,7 @@ async def run_adapters(hosts: str, tcp_port: int, udp_port: int, state: str | No
     try:
         await serve(hosts, tcp_port, udp_port, state, model=model, stop=stop,
                          duration=duration, reset_downtime_s=reset_downtime_s,
-                         on_ready=lambda servers: _ready(servers, control))
+                         on_ready=lambda servers: _ready(servers, control, load))
     except OSError as exc:
         raise ServobusError(f"cannot listen on {hosts} (TCP {tcp_port}, UDP {udp_port}): "
                             f"{exc.strerror or exc} - use other ports (0 picks free ones) "
@@ -86,10 +91,14 @@ def checked_hosts(text: str) -> str:
 
 def run_sim(io: CommandIO, *, hosts: str, tcp_port: int, udp_port: int, state: str | None,
             model: str, reset_downtime: float, duration: float | None, realtime: bool,
-            control: tuple[str, int] | None) -> None:
+            control: tuple[str, int] | None, load: str | None, inertia: float | None,
+            resonance: float | None, load_torque: float | None) -> None:
     """Virtual DYN5 drives on EtherNet/IP (explicit messaging, ListIdentity, Class 1 I/O)."""
     from servobus.protocols.enip.server import parse_hosts
 
+    load_options: dict[str, Any] = {"load": load, "inertia": inertia, "resonance": resonance,
+                                    "load_torque": load_torque}
+    apply_load([], **load_options)  # a bad load is a usage error before anything listens
     host_list = parse_hosts(hosts)
     io.echo(f"servobus sim enip: {len(host_list)} virtual DYN5 ({model}) on "
             f"{', '.join(host_list)}", err=True)
@@ -97,7 +106,7 @@ def run_sim(io: CommandIO, *, hosts: str, tcp_port: int, udp_port: int, state: s
         request_realtime("servobus sim enip")
     with asyncio.Runner(loop_factory=fine_event_loop) as runner:
         runner.run(run_adapters(hosts, tcp_port, udp_port, state, model, duration,
-                                reset_downtime, control))
+                                reset_downtime, control, load_options))
     io.echo("stopped", err=True)
 
 
@@ -127,6 +136,7 @@ SIM_OPTIONS = (
            "Class 1 frames on time beside CPU-bound work",
            type=bool, default=True, show_default=True),
     CONTROL,
+    *LOAD_OPTIONS,
 )
 
 

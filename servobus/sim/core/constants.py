@@ -10,7 +10,7 @@ from servobus.families.dmm import units as U
 
 #: Fixed control period. 4 kHz: the torque filter pole (26 x 127 = 3302 rad/s) and a speed loop
 #: of up to ~400 Hz are resolved (>= 2 samples per pole time constant), and 16 drives still fit
-#: in well under half a core of pure Python (benchmarks/bench_core.py).
+#: in half a core of pure Python (benchmarks/bench_core.py).
 CONTROL_HZ = 4_000
 CONTROL_DT = 1.0 / CONTROL_HZ
 
@@ -19,23 +19,42 @@ CONTROL_DT = 1.0 / CONTROL_HZ
 KP_PER_MAIN_GAIN = 100.0 / 40
 #: Speed loop bandwidth per Speed Gain unit on the bare rotor (rad/s). The speed loop torque gain
 #: is rotor inertia x this x SpeedGain, so with load inertia J_L the bandwidth falls by
-#: J_m / (J_m + J_L): a heavier load needs a larger Speed Gain (manual 5.1, 5.2).
-SPEED_BW_PER_SPEED_GAIN = 400.0 / 40
+#: J_m / (J_m + J_L): a heavier load needs a larger Speed Gain (manual 5.1, 5.2). 20 rad/s
+#: puts the light-load limit of the loop (its delay, filter and current loop) near Speed
+#: Gain 100: at 127 the bare rotor buzzes near full torque, as 5.1 warns (docs/tuning.md).
+SPEED_BW_PER_SPEED_GAIN = 20.0
 #: Speed loop integrator zero per Integration Gain unit (rad/s). Default 20 -> 100 rad/s.
-#: The defaults keep position : speed bandwidth at 1 : 4 with the zero well below crossover,
+#: The defaults keep position : speed bandwidth at 1 : 8 with the zero well below crossover,
 #: a well-damped step; raising Main Gain or Integration Gain towards the speed loop
 #: bandwidth brings overshoot and ringing, as 5.2 warns.
 KI_PER_INT_GAIN = 100.0 / 20
 #: Manual 4.2: torque filter a/(s+a), a = 26 x TrqCons rad/s.
 TORQUE_FILTER_PER_UNIT = 26.0
 
+# ---------------------------------------------------------------- loop dynamics (docs/tuning.md)
+#: The speed loop's torque command reaches the power stage this many periods later
+#: (computation and PWM update of a digital drive).
+TRANSPORT_DELAY_PERIODS = 2
+#: Current loop bandwidth: a first-order lag behind the torque filter.
+CURRENT_LOOP_HZ = 1_500.0
+#: Adaptive Tuning (DYN2 5.2) as its result, not its algorithm: the drive's estimate of the
+#: total inertia starts at the rotor's and moves towards the true one while the reference
+#: accelerates, with this time constant (seconds of acceleration) ...
+ADAPT_TAU_S = 0.25
+#: ... and never beyond this multiple of the rotor inertia: a load heavier than that is only
+#: partly fed forward, so the gains still decide the response (docs/tuning.md).
+ADAPT_MAX_RATIO = 4.0
+
 # ---------------------------------------------------------------- mechanics
-#: Coulomb friction is smoothed linearly below this speed (20 rpm) so a motor at rest is at a
-#: true equilibrium (no stick-slip hunting); the slope stays ~10x below the speed loop gain so
-#: it does not drag out settling. Viscous friction per model below.
-FRICTION_SMOOTH_CPS = U.rpm_to_counts_per_s(20.0)
 #: Viscous friction as a fraction of the Coulomb friction per 1000 rpm.
 VISCOUS_PER_1000RPM = 0.5
+#: Compliant coupling: damping ratio when none is given, and the highest resonance the
+#: integration at CONTROL_HZ resolves (semi-implicit Euler, omega x h < 1).
+DEFAULT_DAMPING = 0.05
+RESONANCE_MAX_HZ = 600.0
+#: A compliant load's side has at least this Coulomb friction (its bearings), as a fraction
+#: of the motor's, so that it comes to rest exactly like the motor.
+LOAD_FRICTION_MIN_FRACTION = 1.0
 
 # ---------------------------------------------------------------- alarms
 #: 7.3 / NOTES: |Pset - Pmotor| > 8192 (1/16384 rev) = 180 deg trips at once ...
@@ -82,10 +101,9 @@ _X_PEAK = (192.0 - 10944.0 ** 0.5) / 360.0
 HANDOVER_Q2_PEAK = abs(-36.0 * _X_PEAK + 96.0 * _X_PEAK**2 - 60.0 * _X_PEAK**3)
 
 # ---------------------------------------------------------------- settling (quiescent path)
-#: A drive whose position error, speed and torque change are below these is at an exact
-#: equilibrium: stepping it changes nothing, so time is skipped in O(1).
-SETTLED_ERROR_COUNTS = 1e-3
-SETTLED_SPEED_CPS = 1e-3
+#: A drive whose position error is 0 counts, whose shafts are held by friction and whose
+#: torque changes by less than this is at an exact equilibrium: stepping it changes nothing,
+#: so time is skipped in O(1).
 SETTLED_TORQUE_NM = 1e-7
 
 # ---------------------------------------------------------------- signals

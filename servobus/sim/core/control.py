@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any, Generic, Protocol, TypeVar
 
 from servobus.errors import ServobusError
+from servobus.sim.core import loads
 
 Reply = dict[str, Any]
 
@@ -233,3 +234,26 @@ def ping(ctl: ChannelControl[Any], a: dict[str, Any]) -> Reply:
     """The channel command ``ping``: the drive ids, commands and faults it serves."""
     return {"ok": True, "ids": ctl.ids(), "commands": sorted(ctl.commands),
             "faults": sorted(ctl.faults)}
+
+
+# ---------------------------------------------------------------------- the load command
+#: The ``load`` command's load keys, as in ``sim://`` URLs and ``servobus sim --load ...``
+#: (servobus.sim.core.loads): every family's channel takes them.
+LOAD_ARGS: tuple[Arg, ...] = (
+    Arg("load", str, choices=tuple(loads.PRESETS), default=None,
+        doc="a sample load: " + "; ".join(f"{k}: {p.doc}" for k, p in loads.PRESETS.items())),
+    Arg("inertia", float, *loads.RANGES["inertia"], default=None,
+        doc="load inertia / rotor inertia"),
+    Arg("resonance", float, *loads.RANGES["resonance"], default=None,
+        doc="resonance of the compliant coupling, Hz (0: rigid)"),
+    Arg("load_torque", float, *loads.RANGES["load_torque"], default=None,
+        doc="N m on the load side, against + (a weight lifted)"),
+)
+
+
+def load_request(args: Mapping[str, Any]) -> loads.LoadSettings:
+    """The load a parsed ``load`` request sets (its :data:`LOAD_ARGS`)."""
+    try:
+        return loads.load_settings({a.name: args.get(a.name) for a in LOAD_ARGS})
+    except ServobusError as exc:
+        raise ControlError("bad_argument", str(exc)) from None

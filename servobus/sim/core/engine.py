@@ -5,20 +5,27 @@ loops keep all state in local variables and allocate nothing, which is what lets
 run in real time in pure Python. Everything is in encoder counts (65,536 per rev), seconds
 and newton-metres.
 
-Per control period, in position servo mode:
+Per control period, in position servo mode (docs/tuning.md has the model and its numbers):
 
-1. reference: S-curve generator (an online trapezoid: accelerate/cruise at Max Accel/Max
+1. mechanics over the last period under the torque then applied: one inertia, or two masses
+   coupled by a spring and a damper (a compliant load); Coulomb friction that holds a shaft
+   at rest and stops a sliding one dead, viscous friction, a load torque on the load side
+   (semi-implicit Euler), or a blocked shaft;
+2. feedback: the encoder (the shaft in the family's counts) and the speed from counts per
+   period;
+3. reference: S-curve generator (an online trapezoid: accelerate/cruise at Max Accel/Max
    Speed, brake at the last moment so it lands exactly; a new target simply replaces the old
    one, which is DTPU) -> moving-average smoothing -> optional path mapping (line/arc), or a
-   wave, or external pulses/analog;
-   A new path during motion hands the reference's speed over (see :meth:`go_path`);
-2. position loop P (Main Gain) with velocity feed-forward -> speed loop PI (Speed Gain,
-   Integration Gain) -> torque clamp (peak current x Kt, torque limit; above the corner
-   speed the motoring torque falls with the back-EMF to zero at the no-load speed, which
-   scales with the bus voltage) -> torque filter a/(s+a), a = 26 x TrqCons;
-3. mechanics: J dw/dt = torque - friction + disturbance (semi-implicit Euler), or a blocked
-   shaft;
-4. alarms: lost phase (> 180 deg at once, >= 90 deg for 2 s), over current (peak current
+   wave, or external pulses/analog; a new path during motion hands the reference's speed
+   over (see :meth:`go_path`);
+4. loops: position P (Main Gain) with velocity feed-forward, plus an acceleration
+   feed-forward through the drive's inertia estimate (Adaptive Tuning) -> speed loop PI
+   (Speed Gain, Integration Gain) -> torque clamp (peak current x Kt, torque limit; above
+   the corner speed the motoring torque falls with the back-EMF to zero at the no-load
+   speed, which scales with the bus voltage; the integrator frozen while clamped) -> a
+   transport delay of 2 periods -> torque filter a/(s+a), a = 26 x TrqCons -> a 1.5 kHz
+   current loop;
+5. alarms: lost phase (> 180 deg at once, >= 90 deg for 2 s), over current (peak current
    while stalled for 1 s), I^2 t over power.
 
 A drive at rest with nothing to do reaches an exact equilibrium; ``settled`` then lets time
@@ -75,6 +82,19 @@ class ServoEngine:
         self.load_inertia = 0.0  # kg m^2, reflected to the motor
         self.load_friction = 0.0  # N m, Coulomb
         self.disturbance = 0.0  # N m, positive pushes towards +counts (CW)
+        #: Compliant coupling (two-mass): resonance (Hz, 0 = rigid) and damping ratio.
+        self.resonance_hz = 0.0
+        self.damping = K.DEFAULT_DAMPING
+        self.load_torque = 0.0  # N m on the load side, against + (a weight being lifted)
+        self.pl = 0.0  # load side position and speed (equal to the motor's when rigid)
+        self.wl = 0.0
+        #: Engine counts per encoder count of the family (DMM 1, YZ-AIM 2).
+        self.encoder_q = 1.0
+        #: Velocity feed-forward into the speed loop (1: DMM; 0: YZ-AIM, a plain P loop)
+        #: and acceleration feed-forward through the adaptive inertia estimate (on/off).
+        self.velocity_ff = 1.0
+        self.accel_ff = True
+        self.j_hat = model.rotor_inertia_kgm2  # the drive's inertia estimate (Adaptive Tuning)
         self.blocked = False
         self.bus_voltage = K.DEFAULT_BUS_VOLTAGE
         self.heat = 0.0  # filtered I^2, A^2 (thermal state persists like a warm motor)
@@ -101,8 +121,13 @@ class ServoEngine:
         self.ref_prev = self.p
         self.integ = 0.0  # speed loop integrator, N m
         self.vff = 0.0  # reference speed of the last period (feed-forward), counts/s
-        self.tq = 0.0  # filtered (actual) torque, N m
+        self.tq = 0.0  # actual torque (after delay, torque filter and current loop), N m
         self.tq_cmd = 0.0
+        self.tq_filt = 0.0  # torque filter output (current loop reference), N m
+        self.tq_d1 = self.tq_d2 = 0.0  # transport delay line, N m
+        self.enc_prev = self.encoder_counts()  # encoder reading of the last period
+        self.w_est = 0.0  # speed from counts per period, counts/s
+        self.j_hat = self.model.rotor_inertia_kgm2  # Adaptive Tuning starts afresh
         self.ref_mode = Ref.HOLD
         self.gen = Gen.IDLE
         self.gp = self.p  # generator coordinate (counts, or path units with a path)
@@ -133,29 +158,68 @@ class ServoEngine:
     def wake(self) -> None:
         self.settled = False
 
+    def encoder_counts(self) -> float:
+        """The encoder's reading in engine counts: the shaft quantised to the family's counts."""
+        q = self.encoder_q
+        return (self.p / q // 1.0) * q
+
+    def _clear_torque(self) -> None:
+        self.tq = self.tq_cmd = self.tq_filt = self.tq_d1 = self.tq_d2 = 0.0
+
     # ------------------------------------------------------------------ coefficients
     def set_gains(self, main: int, speed: int, integ: int, trq: int, torque_limit: int) -> None:
-        m = self.model
+        """DMM gains (1..127 each, docs/tuning.md): Main Gain -> position P, Speed Gain ->
+        speed loop bandwidth on the bare rotor, Integration Gain -> integrator zero, TrqCons ->
+        torque filter a = 26 x TrqCons, torque limit in 1/127 of peak."""
         self.gains = (main, speed, integ, trq, torque_limit)
-        j_total = m.rotor_inertia_kgm2 + self.load_inertia
-        self.inv_j = 1.0 / (j_total * RAD_PER_COUNT)  # counts/s^2 per N m
-        # Acceleration feed-forward with the inertia the drive's adaptive tuning (5.2) learns:
-        # N m per counts/s^2 per control period.
-        self.kaff = j_total * RAD_PER_COUNT
-        self.kp = K.KP_PER_MAIN_GAIN * main
+        self.set_loop(K.KP_PER_MAIN_GAIN * main, K.SPEED_BW_PER_SPEED_GAIN * speed,
+                      K.KI_PER_INT_GAIN * integ, K.TORQUE_FILTER_PER_UNIT * trq,
+                      min(1.0, torque_limit / 127))
+
+    def set_loop(self, kp: float, speed_bw: float, integ_zero: float, filter_a: float,
+                 torque_fraction: float) -> None:
+        """Loop coefficients: position gain (1/s), speed loop bandwidth on the bare rotor
+        (rad/s; 0 = no speed loop), integrator zero (rad/s; 0 = no integral action), torque
+        filter pole (rad/s) and the torque limit as a fraction of peak."""
+        m = self.model
+        self.loop = (kp, speed_bw, integ_zero, filter_a, torque_fraction)
+        self._apply_mechanics()
+        self.kp = max(0.0, kp)
         # N m per counts/s: rotor inertia x bandwidth (rad/s) x rad/count
-        self.kv = m.rotor_inertia_kgm2 * K.SPEED_BW_PER_SPEED_GAIN * speed * RAD_PER_COUNT
-        self.ki_h = K.KI_PER_INT_GAIN * integ * self.h
-        self.alpha = 1.0 - math.exp(-K.TORQUE_FILTER_PER_UNIT * trq * self.h)
-        self.tmax = m.peak_current_a * m.torque_constant_nm_a * min(1.0, torque_limit / 127)
+        self.kv = m.rotor_inertia_kgm2 * max(0.0, speed_bw) * RAD_PER_COUNT
+        self.ki_h = max(0.0, integ_zero) * self.h
+        self.alpha = 1.0 - math.exp(-max(filter_a, 1e-9) * self.h)
+        self.alpha_c = 1.0 - math.exp(-TWO_PI * K.CURRENT_LOOP_HZ * self.h)
+        self.tmax = m.peak_current_a * m.torque_constant_nm_a * max(0.0, min(1.0,
+                                                                             torque_fraction))
         self.inv_kt = 1.0 / m.torque_constant_nm_a
         self._apply_voltage_limit()
-        self.fc = m.friction_nm + self.load_friction
-        self.fb = m.friction_nm * K.VISCOUS_PER_1000RPM / U.rpm_to_counts_per_s(1000.0)
-        self.inv_fs = 1.0 / K.FRICTION_SMOOTH_CPS
         self.heat_beta = self.h / K.THERMAL_TAU_S
         self.heat_trip = (self.thermal_trip_factor * m.rated_current_a) ** 2
         self.wake()
+
+    def _apply_mechanics(self) -> None:
+        """Plant coefficients from the motor model and the load (docs/tuning.md)."""
+        m = self.model
+        jm, jl = m.rotor_inertia_kgm2, self.load_inertia
+        f = min(max(self.resonance_hz, 0.0), K.RESONANCE_MAX_HZ)
+        self.rigid = f <= 0.0 or jl <= 0.0
+        self.inv_j = 1.0 / ((jm + jl) * RAD_PER_COUNT)  # counts/s^2 per N m, rigid
+        self.inv_jm = 1.0 / (jm * RAD_PER_COUNT)
+        self.inv_jl = 1.0 / (max(jl, 1e-12) * RAD_PER_COUNT)
+        j_eq = jm * jl / (jm + jl) if jl > 0.0 else 0.0
+        omega = TWO_PI * f
+        self.kc = omega * omega * j_eq * RAD_PER_COUNT  # N m per count of twist
+        self.cc = 2.0 * max(self.damping, 0.0) * omega * j_eq * RAD_PER_COUNT  # per count/s
+        self.fc_m = m.friction_nm
+        self.fc_l = self.load_friction + K.LOAD_FRICTION_MIN_FRACTION * m.friction_nm
+        self.fc = m.friction_nm + self.load_friction
+        self.fb = m.friction_nm * K.VISCOUS_PER_1000RPM / U.rpm_to_counts_per_s(1000.0)
+        self.j_max = jm * K.ADAPT_MAX_RATIO
+        self.j_true = jm + jl
+        self.j_hat = min(max(self.j_hat, jm), self.j_max)
+        if self.rigid:
+            self.pl, self.wl = self.p, self.w
 
     def _apply_voltage_limit(self) -> None:
         """Back-EMF: full torque up to the corner speed, then linearly less motoring torque
@@ -187,8 +251,8 @@ class ServoEngine:
         self.lp_slow_s = K.LOST_PHASE_SLOW_S if enabled else inf
         self.oc_trip_s = K.OVER_CURRENT_S if enabled else inf
         self.thermal_trip_factor = K.THERMAL_TRIP_FACTOR if enabled else inf
-        if hasattr(self, "gains"):
-            self.set_gains(*self.gains)
+        if hasattr(self, "loop"):
+            self.set_loop(*self.loop)
 
     def set_profile(self, vmax: float, amax: float) -> None:
         """Generator limits in generator units per s and per s^2."""
@@ -209,8 +273,11 @@ class ServoEngine:
         """Servo (re)starts: reference = shaft, errors and generator cleared."""
         self.ref = self.ref_prev = self.p
         self.integ = 0.0
-        self.tq_cmd = 0.0
+        self.tq_cmd = self.tq_d1 = self.tq_d2 = 0.0
+        self.tq_filt = self.tq
         self.vff = 0.0
+        self.enc_prev = self.encoder_counts()
+        self.w_est = 0.0
         self._reset_gen(self.p, 0.0)
         self.ref_mode = Ref.HOLD
         self.busy = False
@@ -421,7 +488,8 @@ class ServoEngine:
     def _trip(self, code: AlarmCode) -> None:
         self.trip_code = code
         self.servo = Servo.FREE
-        self.tq = self.tq_cmd = self.integ = 0.0
+        self._clear_torque()
+        self.integ = 0.0
         self.busy = False
         self.ref_mode = Ref.HOLD
         self.gen = Gen.IDLE
@@ -436,12 +504,22 @@ class ServoEngine:
         sin = math.sin
         p, w, ref = self.p, self.w, self.ref
         integ, tq, tq_c, heat = self.integ, self.tq, self.tq_cmd, self.heat
-        kp, kv, ki_h, alpha, kaff = self.kp, self.kv, self.ki_h, self.alpha, self.kaff
-        vff = self.vff
-        tmax, inv_kt, inv_j = self.tmax, self.inv_kt, self.inv_j
+        tf, d1, d2, alpha_c = self.tq_filt, self.tq_d1, self.tq_d2, self.alpha_c
+        kp, kv, ki_h, alpha = self.kp, self.kv, self.ki_h, self.alpha
+        vff, ffv = self.vff, self.velocity_ff
+        q = self.encoder_q
+        inv_q = 1.0 / q
+        enc_prev, w_est = self.enc_prev, self.w_est
+        # acceleration feed-forward: the inertia estimate (kg m^2) -> N m per counts/s^2
+        jh, j_goal = self.j_hat, min(self.j_true, self.j_max)
+        adapt = h / K.ADAPT_TAU_S if self.accel_ff else 0.0
+        kaff = jh * RAD_PER_COUNT if self.accel_ff else 0.0
+        tmax, inv_kt = self.tmax, self.inv_kt
         w_corner, w_noload, tv_slope = self.w_corner, self.w_noload, self.tv_slope
-        fc, fb, inv_fs = self.fc, self.fb, self.inv_fs
-        dist, blocked = self.disturbance, self.blocked
+        fc, fb, inv_j, rigid = self.fc, self.fb, self.inv_j, self.rigid
+        fc_m, fc_l, inv_jm, inv_jl = self.fc_m, self.fc_l, self.inv_jm, self.inv_jl
+        kc, cc, pl, wl = self.kc, self.cc, self.pl, self.wl
+        dist, blocked = self.disturbance - self.load_torque, self.blocked
         beta, heat_trip = self.heat_beta, self.heat_trip
         lp_fast, lp_slow, lp_slow_s = self.lp_fast, self.lp_slow, self.lp_slow_s
         oc_trip_s = self.oc_trip_s
@@ -463,11 +541,52 @@ class ServoEngine:
         ext_step, ext_left = self.ext_step, self.ext_left
         busy = self.busy
         trip = AlarmCode.NONE
-        eps_e, eps_w, eps_t = K.SETTLED_ERROR_COUNTS, K.SETTLED_SPEED_CPS, K.SETTLED_TORQUE_NM
+        eps_t = K.SETTLED_TORQUE_NM
         settled = False
         k = 0
+        tc = tq_c
         while k < n:
             k += 1
+            # ---- mechanics over the last period, under the torque then applied
+            if blocked:
+                w = wl = 0.0
+            elif rigid:
+                net = tq + dist
+                if w == 0.0:  # at rest: static friction holds up to fc
+                    if net > fc:
+                        w = (net - fc) * inv_j * h
+                    elif net < -fc:
+                        w = (net + fc) * inv_j * h
+                else:  # sliding: friction stops it dead rather than reversing it
+                    wn = w + (net - (fc if w > 0.0 else -fc) - fb * w) * inv_j * h
+                    w = wn if (wn > 0.0) == (w > 0.0) else 0.0
+                p += w * h
+            else:  # two-mass: motor -- spring kc, damper cc -- load
+                tw = kc * (p - pl) + cc * (w - wl)
+                net = tq - tw
+                if w == 0.0:
+                    if net > fc_m:
+                        w = (net - fc_m) * inv_jm * h
+                    elif net < -fc_m:
+                        w = (net + fc_m) * inv_jm * h
+                else:
+                    wn = w + (net - (fc_m if w > 0.0 else -fc_m) - fb * w) * inv_jm * h
+                    w = wn if (wn > 0.0) == (w > 0.0) else 0.0
+                net = tw + dist
+                if wl == 0.0:
+                    if net > fc_l:
+                        wl = (net - fc_l) * inv_jl * h
+                    elif net < -fc_l:
+                        wl = (net + fc_l) * inv_jl * h
+                else:
+                    wn = wl + (net - (fc_l if wl > 0.0 else -fc_l)) * inv_jl * h
+                    wl = wn if (wn > 0.0) == (wl > 0.0) else 0.0
+                p += w * h
+                pl += wl * h
+            # ---- feedback: the encoder now, speed from counts per period
+            enc = (p * inv_q // 1.0) * q
+            w_est = (enc - enc_prev) * inv_h
+            enc_prev = enc
             ref_prev = ref
             # ---- reference
             if mode == 1:  # GEN
@@ -553,12 +672,17 @@ class ServoEngine:
             elif mode == 4 and ext_left > 0:  # EXT pulses
                 ref += ext_step
                 ext_left -= 1
-            # ---- servo loop
+            # ---- servo loop: position P -> speed PI -> clamp -> delay -> filter -> current
             e = ref - p
+            eq = ((e * inv_q + 0.5) // 1.0) * q  # the error in encoder counts
             vff_prev = vff
             vff = (ref - ref_prev) * inv_h
-            ev = vff + kp * e - w
-            tc = kv * ev + integ + (vff - vff_prev) * inv_h * kaff
+            acc = (vff - vff_prev) * inv_h
+            if acc != 0.0 and adapt:  # Adaptive Tuning learns while the reference accelerates
+                jh += (j_goal - jh) * adapt
+                kaff = jh * RAD_PER_COUNT
+            ev = ffv * vff + kp * eq - w_est
+            tc = kv * ev + integ + acc * kaff
             hi = tmax
             lo = -tmax
             if w > w_corner:  # back-EMF: less motoring torque at speed
@@ -574,26 +698,19 @@ class ServoEngine:
             elif tc < lo:
                 tc = lo
             else:
-                integ += kv * ki_h * ev  # conditional integration = anti-windup
-            tq += (tc - tq) * alpha
-            # ---- mechanics
-            if blocked:
-                w = 0.0
-            else:
-                f = w * inv_fs
-                if f > 1.0:
-                    f = 1.0
-                elif f < -1.0:
-                    f = -1.0
-                w += (tq - fc * f - fb * w + dist) * inv_j * h
-                p += w * h
+                integ += kv * ki_h * ev  # frozen while clamped (anti-windup)
+            td = d2
+            d2 = d1
+            d1 = tc
+            tf += (td - tf) * alpha
+            tq += (tf - tq) * alpha_c
             # ---- protection
             i = tq * inv_kt
             heat += (i * i - heat) * beta
             if heat > heat_trip:
                 trip = AlarmCode.OVERHEAT
                 break
-            ae = e if e >= 0.0 else -e
+            ae = eq if eq >= 0.0 else -eq  # what the drive sees: encoder counts
             if ae > lp_fast:
                 trip = AlarmCode.LOST_PHASE
                 break
@@ -612,13 +729,18 @@ class ServoEngine:
                         break
                 else:
                     oc_t = 0.0
-                if (mode == 0 or (mode == 4 and ext_left == 0)) and ae < eps_e \
-                        and -eps_w < w < eps_w and -eps_t < tc - tq < eps_t:
+                if (mode == 0 or (mode == 4 and ext_left == 0)) and eq == 0.0 \
+                        and w == 0.0 and wl == 0.0 and w_est == 0.0 \
+                        and -eps_t < tc - tq < eps_t and -eps_t < tc - tf < eps_t \
+                        and d1 == tc and d2 == tc:
                     settled = True
                     break
-        tq_c = tc if k else tq_c
+        tq_c = tc
         self.p, self.w, self.ref, self.ref_prev = p, w, ref, ref_prev if k else self.ref_prev
+        self.pl, self.wl = (p, w) if rigid else (pl, wl)
         self.integ, self.tq, self.tq_cmd, self.heat = integ, tq, tq_c, heat
+        self.tq_filt, self.tq_d1, self.tq_d2 = tf, d1, d2
+        self.enc_prev, self.w_est, self.j_hat = enc_prev, w_est, jh
         self.vff = vff
         self.lp_t, self.oc_t = lp_t, oc_t
         self.ref_mode = Ref(mode)
@@ -639,29 +761,68 @@ class ServoEngine:
         return k
 
     def _run_free(self, n: int) -> int:
-        """Servo off: the shaft coasts under friction and disturbance; current is zero."""
+        """Servo off: the shaft coasts under friction and the load's torques; no current."""
         h = self.h
-        p, w, heat = self.p, self.w, self.heat
-        fc, fb, inv_fs, inv_j = self.fc, self.fb, self.inv_fs, self.inv_j
-        dist, blocked, beta = self.disturbance, self.blocked, self.heat_beta
-        if blocked or (dist == 0.0 and -K.SETTLED_SPEED_CPS < w < K.SETTLED_SPEED_CPS):
-            self.w = 0.0 if blocked else w
-            self.tq = 0.0
-            self.settled = True
-            self._skip(n)
-            return 0
-        for _ in range(n):
-            f = w * inv_fs
-            if f > 1.0:
-                f = 1.0
-            elif f < -1.0:
-                f = -1.0
-            w += (dist - fc * f - fb * w) * inv_j * h
-            p += w * h
+        p, w, heat, beta = self.p, self.w, self.heat, self.heat_beta
+        fc, fb, inv_j, rigid = self.fc, self.fb, self.inv_j, self.rigid
+        fc_m, fc_l, inv_jm, inv_jl = self.fc_m, self.fc_l, self.inv_jm, self.inv_jl
+        kc, cc, pl, wl = self.kc, self.cc, self.pl, self.wl
+        dist, blocked = self.disturbance - self.load_torque, self.blocked
+        tq = 0.0
+        k = 0
+        while k < n:
+            tw = kc * (p - pl)
+            if blocked or (w == 0.0 and wl == 0.0 and (
+                    (rigid and -fc <= dist <= fc)
+                    or (not rigid and -fc_m <= tw <= fc_m and -fc_l <= tw + dist <= fc_l))):
+                break  # at rest for good (or blocked): only the heat decays
+            k += 1
+            if blocked:
+                w = wl = 0.0
+            elif rigid:
+                net = tq + dist
+                if w == 0.0:  # at rest: static friction holds up to fc
+                    if net > fc:
+                        w = (net - fc) * inv_j * h
+                    elif net < -fc:
+                        w = (net + fc) * inv_j * h
+                else:  # sliding: friction stops it dead rather than reversing it
+                    wn = w + (net - (fc if w > 0.0 else -fc) - fb * w) * inv_j * h
+                    w = wn if (wn > 0.0) == (w > 0.0) else 0.0
+                p += w * h
+            else:  # two-mass: motor -- spring kc, damper cc -- load
+                tw = kc * (p - pl) + cc * (w - wl)
+                net = tq - tw
+                if w == 0.0:
+                    if net > fc_m:
+                        w = (net - fc_m) * inv_jm * h
+                    elif net < -fc_m:
+                        w = (net + fc_m) * inv_jm * h
+                else:
+                    wn = w + (net - (fc_m if w > 0.0 else -fc_m) - fb * w) * inv_jm * h
+                    w = wn if (wn > 0.0) == (w > 0.0) else 0.0
+                net = tw + dist
+                if wl == 0.0:
+                    if net > fc_l:
+                        wl = (net - fc_l) * inv_jl * h
+                    elif net < -fc_l:
+                        wl = (net + fc_l) * inv_jl * h
+                else:
+                    wn = wl + (net - (fc_l if wl > 0.0 else -fc_l)) * inv_jl * h
+                    wl = wn if (wn > 0.0) == (wl > 0.0) else 0.0
+                p += w * h
+                pl += wl * h
             heat -= heat * beta
         self.p, self.w, self.heat, self.tq = p, w, heat, 0.0
+        self.pl, self.wl = (p, w) if rigid else (pl, wl)
+        if blocked:
+            self.w = self.wl = 0.0
         self.ref = self.ref_prev = p
-        return n
+        self.enc_prev = self.encoder_counts()
+        if k < n:
+            self.settled = True
+            self._skip(n - k)  # counts its own periods; run() adds the k that ran
+        return k
 
     def _run_speed_torque(self, n: int) -> int:
         """Speed servo (analog speed reference) or torque servo (analog current reference)."""
@@ -669,9 +830,11 @@ class ServoEngine:
         p, w, integ, tq, heat = self.p, self.w, self.integ, self.tq, self.heat
         kv, ki_h, alpha, tmax, inv_kt = self.kv, self.ki_h, self.alpha, self.tmax, self.inv_kt
         w_corner, w_noload, tv_slope = self.w_corner, self.w_noload, self.tv_slope
-        fc, fb, inv_fs, inv_j = self.fc, self.fb, self.inv_fs, self.inv_j
-        dist, blocked, beta, heat_trip = self.disturbance, self.blocked, self.heat_beta, \
-            self.heat_trip
+        fc, fb, inv_j, rigid = self.fc, self.fb, self.inv_j, self.rigid
+        fc_m, fc_l, inv_jm, inv_jl = self.fc_m, self.fc_l, self.inv_jm, self.inv_jl
+        kc, cc, pl, wl = self.kc, self.cc, self.pl, self.wl
+        dist, blocked = self.disturbance - self.load_torque, self.blocked
+        beta, heat_trip = self.heat_beta, self.heat_trip
         ss, target, sref = self.ss_alpha, self.speed_target, self.speed_ref
         speed_mode = self.servo == Servo.SPEED
         wlim = self.torque_speed_limit
@@ -732,15 +895,40 @@ class ServoEngine:
                     tc = lo
             tq += (tc - tq) * alpha
             if blocked:
-                w = 0.0
-            else:
-                f = w * inv_fs
-                if f > 1.0:
-                    f = 1.0
-                elif f < -1.0:
-                    f = -1.0
-                w += (tq - fc * f - fb * w + dist) * inv_j * h
+                w = wl = 0.0
+            elif rigid:
+                net = tq + dist
+                if w == 0.0:  # at rest: static friction holds up to fc
+                    if net > fc:
+                        w = (net - fc) * inv_j * h
+                    elif net < -fc:
+                        w = (net + fc) * inv_j * h
+                else:  # sliding: friction stops it dead rather than reversing it
+                    wn = w + (net - (fc if w > 0.0 else -fc) - fb * w) * inv_j * h
+                    w = wn if (wn > 0.0) == (w > 0.0) else 0.0
                 p += w * h
+            else:  # two-mass: motor -- spring kc, damper cc -- load
+                tw = kc * (p - pl) + cc * (w - wl)
+                net = tq - tw
+                if w == 0.0:
+                    if net > fc_m:
+                        w = (net - fc_m) * inv_jm * h
+                    elif net < -fc_m:
+                        w = (net + fc_m) * inv_jm * h
+                else:
+                    wn = w + (net - (fc_m if w > 0.0 else -fc_m) - fb * w) * inv_jm * h
+                    w = wn if (wn > 0.0) == (w > 0.0) else 0.0
+                net = tw + dist
+                if wl == 0.0:
+                    if net > fc_l:
+                        wl = (net - fc_l) * inv_jl * h
+                    elif net < -fc_l:
+                        wl = (net + fc_l) * inv_jl * h
+                else:
+                    wn = wl + (net - (fc_l if wl > 0.0 else -fc_l)) * inv_jl * h
+                    wl = wn if (wn > 0.0) == (wl > 0.0) else 0.0
+                p += w * h
+                pl += wl * h
             i = tq * inv_kt
             heat += (i * i - heat) * beta
             if heat > heat_trip:
@@ -755,7 +943,10 @@ class ServoEngine:
                 oc_t = 0.0
         self.p, self.w, self.integ, self.tq, self.tq_cmd, self.heat = p, w, integ, tq, tc, heat
         self.speed_ref, self.oc_t, self.lim_fwd = sref, oc_t, lim_fwd
+        self.pl, self.wl = (p, w) if rigid else (pl, wl)
+        self.tq_filt = tq
         self.ref = self.ref_prev = p
+        self.enc_prev = self.encoder_counts()
         if trip:
             self._trip(trip)
         return k

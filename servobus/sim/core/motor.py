@@ -19,6 +19,7 @@ from collections.abc import Callable
 from servobus.families.dmm import units as U
 from servobus.sim.core import constants as K
 from servobus.sim.core.engine import Ref, Servo, ServoEngine
+from servobus.sim.core.loads import LoadSettings
 
 #: Soft start of the engine's speed/torque servo (unused in position mode); the engine's
 #: own rise for its factory acceleration, set so that every coefficient is defined.
@@ -49,6 +50,28 @@ class EngineShaft:
         if friction is not None:
             eng.load_friction = max(0.0, float(friction))
         self._apply_load()
+
+    def set_mechanics(self, settings: LoadSettings) -> None:
+        """A load of :mod:`servobus.sim.core.loads`: inertia ratio, resonance, damping and
+        load torque (each left as it is when None)."""
+        eng = self._engine
+        if settings.inertia is not None:
+            eng.load_inertia = settings.inertia * eng.model.rotor_inertia_kgm2
+        if settings.resonance is not None:
+            eng.resonance_hz = settings.resonance
+        if settings.damping is not None:
+            eng.damping = settings.damping
+        if settings.load_torque is not None:
+            eng.load_torque = settings.load_torque
+        self._apply_load()
+
+    def mechanics(self) -> dict[str, float]:
+        """The load as :meth:`set_mechanics` sets it, plus the drive's inertia estimate."""
+        eng = self._engine
+        jm = eng.model.rotor_inertia_kgm2
+        return {"inertia": eng.load_inertia / jm, "resonance": eng.resonance_hz,
+                "damping": eng.damping, "load_torque": eng.load_torque,
+                "inertia_estimate": eng.j_hat / jm - 1.0}
 
     def set_disturbance(self, torque_nm: float) -> None:
         """External torque on the shaft, positive towards + (CW)."""
@@ -81,6 +104,16 @@ class EngineShaft:
         return self._engine.ref - self._engine.p
 
     @property
+    def shaft_position(self) -> float:
+        """Motor shaft position in counts from the origin, unrounded (traces, step tests)."""
+        return self._engine.p - self._origin
+
+    @property
+    def load_position(self) -> float:
+        """Load side position in motor counts from the origin (the motor's when rigid)."""
+        return self._engine.pl - self._origin
+
+    @property
     def periods(self) -> int:
         """Control periods run since creation (period ``k`` ends at ``k / CONTROL_HZ`` s)."""
         return self._engine.steps
@@ -104,6 +137,7 @@ class Motor(EngineShaft):
         self._engine = ServoEngine(model)
         self._engine.set_protections(False)  # a family models its own protections
         self._gains = DEFAULT_GAINS
+        self._loop: tuple[float, float, float, float, float] | None = None
         self._profile = (1.0, 1.0)  # generator speed (rpm), acceleration (rpm/s)
         self._free = False
         #: Called after every control period when set (servobus.sim.core.capture).
@@ -121,7 +155,10 @@ class Motor(EngineShaft):
 
     def _apply(self) -> None:
         eng = self._engine
-        eng.set_gains(*self._gains)
+        if self._loop is None:
+            eng.set_gains(*self._gains)
+        else:
+            eng.set_loop(*self._loop)
         eng.set_soft_start(SOFT_START_S)
         speed, accel = self._profile
         eng.set_profile(U.rpm_to_counts_per_s(speed), U.rpm_to_counts_per_s(accel))
@@ -129,7 +166,29 @@ class Motor(EngineShaft):
     def set_gains(self, main: int, speed: int, integ: int, trq: int, torque_limit: int) -> None:
         """Loop gains and torque limit on the engine's 1..127 scale (127 = peak current)."""
         self._gains = (main, speed, integ, trq, torque_limit)
+        self._loop = None
         self._apply()
+
+    def set_loop(self, kp: float, speed_bw: float, integ_zero: float, filter_a: float,
+                 torque_fraction: float) -> None:
+        """Loop coefficients in physical units (:meth:`ServoEngine.set_loop`), for a family
+        whose gains are not on the engine's 1..127 scale (YZ-AIM, docs/tuning.md)."""
+        self._loop = (kp, speed_bw, integ_zero, filter_a, torque_fraction)
+        self._apply()
+
+    @property
+    def loop(self) -> tuple[float, float, float, float, float]:
+        """The loop coefficients in use (:meth:`set_loop`)."""
+        return self._engine.loop
+
+    def set_feedback(self, *, encoder_q: float, velocity_ff: float, accel_ff: bool) -> None:
+        """The family's encoder (engine counts per count) and feed-forward (docs/tuning.md)."""
+        eng = self._engine
+        eng.encoder_q = float(encoder_q)
+        eng.velocity_ff = float(velocity_ff)
+        eng.accel_ff = bool(accel_ff)
+        eng.enc_prev = eng.encoder_counts()
+        eng.wake()
 
     @property
     def gains(self) -> tuple[int, int, int, int, int]:

@@ -31,7 +31,14 @@ from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, CommandMode
 from servobus.sim.core import constants as K
 from servobus.sim.core import control as channel
-from servobus.sim.core.control import Arg, ChannelControl, ControlError, Reply
+from servobus.sim.core.control import (
+    LOAD_ARGS,
+    Arg,
+    ChannelControl,
+    ControlError,
+    Reply,
+    load_request,
+)
 from servobus.sim.core.io import PulseFormat
 from servobus.sim.dmm.drive import VirtualDrive
 
@@ -154,10 +161,13 @@ def _bus(ctl: DriveControl, d: VirtualDrive, a: dict[str, Any]) -> Reply:
 
 
 def _load(ctl: DriveControl, d: VirtualDrive, a: dict[str, Any]) -> Reply:
-    d.set_load(inertia=a["inertia"], friction=a["friction"])
+    settings = load_request(a)
+    d.set_load(friction=a["friction"])
     if a["torque_nm"] is not None:
         d.set_disturbance(a["torque_nm"])
-    return _ok(world=d.world())
+    if not settings.empty:
+        d.set_mechanics(settings)
+    return _ok(world=d.world(), mechanics=d.mechanics())
 
 
 def _block(ctl: DriveControl, d: VirtualDrive, a: dict[str, Any]) -> Reply:
@@ -265,9 +275,10 @@ COMMANDS: dict[str, Command] = {c.name: c for c in (
     Command("bus", (Arg("volts", float, 0.0, 200.0, doc="DC bus (over voltage above 80 V)"),),
             _bus, "set the supply / bus voltage"),
     Command("load", (Arg("torque_nm", float, -100.0, 100.0, default=None),
-                     Arg("inertia", float, 0.0, 10.0, default=None, doc="kg m^2"),
-                     Arg("friction", float, 0.0, 100.0, default=None, doc="N m, Coulomb")),
-            _load, "external torque, load inertia and friction at the shaft"),
+                     Arg("friction", float, 0.0, 100.0, default=None, doc="N m, Coulomb"),
+                     *LOAD_ARGS),
+            _load, "external torque, friction and the load: preset, inertia ratio, "
+                   "resonance, load torque (docs/tuning.md)"),
     Command("block", (Arg("blocked", bool),), _block, "block or free the shaft"),
     Command("fault", (Arg("fault", str, choices=tuple(FAULTS)),), _fault, "inject a fault"),
     Command("clear", (), _clear, "remove every fault cause (not the alarm)"),

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from servobus.sim.core import control as channel
-from servobus.sim.core.control import Arg, ChannelControl, Reply
+from servobus.sim.core.control import LOAD_ARGS, Arg, ChannelControl, Reply, load_request
 from servobus.sim.yzaim import physics as phys
 from servobus.sim.yzaim.motor import OVER_VOLTAGE_MARGIN, YzaimMotor
 
@@ -83,10 +83,13 @@ def _battery(ctl: MotorControl, m: YzaimMotor, a: dict[str, Any]) -> Reply:
 
 
 def _load(ctl: MotorControl, m: YzaimMotor, a: dict[str, Any]) -> Reply:
-    m.set_load(inertia=a["inertia"], friction=a["friction"])
+    settings = load_request(a)
+    m.set_load(friction=a["friction"])
     if a["torque_nm"] is not None:
         m.set_disturbance(a["torque_nm"])
-    return _ok(world=m.world())
+    if not settings.empty:
+        m.drive.set_mechanics(settings)
+    return _ok(world=m.world(), mechanics=m.drive.mechanics())
 
 
 def _block(ctl: MotorControl, m: YzaimMotor, a: dict[str, Any]) -> Reply:
@@ -151,9 +154,10 @@ COMMANDS: dict[str, Command] = {c.name: c for c in (
     Command("battery", (Arg("ok", bool, doc="false: the multi-turn battery is flat"),),
             _battery, "the multi-turn backup battery (warning 0x13 when flat)"),
     Command("load", (Arg("torque_nm", float, -100.0, 100.0, default=None),
-                     Arg("inertia", float, 0.0, 10.0, default=None, doc="kg m^2"),
-                     Arg("friction", float, 0.0, 100.0, default=None, doc="N m, Coulomb")),
-            _load, "external torque, load inertia and friction at the shaft"),
+                     Arg("friction", float, 0.0, 100.0, default=None, doc="N m, Coulomb"),
+                     *LOAD_ARGS),
+            _load, "external torque, friction and the load: preset, inertia ratio, "
+                   "resonance, load torque (docs/tuning.md)"),
     Command("block", (Arg("blocked", bool),), _block, "block or free the shaft"),
     Command("fault", (Arg("fault", str, choices=tuple(FAULTS)),), _fault, "inject a fault"),
     Command("clear", (), _clear, "remove every fault cause (not a latched alarm)"),

@@ -131,6 +131,7 @@ class YzaimMotor:
                 self.store.registers["gear_numerator"] = 0
         core = phys.core_model(self.model)
         self.drive = Motor(core)  # the motor and its position loop (engine counts)
+        self.drive.set_feedback(encoder_q=phys.CORE_PER_COUNT, velocity_ff=0.0, accel_ff=False)
         capture.note_front(self)  # sim:// traces this motor (its address and counts)
         self.peak_a = core.peak_current_a
         self.refused_writes = 0  # writes not applied (range, access, modbus_enable 0)
@@ -478,15 +479,13 @@ class YzaimMotor:
         param = phys.torque_limit_param(limit, self.peak_a)
         if param != self._torque_param:
             self._torque_param = param
-            self.drive.set_gains(*self.drive.gains[:4], param)
+            self.drive.set_loop(*self.drive.loop[:4], param / phys.ENGINE_PARAM_MAX)
 
     def _apply_gains(self) -> None:
         r = self._ram
-        gains = phys.engine_gains(r["position_loop_kp"], r["speed_loop_kp"],
-                                  r["speed_loop_integration_time"])
-        _, _, _, trq, limit = self.drive.gains
-        self.drive.set_gains(gains["main_gain"], gains["speed_gain"], gains["int_gain"], trq,
-                             limit)
+        loop = phys.loop_coefficients(r["position_loop_kp"], r["speed_loop_kp"],
+                                      r["speed_loop_integration_time"])
+        self.drive.set_loop(*loop, self.drive.loop[4])
 
     def _apply_profile(self) -> None:
         speed, accel = phys.profile(self._ram["target_speed"], self._ram["acceleration"],
