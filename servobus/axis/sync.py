@@ -420,6 +420,11 @@ class Axis:
         """``hook(direction, item, t)``; it runs where the loop runs (module docstring)."""
         return self._call(self._core.add_trace, hook)
 
+    def describe_traced(self, item: object, from_drive: bool) -> str | None:
+        """An :meth:`add_trace` hook's item in the sniff decoder's words (None: it says
+        itself)."""
+        return self._core.describe_traced(item, from_drive)
+
     def sync_group(self) -> object | None:
         """Axes with the same (non-None) group start absolute moves with one trigger."""
         return self._core.sync_group()

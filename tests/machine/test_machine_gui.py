@@ -99,7 +99,8 @@ def test_one_scope_plots_axes_of_two_protocols(client: TestClient) -> None:
             ws.send_text(json.dumps({"type": "ack", "seq": frame.seq}))
             seen.append(frame)
             ys = [[v for v in y if math.isfinite(v)] for y in frame.ys]
-            if len(ys) == 2 and ys[1] and abs(ys[1][-1] - 8192) <= 8:
+            # the scope speaks the axis's unit (issue 33): c is in deg, 8 counts ~ 0.09 deg
+            if len(ys) == 2 and ys[1] and abs(ys[1][-1] - 90) <= 0.09:
                 break
         else:
             pytest.fail("no frame showing the c axis (EasyCan) at 90 deg")
