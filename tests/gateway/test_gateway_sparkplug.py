@@ -64,6 +64,18 @@ def test_the_schema_reader_refuses_what_it_does_not_read(text: str) -> None:
         parse_proto(text)
 
 
+def test_serve_refuses_sparkplug_without_a_broker_or_with_a_bad_group() -> None:
+    from click.testing import CliRunner
+
+    from servobus.cli.main import cli
+
+    result = CliRunner().invoke(cli, ["serve", "--sparkplug", "plant"])
+    assert result.exit_code == 2 and "--sparkplug needs --mqtt" in result.output
+    result = CliRunner().invoke(cli, ["serve", "--mqtt", "mqtt://127.0.0.1:1",
+                                      "--sparkplug", "line/3"])
+    assert result.exit_code == 2 and "one topic level" in result.output
+
+
 # ---------------------------------------------------------------- the DCMD rules
 def admit(data: bytes, retained: bool = False, gate: DcmdGate | None = None) -> Any:
     return (gate or DcmdGate()).admit("a0", data, retained)

@@ -86,7 +86,11 @@ class SparkplugNode:
         self.node = gateway_id(machine.name, options.gateway_id)
         self.client_id = f"{client_id(self.node)}-spb"
         self.broker = parse_broker(options.url)
-        self.user = f"mqtt:{options.username or self.broker.username}"
+        user = options.username or self.broker.username
+        if options.commands and not (user and (options.password or self.broker.password)):
+            raise InvalidValue("DCMD (--mqtt-commands) needs the broker's authentication: "
+                               "give --mqtt-user and a password")
+        self.user = f"mqtt:{user}"
         self.gate = DcmdGate(options.max_age_s)
         self.bd_seq = -1  # the first connection takes 0
         self.seq = 0
