@@ -164,7 +164,7 @@ async def run_one(count: int, mqtt_port: int, folder: Path, mqtt_hz: float) -> d
 
 
 def per_half_core(points: list[tuple[float, float]]) -> float:
-    """Where the least-squares line through (x, CPU %) reaches 50 %."""
+    """Where the least-squares line through (axes, CPU %) reaches 50 %."""
     n = len(points)
     mx = sum(x for x, _ in points) / n
     my = sum(y for _, y in points) / n
@@ -194,12 +194,11 @@ def main(argv: list[str] | None = None) -> None:
     counted: list[tuple[float, float]] = [(r["count"], r["cpu"]) for r in results
                                           if r["hz"] >= MIN_HZ]
     if len(counted) < 2:
-        # the cost per sample, from the rates the links reached: an estimate only (a machine
-        # too loaded for the drives' processes to answer at 50 Hz slows the gateway's share too)
-        samples = [(r["samples"], r["cpu"]) for r in results if r["samples"] > 0]
-        estimate = per_half_core(samples) / RATE_HZ if len(samples) >= 2 else float("nan")
-        print(f"  fewer than two runs reached {MIN_HZ:g} Hz: no figure (the load of this "
-              f"machine?); estimated from the CPU per axis sample: {estimate:.0f} axes")
+        # no estimate from slower runs (decision): on a machine too loaded for the drives'
+        # processes to answer at 50 Hz the gateway's CPU per sample was 5 times its cost on
+        # an idle one, and a figure from it would plan a plant wrong
+        print(f"  fewer than two runs reached {MIN_HZ:g} Hz (is this machine loaded?): "
+              "no figure")
         return
     axes = per_half_core(counted)  # no target in the issue: the figure to plan with
     print(f"  axes per half core at {RATE_HZ:g} Hz: {axes:.0f}  (the line through "
