@@ -18,16 +18,19 @@ from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
 from servobus.cli.failures import CliError, Interrupted
 
-GATEWAY_LIBRARIES = ("asyncua", "aiomqtt")
+GATEWAY_LIBRARIES = ("asyncua", "aiomqtt", "protobuf")
+#: the top-level module of each library (protobuf's is google.protobuf)
+LIBRARY_MODULES = {"asyncua": "asyncua", "aiomqtt": "aiomqtt", "google": "protobuf"}
 
 
 def _missing_library(exc: ModuleNotFoundError) -> Exception:
     """asyncua and aiomqtt are in the default install (pyproject.toml, issue 32): one missing
     means an environment installed otherwise (--no-deps, a broken venv); name the command
     that installs them rather than calling it a servobus bug."""
-    if (exc.name or "").split(".")[0] not in GATEWAY_LIBRARIES:
+    library = LIBRARY_MODULES.get((exc.name or "").split(".")[0])
+    if library is None:
         return exc
-    return CliError(f"servobus serve needs the Python package {exc.name!r}, which is not "
+    return CliError(f"servobus serve needs the Python package {library!r}, which is not "
                     "installed in this environment",
                     f"install the gateway's libraries with `{sys.executable} -m pip install "
                     f"{' '.join(GATEWAY_LIBRARIES)}`")
@@ -72,6 +75,9 @@ EXISTING = click.Path(dir_okay=False, exists=True, path_type=Path)
               help="this gateway's name on the broker and in OPC UA: MQTT client id "
                    "servobus-ID, ApplicationUri urn:servobus:gateway:ID "
                    "[default: the machine's name]")
+@click.option("--sparkplug", default=None, metavar="GROUP",
+              help="be a Sparkplug B edge node on the --mqtt broker too: topics "
+                   "spBv1.0/GROUP/.../ID/<axis> (DCMD with --mqtt-commands)")
 @click.option("--gui", is_flag=True, help="serve the web GUI from this process too")
 @click.option("--gui-port", type=click.IntRange(0, 65535), default=8080, show_default=True,
               help="port of the GUI on 127.0.0.1")
@@ -80,8 +86,8 @@ def serve(ctx: CliContext, machine_path: Path | None, endpoint: str, users_path:
           cert: Path | None, key: Path | None, rate: float, mqtt_url: str | None,
           mqtt_rate: float, mqtt_commands: bool, mqtt_user: str | None,
           mqtt_password_file: Path | None, mqtt_ca: Path | None, mqtt_cert: Path | None,
-          mqtt_key: Path | None, mqtt_prefix: str, gateway_id: str | None, gui: bool,
-          gui_port: int) -> None:
+          mqtt_key: Path | None, mqtt_prefix: str, gateway_id: str | None,
+          sparkplug: str | None, gui: bool, gui_port: int) -> None:
     """Serve a machine to OPC UA clients and an MQTT broker until Ctrl-C.
 
     Anonymous OPC UA clients may browse, read and subscribe; methods that command an axis
@@ -92,6 +98,9 @@ def serve(ctx: CliContext, machine_path: Path | None, endpoint: str, users_path:
         from servobus.gateway.opcua_server import OpcUaOptions, parse_endpoint
         from servobus.gateway.serve import GatewayOptions, open_and_serve
         from servobus.gateway.users import Users
+
+        if sparkplug is not None:
+            import servobus.gateway.sparkplug.node  # noqa: F401  (protobuf: said here)
     except ModuleNotFoundError as exc:
         raise _missing_library(exc) from exc
 
@@ -103,10 +112,12 @@ def serve(ctx: CliContext, machine_path: Path | None, endpoint: str, users_path:
         raise click.UsageError("give --cert and --key together")
     if mqtt_commands and mqtt_url is None:
         raise click.UsageError("--mqtt-commands needs --mqtt")
+    if sparkplug is not None and mqtt_url is None:
+        raise click.UsageError("--sparkplug needs --mqtt (the broker)")
     parse_endpoint(endpoint)
     if mqtt_url is not None:
         parse_broker(mqtt_url)  # a malformed URL: one line before anything starts
-    check_identity(mqtt_prefix, gateway_id)
+    check_identity(mqtt_prefix, gateway_id, sparkplug)
     users = Users.load(users_path) if users_path is not None else None
     stem = machine_path.stem if machine_path is not None else "servobus"
     opcua = OpcUaOptions(endpoint=endpoint, users=users, cert=cert, key=key,
@@ -123,15 +134,17 @@ def serve(ctx: CliContext, machine_path: Path | None, endpoint: str, users_path:
                            cert=mqtt_cert, key=mqtt_key, prefix=mqtt_prefix,
                            gateway_id=gateway_id)
     options = GatewayOptions(opcua=opcua, mqtt=mqtt, rate_hz=rate,
-                             gui_port=gui_port if gui else None, own_process=True)
+                             gui_port=gui_port if gui else None, own_process=True,
+                             sparkplug=sparkplug)
     _log_events()
     name = asyncio.run(open_and_serve(
         machine_path, options, lambda line: click.echo(line, err=line.startswith("warning:"))))
     raise Interrupted("Ctrl-C" if name == "SIGINT" else name, SHUTDOWN_NOTE)
 
 
-def check_identity(prefix: str, ident: str | None) -> None:
-    """--mqtt-prefix and --gateway-id, checked before anything starts (a usage error)."""
+def check_identity(prefix: str, ident: str | None, group: str | None = None) -> None:
+    """--mqtt-prefix, --gateway-id and --sparkplug, checked before anything starts (a usage
+    error)."""
     from servobus.errors import ArgumentRangeError
     from servobus.gateway.identity import check_prefix, gateway_id
 
@@ -139,6 +152,10 @@ def check_identity(prefix: str, ident: str | None) -> None:
         check_prefix(prefix)
         if ident is not None:
             gateway_id("", ident)
+        if group is not None:
+            from servobus.gateway.sparkplug.node import check_group
+
+            check_group(group)
     except ArgumentRangeError as exc:
         raise click.UsageError(str(exc)) from None
 

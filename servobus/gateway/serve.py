@@ -21,6 +21,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from servobus.errors import InvalidValue
 from servobus.gateway.commands import Commander
 from servobus.gateway.heap import freeze_startup_heap
 from servobus.gateway.mqtt import MqttGateway, MqttOptions, check_topics_free
@@ -42,6 +43,8 @@ class GatewayOptions:
     gui_port: int | None = None  # serve the web GUI too (servobus.gateway.gui_bridge)
     #: the gateway owns its process (``servobus serve``): freeze the start-up heap
     own_process: bool = False
+    #: a Sparkplug B group id: be an edge node on the ``mqtt`` broker too
+    sparkplug: str | None = None
 
 
 class Gateway:
@@ -58,6 +61,14 @@ class Gateway:
         self.sampler.link_listeners.append(self.opcua.on_link)
         self.mqtt = (MqttGateway(machine, self.sampler, self.commander, options.mqtt)
                      if options.mqtt else None)
+        self.sparkplug = None
+        if options.sparkplug is not None:
+            if options.mqtt is None:
+                raise InvalidValue("Sparkplug B needs the broker: give --mqtt too")
+            from servobus.gateway.sparkplug.node import SparkplugNode
+
+            self.sparkplug = SparkplugNode(machine, self.sampler, self.commander, options.mqtt,
+                                           options.sparkplug)
         self.tasks: list[asyncio.Task[None]] = []
 
     async def start(self) -> None:
@@ -66,6 +77,9 @@ class Gateway:
                       asyncio.create_task(self.opcua.run_updates(), name="gateway-opcua")]
         if self.mqtt is not None:
             self.tasks.append(asyncio.create_task(self.mqtt.run(), name="gateway-mqtt"))
+        if self.sparkplug is not None:
+            self.tasks.append(asyncio.create_task(self.sparkplug.run(),
+                                                  name="gateway-sparkplug"))
         # "ready" means values to read: every link's first round (good or Bad) is in
         with contextlib.suppress(TimeoutError):
             async with asyncio.timeout(FIRST_ROUND_S):
@@ -140,6 +154,10 @@ async def serve_machine(machine: Machine, options: GatewayOptions, say: Say,
         if gateway.mqtt is not None:
             say(f"servobus serve: mqtt {gateway.mqtt.broker.host}:{gateway.mqtt.broker.port} "
                 f"topics {gateway.mqtt.base}/... client id {gateway.mqtt.presence.client_id}")
+        if gateway.sparkplug is not None:
+            spb = gateway.sparkplug
+            say(f"servobus serve: sparkplug {spb.topic('NBIRTH')} (devices: the axes) "
+                f"client id {spb.client_id}")
         say("servobus serve: ready. Ctrl-C stops every axis and the gateway.")
         waiter = asyncio.create_task(stop.wait())
         failed = asyncio.create_task(gateway.wait_failed())

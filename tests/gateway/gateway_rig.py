@@ -111,35 +111,69 @@ PASSWD = shutil.which("mosquitto_passwd")
 BROKER_USERS = {"gateway": "gateway-secret-1", "tester": "tester-secret-1"}
 
 
-@contextlib.contextmanager
-def mosquitto(folder: Path) -> Iterator[int]:
-    """A Mosquitto broker on a free loopback port (users of BROKER_USERS); its port."""
-    if MOSQUITTO is None or PASSWD is None:
-        pytest.skip("mosquitto is not installed (Debian: apt-get install mosquitto)")
-    passwords = folder / "passwd"
-    passwords.write_text("")
-    for user, password in BROKER_USERS.items():
-        subprocess.run([PASSWD, "-b", str(passwords), user, password], check=True,
-                       capture_output=True)
-    passwords.chmod(0o600)
-    for _attempt in range(5):  # the free port may be taken between the probe and the bind
-        port = free_port()
-        conf = folder / "mosquitto.conf"
+class Mosquitto:
+    """One Mosquitto broker on a loopback port (users of BROKER_USERS); :meth:`restart`
+    stops it and starts it again on the same port (its retained messages gone)."""
+
+    def __init__(self, folder: Path) -> None:
+        if MOSQUITTO is None or PASSWD is None:
+            pytest.skip("mosquitto is not installed (Debian: apt-get install mosquitto)")
+        self.folder = folder
+        self.passwords = folder / "passwd"
+        self.passwords.write_text("")
+        for user, password in BROKER_USERS.items():
+            subprocess.run([PASSWD, "-b", str(self.passwords), user, password], check=True,
+                           capture_output=True)
+        self.passwords.chmod(0o600)
+        self.port = 0
+        self.proc: Process | None = None
+
+    def start(self, port: int) -> bool:
+        conf = self.folder / "mosquitto.conf"
         # as root, mosquitto would drop to user mosquitto, who cannot read tmp_path
         stay = "user root\n" if os.geteuid() == 0 else ""
         conf.write_text(f"listener {port} 127.0.0.1\nallow_anonymous false\n"
-                        f"password_file {passwords}\npersistence false\n{stay}")
-        proc = subprocess.Popen([MOSQUITTO, "-c", str(conf)], stdout=subprocess.DEVNULL,
-                                stderr=subprocess.PIPE)
-        if _wait_listening(proc, port):
+                        f"password_file {self.passwords}\npersistence false\n{stay}")
+        assert MOSQUITTO is not None
+        self.proc = subprocess.Popen([MOSQUITTO, "-c", str(conf)], stdout=subprocess.DEVNULL,
+                                     stderr=subprocess.PIPE)
+        if _wait_listening(self.proc, port):
+            self.port = port
+            return True
+        self.stop()
+        return False
+
+    def stop(self) -> None:
+        if self.proc is not None:
+            stop_process(self.proc)
+            self.proc = None
+
+    def restart(self) -> None:
+        self.stop()
+        if not self.start(self.port):
+            pytest.fail(f"mosquitto did not start again on port {self.port}")
+
+
+@contextlib.contextmanager
+def mosquitto_broker(folder: Path) -> Iterator[Mosquitto]:
+    """A :class:`Mosquitto` on a free loopback port, stopped at the end."""
+    broker = Mosquitto(folder)
+    for _attempt in range(5):  # the free port may be taken between the probe and the bind
+        if broker.start(free_port()):
             break
-        stop_process(proc)
     else:
         pytest.fail("mosquitto did not start on a free port")
     try:
-        yield port
+        yield broker
     finally:
-        stop_process(proc)
+        broker.stop()
+
+
+@contextlib.contextmanager
+def mosquitto(folder: Path) -> Iterator[int]:
+    """A Mosquitto broker on a free loopback port (users of BROKER_USERS); its port."""
+    with mosquitto_broker(folder) as broker:
+        yield broker.port
 
 
 def _wait_listening(proc: Process, port: int, timeout: float = 20.0) -> bool:
