@@ -42,7 +42,7 @@ async def _grid_point(family: str, load: str, inertia: int, gains: dict[str, int
     plant = _plant(family, load, inertia)
     for name, value in gains.items():
         await plant.write_gain(name, value)
-    record = await plant.test_move(plant.counts_per_rev // 4, RECORD_S)
+    record = await plant.test_move(await plant.position() + plant.counts_per_rev // 4, RECORD_S)
     m = record.metrics()
     return Trial(gains, m.overshoot_pct, m.settling_time_s, m.rise_time_s,
                  m.following_error_max, vibration(record))

@@ -11,8 +11,8 @@ from servobus.tune.record import Record
 class Plant(Protocol):
     """What :class:`servobus.tune.tuner.Tuner` drives.
 
-    ``test_move`` moves by ``distance`` counts from where the motor stands and records
-    ``seconds`` of it; each one is leased (it stops on its own when the tuner stops
+    ``test_move`` moves to the absolute ``target`` (counts) and records ``seconds`` of it
+    from the command on; each one is leased (it stops on its own when the tuner stops
     renewing: on an abort, a Ctrl-C or a lost link). ``source`` is ``"trace"`` (the drive's
     own samples) or ``"poll"`` (what the link reads), ``rate_hz`` its sample rate."""
 
@@ -28,9 +28,13 @@ class Plant(Protocol):
 
     async def position(self) -> int: ...
 
-    async def test_move(self, distance: int, seconds: float) -> Record: ...
+    async def test_move(self, target: int, seconds: float) -> Record: ...
 
     async def stop(self) -> None: ...
+
+    async def settle(self, timeout: float) -> None:
+        """Until the motor stands still (or ``timeout`` s): each test move starts at rest."""
+        ...
 
     async def save(self) -> None:
         """Keep the gains over a power cycle (RAM_SAVE_COMMAND families only)."""

@@ -45,6 +45,11 @@ RAISE = 1.4
 EEPROM_WRITES_PER_GAIN = 10
 EEPROM_WRITE_BUDGET = 40
 RECORD_S = 0.6
+#: How long the motor may take to come to rest before a test move (it starts anyway).
+SETTLE_TIMEOUT_S = 0.5
+#: Steps a gain is lowered by at most while the kept gains vibrate (the calm phase) and
+#: while the best raised value still overshoots (the search's way down).
+CALM_STEPS = 4
 #: Polled samples time a step coarsely: the tuner backs off further from what it cannot see.
 POLL_MARGIN = 0.6
 
@@ -211,6 +216,7 @@ class Tuner:
     # -------------------------------------------------------------- moves
     async def _move(self) -> Record:
         """To the far end of the distance, then back to the start, and so on."""
+        await self.plant.settle(SETTLE_TIMEOUT_S)
         here = await self.plant.position()
         if self.origin is None:
             self.origin = here
@@ -223,7 +229,7 @@ class Tuner:
         if abs(end - here) > 2 * abs(self.limits.distance):
             raise TuneAborted(f"the motor stands at {here} counts, beyond the test span "
                               f"{self.origin} .. {self.origin + self.limits.distance}")
-        return await self.plant.test_move(end - here, self.limits.record_s)
+        return await self.plant.test_move(end, self.limits.record_s)
 
     async def _trial(self) -> tuple[Trial, Record]:
         record = await self._move()
@@ -266,10 +272,15 @@ class Tuner:
                           found)
 
     async def _abort(self) -> None:
+        """Stop, then the kept gains back; a failed write back is said, not hidden."""
         try:
             await self.plant.stop()
         finally:
-            await self.revert()
+            try:
+                await self.revert()
+            except ServobusError as exc:
+                raise TuneAborted(f"the kept gains could not be written back ({exc}); "
+                                  f"they were {self.original}") from exc
 
     async def _calm(self, before: Trial, ratio: float | None) -> Trial:
         """Where the kept gains vibrate already (a load heavier than they suit: 5.2 "heavier
@@ -287,20 +298,27 @@ class Tuner:
                 value = keep_units(value, start, info.minimum, info.maximum)
             if value != start and await self._write(speed.name, value):
                 trial, _ = await self._trial()
-        position = self.plant.profile.gain(GainRole.POSITION)
-        if position is None:
-            return trial
-        info = self.plant.param_info(position.name)
-        steps = 0
-        while trial.vibrates and steps < EEPROM_WRITES_PER_GAIN // 2:
-            start = self.written[position.name]
-            value = max(info.minimum, round(start / RAISE))
-            if position.keep_units_digit:
+        # 5.2: "Decrease Integration Gain if load inertia is big and system oscillates",
+        # then a softer position loop
+        for role in (GainRole.INTEGRAL, GainRole.POSITION):
+            gain = self.plant.profile.gain(role)
+            if gain is not None:
+                trial = await self._lower_until_calm(gain, trial)
+        return trial
+
+    async def _lower_until_calm(self, gain: TuningGain, trial: Trial) -> Trial:
+        info = self.plant.param_info(gain.name)
+        for _ in range(CALM_STEPS):
+            if not trial.vibrates:
+                break
+            start = self.written[gain.name]
+            value = round(start * RAISE if gain.inverse else start / RAISE)
+            value = max(info.minimum, min(info.maximum, value))
+            if gain.keep_units_digit:
                 value = keep_units(value, start, info.minimum, info.maximum)
-            if value == start or not await self._write(position.name, value):
+            if value == start or not await self._write(gain.name, value):
                 break
             trial, _ = await self._trial()
-            steps += 1
         return trial
 
     async def _search(self, gain: TuningGain, best: Trial, found: dict[str, int]) -> Trial:
@@ -325,5 +343,17 @@ class Tuner:
             else:
                 tried = [(v, t) for v, t in tried if v == start or v <= limit * self.margin]
         value, chosen = min(tried, key=lambda vt: vt[1].score())
+        if chosen.vibrates or chosen.overshoot_pct > MAX_OVERSHOOT_PCT:
+            # raising did not help: the other way (5.2: a lower Integration Gain on a big
+            # inertia; a softer position loop on a compliant load)
+            down = candidates(TuningGain(gain.role, gain.name, not gain.inverse,
+                                         gain.keep_units_digit), start, info.minimum,
+                              info.maximum)[:CALM_STEPS]
+            for lower in down:
+                if not await self._write(gain.name, lower):
+                    break
+                trial, _ = await self._trial()
+                tried.append((lower, trial))
+            value, chosen = min(tried, key=lambda vt: vt[1].score())
         await self._write(gain.name, value)
         return chosen

@@ -120,7 +120,7 @@ def test_ctrl_c_during_a_move_stops_and_reverts() -> None:
 def test_poll_only_sees_no_position_error_and_still_tunes_calm() -> None:
     # Trace off: 100 Hz samples of position and current. Measured: overshoot 0.0 %, calm.
     plant = dmm("direct", 10, trace=False)
-    record = asyncio.run(plant.test_move(plant.counts_per_rev // 8, 0.3))
+    record = asyncio.run(plant.test_move(plant.counts_per_rev // 8, 0.3))  # from 0
     assert record.error is None and len(record.times) == 30
     result = tune(plant)
     assert result.source == "poll" and result.after.following_error is None

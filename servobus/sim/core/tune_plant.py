@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Protocol
 
-from servobus.axis.types import Family, ParamInfo, TuningProfile
+from servobus.axis.types import MOVING_RPM, Family, ParamInfo, TuningProfile
 from servobus.errors import ArgumentRangeError
 from servobus.families.dmm.family import DYN2
 from servobus.families.yzaim import registers as yz
@@ -26,6 +26,8 @@ from servobus.tune.record import Record
 #: A link's poll rate for the poll-only path: a DYN232 line reads a position and a current
 #: in about 10 ms at 38,400 baud (docs/performance.md).
 POLL_HZ = 100.0
+#: Polls in a row below MOVING_RPM that count as standing still.
+SETTLED_POLLS = 5
 
 
 class _Core(Protocol):
@@ -93,7 +95,7 @@ class SteppedPlant:
 
     async def position(self) -> int:
         core = self.core
-        return round(core.shaft_position) if isinstance(core, VirtualDrive) else core.position
+        return core.position
 
     def _sample(self) -> tuple[float, float, float]:
         core = self.core
@@ -107,17 +109,21 @@ class SteppedPlant:
         code = int(core.alarm) if isinstance(core, VirtualDrive) else core.alarm.code
         return code, self.family.alarm_text(code)
 
-    async def test_move(self, distance: int, seconds: float) -> Record:
+    async def test_move(self, target: int, seconds: float) -> Record:
         core = self.core
         start = float(await self.position())
         self.moves += 1
         if isinstance(core, VirtualDrive):
-            core.move_relative(round(distance * core.get_param("gear_num") / 16384))
-            target = start + round(distance * core.get_param("gear_num") / 16384) * (
-                16384 / core.get_param("gear_num"))
+            per_command = 16384 / core.get_param("gear_num")  # DYN2 7.4.1
+            command = round(target / per_command)
+            core.move_absolute(command)
+            goal = command * per_command
         else:
-            core.write_words(yz.PAIR_BY_NAME["incremental_position"].low, yz.split32(distance))
-            target = start + distance
+            # incremental from the motor's own target: an absolute 0 clears the position (5.2)
+            step = target - core.target
+            if step:
+                core.write_words(yz.PAIR_BY_NAME["incremental_position"].low, yz.split32(step))
+            goal = float(target)
         t0 = core.time
         every = max(1, round(K.CONTROL_HZ / self.rate_hz))
         times: list[float] = []
@@ -135,7 +141,15 @@ class SteppedPlant:
                 err.append(e)
                 cur.append(c)
         code, text = self.alarm()
-        return Record(times, pos, err if self.trace else None, cur, start, target, code, text)
+        return Record(times, pos, err if self.trace else None, cur, start, goal, code, text)
+
+    async def settle(self, timeout: float) -> None:
+        core = self.core
+        still = 0
+        end = core.time + timeout
+        while core.time < end and still < SETTLED_POLLS:
+            core.advance_to(core.time + 1.0 / POLL_HZ)
+            still = still + 1 if abs(core.speed_rpm) < MOVING_RPM else 0
 
     async def stop(self) -> None:
         self.stops += 1
