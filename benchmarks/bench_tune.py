@@ -1,7 +1,7 @@
 """``servobus tune`` on every load preset (issue 35): tuned from defaults against a grid.
 
 For DMM (DYN2-TL) and YZ-AIM virtual drives, each load preset at inertia ratios 0, 3, 10 and
-30: the tuner runs from the default gains on simulated time (servobus.sim.core.tune_plant),
+30: the tuner runs from the default gains on simulated time (servobus.sim.tune_plant),
 a quarter-turn test distance; a grid of hand-picked gains (:data:`GRIDS`) is stepped the
 same way and its best case kept (calm, overshoot <= 10 %, fastest to settle). A case meets
 the target when the tuned gains end calm, with overshoot <= 10 % and settling no slower
@@ -17,7 +17,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 from benchmarks import verdict
 from servobus.sim.core.loads import load_settings
-from servobus.sim.core.tune_plant import SteppedPlant
+from servobus.sim.tune_plant import SteppedPlant
 from servobus.tune.record import vibration
 from servobus.tune.tuner import DETECT, MAX_OVERSHOOT_PCT, RECORD_S, Limits, Trial, Tuner
 

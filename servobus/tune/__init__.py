@@ -4,5 +4,5 @@
 (the drive as the tuner sees it: gains by role from ``Capability.TUNING``, a leased test move
 that returns a :class:`~servobus.tune.record.Record`). The plant of a real or ``sim://``
 axis is :mod:`servobus.tune.axis_plant`; the simulated-time plant of the tests and the
-benchmark is :mod:`servobus.sim.core.tune_plant`.
+benchmark is :mod:`servobus.sim.tune_plant`.
 """

@@ -32,6 +32,8 @@ from servobus.tune.record import Record, vibration
 ORDER = (GainRole.SPEED, GainRole.POSITION, GainRole.INTEGRAL, GainRole.FILTER)
 #: Vibration (servobus.tune.record) from which a test move counts as vibrating or ringing.
 DETECT = 0.05
+#: The search stops raising a gain at half that: the onset of vibration is its limit.
+ONSET = DETECT / 2
 #: Default abort limit: a hold current swinging this much of the move's peak is loud.
 ABORT_VIBRATION = 1.5
 #: Back-off: a gain may be at most this fraction of the first vibrating value (3 dB).
@@ -106,13 +108,18 @@ class TuneResult:
     source: str
     rate_hz: float
     limits_found: dict[str, int] = field(default_factory=dict)
+    saved: bool = False
+    persistence: str = ""
+    save_hint: str = ""
 
     def as_dict(self) -> dict[str, object]:
         return {"before": self.before.as_dict(), "after": self.after.as_dict(),
                 "original": self.original, "tuned": self.tuned,
                 "inertia_ratio": self.inertia_ratio, "amps_per_accel": self.amps_per_accel,
                 "trials": self.trials, "writes": self.writes, "source": self.source,
-                "rate_hz": self.rate_hz, "vibration_limits": self.limits_found}
+                "rate_hz": self.rate_hz, "vibration_limits": self.limits_found,
+                "saved": self.saved, "persistence": self.persistence,
+                "save_hint": self.save_hint}
 
 
 def candidates(gain: TuningGain, start: int, minimum: int, maximum: int) -> list[int]:
@@ -174,16 +181,22 @@ class Tuner:
     """One tuning run on ``plant`` within ``limits``; ``on_trial`` sees every test move."""
 
     def __init__(self, plant: Plant, limits: Limits, counts_per_rev: int,
-                 on_trial: Callable[[Trial], None] | None = None) -> None:
+                 on_trial: Callable[[Trial], None] | None = None, *,
+                 save: bool = False) -> None:
         if limits.distance == 0:
             raise ServobusError("the test distance must not be zero")
         self.plant = plant
         self.limits = limits
         self.counts_per_rev = counts_per_rev
         self.on_trial = on_trial
+        self.save = save
+        if save and plant.profile.persistence is not Persistence.RAM_SAVE_COMMAND:
+            raise ServobusError("these gains are not saved with a command: "
+                                + plant.profile.save_hint)
         self.original: dict[str, int] = {}
         self.written: dict[str, int] = {}  # what the drive holds now
         self.writes = 0
+        self.per_gain: dict[str, int] = {}
         self.trials = 0
         self.origin: int | None = None
         self.outward = False
@@ -197,12 +210,15 @@ class Tuner:
         if self.written.get(name) == value:
             return True
         reserve = sum(1 for g, v in self.original.items() if self.written.get(g) != v)
-        if self.budget is not None and self.writes + 1 + reserve > self.budget:
+        if self.budget is not None and (
+                self.writes + 1 + reserve > self.budget
+                or self.per_gain.get(name, 0) + 2 > EEPROM_WRITES_PER_GAIN):  # + the revert
             return False
         self.plant.param_info(name).check(value)
         await self.plant.write_gain(name, value)
         self.written[name] = value
         self.writes += 1
+        self.per_gain[name] = self.per_gain.get(name, 0) + 1
         return True
 
     async def revert(self) -> None:
@@ -264,12 +280,21 @@ class Tuner:
                 if gain is not None:
                     best = await self._search(gain, best, found)
             after, _ = await self._trial()
+            if after.vibrates:  # the verify shakes where the search did not: one step down
+                for role in (GainRole.INTEGRAL, GainRole.POSITION):
+                    gain = plant.profile.gain(role)
+                    if gain is not None:
+                        after = await self._lower_until_calm(gain, after)
+            if self.save:
+                await plant.save()
         except BaseException:
             await self._abort()
             raise
         return TuneResult(before, after, dict(self.original), dict(self.written), ratio,
                           per_accel, self.trials, self.writes, plant.source, plant.rate_hz,
-                          found)
+                          found, saved=self.save,
+                          persistence=plant.profile.persistence.value,
+                          save_hint=plant.profile.save_hint)
 
     async def _abort(self) -> None:
         """Stop, then the kept gains back; a failed write back is said, not hidden."""
@@ -331,7 +356,7 @@ class Tuner:
             if not await self._write(gain.name, value):
                 break  # the write budget is spent: keep what was found so far
             trial, _ = await self._trial()
-            if trial.vibrates:
+            if trial.vibration >= ONSET:
                 limit = value
                 await self._write(gain.name, tried[-1][0])  # calm again before anything else
                 break

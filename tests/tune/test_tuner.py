@@ -1,4 +1,4 @@
-"""servobus.tune on simulated time (servobus.sim.core.tune_plant): the procedure, its abort
+"""servobus.tune on simulated time (servobus.sim.tune_plant): the procedure, its abort
 paths (alarm, vibration, limit, Ctrl-C), the revert, the poll-only path, the write rules."""
 
 from __future__ import annotations
@@ -7,10 +7,13 @@ import asyncio
 
 import pytest
 
+from servobus.axis.connect import connect_async
 from servobus.axis.types import GainRole, TuningGain
+from servobus.errors import ServobusError
 from servobus.families.yzaim.family import YZAIM
 from servobus.sim.core.loads import load_settings
-from servobus.sim.core.tune_plant import SteppedPlant
+from servobus.sim.tune_plant import SteppedPlant
+from servobus.tune.axis_plant import AxisPlant
 from servobus.tune.tuner import (
     EEPROM_WRITE_BUDGET,
     Limits,
@@ -145,3 +148,26 @@ def test_candidates_rise_to_the_range_end_within_the_budget_per_gain() -> None:
     assert down == sorted(down, reverse=True) and down[-1] == ti.minimum
     assert keep_units(8064, 1001, 60, 10000) == 8061
     assert keep_units(30000, 1509, 60, 30000) == 29999
+
+
+def test_save_only_where_the_family_saves_with_a_command() -> None:
+    yz = SteppedPlant.yzaim(load_settings({"load": "direct", "inertia": 3}))
+    cpr = yz.counts_per_rev
+    result = asyncio.run(Tuner(yz, Limits(cpr // 4), cpr, save=True).run())
+    assert result.saved and yz.saved == 1
+    with pytest.raises(ServobusError, match="EEPROM"):  # DMM: written to EEPROM as made
+        Tuner(dmm(), Limits(1000), 65536, save=True)
+
+
+async def test_the_axis_plant_reads_the_trace_or_polls_on_a_sim_axis() -> None:
+    # Wall clock, 0.3 s a move on a paced line (38,400 baud): the trace gives 4 kHz samples
+    # with the position error, the poll path what the link reads (position and current).
+    async with await connect_async("sim://dyn232?load=direct&inertia=3") as axis:
+        traced = AxisPlant(axis)
+        record = await traced.test_move(8192, 0.3)
+        assert traced.source == "trace" and traced.rate_hz == 4000.0
+        assert record.error is not None and abs(record.position[-1] - 8192) < 50
+        polled = AxisPlant(axis, trace=False)
+        record = await polled.test_move(0, 0.3)
+        assert polled.source == "poll" and record.error is None
+        assert 0 < polled.rate_hz < 1000.0 and abs(record.position[-1]) < 50  # paced line
