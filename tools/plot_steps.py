@@ -91,7 +91,8 @@ def plot(rows: Sequence[tuple[int, StepTrace]], path: str) -> None:
     fig.savefig(path)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def parse(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    """The command line; its defaults are the docs/tuning.md table's case."""
     parser = argparse.ArgumentParser(prog="python -m tools.plot_steps",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--load", choices=tuple(PRESETS), default="belt")
@@ -107,12 +108,21 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="a reference jump on the protocol-free core instead of the move")
     parser.add_argument("--seconds", type=float, default=0.8)
     parser.add_argument("--plot", metavar="FILE.png")
-    args = parser.parse_args(argv)
+    return parser.parse_args(argv)
+
+
+def runs(args: argparse.Namespace) -> list[tuple[int, StepTrace]]:
+    """One step per Main Gain of ``args``."""
     load = {"load": args.load, "inertia": args.inertia, "resonance": args.resonance,
             "load_torque": args.load_torque}
-    rows = [(g, run_step(g, speed=args.speed, integ=args.integ, trq=args.trq,
+    return [(g, run_step(g, speed=args.speed, integ=args.integ, trq=args.trq,
                          accel=args.accel, raw=args.raw, load=load, seconds=args.seconds))
             for g in args.main]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = parse(argv)
+    rows = runs(args)
     print(table(rows))
     if args.plot:
         plot(rows, args.plot)

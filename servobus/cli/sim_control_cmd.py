@@ -25,6 +25,7 @@ from servobus.cli.param_types import Seconds
 from servobus.sim.control_client import DEFAULT_TIMEOUT_S, FAULTS, ControlClient
 from servobus.sim.core.control import Arg, ControlError, Reply
 from servobus.sim.core.io import PulseFormat
+from servobus.sim.core.loads import PRESETS
 
 CONTROL_ENV = "SERVOBUS_CONTROL"
 _META = "servobus.sim_control"
@@ -39,7 +40,8 @@ _META = "servobus.sim_control"
               help="reply deadline in seconds")
 @click.pass_context
 def control_group(ctx: click.Context, url: str, drive_id: int | None, timeout: float) -> None:
-    """JP3 inputs and outputs, internal state and faults of a running virtual drive server."""
+    """The world around a running simulator's drives: JP3 inputs and outputs (DMM), supply
+    and battery (YZ-AIM), loads, internal state and faults (docs/sim-control.md)."""
     ctx.meta[_META] = (url, drive_id, timeout)
 
 
@@ -129,17 +131,34 @@ def ena_cmd(state: str) -> None:
 @_command("bus")
 @click.argument("volts", type=float)
 def bus_cmd(volts: float) -> None:
-    """Set the supply / DC bus voltage (over voltage above 80 V)."""
+    """Set the supply / DC bus voltage (DMM: over voltage above 80 V; YZ-AIM: above the
+    model's supply range + 10 %)."""
     _send("bus", volts=volts)
+
+
+@_command("battery")
+@click.argument("state", type=click.Choice(["ok", "flat"]))
+def battery_cmd(state: str) -> None:
+    """YZ-AIM: the multi-turn backup battery (flat: warning 0x13, the motor keeps running)."""
+    _send("battery", ok=state == "ok")
 
 
 @_command("load")
 @click.option("--torque", "torque_nm", type=float, default=None, help="external torque, N m")
-@click.option("--inertia", type=float, default=None, help="load inertia, kg m^2")
 @click.option("--friction", type=float, default=None, help="Coulomb friction, N m")
-def load_cmd(torque_nm: float | None, inertia: float | None, friction: float | None) -> None:
-    """Load torque, inertia and friction at the motor shaft."""
-    _send("load", torque_nm=torque_nm, inertia=inertia, friction=friction)
+@click.option("--load", "preset", type=click.Choice(sorted(PRESETS)), default=None,
+              help="a sample load (docs/tuning.md)")
+@click.option("--inertia", type=float, default=None, help="load inertia / rotor inertia")
+@click.option("--resonance", type=float, default=None,
+              help="resonance of a compliant coupling, Hz (0: rigid)")
+@click.option("--load-torque", "load_torque", type=float, default=None,
+              help="torque on the load side, N m, against +")
+def load_cmd(torque_nm: float | None, friction: float | None, preset: str | None,
+             inertia: float | None, resonance: float | None,
+             load_torque: float | None) -> None:
+    """External torque and friction at the shaft; the load to tune on (docs/tuning.md)."""
+    _send("load", torque_nm=torque_nm, friction=friction, load=preset, inertia=inertia,
+          resonance=resonance, load_torque=load_torque)
 
 
 @_command("block")

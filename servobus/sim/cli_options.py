@@ -57,8 +57,12 @@ LOAD_OPTIONS = (
 )
 
 
-def apply_load(motors: Iterable[object], options: dict[str, object]) -> None:
-    """Set the :data:`LOAD_OPTIONS` given on every motor (a core or a front with ``drive``)."""
+def apply_load(motors: Iterable[object], *, load: str | None, inertia: float | None,
+               resonance: float | None, load_torque: float | None) -> None:
+    """Set the :data:`LOAD_OPTIONS` given on every motor (a core or a front with ``drive``);
+    ArgumentRangeError for a bad combination."""
+    options = {"load": load, "inertia": inertia, "resonance": resonance,
+               "load_torque": load_torque}
     try:
         settings = loads.load_settings(options)
     except ServobusError as exc:
@@ -87,6 +91,13 @@ CONTROL = listen_option(
     "--control", "control",
     "also serve the control channel here (JSON lines: analog input, pulse trains, ENA, "
     "outputs, internal state, faults; `servobus sim control`); PORT 0 picks a free port; a "
+    "missing host means 127.0.0.1")
+
+#: ``--control`` of the YZ-AIM simulators (servobus.sim.yzaim.control).
+CONTROL_YZAIM = listen_option(
+    "--control", "control",
+    "also serve the control channel here (JSON lines: supply, battery, load, blocked "
+    "shaft, internal state, faults; `servobus sim control`); PORT 0 picks a free port; a "
     "missing host means 127.0.0.1")
 
 

@@ -11,12 +11,14 @@ from servobus.errors import ConnectionLost, DriveTimeout
 from servobus.sim.core.control import ControlError, FaultTable, Reply
 from servobus.sim.dmm import control as drive_control
 from servobus.sim.line_server import parse_listen_url
+from servobus.sim.yzaim import control as motor_control
 
 DEFAULT_TIMEOUT_S = 5.0
 #: The faults the channel's drives take, for clients that offer them by name (the CLI's
-#: ``servobus sim control fault``): the control server serves the DMM virtual drives
-#: (servobus.sim.control_server), so theirs.
-FAULTS: FaultTable = drive_control.FAULTS
+#: ``servobus sim control fault``): every family's, since the client does not know which
+#: simulator it talks to (the DMM drives' and the YZ-AIM motors'; a name both have is the
+#: DMM's entry here, and the server checks the arguments of its own).
+FAULTS: FaultTable = {**motor_control.FAULTS, **drive_control.FAULTS}
 MAX_REPLY = 1 << 20  # bytes of one reply line (a state reply is well under 2 KiB)
 
 

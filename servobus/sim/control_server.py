@@ -26,8 +26,8 @@ from collections.abc import Sequence
 from typing import Any, TextIO
 
 from servobus.sim import server_limits as lim
-from servobus.sim.core.control import Reply
-from servobus.sim.dmm.control import COMMANDS, DriveControl
+from servobus.sim.core.control import ChannelControl, Reply
+from servobus.sim.dmm.control import DriveControl
 from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.line_server import DEFAULT_HOST, format_tcp_url
 from servobus.sim.wall_clock import RealtimeClock
@@ -46,9 +46,10 @@ def _dumps(reply: Reply) -> bytes:
 
 
 class ControlServer:
-    """Serves a :class:`DriveControl` on one TCP port."""
+    """Serves a family's :class:`ChannelControl` (DMM: :class:`DriveControl`; YZ-AIM:
+    ``servobus.sim.yzaim.control.MotorControl``) on one TCP port."""
 
-    def __init__(self, control: DriveControl, *, max_clients: int = DEFAULT_MAX_CLIENTS,
+    def __init__(self, control: ChannelControl[Any], *, max_clients: int = DEFAULT_MAX_CLIENTS,
                  max_line: int = MAX_LINE) -> None:
         self.control = control
         self.max_line = max_line
@@ -184,7 +185,7 @@ class _Session:
         await self._send(reply)
 
     def _log_done(self, request: dict[str, Any], reply: Reply) -> None:
-        command = COMMANDS[request["cmd"]]
+        command = self.server.control.commands[request["cmd"]]
         args = " ".join(f"{k}={v}" for k, v in request.items() if k not in ("cmd", "id", "seq"))
         target = f"id {reply['id']} " if "id" in reply else ""
         level = logging.INFO if command.changes else logging.DEBUG
@@ -212,15 +213,20 @@ def print_endpoint(server: ControlServer, out: TextIO | None = None) -> None:
 
 def start_control(endpoint: tuple[str, int] | None, drives: Sequence[VirtualDrive], *,
                   clock: RealtimeClock | None = None) -> ControlServer | None:
-    """Bind, print where, and serve ``drives`` on the running loop (None: nothing to do) -
-    what ``--control`` of a ``servobus sim <protocol>`` does once its server is up.
+    """Bind, print where, and serve DMM ``drives`` on the running loop (None: nothing to
+    do) - what ``--control`` of a ``servobus sim <protocol>`` does once its server is up.
 
     ``clock`` is the server's wall-clock mapping when it has one at hand; otherwise one is
     made from the drives' own time. Raises ListenError when the address cannot be bound."""
     if endpoint is None:
         return None
     clock = clock if clock is not None else RealtimeClock(drives)
-    server = ControlServer(DriveControl(drives, sync=clock.sync))
+    return serve_control(endpoint, DriveControl(drives, sync=clock.sync))
+
+
+def serve_control(endpoint: tuple[str, int], control: ChannelControl[Any]) -> ControlServer:
+    """Bind, print where, and serve ``control`` (any family's) on the running loop."""
+    server = ControlServer(control)
     server.bind(*endpoint)
     print_endpoint(server)
     server.start()

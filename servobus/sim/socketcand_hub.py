@@ -27,9 +27,14 @@ is answered; other commands get ``< error unsupported >``. Binds 127.0.0.1 by de
 
 Abuse (decisions; shared bounds in :mod:`servobus.sim.server_limits`):
 
-* A malformed message (bytes outside printable ASCII, a ``send`` whose identifier, length
-  or data bytes are not hex in range - ``-1`` included) is answered ``< error REASON >``
-  (fixed ASCII text) and never relayed; the session stays open.
+* A malformed ``send`` (an identifier, length or data bytes that are not hex in range -
+  ``-1`` included -, or bytes outside printable ASCII) is dropped without a reply, as
+  socketcand does (its rawmode logs "Syntax error in send command" and answers nothing;
+  python-can reads any ``< error ... >`` line as a frame and ends its session, issue 34).
+  The first ``MAX_LOGGED_DROPS`` per session get one log line each, the rest are counted
+  (``malformed_sends``). Any other message outside printable ASCII is answered ``< error
+  command must be printable ASCII >``, an unknown command ``< error unsupported >``. Nothing
+  malformed is relayed; the session stays open.
 * The drives' port is a *gate*: it keeps a receive FIFO of ``RX_FIFO_FRAMES`` = 64 frames per
   sender and serves senders round robin, so one flooding client cannot starve another.
   A frame enters the bus (reaches any endpoint) only if every gate has room for it. Paced
@@ -62,6 +67,7 @@ RAWMODE_SETTLE_S = 0.020
 MAX_MESSAGE = 256  # a socketcand message is far shorter; longer input is garbage
 RX_FIFO_FRAMES = 64  # per sender at a gate (the drives' receive FIFO, see module doc)
 LISTENER_FRAMES = 4096  # per sender at a plain in-process port (drops beyond)
+MAX_LOGGED_DROPS = 10  # per session: malformed sends logged one line each, then counted
 REPLY_SETTLE_S = 0.1  # half-closed session: time for replies after the gates took its frames
 HALF_CLOSE_LINGER_S = 2.0  # ... at most this long in all
 WHAT = "sim dyncan socketcand"
@@ -240,6 +246,7 @@ class _Session:
         self._flush_scheduled = False
         self._wall = self._mono = 0.0  # when the TCP data being parsed reached the hub
         self.remote_frames = 0  # RTR frames dropped (socketcand rawmode has none)
+        self.malformed_sends = 0  # dropped without a reply, as socketcand does
 
     def deliver(self, frame: CanFrame, sender: object = None) -> None:
         if self.receiving:
@@ -295,7 +302,10 @@ class _Session:
                     continue
                 message, buf = buf[start + 1:end], buf[end + 1:]
                 if not _PRINTABLE.fullmatch(message):
-                    self.reply("< error command must be printable ASCII >")
+                    if message.split(maxsplit=1)[:1] == [b"send"]:
+                        self._drop_send("bytes outside printable ASCII")
+                    else:
+                        self.reply("< error command must be printable ASCII >")
                     continue
                 await self._command(message.decode("ascii").split())
 
@@ -320,13 +330,25 @@ class _Session:
                     lim.logger.info("socketcand client sent a remote (RTR) frame %s: dropped, "
                              "socketcand rawmode has no remote frames", tokens[1])
                     return
-                self.reply(f"< error {exc} >")  # fixed ASCII texts (parse_send)
+                self._drop_send(str(exc))
                 return
             await self.hub.publish_from_client(frame, self)
         elif word == "echo":
             self.reply("< echo >")
         else:
             self.reply("< error unsupported >")
+
+
+    def _drop_send(self, reason: str) -> None:
+        """A malformed ``send``: no reply (socketcand answers nothing; python-can would read
+        an ``< error >`` line as a frame and end its session), one log line while few."""
+        self.malformed_sends += 1
+        if self.malformed_sends <= MAX_LOGGED_DROPS:
+            lim.logger.info("socketcand client sent a malformed send (%s): dropped without a "
+                            "reply, as socketcand does", reason)
+            if self.malformed_sends == MAX_LOGGED_DROPS:
+                lim.logger.info("socketcand client: further malformed sends on this session "
+                                "are dropped without a log line")
 
 
 Endpoint = HubPort | _Session

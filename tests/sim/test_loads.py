@@ -83,8 +83,7 @@ def test_the_control_channels_load_command_takes_the_same_keys() -> None:
 
 def test_apply_load_reaches_dmm_drives_and_yzaim_motors() -> None:
     drive, motor = VirtualDrive(1), YzaimMotor()
-    apply_load([drive, motor], {"load": "direct", "inertia": None, "resonance": None,
-                                "load_torque": 0.2})
+    apply_load([drive, motor], load="direct", inertia=None, resonance=None, load_torque=0.2)
     for shaft in (drive, motor.drive):
         assert shaft.mechanics()["inertia"] == PRESETS["direct"].inertia
         assert shaft.mechanics()["load_torque"] == 0.2

@@ -54,7 +54,9 @@ MALFORMED = [
 ]
 
 
-def test_malformed_and_non_ascii_commands_get_an_error_and_keep_the_session() -> None:
+def test_malformed_sends_are_dropped_silently_and_keep_the_session() -> None:
+    """socketcand answers a malformed send with nothing (issue 34: the hub's ``< error >``
+    line ended python-can's session); other non-ASCII or unknown commands get an error."""
     with sim(*BUS, "--fast") as p:
         port = p.port()
         listener = can_session(port)
@@ -62,7 +64,10 @@ def test_malformed_and_non_ascii_commands_get_an_error_and_keep_the_session() ->
         try:
             for message in MALFORMED * 10:
                 sender.sendall(message)
-                expect(sender, b"< error ", 2.0)
+            sender.sendall(b"< echo >")
+            assert b"error" not in expect(sender, b"< echo >")
+            sender.sendall(b"< bogus \xff >")
+            expect(sender, b"< error command must be printable ASCII >")
             sender.sendall(b"< bogus >")
             expect(sender, b"< error unsupported >")
             sender.sendall(b"< echo >")
@@ -72,6 +77,7 @@ def test_malformed_and_non_ascii_commands_get_an_error_and_keep_the_session() ->
             listener.close()
             sender.close()
     assert "Traceback" not in p.stderr, p.stderr[-2000:]
+    assert p.stderr.count("malformed send") == 11  # 10 logged, then one line saying so
 
 
 def test_a_remote_frame_is_dropped_without_a_reply_as_socketcand_does() -> None:

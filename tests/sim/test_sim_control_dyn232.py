@@ -18,10 +18,12 @@ import pytest
 from rig import wait_until
 from subprocess_rig import read_line
 
+from servobus.cli.main import main
 from servobus.families.dmm.registers import ALARM_SHIFT, StatusBits
 from servobus.families.dmm.vocabulary import DmmFunction as DF
 from servobus.protocols.dyn232 import codec as c
 from servobus.sim.control_client import ControlClient
+from servobus.sim.core.loads import PRESETS
 from servobus.sim.dmm.control import ControlError
 
 pytestmark = [pytest.mark.timeout(90), pytest.mark.slow]
@@ -190,6 +192,16 @@ def test_load_step_inertia_and_following_error_are_visible_in_the_state(bench: B
     assert state["following_error"] != 0 and state["reference"] > state["position"] - 1000
     assert state["following_error_deg"] == pytest.approx(state["following_error"] * 360 / 65536,
                                                          abs=1e-3)
+
+
+def test_servobus_sim_control_load_sets_the_load_to_tune_on(bench: Bench) -> None:
+    with pytest.raises(SystemExit) as done:
+        main(["sim", "control", "--to", bench.control_url, "--id", "1", "load", "--load",
+              "belt", "--inertia", "10", "--load-torque", "0.2"])
+    assert done.value.code in (0, None)
+    mechanics = bench.ctl("load")["mechanics"]  # no keys: changes nothing, says the load
+    assert (mechanics["inertia"], mechanics["resonance"], mechanics["load_torque"]) == (
+        10.0, PRESETS["belt"].resonance, 0.2)
 
 
 def test_a_supply_dip_below_24_v_powers_the_drive_off_and_on(bench: Bench) -> None:

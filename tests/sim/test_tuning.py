@@ -8,6 +8,7 @@ period (servobus.sim.core.steps), no wall clock.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from collections.abc import Sequence
@@ -194,21 +195,19 @@ def test_8_yzaim_following_error_at_constant_speed_is_speed_over_position_gain(
 
 
 # ------------------------------------------------------------------ compliance (5.2 belts)
-def belt_step(main: int) -> StepTrace:
-    """The drive's own move (what the GUI's step test commands) of a quarter turn on a belt
-    at inertia ratio 10, tuned as 5.2 advises a belt: Speed Gain up, Integration Gain down."""
-    d = VirtualDrive(1)
-    d.set_mechanics(load_settings({"load": "belt", "inertia": 10.0}))
-    for name, value in (("main_gain", main), ("speed_gain", 80), ("int_gain", 5),
-                        ("max_accel", 10)):
-        d.set_param(name, value)
-    return record(d, lambda: d.move_relative(QUARTER_REV // 4), 0.8)
+@functools.cache
+def belt_steps() -> dict[int, StepTrace]:
+    """The drive's own move (what the GUI's step test commands) of a quarter turn on a belt at
+    inertia ratio 10, tuned as 5.2 advises a belt (Speed Gain 80 up, Integration Gain 5
+    down), Max Accel 10, at Main Gain 10 / 40 / 80: tools/plot_steps.py's default case, the
+    table of docs/tuning.md."""
+    return dict(plot_steps.runs(plot_steps.parse([])))
 
 
 def test_9_a_compliant_load_shows_its_resonance_and_the_load_overshoots_more() -> None:
     # Measured at Main Gain 40: motor overshoot 3.7 %, load 11.1 %; the twist of the belt
     # rings at 15 Hz, near the antiresonance (60 Hz / sqrt(1 + 10) = 18 Hz).
-    tr = belt_step(40)
+    tr = belt_steps()[40]
     motor_m, load_m = metrics(tr, QUARTER_REV), metrics(tr, QUARTER_REV, load=True)
     assert load_m.overshoot_pct > motor_m.overshoot_pct + 3.0
     twist = [a - b for a, b in zip(tr.load_position, tr.position, strict=True)]
@@ -224,7 +223,7 @@ def test_10_the_step_test_shows_the_main_gain_on_a_belt() -> None:
     # The GUI step test's figures (servobus.axis.step_metrics) of the drive's own move.
     # Measured Main Gain 10 / 40 / 80: motor overshoot 9.0 / 3.7 / 1.5 %, largest following
     # error 1482 / 972 / 563 counts, load overshoot 14.6 / 11.1 / 6.8 % (docs/tuning.md).
-    runs = [belt_step(g) for g in (10, 40, 80)]
+    runs = [belt_steps()[g] for g in (10, 40, 80)]
     motor_m = [metrics(tr, QUARTER_REV) for tr in runs]
     load_m = [metrics(tr, QUARTER_REV, load=True) for tr in runs]
     follow = [m.following_error_max or 0.0 for m in motor_m]
@@ -295,11 +294,17 @@ def test_14_every_gain_acts_over_its_whole_register_range() -> None:
     assert all(len(s) == 127 for s in seen)
 
 
-def test_15_docs_tuning_md_carries_the_table_tools_plot_steps_prints(
-        capsys: pytest.CaptureFixture[str]) -> None:
+def test_15_docs_tuning_md_carries_the_table_tools_plot_steps_prints() -> None:
     # The step metrics on a belt at inertia ratio 10 at Main Gain 10 / 40 / 80, as documented.
-    assert plot_steps.main([]) == 0
-    printed = capsys.readouterr().out.strip()
+    printed = plot_steps.table(sorted(belt_steps().items()))
     text = (Path(__file__).resolve().parents[2] / "docs" / "tuning.md").read_text()
     documented = text.split("<!-- steps-table -->\n")[1].split("\n<!-- /steps-table -->")[0]
     assert printed == documented
+
+
+def test_16_tools_plot_steps_prints_a_table_for_any_case(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    assert plot_steps.main(["--raw", "--load", "direct", "--main", "40", "--seconds",
+                            "0.05"]) == 0
+    lines = capsys.readouterr().out.strip().split("\n")
+    assert len(lines) == 3 and lines[2].startswith("| 40 | ")

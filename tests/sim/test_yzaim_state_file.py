@@ -11,9 +11,10 @@ import pytest
 from sim_abuse_rig import run_cli, sim
 
 from servobus.axis.connect import connect
+from servobus.families.yzaim import registers as Y
 from servobus.sim.core.state_file import StateFile, StateFileError
 from servobus.sim.dmm.eeprom import EepromStore
-from servobus.sim.yzaim.fleet import make_motors
+from servobus.sim.yzaim.fleet import make_motors, record_positions
 from servobus.sim.yzaim.motor import YzaimMotor
 from servobus.sim.yzaim.store import YZAIM_STATE, YzaimStore
 
@@ -140,3 +141,21 @@ def test_a_second_simulator_on_the_same_file_refuses_to_start(tmp_path: Path) ->
                     "--duration", "0.1")  # the lock went with the first process
     assert again.returncode == 0, again.stderr
     assert "1" in json.loads(path.read_text())  # the first simulator's record is kept
+
+
+@pytest.mark.parametrize("model", ["57AIM30C", "42AIM15C"])
+def test_a_stopped_simulator_records_each_position_for_the_next_start(
+        tmp_path: Path, model: str) -> None:
+    """1: "communication mode: power-off record position" (issue 34: `sim modbus` lost it).
+    A multi-turn model (57AIM) comes back at its position; a single-turn one (42AIM) reads
+    only its angle within the turn, as after a power cycle."""
+    path = str(tmp_path / "motors.json")
+    (motor,) = make_motors([1], state=path, model=model)
+    target = 3 * Y.COUNTS_PER_REV + 1234
+    motor.write_words(Y.PAIR_BY_NAME["absolute_position"].low, [target & 0xFFFF, target >> 16])
+    motor.advance(2.0)
+    here = motor.position
+    assert abs(here - target) < 50
+    record_positions([motor])
+    (again,) = make_motors([1], state=path, model=model)
+    assert again.position == (here if model == "57AIM30C" else here % Y.COUNTS_PER_REV)

@@ -38,11 +38,13 @@ def run_sim(io: CommandIO, *, listen: tuple[str, int] | None, pty: bool,
             tap: tuple[str, int] | None, ids: tuple[int, ...] | None, fast: bool,
             state: str | None, model: str, duration: float | None, max_clients: int,
             control: tuple[str, int] | None,
-            **load: object) -> None:
+            load: str | None, inertia: float | None, resonance: float | None,
+            load_torque: float | None) -> None:
     """Virtual DYN2/DC2 drives sharing one RS485 line (DYN232M protocol)."""
     log_to_stderr()
     drives = make_drives(ids if ids is not None else (FACTORY_ID,), state=state, model=model)
-    apply_load(drives, load)
+    apply_load(drives, load=load, inertia=inertia, resonance=resonance,
+               load_torque=load_torque)
     banner = sim_banner("dyn232", len(drives), "drive", model, "ids",
                         (d.drive_id for d in drives), fast, "paced at 38400 8N1")
 

@@ -21,7 +21,7 @@ import signal
 import sys
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from servobus import fastloop
 from servobus.axis.capabilities import Capability
@@ -43,10 +43,11 @@ if TYPE_CHECKING:
 
 # ---------------------------------------------------------------- sim enip
 def _ready(servers: list[EnipServer], control: tuple[str, int] | None,
-           load: dict[str, object] | None = None) -> None:
+           load: dict[str, Any] | None = None) -> None:
     """Give the drives their load (``--load`` ...), say where the adapters listen; serve the
     control channel (JP3 I/O, faults) if asked."""
-    apply_load([s.drive for s in servers], load or {})
+    if load:
+        apply_load([s.drive for s in servers], **load)
     _listening(servers)
     if servers:
         start_control(control, [s.drive for s in servers], clock=servers[0].clock)
@@ -62,7 +63,7 @@ def _listening(servers: list[EnipServer]) -> None:
 async def run_adapters(hosts: str, tcp_port: int, udp_port: int, state: str | None,
                        model: str, duration: float | None, reset_downtime_s: float,
                        control: tuple[str, int] | None = None,
-                       load: dict[str, object] | None = None) -> None:
+                       load: dict[str, Any] | None = None) -> None:
     from servobus.protocols.enip.server import serve
 
     stop = asyncio.Event()
@@ -90,11 +91,14 @@ def checked_hosts(text: str) -> str:
 
 def run_sim(io: CommandIO, *, hosts: str, tcp_port: int, udp_port: int, state: str | None,
             model: str, reset_downtime: float, duration: float | None, realtime: bool,
-            control: tuple[str, int] | None, **load: object) -> None:
+            control: tuple[str, int] | None, load: str | None, inertia: float | None,
+            resonance: float | None, load_torque: float | None) -> None:
     """Virtual DYN5 drives on EtherNet/IP (explicit messaging, ListIdentity, Class 1 I/O)."""
     from servobus.protocols.enip.server import parse_hosts
 
-    apply_load([], load)  # a bad load is a usage error before anything listens
+    load_options: dict[str, Any] = {"load": load, "inertia": inertia, "resonance": resonance,
+                                    "load_torque": load_torque}
+    apply_load([], **load_options)  # a bad load is a usage error before anything listens
     host_list = parse_hosts(hosts)
     io.echo(f"servobus sim enip: {len(host_list)} virtual DYN5 ({model}) on "
             f"{', '.join(host_list)}", err=True)
@@ -102,7 +106,7 @@ def run_sim(io: CommandIO, *, hosts: str, tcp_port: int, udp_port: int, state: s
         request_realtime("servobus sim enip")
     with asyncio.Runner(loop_factory=fine_event_loop) as runner:
         runner.run(run_adapters(hosts, tcp_port, udp_port, state, model, duration,
-                                reset_downtime, control, load))
+                                reset_downtime, control, load_options))
     io.echo("stopped", err=True)
 
 

@@ -20,6 +20,7 @@ from servobus.protocols.modbus.timing import DEFAULT_BAUD
 from servobus.sim import server_limits as lim
 from servobus.sim.line_server import DEFAULT_HOST, LineServer, serve_line
 from servobus.sim.wire import COARSE_S
+from servobus.sim.yzaim.fleet import record_positions
 from servobus.sim.yzaim.motor import YzaimMotor
 
 WHAT = "sim modbus"  # how log lines name this server
@@ -57,8 +58,12 @@ async def serve(
     max_clients: int = lim.DEFAULT_MAX_CLIENTS,
     ready: Callable[[], None] | None = None,
 ) -> ModbusServer:
-    """Run a line until SIGINT/SIGTERM or ``duration`` seconds; print where it listens."""
+    """Run a line until SIGINT/SIGTERM or ``duration`` seconds; print where it listens.
+    When it stops, each motor records its position (power-off, as ``sim easycan`` does)."""
     server = ModbusServer(motors, paced=paced, baud=baud, coarse_s=coarse_s,
                           max_clients=max_clients)
-    return await serve_line(server, listen=listen, pty=pty, tap=tap, duration=duration,
-                            out=out, ready=ready)
+    try:
+        return await serve_line(server, listen=listen, pty=pty, tap=tap, duration=duration,
+                                out=out, ready=ready)
+    finally:
+        record_positions(server.motors)

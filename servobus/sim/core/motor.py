@@ -85,6 +85,13 @@ class EngineShaft:
             self._engine.w = 0.0
         self._engine.wake()
 
+    def world(self) -> dict[str, float | bool]:
+        """The world around the shaft as set by set_load, set_disturbance and set_blocked
+        (the control channel's state readout)."""
+        eng = self._engine
+        return {"load_inertia_kgm2": eng.load_inertia, "load_friction_nm": eng.load_friction,
+                "load_torque_nm": eng.disturbance, "blocked": eng.blocked}
+
     # ---------------------------------------------------------------- readouts
 
     @property

@@ -23,34 +23,29 @@ echoed in its reply. ``id`` may be left out when the channel serves exactly one 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, CommandMode
 from servobus.sim.core import constants as K
-from servobus.sim.core.control import LOAD_ARGS, Arg, ControlError, Reply, load_request
+from servobus.sim.core import control as channel
+from servobus.sim.core.control import (
+    LOAD_ARGS,
+    Arg,
+    ChannelControl,
+    ControlError,
+    Reply,
+    load_request,
+)
 from servobus.sim.core.io import PulseFormat
 from servobus.sim.dmm.drive import VirtualDrive
 
 MAX_COUNT = 1 << 31  # |pulses| per request (a 28-bit position range fits many times over)
 
-
-Handler = Callable[["DriveControl", VirtualDrive, dict[str, Any]], Reply]
-ChannelHandler = Callable[["DriveControl", dict[str, Any]], Reply]
-
-
-@dataclass(frozen=True)
-class Command:
-    """A command on one drive (``run``), or on the channel itself (``run_channel``: no id)."""
-
-    name: str
-    args: tuple[Arg, ...]
-    run: Handler | None
-    doc: str
-    changes: bool = True  # False: a read (servers log it at debug level only)
-    run_channel: ChannelHandler | None = None
+#: A command of this table: ``run(ctl, drive, args)`` on one drive, or ``run_channel``.
+Command = channel.Command[VirtualDrive]
 
 
 @dataclass(frozen=True)
@@ -208,11 +203,6 @@ def _outputs(ctl: DriveControl, d: VirtualDrive, a: dict[str, Any]) -> Reply:
     return _ok(**drive_outputs(d))
 
 
-def _ping(ctl: DriveControl, a: dict[str, Any]) -> Reply:
-    return _ok(ids=[x.drive_id for x in ctl.drives], commands=sorted(COMMANDS),
-               faults=sorted(FAULTS))
-
-
 # ---------------------------------------------------------------------- faults
 def _over_voltage(d: VirtualDrive, a: dict[str, Any]) -> None:
     if a["seconds"]:
@@ -265,7 +255,7 @@ FAULTS: dict[str, Fault] = {f.name: f for f in (
 
 COMMANDS: dict[str, Command] = {c.name: c for c in (
     Command("ping", (), None, "the drive ids, commands and faults", changes=False,
-            run_channel=_ping),
+            run_channel=channel.ping),
     Command("state", (), _state, "internal state: reference, error, current, bus, ...",
             changes=False),
     Command("outputs", (), _outputs, "JP3 outputs ALM, ONPOS/BKO, ZRI", changes=False),
@@ -296,82 +286,19 @@ COMMANDS: dict[str, Command] = {c.name: c for c in (
             "power off for off_s, then on (0: at once); clears a latched alarm (6.1)"),
 )}
 
-_ENVELOPE = frozenset({"cmd", "id", "seq"})
-
-
 # ---------------------------------------------------------------------- the executor
-class DriveControl:
-    """Executes control requests on a set of drives (protocol-free, one event loop owns it).
+class DriveControl(ChannelControl[VirtualDrive]):
+    """Executes control requests on a set of DMM virtual drives, addressed by drive id
+    (:class:`servobus.sim.core.control.ChannelControl` with this module's tables)."""
 
-    ``sync`` (e.g. ``RealtimeClock.sync``) runs before every request, so a server's drives
-    are at the current time when a request reads or changes them."""
+    commands = COMMANDS
+    faults = FAULTS
 
-    def __init__(self, drives: Sequence[VirtualDrive], *,
-                 sync: Callable[[], None] | None = None) -> None:
-        self.drives = list(drives)
-        self._sync = sync
-
-    def drive(self, drive_id: int | None) -> VirtualDrive:
-        if drive_id is None:
-            if len(self.drives) == 1:
-                return self.drives[0]
-            raise ControlError("unknown_id", "id is needed: this channel serves drives "
-                               + ",".join(str(d.drive_id) for d in self.drives))
-        for d in self.drives:
-            if d.drive_id == drive_id:
-                return d
-        raise ControlError("unknown_id", f"no drive with id {drive_id}")
-
-    def execute(self, request: object) -> Reply:
-        """One request (a dict, as decoded from JSON) -> its reply; never raises."""
-        seq = request.get("seq") if isinstance(request, Mapping) else None
-        try:
-            reply = self._execute(request)
-        except ControlError as exc:
-            reply = {"ok": False, "kind": exc.kind, "error": str(exc)}
-        head: Reply = {"ok": reply.pop("ok")}
-        if isinstance(request, Mapping) and isinstance(request.get("cmd"), str):
-            head["cmd"] = request["cmd"]
-        if "id" in reply:
-            head["id"] = reply.pop("id")
-        head.update(reply)
-        if isinstance(seq, str | int | float | bool):
-            head["seq"] = seq
-        return head
-
-    def _execute(self, request: object) -> Reply:
-        if not isinstance(request, Mapping):
-            raise ControlError("malformed", "a request is a JSON object")
-        name = request.get("cmd")
-        command = COMMANDS.get(name) if isinstance(name, str) else None
-        if command is None:
-            raise ControlError("unknown_command",
-                               f"cmd must be one of {', '.join(COMMANDS)}; got {name!r}")
-        args = parse_args(command, request)
-        if self._sync is not None:
-            self._sync()
-        if command.run is None:
-            assert command.run_channel is not None
-            return command.run_channel(self, args)
-        raw_id = request.get("id")
-        if raw_id is not None and (isinstance(raw_id, bool) or not isinstance(raw_id, int)):
-            raise ControlError("unknown_id", "id must be an integer")
-        drive = self.drive(raw_id)
-        reply = command.run(self, drive, args)
-        reply.setdefault("id", drive.drive_id)
-        return reply
+    def drive_id(self, drive: VirtualDrive) -> int:
+        return drive.drive_id
 
     # Python API: the same commands as keyword calls; each returns the reply, raising
     # ControlError instead of answering {"ok": false}.
-    def call(self, cmd: str, drive_id: int | None = None, **args: Any) -> Reply:
-        request: dict[str, Any] = {"cmd": cmd, **args}
-        if drive_id is not None:
-            request["id"] = drive_id
-        reply = self.execute(request)
-        if not reply["ok"]:
-            raise ControlError(reply["kind"], reply["error"])
-        return reply
-
     def analog(self, drive_id: int | None, volts: float) -> Reply:
         return self.call("analog", drive_id, volts=volts)
 
@@ -384,33 +311,10 @@ class DriveControl:
     def ena(self, drive_id: int | None, enabled: bool) -> Reply:
         return self.call("ena", drive_id, enabled=enabled)
 
-    def fault(self, drive_id: int | None, fault: str, **params: Any) -> Reply:
-        return self.call("fault", drive_id, fault=fault, **params)
-
-    def state(self, drive_id: int | None = None) -> Reply:
-        return self.call("state", drive_id)
-
     def outputs(self, drive_id: int | None = None) -> Reply:
         return self.call("outputs", drive_id)
 
 
 def parse_args(command: Command, request: Mapping[str, Any]) -> dict[str, Any]:
-    """Check a request's arguments against the tables; defaults filled in."""
-    specs = {a.name: a for a in command.args}
-    if command.name == "fault" and isinstance(request.get("fault"), str):
-        fault = FAULTS.get(request["fault"])
-        if fault is not None:
-            specs.update({a.name: a for a in fault.args})
-    unknown = sorted(set(request) - _ENVELOPE - set(specs))
-    if unknown:
-        raise ControlError("bad_argument", f"{command.name} takes no argument "
-                           + ", ".join(repr(u) for u in unknown))
-    out: dict[str, Any] = {}
-    for name, spec in specs.items():
-        if name in request:
-            out[name] = spec.parse(request[name])
-        elif spec.required:
-            raise ControlError("bad_argument", f"{command.name} needs {name}")
-        else:
-            out[name] = spec.default
-    return out
+    """Check a request's arguments against this module's tables; defaults filled in."""
+    return channel.parse_args(command, request, FAULTS)

@@ -506,11 +506,18 @@ class VirtualDrive(EngineShaft):
 
     def torque_command(self, amps: float) -> bool:
         """Torque servo current reference in A (+ = towards + / CW), clipped by the torque
-        limit; ignored (False) unless the servo is on in torque mode."""
+        limit; ignored (False) unless the servo is on in torque mode.
+
+        A network command (DYN5 0x26) bypasses the soft start that filters the DYN2's analog
+        torque reference (5.1, Max Acceleration): DYN5 section 7, commands "become effective
+        in the servo loop after <=300us. This is true for all position, speed or torque
+        commands". The loop takes it at its next period (250 us at 4 kHz); the TrqCons
+        filter and the current loop stay, as they are the loop's own (issue 34)."""
         if self.servo_free or self._config.servo_mode is not ServoMode.TORQUE:
             return False
-        self._engine.speed_target = float(amps)
-        self._engine.wake()
+        eng = self._engine
+        eng.speed_target = eng.speed_ref = float(amps)
+        eng.wake()
         return True
 
     def set_torque_speed_limit(self, rpm: float | None) -> None:
@@ -791,6 +798,13 @@ class VirtualDrive(EngineShaft):
             self.trip(AlarmCode.LOST_PHASE)
 
     # ---------------------------------------------------------------- readouts (EngineShaft)
+
+    @property
+    def torque_reference_a(self) -> float:
+        """The current the servo loop commanded in its last period (its torque reference,
+        before the TrqCons filter), A; 0 with the servo free."""
+        eng = self._engine
+        return eng.tq_cmd * eng.inv_kt if eng.servo != Servo.FREE else 0.0
 
     @property
     def torque_current(self) -> int:

@@ -25,3 +25,11 @@ def make_motors(addresses: Sequence[int], *, state: str | None = None,
     return [YzaimMotor(a, model=model,
                        store=YzaimStore(state, key=str(a)) if state else None)
             for a in addresses]
+
+
+def record_positions(motors: Sequence[YzaimMotor]) -> None:
+    """The simulator stops: each motor records its position as at a power-off (1:
+    "communication mode: power-off record position"), kept in its state file if it has one,
+    so a multi-turn position survives a restart of ``sim easycan`` / ``sim modbus``."""
+    for motor in motors:
+        motor.store.record_position(motor.position)

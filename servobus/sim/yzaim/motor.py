@@ -139,7 +139,11 @@ class YzaimMotor:
         self.supply_v = (self.model.supply_v[0] + self.model.supply_v[1]) / 2
         self.battery_ok = True
         self._i2 = 0.0
-        self._offset = float(self.store.position or 0)  # YZ-AIM counts at core position 0
+        # YZ-AIM counts at core position 0: the recorded position (a single-turn encoder
+        # reads only its angle within the turn at power-on, as in power_cycle)
+        recorded = self.store.position or 0
+        self._offset = float(recorded if self.model.multi_turn
+                             else recorded % yzaim.COUNTS_PER_REV)
         self._power_on()
 
     # ---------------------------------------------------------------- lifecycle
@@ -414,6 +418,10 @@ class YzaimMotor:
     def set_supply_voltage(self, volts: float) -> None:
         self.supply_v = float(volts)
         self._check_supply()
+
+    def world(self) -> dict[str, float | bool]:
+        """The world around the motor as the simulator set it (control channel ``state``)."""
+        return {**self.drive.world(), "supply_v": self.supply_v, "battery_ok": self.battery_ok}
 
     def set_battery(self, ok: bool) -> None:
         """Multi-turn backup battery present and charged (False: warning 0x13)."""

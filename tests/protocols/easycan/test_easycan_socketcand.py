@@ -28,6 +28,7 @@ from servobus.protocols.easycan.messages import (
     ReadRequest,
 )
 from servobus.protocols.easycan.server import serve
+from servobus.sim.control_client import ControlClient
 from servobus.sim.socketcand_hub import SocketcandHub
 from servobus.sim.wall_clock import RealtimeClock
 from servobus.sim.yzaim.motor import YzaimMotor
@@ -288,3 +289,29 @@ def test_a_remote_frame_keeps_the_python_can_session(server: int) -> None:
         assert exchange(bus, "FF 03 02 01")[:4].hex(" ") == "01 03 02 01"  # still served
     finally:
         bus.shutdown()
+
+
+def test_the_control_channel_injects_a_fault_python_can_reads() -> None:
+    """``--control`` as on ``sim dyn232``: a supply surge on motor 2 through the control
+    client shows as over-voltage 0x12 in its alarm register 0x0E over EasyCan; motor 1 is
+    untouched; ``clear`` and a power cycle through the channel bring it back."""
+    proc, port = start_server("--ids", "1,2", "--fast", "--control", "tcp://127.0.0.1:0")
+    bus = can.Bus(interface="socketcand", host="127.0.0.1", port=port, channel="can0")
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline().strip()
+        assert line.startswith("control on tcp://127.0.0.1:"), line
+        with ControlClient(line.split(" ", 2)[2]) as control:
+            assert control.call("ping")["ids"] == [1, 2]
+            assert control.call("fault", 2, fault="over_voltage")["alarm_code"] == 0x12
+            alarm = "FF 03 0E 01"  # read 1 register from 0x0E
+            assert exchange(bus, alarm, ident=0x002).hex(" ") == "02 03 0e 01 12 00"
+            assert exchange(bus, alarm, ident=0x001).hex(" ") == "01 03 0e 01 00 00"
+            control.call("clear", 2)
+            assert control.call("power_cycle", 2)["alarm"] == "none"
+            assert control.call("state", 2)["alarm_code"] == 0
+            assert exchange(bus, alarm, ident=0x002).hex(" ") == "02 03 0e 01 00 00"
+    finally:
+        bus.shutdown()
+        proc.terminate()
+        proc.wait(10)

@@ -317,7 +317,9 @@ def test_torque_mode_obeys_its_speed_limit(adapter: Dyn5Adapter, torque: int) ->
     for _ in range(2000):  # 1 s
         run(adapter, 0.0005)
         fastest = max(fastest, abs(adapter.drive.speed_rpm))
-    assert fastest <= 110.0  # the speed loop's own overshoot at full torque: < 10 %
+    # The limiting speed loop's own overshoot on a bare rotor: < 15 % (12.4 % since the
+    # command is no longer soft-started, DYN5 section 7; under the soft start it was < 10 %).
+    assert fastest <= 115.0
     sign = 1 if torque > 0 else -1
     assert value(adapter, 0x14) == 100 * sign  # held at the limit, in the command's direction
     assert abs(adapter.drive.current_a) < 0.1 * abs(torque) / 2000 * 20  # only friction left

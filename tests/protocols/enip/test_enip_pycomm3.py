@@ -7,6 +7,7 @@ from collections.abc import Iterator
 
 import pytest
 from pycomm3 import DINT, UDINT, CIPDriver, Services
+from rig import wait_until
 
 from servobus.protocols.enip.server import BackgroundEnip, EnipServer
 
@@ -14,9 +15,14 @@ pytestmark = pytest.mark.timeout(60)
 
 
 @pytest.fixture(scope="module")
-def server() -> Iterator[EnipServer]:
+def background() -> Iterator[BackgroundEnip]:
     with BackgroundEnip() as bg:
-        yield bg.servers[0]
+        yield bg
+
+
+@pytest.fixture(scope="module")
+def server(background: BackgroundEnip) -> EnipServer:
+    return background.servers[0]
 
 
 @pytest.fixture
@@ -92,3 +98,25 @@ def test_list_identity(server: EnipServer) -> None:
     assert identity is not None
     assert identity["product_name"] == "DYN5ENIP" and identity["ip_address"] == "127.0.0.1"
     assert identity["state"] == 3
+
+
+def test_a_torque_command_is_not_soft_started(background: BackgroundEnip,
+                                              plc: CIPDriver) -> None:
+    """DYN5 section 7: torque commands "become effective in the servo loop after <=300us"
+    (checked on simulated time in test_enip_torque_latency). At High Accel 1 the DYN2's
+    analog soft start would take 60 s from 10 to 90 % (issue 34); the network command is
+    there at once. Shaft blocked (back-EMF plays no part); Motor Torque 0x1F is CCW-positive."""
+    get, put = Services.get_attribute_single, Services.set_attribute_single
+    drive = background.servers[0].drive
+    background.call(lambda: drive.set_blocked(True))
+    high_accel = message(plc, get, 0x0F, 0x09, 1, data_type=UDINT).value
+    try:
+        for inst, value in ((0x09, 1), (0x25, 0xFFFF), (0x0D, 0xAAAA), (0x26, 150)):
+            assert message(plc, put, 0x0F, inst, 1, request_data=UDINT.encode(value)).error \
+                is None
+        wait_until(lambda: message(plc, get, 0x0F, 0x1F, 1, data_type=DINT).value == -150,
+                   timeout=30, what="Motor Torque -150 (a soft start at High Accel 1: ~60 s)")
+    finally:
+        for inst, value in ((0x26, 0), (0x25, 0), (0x09, high_accel)):
+            message(plc, put, 0x0F, inst, 1, request_data=UDINT.encode(value))
+        background.call(lambda: drive.set_blocked(False))

@@ -8,11 +8,16 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
+from click.testing import CliRunner
+from rig import wait_until
 
+from servobus.cli.main import cli
 from servobus.families.yzaim import registers as Y
+from servobus.sim.control_client import ControlClient
 
 pymodbus = pytest.importorskip("pymodbus")
 from pymodbus import FramerType  # noqa: E402
@@ -143,6 +148,87 @@ def test_rtu_over_a_pseudo_terminal() -> None:
             assert not c.write_register(R["target_speed"].address, 750, device_id=3).isError()
             assert c.read_holding_registers(R["target_speed"].address,
                                             device_id=3).registers == [750]
+        finally:
+            c.close()
+    finally:
+        proc.terminate()
+        proc.wait(10)
+
+
+def test_state_file_keeps_a_multi_turn_position_across_a_restart(tmp_path: Path) -> None:
+    """1: "communication mode: power-off record position": the 57AIM's multi-turn position
+    survives a restart of ``sim modbus --state`` as it does for ``sim easycan`` (issue 34:
+    the motor came back at 0). Written and read by pymodbus, the simulator SIGTERMed."""
+    state = str(tmp_path / "motors.json")
+    target = 3 * Y.COUNTS_PER_REV + 1234
+
+    def position(c: ModbusTcpClient) -> int:
+        regs = c.read_holding_registers(ABS, count=2, device_id=3).registers
+        return int(c.convert_from_registers(regs, INT32, word_order="little"))
+
+    def run(check: Callable[[ModbusTcpClient], int]) -> int:
+        proc, lines = _start("--ids", "3", "--fast", "--state", state)
+        try:
+            assert lines[0].startswith("listening on tcp://"), lines
+            host, port = lines[0].split("tcp://", 1)[1].rsplit(":", 1)
+            c = ModbusTcpClient(host, port=int(port), framer=FramerType.RTU, timeout=2,
+                                retries=1)
+            assert c.connect()
+            try:
+                return check(c)
+            finally:
+                c.close()
+        finally:
+            proc.terminate()
+            assert proc.wait(10) == 0
+
+    def move(c: ModbusTcpClient) -> int:
+        words = c.convert_to_registers(target, INT32, word_order="little")
+        assert not c.write_registers(ABS, words, device_id=3).isError()
+        wait_until(lambda: abs(position(c) - target) <= 10, timeout=20.0, what="the move")
+        # at rest on its target: two equal reads in a row can catch the P loop closing the
+        # last count (docs/tuning.md), so wait for the target itself
+        wait_until(lambda: position(c) == target, timeout=20.0, what="the motor at rest")
+        return position(c)
+
+    before = run(move)
+    assert run(position) == before
+
+
+def test_the_control_channel_injects_faults_pymodbus_reads() -> None:
+    """``--control`` as on ``sim dyn232``: a flat battery (warning 0x13, the motor keeps
+    running) through the control client, cleared and a blocked shaft injected through
+    ``servobus sim control`` (stall 0x14 after 0x18's units digit, 1 s here), each read by
+    pymodbus from 0x0E."""
+    proc = subprocess.Popen([sys.executable, "-m", "servobus", "sim", "modbus", "--ids", "3",
+                             "--fast", "--control", "tcp://127.0.0.1:0", "--duration", "50"],
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        assert proc.stdout is not None
+        listening, control_line = proc.stdout.readline(), proc.stdout.readline()
+        host, port = listening.strip().split("tcp://", 1)[1].rsplit(":", 1)
+        assert control_line.startswith("control on tcp://127.0.0.1:"), control_line
+        url = control_line.strip().split(" ", 2)[2]
+        c = ModbusTcpClient(host, port=int(port), framer=FramerType.RTU, timeout=2, retries=1)
+        assert c.connect()
+        try:
+            def alarm() -> int:
+                return int(c.read_holding_registers(R["alarm_code"].address,
+                                                    device_id=3).registers[0])
+
+            with ControlClient(url) as control:
+                assert control.call("fault", fault="battery")["alarm_code"] == 0x13
+                assert alarm() == 0x13
+            ok = CliRunner().invoke(cli, ["sim", "control", "--to", url, "battery", "ok"])
+            assert ok.exit_code == 0 and 'alarm: "none"' in ok.output, ok.output
+            assert alarm() == 0
+            assert not c.write_register(R["standstill_max_output"].address, 301,
+                                        device_id=3).isError()
+            stall = CliRunner().invoke(cli, ["sim", "control", "--to", url, "fault", "stall"])
+            assert stall.exit_code == 0 and 'fault: "stall"' in stall.output, stall.output
+            words = c.convert_to_registers(Y.COUNTS_PER_REV, INT32, word_order="little")
+            assert not c.write_registers(ABS, words, device_id=3).isError()
+            wait_until(lambda: alarm() == 0x14, timeout=20.0, what="stall 0x14")
         finally:
             c.close()
     finally:
