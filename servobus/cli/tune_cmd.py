@@ -116,12 +116,16 @@ def tune_cmd(ctx: CliContext, distance: str, yes: bool, save: bool, revert: bool
         if counts == 0:
             raise click.BadParameter("the distance must not be zero", param_hint="'--distance'")
         axis.check_target(axis.to_user(axis.counts() + counts))  # LimitError: nothing moved
+        profile = core.family.tuning
+        if save and (profile is None or profile.persistence is not Persistence.RAM_SAVE_COMMAND):
+            hint = profile.save_hint if profile is not None else "no tuning gains"
+            raise click.UsageError(f"--save: {core.family.title} gains are not saved with a "
+                                   f"command ({hint}); nothing was moved")
         if not yes and not click.confirm(
                 f"tune {who}: test moves between here and {shown} away, gains raised until "
                 f"the motor vibrates; go?", default=False, err=True):
             raise CliError("not tuned: the question was declined", "nothing was moved or "
                            "written; --yes skips the question")
-        profile = core.family.tuning
         if profile is not None and profile.persistence is Persistence.EEPROM_EACH_WRITE:
             note("note: every gain write goes to the drive's EEPROM (at most 40 this run)")
         with stop_on_interrupt(core):

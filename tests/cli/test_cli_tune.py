@@ -47,3 +47,10 @@ def test_tune_a_loaded_virtual_drive_and_revert_on_request(
     assert doc["source"] == "trace" and doc["reverted"] is True
     with connect(LOADED) as axis:  # a fresh virtual drive: the defaults, as kept
         assert {n: axis.read_param(n) for n in doc["original"]} == doc["original"]
+
+
+def test_save_is_refused_where_the_family_saves_no_other_way(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    code, _out, err = run(capsys, "--url", LOADED, "tune", "--distance", "1000", "--save",
+                          "--yes")
+    assert code == 2 and "EEPROM" in err and "nothing was moved" in err
