@@ -16,8 +16,8 @@ import argparse
 import sys
 from collections.abc import Sequence
 
+from servobus.axis.step_metrics import StepMetrics, step_metrics
 from servobus.families.dmm import units as U
-from servobus.gui.step_metrics import StepMetrics, step_metrics
 from servobus.sim.core.loads import PRESETS, load_settings
 from servobus.sim.core.motor import Motor
 from servobus.sim.core.steps import StepTrace, record

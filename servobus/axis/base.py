@@ -360,6 +360,13 @@ class AsyncAxis(ABC):
                 raise ArgumentRangeError(f"{axis!r} does not start together with {self!r}")
             axis._check_move(counts, relative=False)
 
+    async def save_parameters(self) -> None:
+        """Keep the parameters written so far over a power cycle, where the family saves
+        with a command (YZ-AIM save flag 0x14). NotSupported elsewhere: DMM DYN2/DYN4
+        writes reach EEPROM as they are made, DYN5 writes over EtherNet/IP cannot be kept."""
+        raise NotSupported(f"{self.family.title} over {self.protocol} has no save command",
+                           family=self.family.name)
+
     #: Where :meth:`trace_buffer` reads; set by the in-process virtual drives
     #: (servobus.sim.core.capture), None on a link to a drive that keeps no trace.
     capture_source: CaptureSource | None = None

@@ -369,6 +369,10 @@ class Axis:
         """One status read, no retry; False on timeout."""
         return self._call(self._core.ping, timeout)
 
+    def save_parameters(self) -> None:
+        """Keep the parameters over a power cycle (:meth:`AsyncAxis.save_parameters`)."""
+        return self._call(self._core.save_parameters)
+
     def trace_buffer(self) -> Capture:
         """The drive's own samples since the previous call (:meth:`AsyncAxis.trace_buffer`)."""
         return self._call(self._core.trace_buffer)

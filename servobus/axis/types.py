@@ -140,6 +140,51 @@ class PtpCalculator:
     compute: Callable[[Mapping[str, int], int], MoveProfile]
 
 
+class GainRole(Enum):
+    """What a tuning gain does in the cascade (docs/tuning.md, "The tuner")."""
+
+    POSITION = "position"  # position loop P (DMM Main Gain, YZ-AIM position kp)
+    SPEED = "speed"  # speed loop P (DMM Speed Gain, YZ-AIM speed kp)
+    INTEGRAL = "integral"  # speed loop integral (DMM Integration Gain, YZ-AIM Ti)
+    FILTER = "filter"  # torque command filter (DMM TrqCons)
+
+
+class Persistence(Enum):
+    """How a gain write persists, which decides what a tuner may write and how it keeps it."""
+
+    #: Every write goes to EEPROM (DMM DYN2/DYN4, manual 5.1): a tuner keeps a write budget.
+    EEPROM_EACH_WRITE = "eeprom"
+    #: RAM until the family's save command (YZ-AIM save flag 0x14): saved only when asked.
+    RAM_SAVE_COMMAND = "save_command"
+    #: RAM only over this link (DYN5 over EtherNet/IP): kept with the vendor's tool.
+    RAM_ONLY = "ram"
+
+
+@dataclass(frozen=True)
+class TuningGain:
+    """One gain of a family's tuning (a name of its parameter table) and how it acts."""
+
+    role: GainRole
+    name: str
+    #: A larger value acts less (YZ-AIM integration time: longer = less integral).
+    inverse: bool = False
+    #: The units digit is a configuration bit a tuner must keep (YZ-AIM 0x05, 0x07).
+    keep_units_digit: bool = False
+
+
+@dataclass(frozen=True)
+class TuningProfile:
+    """What ``Capability.TUNING`` gives a tuner: the gains by role, how writes persist, and
+    for people what keeps them where the link cannot (``save_hint``)."""
+
+    gains: tuple[TuningGain, ...]
+    persistence: Persistence
+    save_hint: str = ""
+
+    def gain(self, role: GainRole) -> TuningGain | None:
+        return next((g for g in self.gains if g.role is role), None)
+
+
 @dataclass(frozen=True)
 class Family:
     """A device family: name, counts per revolution, parameters, capabilities."""
@@ -159,6 +204,8 @@ class Family:
     #: How the family's drives plan a point-to-point move, computed offline from its
     #: parameters (``servobus profile``); None where the family has no such table.
     ptp_profile: PtpCalculator | None = None
+    #: The gains a tuner sets (families with ``Capability.TUNING``; servobus.tune).
+    tuning: TuningProfile | None = None
 
     def param(self, name: str) -> ParamInfo:
         for p in self.params:

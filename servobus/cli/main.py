@@ -44,6 +44,7 @@ COMMAND_MODULES: list[str] = [
     "servobus.cli.enable_cmd",
     "servobus.cli.origin_cmd",
     "servobus.cli.jog_cmd",
+    "servobus.cli.tune_cmd",
     "servobus.cli.shell_cmd",
 ]
 

@@ -241,7 +241,7 @@ class MqttGateway:
         period = 1.0 / self.options.rate_hz
         loop = asyncio.get_running_loop()
         next_at = loop.time()
-        paho = getattr(client, "_client", None)  # see _send_state
+        paho = paho_of(client)
         while True:
             for name, axis in self.machine.axes.items():
                 sample = self.sampler.latest.get(name)
@@ -376,6 +376,12 @@ def tls_context(o: MqttOptions, broker: Broker) -> ssl.SSLContext | None:
         ctx.check_hostname = False
         ctx.verify_mode = ssl.CERT_NONE
     return ctx
+
+
+def paho_of(client: aiomqtt.Client) -> object:
+    """The aiomqtt client's paho client (an MQTT client, not a drive's), or None: what
+    :meth:`MqttGateway._send_state` hands QoS 0 state messages to without a round trip."""
+    return getattr(client, "_client", None)
 
 
 def broker_client(options: MqttOptions, identifier: str,

@@ -3,7 +3,7 @@
 The step is commanded with ``move_by`` (its end point checked against the soft limits first,
 servobus.gui.soft_limits) and the capture is triggered by the command itself:
 the sampler's samples (the drive's trace, or polls) from shortly before the command to
-``duration`` after it are cut out and measured (servobus.gui.step_metrics). A DMM drive
+``duration`` after it are cut out and measured (servobus.axis.step_metrics). A DMM drive
 moves along its Max Speed / Max Accel profile, so the figures describe the profile and
 the servo loop together; a small step shows the loop more than the profile.
 
@@ -20,11 +20,11 @@ from collections import deque
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
+from servobus.axis.step_metrics import step_metrics
 from servobus.errors import ArgumentRangeError, DriveTimeout, ServobusError
 from servobus.gui.fleet import AxisHandle
 from servobus.gui.sampler import AxisSampler
 from servobus.gui.soft_limits import check_step, has_limits
-from servobus.gui.step_metrics import step_metrics
 
 #: A parameter is a tuning gain when its name contains one of these.
 GAIN_NAME_HINTS = ("gain", "kp", "integration", "feedforward", "trq_cons")

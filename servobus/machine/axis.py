@@ -55,6 +55,7 @@ if TYPE_CHECKING:
     from servobus.axis.base import AsyncAxis
     from servobus.axis.types import AxisStatus, Family
     from servobus.link.stats import StreamStats
+    from servobus.tune.tuner import Trial, TuneResult
 
 log = logging.getLogger(__name__)
 
@@ -552,6 +553,32 @@ class AsyncMachineAxis:
         new = Lease(owner, speed, accel, limit, time.monotonic() + ttl, profile=profile)
         new.task = asyncio.create_task(self._stream(new), name=f"lease {self.name}")
         self._lease = new
+
+    async def tune(self, distance: int, *, owner: str = "api",
+                   vibration_limit: float | None = None, trace: bool = True,
+                   save: bool = False,
+                   on_trial: Callable[[Trial], None] | None = None) -> TuneResult:
+        """The manuals' tuning procedure (servobus.tune, docs/tuning.md): test moves between
+        here and ``distance`` counts away, inside the soft limits (checked before anything
+        moves); the kept gains come back on an abort, a failure or a cancel. Refused while
+        another owner's lease runs. ``trace=False`` polls where a trace exists; ``save``
+        keeps the gains where the family saves with a command. Takes seconds."""
+        from servobus.tune.axis_plant import AxisPlant
+        from servobus.tune.tuner import ABORT_VIBRATION, Limits, Tuner
+
+        self.check_owner(owner)
+        core = self._motion()
+        here = await self.counts()
+        soft = None
+        if self.limits is not None:
+            soft = (min(map(self.to_counts, self.limits)), max(map(self.to_counts, self.limits)))
+        self.check_target(self.to_user(here + distance))  # LimitError: nothing moved
+        limit = ABORT_VIBRATION if vibration_limit is None else vibration_limit
+        tuner = Tuner(AxisPlant(core, trace=trace), Limits(distance, soft, limit),
+                      core.counts_per_rev, on_trial=on_trial, save=save)
+        self._commanded()
+        with self._watch():
+            return await tuner.run()
 
     def check_owner(self, owner: str) -> None:
         """OwnerError (nothing sent) when another owner's lease runs on this axis."""

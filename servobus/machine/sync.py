@@ -6,7 +6,7 @@ machine's loop thread and blocks on the result.
 
 from __future__ import annotations
 
-from collections.abc import Collection, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from pathlib import Path
 from types import MappingProxyType, TracebackType
 from typing import TYPE_CHECKING
@@ -23,6 +23,7 @@ from servobus.machine.machine import (
 if TYPE_CHECKING:
     from servobus.axis.types import AxisStatus, Family
     from servobus.machine.axis import AsyncMachineAxis
+    from servobus.tune.tuner import Trial, TuneResult
 
 
 class MachineAxis:
@@ -130,6 +131,14 @@ class MachineAxis:
 
     def status(self) -> AxisStatus:
         return self._runner.run(self._core.status())
+
+    def tune(self, distance: int, *, owner: str = "api", vibration_limit: float | None = None,
+             trace: bool = True, save: bool = False,
+             on_trial: Callable[[Trial], None] | None = None) -> TuneResult:
+        """A tuning run (:meth:`servobus.machine.axis.MachineAxis.tune`)."""
+        return self._runner.run(self._core.tune(distance, owner=owner,
+                                                vibration_limit=vibration_limit, trace=trace,
+                                                save=save, on_trial=on_trial))
 
     def move_to(self, target: float, *, wait: bool = False, timeout: float | None = None) -> None:
         self._runner.run(self._core.move_to(target, wait=wait, timeout=timeout))

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from servobus.gui.step_metrics import step_metrics
+from servobus.axis.step_metrics import step_metrics
 
 DT = 1e-4
 

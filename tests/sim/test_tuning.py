@@ -16,10 +16,10 @@ from pathlib import Path
 
 import pytest
 
+from servobus.axis.step_metrics import StepMetrics, step_metrics
 from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode
 from servobus.families.yzaim import registers as Y
-from servobus.gui.step_metrics import StepMetrics, step_metrics
 from servobus.sim.core import constants as K
 from servobus.sim.core.loads import LoadSettings, load_settings
 from servobus.sim.core.motor import Motor
@@ -220,7 +220,7 @@ def test_9_a_compliant_load_shows_its_resonance_and_the_load_overshoots_more() -
 
 
 def test_10_the_step_test_shows_the_main_gain_on_a_belt() -> None:
-    # The GUI step test's figures (servobus.gui.step_metrics) of the drive's own move.
+    # The GUI step test's figures (servobus.axis.step_metrics) of the drive's own move.
     # Measured Main Gain 10 / 40 / 80: motor overshoot 9.0 / 3.7 / 1.5 %, largest following
     # error 1482 / 972 / 563 counts, load overshoot 14.6 / 11.1 / 6.8 % (docs/tuning.md).
     runs = [belt_steps()[g] for g in (10, 40, 80)]

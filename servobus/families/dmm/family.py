@@ -10,7 +10,15 @@ half away from zero; the resolution is ``16384 / GEAR_NUM`` counts (4 at GEAR_NU
 from __future__ import annotations
 
 from servobus.axis.capabilities import Capability
-from servobus.axis.types import AxisStatus, Family, motion_state
+from servobus.axis.types import (
+    AxisStatus,
+    Family,
+    GainRole,
+    Persistence,
+    TuningGain,
+    TuningProfile,
+    motion_state,
+)
 from servobus.axis.units import round_counts
 from servobus.families.dmm import params as P
 from servobus.families.dmm import units as U
@@ -33,6 +41,14 @@ CAPABILITIES = frozenset({
     Capability.HOMING,
 })
 
+#: The tuner's gains (manual 5.1, 5.2); every write goes to EEPROM (5.1).
+TUNING = TuningProfile(
+    gains=(TuningGain(GainRole.POSITION, "main_gain"), TuningGain(GainRole.SPEED, "speed_gain"),
+           TuningGain(GainRole.INTEGRAL, "int_gain"), TuningGain(GainRole.FILTER, "trq_cons")),
+    persistence=Persistence.EEPROM_EACH_WRITE,
+    save_hint="written to the drive's EEPROM as they were set (manual 5.1)",
+)
+
 DYN2 = Family(
     name="dmm-dyn2",
     title="DMM DYN2/DC2/DYN4",
@@ -42,6 +58,7 @@ DYN2 = Family(
     ptp_profile=PTP,
     alarms={int(k): v for k, v in ALARM_TEXT.items()},
     wave_counts_per_unit=U.WAVE_COUNTS_PER_UNIT,
+    tuning=TUNING,
 )
 
 

@@ -30,7 +30,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from servobus.axis.capabilities import Capability
-from servobus.axis.types import AxisStatus, Family, ParamInfo, Storage, motion_state
+from servobus.axis.types import (
+    AxisStatus,
+    Family,
+    GainRole,
+    ParamInfo,
+    Persistence,
+    Storage,
+    TuningGain,
+    TuningProfile,
+    motion_state,
+)
 from servobus.families.dmm import params as dmm_params
 from servobus.families.dmm import units as U
 from servobus.families.dmm.profile import PTP
@@ -87,6 +97,15 @@ SETTABLE: tuple[Instance, ...] = tuple(
 PARAM_INSTANCES: dict[str, Instance] = {_param_name(i): i for i in SETTABLE}
 PARAM_NAMES: tuple[str, ...] = tuple(PARAM_INSTANCES)
 
+#: The tuner's gains (Pr.00 - Pr.03). Writes over EtherNet/IP reach RAM only, and the link
+#: has no save ("settings lost after Reset command or Power Cycle"): DMMDRV5 keeps them.
+TUNING = TuningProfile(
+    gains=(TuningGain(GainRole.POSITION, "main_gain"), TuningGain(GainRole.SPEED, "speed_gain"),
+           TuningGain(GainRole.INTEGRAL, "int_gain"), TuningGain(GainRole.FILTER, "trq_cons")),
+    persistence=Persistence.RAM_ONLY,
+    save_hint="lost at reset or power cycle: enter these gains in DMMDRV5 to keep them",
+)
+
 DYN5 = Family(
     name=NAME,
     title="DMM DYN5",
@@ -96,6 +115,7 @@ DYN5 = Family(
     alarms=ALARM_TEXT,
     wave_counts_per_unit=U.WAVE_COUNTS_PER_UNIT,
     ptp_profile=PTP,
+    tuning=TUNING,
 )
 
 

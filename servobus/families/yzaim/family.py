@@ -28,7 +28,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from servobus.axis.capabilities import Capability
-from servobus.axis.types import AxisStatus, Family, ParamInfo, Storage, motion_state
+from servobus.axis.types import (
+    AxisStatus,
+    Family,
+    GainRole,
+    ParamInfo,
+    Persistence,
+    Storage,
+    TuningGain,
+    TuningProfile,
+    motion_state,
+)
 from servobus.families.yzaim import registers as yzaim
 
 NAME = yzaim.FAMILY
@@ -67,6 +77,16 @@ SETTABLE: tuple[yzaim.Register, ...] = tuple(
     and r.address not in {a for p in yzaim.PAIRS for a in (p.low, p.high)})
 PARAM_NAMES: tuple[str, ...] = tuple(r.name for r in SETTABLE)
 
+#: The tuner's gains (5.2: 0x07, 0x05, 0x06). The units digits of the two kp are
+#: configuration bits (pulse polarity, alarm output): a tuner keeps them. RAM until saved.
+TUNING = TuningProfile(
+    gains=(TuningGain(GainRole.POSITION, "position_loop_kp", keep_units_digit=True),
+           TuningGain(GainRole.SPEED, "speed_loop_kp", keep_units_digit=True),
+           TuningGain(GainRole.INTEGRAL, "speed_loop_integration_time", inverse=True)),
+    persistence=Persistence.RAM_SAVE_COMMAND,
+    save_hint="in RAM: saved with the save flag (register 0x14) only when asked (--save)",
+)
+
 YZAIM = Family(
     name=NAME,
     title="YZ-AIM",
@@ -74,6 +94,7 @@ YZAIM = Family(
     params=tuple(_info(r) for r in SETTABLE),
     capabilities=CAPABILITIES,
     alarms={a.code: a.text for a in yzaim.ALARMS if a.code},
+    tuning=TUNING,
 )
 
 

@@ -38,6 +38,7 @@ from servobus.gateway.mqtt import (
     MqttOptions,
     broker_client,
     check_topic_name,
+    paho_of,
     parse_broker,
 )
 from servobus.gateway.sampler import Sampler
@@ -119,7 +120,7 @@ class SparkplugNode:
                 await asyncio.sleep(RECONNECT_S)
 
     async def _session(self, client: aiomqtt.Client) -> None:
-        self._paho = getattr(client, "_client", None)
+        self._paho = paho_of(client)
         await client.subscribe(self.topic("NCMD"), qos=1)  # before the birth (the spec)
         if self.options.commands:
             await client.subscribe(self.topic("DCMD", "+"), options=SubscribeOptions(

@@ -1,4 +1,4 @@
-"""Step-response figures from a recorded position (pure; the Tuning panel's numbers).
+"""Step-response figures from a recorded position (pure; the Tuning panel's, the tuner's).
 
 Definitions (control-engineering conventions; the drive manuals define none):
 

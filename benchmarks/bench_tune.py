@@ -1,0 +1,112 @@
+"""``servobus tune`` on every load preset (issue 35): tuned from defaults against a grid.
+
+For DMM (DYN2-TL) and YZ-AIM virtual drives, each load preset at inertia ratios 0, 3, 10 and
+30: the tuner runs from the default gains on simulated time (servobus.sim.tune_plant),
+a quarter-turn test distance; a grid of hand-picked gains (:data:`GRIDS`) is stepped the
+same way and its best case kept (calm, overshoot <= 10 %, fastest to settle). A case meets
+the target when the tuned gains end calm, with overshoot <= 10 % and settling no slower
+than 1.25 x the grid's best. Run: ``python -m benchmarks tune`` (about 2 min on 2 cores).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import math
+from concurrent.futures import ProcessPoolExecutor
+
+from benchmarks import verdict
+from servobus.sim.core.loads import load_settings
+from servobus.sim.tune_plant import SteppedPlant
+from servobus.tune.record import vibration
+from servobus.tune.tuner import DETECT, MAX_OVERSHOOT_PCT, RECORD_S, Limits, Trial, Tuner
+
+LOADS = ("screw", "direct", "belt")
+INERTIAS = (0, 3, 10, 30)
+FAMILIES = ("dmm", "yzaim")
+GRIDS: dict[str, dict[str, tuple[int, ...]]] = {
+    "dmm": {"main_gain": (10, 20, 40, 80), "speed_gain": (40, 80, 127),
+            "int_gain": (5, 20), "trq_cons": (127,)},
+    "yzaim": {"position_loop_kp": (300, 750, 1500, 3000), "speed_loop_kp": (1000, 3000, 8000),
+              "speed_loop_integration_time": (20, 100)},
+}
+SETTLE_FACTOR = 1.25
+
+
+def _plant(family: str, load: str, inertia: int) -> SteppedPlant:
+    settings = load_settings({"load": load, "inertia": inertia})
+    return SteppedPlant.dmm(settings) if family == "dmm" else SteppedPlant.yzaim(settings)
+
+
+async def _grid_point(family: str, load: str, inertia: int, gains: dict[str, int]) -> Trial:
+    plant = _plant(family, load, inertia)
+    for name, value in gains.items():
+        await plant.write_gain(name, value)
+    record = await plant.test_move(await plant.position() + plant.counts_per_rev // 4, RECORD_S)
+    m = record.metrics()
+    return Trial(gains, m.overshoot_pct, m.settling_time_s, m.rise_time_s,
+                 m.following_error_max, vibration(record))
+
+
+def _case(args: tuple[str, str, int]) -> dict[str, object]:
+    family, load, inertia = args
+    grid = GRIDS[family]
+    best: Trial | None = None
+    for values in itertools.product(*grid.values()):
+        trial = asyncio.run(_grid_point(family, load, inertia, dict(zip(grid, values,
+                                                                        strict=True))))
+        if best is None or trial.score() < best.score():
+            best = trial
+    plant = _plant(family, load, inertia)
+    try:
+        result = asyncio.run(Tuner(plant, Limits(plant.counts_per_rev // 4),
+                                   plant.counts_per_rev).run())
+        tuned: Trial | None = result.after
+        error = ""
+    except Exception as exc:  # a failed case is a row of the table, not a crash
+        tuned, error = None, str(exc)
+    return {"family": family, "load": load, "inertia": inertia, "tuned": tuned, "grid": best,
+            "error": error}
+
+
+def _meets(tuned: Trial | None, grid: Trial | None) -> bool:
+    if tuned is None or tuned.vibrates or tuned.overshoot_pct > MAX_OVERSHOOT_PCT:
+        return False
+    if tuned.settling_s is None:
+        return False
+    if grid is None or grid.settling_s is None or grid.vibrates:
+        return True  # the grid has no calm case to compare with
+    return tuned.settling_s <= SETTLE_FACTOR * grid.settling_s
+
+
+def _ms(s: float | None) -> str:
+    return "-" if s is None else f"{s * 1000:.1f}"
+
+
+def main() -> None:
+    cases = [(f, load, i) for f in FAMILIES for load in LOADS for i in INERTIAS]
+    with ProcessPoolExecutor(max_workers=2) as pool:
+        rows = list(pool.map(_case, cases))
+    print("tune: tuned from defaults vs the grid's best (quarter-turn test move, "
+          f"vibration detected at {DETECT})")
+    print("| family | load | inertia | overshoot % | settling ms | vibration | gains | "
+          "grid overshoot % | grid settling ms | grid vibration | grid gains | meets |")
+    print("| --- | --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: | --- | --- |")
+    met = 0
+    for r in rows:
+        tuned, grid = r["tuned"], r["grid"]
+        assert grid is None or isinstance(grid, Trial)
+        assert tuned is None or isinstance(tuned, Trial)
+        ok = _meets(tuned, grid)
+        met += ok
+        t = (f"{tuned.overshoot_pct:.1f} | {_ms(tuned.settling_s)} | {tuned.vibration:.3f} | "
+             f"{' '.join(map(str, tuned.gains.values()))}") if tuned else (
+                 f"aborted: {r['error']} | | |")
+        g = (f"{grid.overshoot_pct:.1f} | {_ms(grid.settling_s)} | {grid.vibration:.3f} | "
+             f"{' '.join(map(str, grid.gains.values()))}") if grid else "| | |"
+        print(f"| {r['family']} | {r['load']} | {r['inertia']} | {t} | {g} | "
+              f"{'yes' if ok else 'no'} |")
+    share = met / len(rows) if rows else math.nan
+    mark = verdict.mark("tune: cases meeting the target", share, at_least=1.0,
+                        show=verdict.percent)
+    print(f"tune: {met} of {len(rows)} cases meet the target  {mark}")

@@ -1,0 +1,384 @@
+"""The manuals' tuning procedure (DYN2 5.2; YZ-AIM 5.2 gains), run against a Plant.
+
+Procedure (docs/tuning.md, "The tuner"):
+
+1. read and keep the gains; a test move at them (the *before* figures) doubles as the
+   inertia test: the current over the acceleration gives the load's inertia ratio where
+   the plant knows its rotor (:func:`inertia_ratio`);
+2. for each gain role in :data:`ORDER` (speed, position, integral, filter): raise it along
+   :func:`candidates` with a test move each, until the move vibrates or rings
+   (:data:`DETECT`); back off: only values within :data:`MARGIN` of the first vibrating
+   one count; keep the one of those that settles fastest within :data:`MAX_OVERSHOOT_PCT`;
+3. a last test move at the tuned gains (the *after* figures).
+
+Safety: the first move beyond the :class:`Limits` (soft limits, the distance the user gave)
+is refused before anything moves; an alarm, a vibration beyond ``vibration_limit``, a
+failure or a cancel (Ctrl-C) stops the motor and writes the kept gains back. A gain is
+written only when it changes; on EEPROM families the run keeps a write budget
+(:data:`EEPROM_WRITE_BUDGET`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from servobus.axis.types import GainRole, Persistence, TuningGain
+from servobus.errors import ServobusError
+from servobus.tune.plant import Plant
+from servobus.tune.record import Record, vibration
+
+ORDER = (GainRole.SPEED, GainRole.POSITION, GainRole.INTEGRAL, GainRole.FILTER)
+#: Vibration (servobus.tune.record) from which a test move counts as vibrating or ringing.
+DETECT = 0.05
+#: The search stops raising a gain at half that: the onset of vibration is its limit.
+ONSET = DETECT / 2
+#: Default abort limit: a hold current swinging this much of the move's peak is loud.
+ABORT_VIBRATION = 1.5
+#: Back-off: a gain may be at most this fraction of the first vibrating value (3 dB).
+MARGIN = 0.7
+MAX_OVERSHOOT_PCT = 10.0
+#: Each step up multiplies a gain by this much (fewer steps: fewer EEPROM writes).
+RAISE = 1.4
+#: DMM: the EEPROM guard warns past 10 writes of one parameter a minute and refuses past 30
+#: (servobus.link.eeprom_guard); 10 a gain, the revert included, keeps a run under both and
+#: 40 a run is 25,000 runs from the drive's million-cycle life.
+EEPROM_WRITES_PER_GAIN = 10
+EEPROM_WRITE_BUDGET = 40
+RECORD_S = 0.6
+#: How long the motor may take to come to rest before a test move (it starts anyway).
+SETTLE_TIMEOUT_S = 0.5
+#: Steps a gain is lowered by at most while the kept gains vibrate (the calm phase) and
+#: while the best raised value still overshoots (the search's way down).
+CALM_STEPS = 4
+#: Polled samples time a step coarsely: the tuner backs off further from what it cannot see.
+POLL_MARGIN = 0.6
+
+
+class TuneAborted(ServobusError):
+    """A tuning run stopped the motor and wrote the kept gains back; the message says why."""
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Where test moves may go: ``distance`` counts from the start (its sign the first
+    move's direction), inside ``soft_limits`` (counts) when the axis has them."""
+
+    distance: int
+    soft_limits: tuple[int, int] | None = None
+    vibration_limit: float = ABORT_VIBRATION
+    record_s: float = RECORD_S
+
+
+@dataclass(frozen=True)
+class Trial:
+    gains: dict[str, int]
+    overshoot_pct: float
+    settling_s: float | None
+    rise_s: float | None
+    following_error: float | None
+    vibration: float
+
+    @property
+    def vibrates(self) -> bool:
+        return self.vibration >= DETECT
+
+    def score(self) -> tuple[bool, bool, float, float]:
+        """Smaller is better: calm, within the overshoot, fast to settle, little overshoot."""
+        return (self.vibrates, self.overshoot_pct > MAX_OVERSHOOT_PCT,
+                math.inf if self.settling_s is None else self.settling_s, self.overshoot_pct)
+
+    def as_dict(self) -> dict[str, object]:
+        return {"gains": self.gains, "overshoot_pct": self.overshoot_pct,
+                "settling_s": self.settling_s, "rise_s": self.rise_s,
+                "following_error": self.following_error, "vibration": self.vibration}
+
+
+@dataclass
+class TuneResult:
+    before: Trial
+    after: Trial
+    original: dict[str, int]
+    tuned: dict[str, int]
+    inertia_ratio: float | None
+    amps_per_accel: float | None
+    trials: int
+    writes: int
+    source: str
+    rate_hz: float
+    limits_found: dict[str, int] = field(default_factory=dict)
+    saved: bool = False
+    persistence: str = ""
+    save_hint: str = ""
+
+    def as_dict(self) -> dict[str, object]:
+        return {"before": self.before.as_dict(), "after": self.after.as_dict(),
+                "original": self.original, "tuned": self.tuned,
+                "inertia_ratio": self.inertia_ratio, "amps_per_accel": self.amps_per_accel,
+                "trials": self.trials, "writes": self.writes, "source": self.source,
+                "rate_hz": self.rate_hz, "vibration_limits": self.limits_found,
+                "saved": self.saved, "persistence": self.persistence,
+                "save_hint": self.save_hint}
+
+
+def candidates(gain: TuningGain, start: int, minimum: int, maximum: int) -> list[int]:
+    """Values from ``start`` up to the top of the range (down, for an inverse gain), each
+    :data:`RAISE` times stronger than the last, the range's end last."""
+    out: list[int] = []
+    v = float(start)
+    while len(out) < EEPROM_WRITES_PER_GAIN - 2:
+        v = v / RAISE if gain.inverse else v * RAISE
+        value = max(minimum, min(maximum, round(v)))
+        if gain.keep_units_digit:
+            value = keep_units(value, start, minimum, maximum)
+        if value != start and (not out or value != out[-1]):
+            out.append(value)
+        if (v <= minimum) if gain.inverse else (v >= maximum):
+            break
+    return out
+
+
+def keep_units(value: int, like: int, minimum: int, maximum: int) -> int:
+    """``value`` with the units digit of ``like`` (a configuration bit), in range."""
+    v = value - value % 10 + like % 10
+    while v > maximum:
+        v -= 10
+    while v < minimum:
+        v += 10
+    return v
+
+
+def inertia_ratio(record: Record, rotor_amps_per_accel: float | None,
+                  counts_per_rev: int) -> tuple[float | None, float | None]:
+    """(load / rotor inertia, A per rev/s^2) from a move's acceleration: the current over
+    the speed's slope while the speed rises to its peak. None where it cannot be told."""
+    if record.current is None or len(record.times) < 8:
+        return None, None
+    t, p = record.times, record.position
+    speed = [(p[i + 1] - p[i]) / (t[i + 1] - t[i]) for i in range(len(p) - 1)]
+    sign = 1.0 if record.target >= record.start else -1.0
+    peak = max(range(len(speed)), key=lambda i: sign * speed[i])
+    if peak < 4:
+        return None, None
+    n = peak
+    ts = t[:n]
+    mt, ms = sum(ts) / n, sum(speed[:n]) / n
+    var = sum((x - mt) ** 2 for x in ts)
+    if var <= 0:
+        return None, None
+    slope = sum((x - mt) * (y - ms) for x, y in zip(ts, speed[:n], strict=True)) / var
+    amps = sum(record.current[:n]) / n
+    if slope * sign <= 0:
+        return None, None
+    per_accel = abs(amps) / (abs(slope) / counts_per_rev)
+    if rotor_amps_per_accel is None:
+        return None, per_accel
+    return max(0.0, per_accel / rotor_amps_per_accel - 1.0), per_accel
+
+
+class Tuner:
+    """One tuning run on ``plant`` within ``limits``; ``on_trial`` sees every test move."""
+
+    def __init__(self, plant: Plant, limits: Limits, counts_per_rev: int,
+                 on_trial: Callable[[Trial], None] | None = None, *,
+                 save: bool = False) -> None:
+        if limits.distance == 0:
+            raise ServobusError("the test distance must not be zero")
+        self.plant = plant
+        self.limits = limits
+        self.counts_per_rev = counts_per_rev
+        self.on_trial = on_trial
+        self.save = save
+        if save and plant.profile.persistence is not Persistence.RAM_SAVE_COMMAND:
+            raise ServobusError("these gains are not saved with a command: "
+                                + plant.profile.save_hint)
+        self.original: dict[str, int] = {}
+        self.written: dict[str, int] = {}  # what the drive holds now
+        self.writes = 0
+        self.per_gain: dict[str, int] = {}
+        self.trials = 0
+        self.origin: int | None = None
+        self.outward = False
+        eeprom = plant.profile.persistence is Persistence.EEPROM_EACH_WRITE
+        self.budget = EEPROM_WRITE_BUDGET if eeprom else None
+        self.margin = MARGIN if plant.source == "trace" else POLL_MARGIN
+
+    # -------------------------------------------------------------- writes
+    async def _write(self, name: str, value: int) -> bool:
+        """Write ``name`` if it changes; False when the write budget is spent (not written)."""
+        if self.written.get(name) == value:
+            return True
+        reserve = sum(1 for g, v in self.original.items() if self.written.get(g) != v)
+        if self.budget is not None and (
+                self.writes + 1 + reserve > self.budget
+                or self.per_gain.get(name, 0) + 2 > EEPROM_WRITES_PER_GAIN):  # + the revert
+            return False
+        self.plant.param_info(name).check(value)
+        await self.plant.write_gain(name, value)
+        self.written[name] = value
+        self.writes += 1
+        self.per_gain[name] = self.per_gain.get(name, 0) + 1
+        return True
+
+    async def revert(self) -> None:
+        """The kept gains back, each only where it changed."""
+        for name, value in self.original.items():
+            if self.written.get(name) != value:
+                await self.plant.write_gain(name, value)
+                self.written[name] = value
+                self.writes += 1
+
+    # -------------------------------------------------------------- moves
+    async def _move(self) -> Record:
+        """To the far end of the distance, then back to the start, and so on."""
+        await self.plant.settle(SETTLE_TIMEOUT_S)
+        here = await self.plant.position()
+        if self.origin is None:
+            self.origin = here
+        self.outward = not self.outward
+        end = self.origin + self.limits.distance if self.outward else self.origin
+        soft = self.limits.soft_limits
+        if soft is not None and not soft[0] <= end <= soft[1]:
+            raise TuneAborted(f"a test move to {end} counts would leave the soft limits "
+                              f"{soft[0]} .. {soft[1]}; nothing was moved")
+        if abs(end - here) > 2 * abs(self.limits.distance):
+            raise TuneAborted(f"the motor stands at {here} counts, beyond the test span "
+                              f"{self.origin} .. {self.origin + self.limits.distance}")
+        return await self.plant.test_move(end, self.limits.record_s)
+
+    async def _trial(self) -> tuple[Trial, Record]:
+        record = await self._move()
+        self.trials += 1
+        m = record.metrics()
+        trial = Trial(dict(self.written), m.overshoot_pct, m.settling_time_s, m.rise_time_s,
+                      m.following_error_max, vibration(record))
+        if self.on_trial is not None:
+            self.on_trial(trial)
+        if record.alarm_code:
+            raise TuneAborted(f"the drive raised alarm {record.alarm_code} "
+                              f"({record.alarm_text or 'alarm'})")
+        if trial.vibration > self.limits.vibration_limit:
+            raise TuneAborted(f"vibration {trial.vibration:.2f} beyond the limit "
+                              f"{self.limits.vibration_limit:g}")
+        return trial, record
+
+    # -------------------------------------------------------------- the procedure
+    async def run(self) -> TuneResult:
+        plant = self.plant
+        for g in plant.profile.gains:
+            self.original[g.name] = await plant.read_gain(g.name)
+        self.written = dict(self.original)
+        try:
+            before, record = await self._trial()
+            ratio, per_accel = inertia_ratio(record, plant.rotor_amps_per_accel(),
+                                             self.counts_per_rev)
+            found: dict[str, int] = {}
+            best = await self._calm(before, ratio)
+            for role in ORDER:
+                gain = plant.profile.gain(role)
+                if gain is not None:
+                    best = await self._search(gain, best, found)
+            after, _ = await self._trial()
+            if after.vibrates:  # the verify shakes where the search did not: one step down
+                for role in (GainRole.INTEGRAL, GainRole.POSITION):
+                    gain = plant.profile.gain(role)
+                    if gain is not None:
+                        after = await self._lower_until_calm(gain, after)
+            if self.save:
+                await plant.save()
+        except BaseException:
+            await self._abort()
+            raise
+        return TuneResult(before, after, dict(self.original), dict(self.written), ratio,
+                          per_accel, self.trials, self.writes, plant.source, plant.rate_hz,
+                          found, saved=self.save,
+                          persistence=plant.profile.persistence.value,
+                          save_hint=plant.profile.save_hint)
+
+    async def _abort(self) -> None:
+        """Stop, then the kept gains back; a failed write back is said, not hidden."""
+        try:
+            await self.plant.stop()
+        finally:
+            try:
+                await self.revert()
+            except ServobusError as exc:
+                raise TuneAborted(f"the kept gains could not be written back ({exc}); "
+                                  f"they were {self.original}") from exc
+
+    async def _calm(self, before: Trial, ratio: float | None) -> Trial:
+        """Where the kept gains vibrate already (a load heavier than they suit: 5.2 "heavier
+        loads ... bigger value of Speed Gain"): the speed gain scaled by the inertia found,
+        then the position gain lowered step by step, until a move is calm."""
+        trial = before
+        speed = self.plant.profile.gain(GainRole.SPEED)
+        if trial.vibrates and speed is not None and ratio:
+            info = self.plant.param_info(speed.name)
+            start = self.written[speed.name]
+            scale = math.sqrt(1.0 + ratio)
+            value = round(start / scale if speed.inverse else start * scale)
+            value = max(info.minimum, min(info.maximum, value))
+            if speed.keep_units_digit:
+                value = keep_units(value, start, info.minimum, info.maximum)
+            if value != start and await self._write(speed.name, value):
+                trial, _ = await self._trial()
+        # 5.2: "Decrease Integration Gain if load inertia is big and system oscillates",
+        # then a softer position loop
+        for role in (GainRole.INTEGRAL, GainRole.POSITION):
+            gain = self.plant.profile.gain(role)
+            if gain is not None:
+                trial = await self._lower_until_calm(gain, trial)
+        return trial
+
+    async def _lower_until_calm(self, gain: TuningGain, trial: Trial) -> Trial:
+        info = self.plant.param_info(gain.name)
+        for _ in range(CALM_STEPS):
+            if not trial.vibrates:
+                break
+            start = self.written[gain.name]
+            value = round(start * RAISE if gain.inverse else start / RAISE)
+            value = max(info.minimum, min(info.maximum, value))
+            if gain.keep_units_digit:
+                value = keep_units(value, start, info.minimum, info.maximum)
+            if value == start or not await self._write(gain.name, value):
+                break
+            trial, _ = await self._trial()
+        return trial
+
+    async def _search(self, gain: TuningGain, best: Trial, found: dict[str, int]) -> Trial:
+        """Raise ``gain`` until a move vibrates, back off, keep the best (module doc)."""
+        info = self.plant.param_info(gain.name)
+        start = self.written[gain.name]
+        tried: list[tuple[int, Trial]] = [(start, best)]
+        limit: int | None = None
+        for value in candidates(gain, start, info.minimum, info.maximum):
+            if not await self._write(gain.name, value):
+                break  # the write budget is spent: keep what was found so far
+            trial, _ = await self._trial()
+            if trial.vibration >= ONSET:
+                limit = value
+                await self._write(gain.name, tried[-1][0])  # calm again before anything else
+                break
+            tried.append((value, trial))
+        if limit is not None:
+            found[gain.name] = limit
+            if gain.inverse:
+                tried = [(v, t) for v, t in tried if v == start or v * self.margin >= limit]
+            else:
+                tried = [(v, t) for v, t in tried if v == start or v <= limit * self.margin]
+        value, chosen = min(tried, key=lambda vt: vt[1].score())
+        if chosen.vibrates or chosen.overshoot_pct > MAX_OVERSHOOT_PCT:
+            # raising did not help: the other way (5.2: a lower Integration Gain on a big
+            # inertia; a softer position loop on a compliant load)
+            down = candidates(TuningGain(gain.role, gain.name, not gain.inverse,
+                                         gain.keep_units_digit), start, info.minimum,
+                              info.maximum)[:CALM_STEPS]
+            for lower in down:
+                if not await self._write(gain.name, lower):
+                    break
+                trial, _ = await self._trial()
+                tried.append((lower, trial))
+            value, chosen = min(tried, key=lambda vt: vt[1].score())
+        await self._write(gain.name, value)
+        return chosen
