@@ -82,8 +82,8 @@ async def test_two_motors_of_one_bus_stream_together_on_one_signal() -> None:
         assert stats.cycles + stats.skipped == 100 and stats.frames == 2 * stats.cycles
         signals = [i for i, item in enumerate(sent) if isinstance(item, WriteRequest)
                    and item.address == SYNC_CONTROL and item.values == (1,)]
-        assert [sent[i].slave for i in signals] == [1, 2]  # type: ignore[attr-defined]
-        assert signals[1] == signals[0] + 1  # one signal: back to back, once
+        assert sorted(sent[i].slave for i in signals) == [1, 2]  # type: ignore[attr-defined]
+        assert signals[1] == signals[0] + 1  # one signal: back to back (either first), once
         await wait_until_async(lambda: _at(first, starts[0] + 4000), timeout=10,
                                what="motor 1 at its last position")
         await wait_until_async(lambda: _at(second, starts[1] - 4000), timeout=10,
