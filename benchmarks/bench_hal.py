@@ -95,7 +95,7 @@ async def measure(url: str, seconds: float) -> dict[str, list[float]]:
     axis.stream_target = timed_stream  # type: ignore[method-assign]
     axis.readings = timed_readings  # type: ignore[method-assign]
     bridge = Bridge([axis], pins, watchdog_s=1.0)
-    next_cyclic = bridge.axes[0]._next_cyclic
+    next_cyclic = bridge.axes[0].next_cyclic
 
     def timed_cycle() -> float | None:  # a cyclic stream's cycle takes its target
         target = next_cyclic()
@@ -105,7 +105,7 @@ async def measure(url: str, seconds: float) -> dict[str, list[float]]:
             to_drive.append(now - written[target])
         return target
 
-    bridge.axes[0]._next_cyclic = timed_cycle  # type: ignore[method-assign]
+    bridge.axes[0].next_cyclic = timed_cycle  # type: ignore[method-assign]
     task = asyncio.create_task(bridge.run())
     try:
         pins["watchdog"] = True

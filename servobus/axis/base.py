@@ -329,6 +329,17 @@ class AsyncAxis(ABC):
         one ``next_position()`` gives."""
         raise self.unsupported(Capability.CYCLIC_POSITION)
 
+    async def stream_cycles_together(
+            self, streams: Sequence[tuple[AsyncAxis, Callable[[], int | None]]],
+    ) -> StreamStats:
+        """Cyclic synchronous position of several axes of this axis's :meth:`sync_group` as
+        one stream (Capability.CYCLIC_GROUP): each cycle one position per axis and one
+        synchronisation signal for the group, so they take their positions together. Every
+        ``next_position()`` is asked each cycle; the stream ends for all when any returns
+        None or a position is out of range (nothing of that cycle is sent), and every drive
+        rests at its last position."""
+        raise self.unsupported(Capability.CYCLIC_GROUP)
+
     async def square_wave(self, amplitude: int) -> None:
         """Drive-generated square-wave test motion (families with "waves")."""
         raise self.unsupported(Capability.WAVES)

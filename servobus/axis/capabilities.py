@@ -60,6 +60,9 @@ class Capability(StrEnum):
     #: A position every fixed cycle, taken by the drive on its own time base
     #: (``stream_cycles``; YZ-AIM EasyCan's 2 ms position cache with the sync signal).
     CYCLIC_POSITION = "cyclic_position"
+    #: Axes of one ``sync_group()`` stream cyclic positions as one group: one cycle, one
+    #: synchronisation signal for all (``stream_cycles_together``; YZ-AIM EasyCan's bus).
+    CYCLIC_GROUP = "cyclic_group"
 
     @property
     def words(self) -> str:

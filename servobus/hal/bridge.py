@@ -4,7 +4,7 @@ One task per axis runs cycles as fast as its link answers (at least ``PERIOD_S``
 it reads the input pins, acts on their edges, streams the position command (``position``
 axes), then reads the drive and writes the output pins. Another task watches the watchdog.
 
-Safety decisions (docs/safety.md, docs/linuxcnc.md):
+Safety decisions (docs/safety.md, docs/linuxcnc.md; sync groups: servobus.hal.cyclic_group):
 
 * a position axis streams only between an ``enable`` rising edge and the next fault or
   falling edge; a stopped axis never resumes by itself: after any fault it needs
@@ -29,6 +29,7 @@ from collections.abc import Callable, Sequence
 
 from servobus.axis.capabilities import Capability
 from servobus.errors import LimitError, MachineLinkError, ServobusError
+from servobus.hal.cyclic_group import CyclicGroup
 from servobus.hal.pins import Pins, axis_pin
 from servobus.hal.step_guard import StepGuard, StepRefused
 from servobus.hal.watchdog import Clock, Watchdog
@@ -49,7 +50,9 @@ class AxisBridge:
     """One machine axis and its pins (``<axis>.<pin>``)."""
 
     def __init__(self, axis: AsyncMachineAxis, pins: Pins, starved: Callable[[], bool],
-                 clock: Clock = time.monotonic) -> None:
+                 clock: Clock = time.monotonic,
+                 group_of: Callable[[AxisBridge], tuple[CyclicGroup, list[AxisBridge]] | None]
+                 = lambda _: None) -> None:
         self.axis = axis
         self.pins = pins
         self.position_mode = axis.spec.hal == "position"
@@ -66,6 +69,10 @@ class AxisBridge:
         #: The running cyclic stream (Capability.CYCLIC_POSITION), None otherwise.
         self._cyclic: asyncio.Task[None] | None = None
         self.cyclic_stats: StreamStats | None = None  # the last cyclic stream's figures
+        #: Where the drives stream as one group (Capability.CYCLIC_GROUP): its group and
+        #: that group's position axes now (servobus.hal.cyclic_group).
+        self._group_of = group_of
+        self._group: CyclicGroup | None = None
         if self.position_mode:
             speed, accel = axis.spec.speed, axis.spec.accel
             assert speed is not None and accel is not None  # the machine file requires them
@@ -140,7 +147,20 @@ class AxisBridge:
         self._target = None
         self.streaming = True
         core = self.axis.axis
-        if core is not None and core.supports(Capability.CYCLIC_POSITION):
+        grouped = self._group_of(self)
+        if grouped is not None:
+            group, members = grouped
+            if group.join(self, members):
+                self._group = group
+                log.info("axis %s: enabled, streaming position-cmd every cycle of the drive "
+                         "in its sync group (%s) once all of it is enabled", self.axis.name,
+                         group.names)
+            else:
+                self.streaming = False
+                log.warning("axis %s: its sync group (%s) streams without it: not streaming "
+                            "(disable the group's axes, then enable them together)",
+                            self.axis.name, group.names)
+        elif core is not None and core.supports(Capability.CYCLIC_POSITION):
             self._cyclic = asyncio.create_task(self._run_cyclic(),
                                                name=f"hal cyclic {self.axis.name}")
             log.info("axis %s: enabled, streaming position-cmd every cycle of the drive",
@@ -161,6 +181,9 @@ class AxisBridge:
         """Stop a position axis (nothing for a monitor axis: step/dir drives it); a cyclic
         stream ends first (its next cycle sees ``streaming`` off)."""
         self.streaming = False
+        group, self._group = self._group, None
+        if group is not None:
+            await group.leave(self)  # every axis of the group stops (cyclic_group)
         cyclic, self._cyclic = self._cyclic, None
         if cyclic is not None and cyclic is not asyncio.current_task():
             try:
@@ -175,14 +198,14 @@ class AxisBridge:
     async def _run_cyclic(self) -> None:
         """The drive's cyclic stream, fed by :meth:`_next_cyclic` until it returns None."""
         try:
-            self.cyclic_stats = await self.axis.stream_cycles(self._next_cyclic)
+            self.cyclic_stats = await self.axis.stream_cycles(self.next_cyclic)
         except ServobusError as exc:
             self.latch(f"the cyclic stream failed: {exc}")
         if self.latched is not None:
             self._cyclic = None  # stop() from here must not wait for itself
             await self.stop()
 
-    def _next_cyclic(self) -> float | None:
+    def next_cyclic(self) -> float | None:
         """One cycle's target: position-cmd, checked; None ends the stream."""
         assert self._guard is not None
         if not self.streaming or self.fault:
@@ -202,8 +225,8 @@ class AxisBridge:
         if self.fault:
             await self.stop()
             return
-        if self._cyclic is not None:
-            return  # the cyclic stream sends (its own task)
+        if self._cyclic is not None or self._group is not None:
+            return  # the cyclic stream sends (its own task, or its group's)
         target = float(self.pins[self.pin("position-cmd")])
         if self._target is not None and target == self._target:
             return  # no new command: nothing to send (never re-sent)
@@ -250,7 +273,9 @@ class Bridge:
                  clock: Clock = time.monotonic) -> None:
         self.pins = pins
         self.watchdog = Watchdog(pins, watchdog_s, clock)
-        self.axes = [AxisBridge(a, pins, lambda: self.watchdog.starved, clock) for a in axes]
+        self.axes = [AxisBridge(a, pins, lambda: self.watchdog.starved, clock,
+                                self._group_of) for a in axes]
+        self._groups: list[CyclicGroup] = []
         for bridge in self.axes:  # what holds before the first cycle: faulted, not fed
             bridge.outputs()
         self._component_fault()
@@ -278,6 +303,21 @@ class Bridge:
                 await self.stop()
             self._component_fault()
             await asyncio.sleep(PERIOD_S)
+
+    def _group_of(self, bridge: AxisBridge,
+                  ) -> tuple[CyclicGroup, list[AxisBridge]] | None:
+        """The sync group of a position axis and its position axes now (the axes whose
+        drives stream as one group: ``AsyncMachineAxis.cyclic_group``), or None."""
+        key = bridge.axis.cyclic_group() if bridge.position_mode else None
+        if key is None:
+            return None
+        members = [b for b in self.axes if b.position_mode and b.axis.cyclic_group() is key]
+        group = next((g for g in self._groups if g.key is key), None)
+        if group is None:
+            self._groups = [g for g in self._groups if g.task is not None]  # links reopened
+            group = CyclicGroup(key)
+            self._groups.append(group)
+        return group, members
 
     def _component_fault(self) -> None:
         self.pins["fault"] = self.watchdog.starved or any(b.fault for b in self.axes)

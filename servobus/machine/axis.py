@@ -31,7 +31,7 @@ import contextlib
 import logging
 import math
 import time
-from collections.abc import Awaitable, Callable, Iterator
+from collections.abc import Awaitable, Callable, Iterator, Sequence
 from typing import TYPE_CHECKING
 
 from servobus.axis.capabilities import Capability
@@ -449,16 +449,48 @@ class AsyncMachineAxis:
         core = self._motion()
         core.require(Capability.CYCLIC_POSITION)
         self.check_owner("stream")
+        next_position = self._counts_of(next_target)
+        self._commanded()
+        with self._watch():
+            return await core.stream_cycles(next_position)
 
+    def cyclic_group(self) -> object | None:
+        """The key of the axes this axis streams cyclic positions with as one group
+        (Capability.CYCLIC_GROUP: one cycle and one synchronisation signal for all, e.g.
+        the motors of one EasyCan bus); None where it has none or its link is down."""
+        core = self.axis
+        if core is None or not core.supports(Capability.CYCLIC_GROUP):
+            return None
+        return core.sync_group()
+
+    async def stream_cycles_together(
+            self, streams: Sequence[tuple[AsyncMachineAxis, Callable[[], float | None]]],
+    ) -> StreamStats:
+        """Cyclic synchronous position of several axes of one :meth:`cyclic_group` as one
+        stream (AsyncAxis.stream_cycles_together): every cycle each ``next_target()`` in its
+        axis's user units, checked against its limits; the stream ends for all when any
+        returns None or is refused, every drive resting at its last position. As
+        :meth:`stream_target`, the caller owns the stream's safety."""
+        cores: list[tuple[AsyncAxis, Callable[[], int | None]]] = []
+        for axis, next_target in streams:
+            core = axis._motion()
+            core.require(Capability.CYCLIC_GROUP)
+            axis.check_owner("stream")
+            cores.append((core, axis._counts_of(next_target)))
+        for axis, _ in streams:
+            axis._commanded()
+        with self._watch():
+            return await self._motion().stream_cycles_together(cores)
+
+    def _counts_of(self, next_target: Callable[[], float | None],
+                   ) -> Callable[[], int | None]:
+        """``next_target`` (user units) as counts, each checked against the limits."""
         def next_position() -> int | None:
             target = next_target()
             if target is None:
                 return None
             return self.to_counts(self.check_target(target))
-
-        self._commanded()
-        with self._watch():
-            return await core.stream_cycles(next_position)
+        return next_position
 
     async def move_to(self, target: float, *, wait: bool = False,
                       timeout: float | None = None) -> None:

@@ -38,7 +38,7 @@ EXPECTED: dict[str, set[Capability]] = {
     "enip": DMM | VIRTUAL | {C.VIRTUAL_IO, C.TORQUE_MODE, C.CYCLIC_IO,
                              C.POWER_LOSS_DETECTION},
     # YZ-AIM over EasyCan: the position caches start together
-    "easycan": YZ | VIRTUAL | {C.SYNC_START, C.CYCLIC_POSITION},
+    "easycan": YZ | VIRTUAL | {C.SYNC_START, C.CYCLIC_POSITION, C.CYCLIC_GROUP},
     "modbus": YZ | VIRTUAL,
 }
 
@@ -98,7 +98,8 @@ def test_a_family_declares_no_connection_capability(family: Family) -> None:
 
 #: A capability that is a method of AsyncAxis: declared exactly where it is implemented.
 METHODS = {C.HOMING: "home", C.WAVES: "square_wave", C.STREAM_TARGETS: "stream_profile",
-           C.POWER_LOSS_DETECTION: "power_marker", C.CYCLIC_POSITION: "stream_cycles"}
+           C.POWER_LOSS_DETECTION: "power_marker", C.CYCLIC_POSITION: "stream_cycles",
+           C.CYCLIC_GROUP: "stream_cycles_together"}
 
 
 def test_a_declared_capability_is_implemented(axis: Axis) -> None:

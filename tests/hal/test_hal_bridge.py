@@ -8,10 +8,11 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
+from bridge_rig import blank_pins, cycles, stopped
 from rig import wait_until_async
 
-from servobus.hal.bridge import AxisBridge, Bridge
-from servobus.hal.pins import AXIS_PINS, COMPONENT_PINS, Pins, axis_pin
+from servobus.hal.bridge import Bridge
+from servobus.hal.pins import Pins
 from servobus.machine import AsyncMachine, open_machine_async
 
 CELL = """\
@@ -41,14 +42,6 @@ hal = "position"
 """
 
 
-def blank_pins(axes: list[str]) -> Pins:
-    pins: Pins = {p.name: (0.0 if p.kind == "float" else False) for p in COMPONENT_PINS}
-    for axis in axes:
-        for p in AXIS_PINS:
-            pins[axis_pin(axis, p.name)] = {"float": 0.0, "bit": False, "s32": 0}[p.kind]
-    return pins
-
-
 @pytest.fixture
 async def machine(tmp_path: Path) -> AsyncIterator[AsyncMachine]:
     path = tmp_path / "cell.toml"
@@ -68,18 +61,6 @@ async def running(machine: AsyncMachine, pins: Pins, watchdog_s: float = 60.0,
     pins["watchdog"] = True  # fed once (LinuxCNC's threads started)
     await wait_until_async(lambda: not pins["fault"], what="fed, online, no fault")
     return bridge, task
-
-
-async def stopped(task: asyncio.Task[None]) -> None:
-    task.cancel()
-    with pytest.raises(asyncio.CancelledError):
-        await task
-
-
-async def cycles(bridge: AxisBridge, count: int) -> None:
-    """Until the axis's loop has run ``count`` more cycles (what it would do, it did)."""
-    until = bridge.cycles + count
-    await wait_until_async(lambda: bridge.cycles >= until, what=f"{count} cycles")
 
 
 async def ramp(pins: Pins, to: float, speed: float) -> None:

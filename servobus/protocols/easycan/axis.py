@@ -21,6 +21,7 @@ from typing import Any
 
 from servobus.axis.base import AsyncAxis
 from servobus.axis.capabilities import Capability
+from servobus.errors import ArgumentRangeError
 from servobus.families.yzaim.axis import YzaimAxis
 from servobus.link.stats import StreamStats
 from servobus.protocols.easycan import commands as cmds
@@ -33,7 +34,8 @@ from servobus.protocols.easycan.sync import SyncGroup
 class EasyCanAxis(YzaimAxis[AsyncEasyCanClient]):
     protocol_name = "easycan"
     reachable_params = cmds.REACHABLE_PARAMS
-    protocol_capabilities = YzaimAxis.protocol_capabilities | {Capability.CYCLIC_POSITION}
+    protocol_capabilities = YzaimAxis.protocol_capabilities | {Capability.CYCLIC_POSITION,
+                                                               Capability.CYCLIC_GROUP}
 
     def __init__(self, client: AsyncEasyCanClient, address: int, *,
                  owns_client: bool = True) -> None:
@@ -105,21 +107,37 @@ class EasyCanAxis(YzaimAxis[AsyncEasyCanClient]):
 
     async def stream_cycles(self, next_position: Callable[[], int | None]) -> StreamStats:
         """The 2 ms position cache with the sync signal (5.4c/d, SyncGroup.stream), this
-        motor alone: position mode, its cache loaded with where it stands and sync on (so
-        the first cycle moves nothing), then ``next_position()`` every cycle until None;
-        sync off again whatever ends the stream (the motor keeps the last cache it took)."""
-        await self._position_mode()
-        self._target = None
-        group = SyncGroup(self.client, [self._id])
-        await group.move({self._id: await self.position()})
-        address = self._id
+        motor alone (:meth:`stream_cycles_together`)."""
+        return await self.stream_cycles_together([(self, next_position)])
+
+    async def stream_cycles_together(
+            self, streams: Sequence[tuple[AsyncAxis, Callable[[], int | None]]],
+    ) -> StreamStats:
+        """The 2 ms position cache of every motor of ``streams`` (all on this client) with
+        one sync signal for them all (5.4c/d, SyncGroup.stream): position mode, each cache
+        loaded with where its motor stands and sync on (so the first cycle moves nothing),
+        then one cache frame per motor per cycle until a ``next_position()`` returns None;
+        sync off again whatever ends the stream (each motor keeps the last cache it took)."""
+        motors: list[tuple[EasyCanAxis, Callable[[], int | None]]] = []
+        for axis, next_position in streams:
+            if not isinstance(axis, EasyCanAxis) or axis.sync_group() is not self.sync_group():
+                raise ArgumentRangeError(f"{axis!r} does not stream together with {self!r}")
+            motors.append((axis, next_position))
+        for axis, _ in motors:
+            await axis._position_mode()
+            axis._target = None
+        group = SyncGroup(self.client, [a.drive_id for a, _ in motors])
+        await group.move({a.drive_id: await a.position() for a, _ in motors})
 
         def cycles() -> Iterator[dict[int, int]]:
             while True:
-                position = next_position()
-                if position is None:
-                    return
-                yield {address: self._check_move(position, relative=False)}
+                targets: dict[int, int] = {}
+                for axis, next_position in motors:
+                    position = next_position()
+                    if position is None:
+                        return
+                    targets[axis.drive_id] = axis._check_move(position, relative=False)
+                yield targets
 
         try:
             return await group.stream(cycles())

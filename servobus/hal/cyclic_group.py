@@ -1,0 +1,106 @@
+"""Position axes that stream as one group (docs/linuxcnc.md, "Sync groups").
+
+Axes whose drives offer ``Capability.CYCLIC_GROUP`` with one group key
+(``AsyncMachineAxis.cyclic_group``: the motors of one YZ-AIM EasyCan bus) stream their
+``position-cmd`` in one stream: each cycle one position per axis and one synchronisation
+signal for the group. Decisions:
+
+* the group starts when every position axis of it is enabled (each by its own ``enable``
+  rising edge, as LinuxCNC's joints are enabled together); until then none streams;
+* the group stops together: when one axis stops streaming (a fault, a refused step, its
+  ``enable`` falling) the stream ends for all and every axis of the group is stopped; a
+  fault of one latches the others ("stopped with its sync group"), so each needs
+  ``fault-reset`` and a new ``enable`` edge; a disabled one only ends the others' stream
+  (they need a new ``enable`` edge, they never resume by themselves);
+* an axis that enables while its group already streams without it is not streamed (it
+  was offline when the group formed): disable the group and enable it again.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from typing import TYPE_CHECKING
+
+from servobus.errors import ServobusError
+from servobus.link.stats import StreamStats
+
+if TYPE_CHECKING:
+    from servobus.hal.bridge import AxisBridge
+
+log = logging.getLogger(__name__)
+
+#: How long a stop waits for the group's stream to end (it ends at its next cycle: 2 ms).
+END_S = 1.0
+
+
+class CyclicGroup:
+    """The position axes of one group key and their one stream."""
+
+    def __init__(self, key: object) -> None:
+        self.key = key
+        self.members: list[AxisBridge] = []
+        self._joined: list[AxisBridge] = []
+        self.task: asyncio.Task[None] | None = None
+        self.stats: StreamStats | None = None  # the last stream's figures
+
+    @property
+    def names(self) -> str:
+        return ", ".join(m.axis.name for m in self.members)
+
+    def join(self, member: AxisBridge, members: list[AxisBridge]) -> bool:
+        """``member`` is enabled and ready; the stream starts once every one of
+        ``members`` (the group's position axes now) is. False: the group streams without
+        it (module docstring)."""
+        if self.task is not None:
+            return member in self.members and member in self._joined
+        self.members = members
+        if member not in self._joined:
+            self._joined.append(member)
+        if all(m in self._joined for m in self.members):
+            self.task = asyncio.create_task(self._run(), name=f"hal sync group {self.names}")
+        return True
+
+    async def leave(self, member: AxisBridge) -> None:
+        """``member`` stopped streaming: the group's stream ends (at its next cycle)."""
+        if member in self._joined:
+            self._joined.remove(member)
+        task = self.task
+        if task is not None and task is not asyncio.current_task():
+            try:
+                await asyncio.wait_for(asyncio.shield(task), END_S)
+            except TimeoutError:
+                log.warning("sync group %s: the stream did not end within %g s: cancelled",
+                            self.names, END_S)
+                task.cancel()
+
+    async def _run(self) -> None:
+        members = list(self.members)
+        log.info("sync group %s: streaming position-cmd every cycle, one sync signal",
+                 self.names)
+        lead = members[0]
+        try:
+            self.stats = await lead.axis.stream_cycles_together(
+                [(m.axis, m.next_cyclic) for m in members])
+        except ServobusError as exc:
+            for m in members:
+                m.latch(f"the sync group's cyclic stream failed: {exc}")
+        finally:
+            self.task = None
+            self._joined.clear()
+        for m in members:
+            m.cyclic_stats = self.stats
+        cause = next((m for m in members if m.fault), None)
+        for m in members:
+            if m.streaming and cause is not None and not m.fault:
+                m.latch(f"stopped with its sync group (axis {cause.axis.name}: "
+                        f"{cause.latched or 'fault'})")
+            m.streaming = False
+        log.info("sync group %s: stopped", self.names)
+        await asyncio.gather(*(_stop(m) for m in members))
+
+
+async def _stop(member: AxisBridge) -> None:
+    with contextlib.suppress(ServobusError):
+        await member.axis.stop()
