@@ -17,6 +17,7 @@ import io
 import math
 import statistics
 import time
+from array import array
 from collections import deque
 from collections.abc import Awaitable, Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
@@ -269,7 +270,9 @@ class ScopeSession:
         for ch in s.channels:
             values = per_axis[ch.axis][ch.signal]
             factor = self.scale(ch)[1]
-            out.append(values if factor == 1.0 else [v * factor for v in values])
+            # into the frame's float32 array at once (map over a bound method: C speed;
+            # 8 channels x 2,000 points x 40 frames/s is 640,000 products a second)
+            out.append(values if factor == 1.0 else array("f", map(factor.__mul__, values)))
         return out
 
     def _roll_frame(self, now: float, *, free_run: bool) -> frames.ScopeFrame | None:
