@@ -9,9 +9,11 @@ Procedure (docs/tuning.md, "The tuner"):
    :func:`candidates` with a test move each, until the move vibrates or rings
    (:data:`DETECT`); back off: only values within :data:`MARGIN` of the first vibrating
    one count; keep the one of those that settles fastest within :data:`MAX_OVERSHOOT_PCT`;
-3. fine tuning (5.2: "make the motor harder ... or softer"): each gain in turn one
-   :data:`RAISE` step up, then down, kept while the move gets better (calm, within the
-   overshoot, faster to settle), never past the back-off from a vibration found in step 2;
+3. fine tuning (5.2: "make the motor harder ... or softer"), on a drive trace only: each
+   gain in turn one :data:`FINE` step harder, else softer, kept while the move gets better
+   (within the overshoot, faster to settle) and stays below the onset of vibration; half
+   steps, then quarter steps. Its margin is that step, not :data:`MARGIN`: a kept value
+   may lie one half step below one that vibrated at other gains;
 4. a last test move at the tuned gains (the *after* figures).
 
 Safety: the first move beyond the :class:`Limits` (soft limits, the distance the user gave)
@@ -364,8 +366,7 @@ class Tuner:
         return trial
 
     def _step(self, gain: TuningGain, harder: bool, factor: float) -> int | None:
-        """One :data:`RAISE` step of ``gain`` harder or softer; None at the range's end or
-        past the back-off from the vibration limit found for it."""
+        """``gain`` one step of ``factor`` harder or softer; None at the range's end."""
         info = self.plant.param_info(gain.name)
         start = self.written[gain.name]
         up = harder != gain.inverse  # a larger register value
