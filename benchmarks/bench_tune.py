@@ -25,8 +25,8 @@ LOADS = ("screw", "direct", "belt")
 INERTIAS = (0, 3, 10, 30)
 FAMILIES = ("dmm", "yzaim")
 GRIDS: dict[str, dict[str, tuple[int, ...]]] = {
-    "dmm": {"main_gain": (10, 20, 40, 80), "speed_gain": (40, 80, 127),
-            "int_gain": (5, 20), "trq_cons": (127,)},
+    "dmm": {"main_gain": (2, 5, 10, 20, 40, 80), "speed_gain": (40, 80, 100, 127),
+            "int_gain": (1, 5, 20), "trq_cons": (127,)},
     "yzaim": {"position_loop_kp": (300, 750, 1500, 3000), "speed_loop_kp": (1000, 3000, 8000),
               "speed_loop_integration_time": (20, 100)},
 }
