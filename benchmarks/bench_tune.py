@@ -5,7 +5,7 @@ For DMM (DYN2-TL) and YZ-AIM virtual drives, each load preset at inertia ratios 
 a quarter-turn test distance; a grid of hand-picked gains (:data:`GRIDS`) is stepped the
 same way and its best case kept (calm, overshoot <= 10 %, fastest to settle). A case meets
 the target when the tuned gains end calm, with overshoot <= 10 % and settling no slower
-than 1.25 x the grid's best. Run: ``python -m benchmarks tune`` (about 2 min on 2 cores).
+than 1.25 x the grid's best. Run: ``python -m benchmarks tune`` (about 2.5 min on 2 cores).
 """
 
 from __future__ import annotations
