@@ -5,7 +5,7 @@ For DMM (DYN2-TL) and YZ-AIM virtual drives, each load preset at inertia ratios 
 a quarter-turn test distance; a grid of hand-picked gains (:data:`GRIDS`) is stepped the
 same way and its best case kept (calm, overshoot <= 10 %, fastest to settle). A case meets
 the target when the tuned gains end calm, with overshoot <= 10 % and settling no slower
-than 1.25 x the grid's best. Run: ``python -m benchmarks tune`` (about 2 min on 2 cores).
+than 1.25 x the grid's best. Run: ``python -m benchmarks tune`` (about 2.5 min on 2 cores).
 """
 
 from __future__ import annotations
@@ -25,8 +25,8 @@ LOADS = ("screw", "direct", "belt")
 INERTIAS = (0, 3, 10, 30)
 FAMILIES = ("dmm", "yzaim")
 GRIDS: dict[str, dict[str, tuple[int, ...]]] = {
-    "dmm": {"main_gain": (10, 20, 40, 80), "speed_gain": (40, 80, 127),
-            "int_gain": (5, 20), "trq_cons": (127,)},
+    "dmm": {"main_gain": (2, 5, 10, 20, 40, 80), "speed_gain": (40, 80, 100, 127),
+            "int_gain": (1, 5, 20), "trq_cons": (127,)},
     "yzaim": {"position_loop_kp": (300, 750, 1500, 3000), "speed_loop_kp": (1000, 3000, 8000),
               "speed_loop_integration_time": (20, 100)},
 }

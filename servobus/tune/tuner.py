@@ -9,7 +9,12 @@ Procedure (docs/tuning.md, "The tuner"):
    :func:`candidates` with a test move each, until the move vibrates or rings
    (:data:`DETECT`); back off: only values within :data:`MARGIN` of the first vibrating
    one count; keep the one of those that settles fastest within :data:`MAX_OVERSHOOT_PCT`;
-3. a last test move at the tuned gains (the *after* figures).
+3. fine tuning (5.2: "make the motor harder ... or softer"), on a drive trace only: each
+   gain in turn one :data:`FINE` step harder, else softer, kept while the move gets better
+   (within the overshoot, faster to settle) and stays below the onset of vibration; half
+   steps, then quarter steps. Its margin is that step, not :data:`MARGIN`: a kept value
+   may lie one half step below one that vibrated at other gains;
+4. a last test move at the tuned gains (the *after* figures).
 
 Safety: the first move beyond the :class:`Limits` (soft limits, the distance the user gave)
 is refused before anything moves; an alarm, a vibration beyond ``vibration_limit``, a
@@ -41,6 +46,9 @@ MARGIN = 0.7
 MAX_OVERSHOOT_PCT = 10.0
 #: Each step up multiplies a gain by this much (fewer steps: fewer EEPROM writes).
 RAISE = 1.4
+#: Fine tuning's steps: half the search's (in dB), between the values the search tried,
+#: then a quarter.
+FINE = (math.sqrt(RAISE), math.sqrt(math.sqrt(RAISE)))
 #: DMM: the EEPROM guard warns past 10 writes of one parameter a minute and refuses past 30
 #: (servobus.link.eeprom_guard); 10 a gain, the revert included, keeps a run under both and
 #: 40 a run is 25,000 runs from the drive's million-cycle life.
@@ -49,6 +57,9 @@ EEPROM_WRITE_BUDGET = 40
 RECORD_S = 0.6
 #: How long the motor may take to come to rest before a test move (it starts anyway).
 SETTLE_TIMEOUT_S = 0.5
+#: ... and before the verify move (the *after* figures), which should not inherit the ringing
+#: of the search's last move.
+VERIFY_SETTLE_S = 2.0
 #: Steps a gain is lowered by at most while the kept gains vibrate (the calm phase) and
 #: while the best raised value still overshoots (the search's way down).
 CALM_STEPS = 4
@@ -209,10 +220,7 @@ class Tuner:
         """Write ``name`` if it changes; False when the write budget is spent (not written)."""
         if self.written.get(name) == value:
             return True
-        reserve = sum(1 for g, v in self.original.items() if self.written.get(g) != v)
-        if self.budget is not None and (
-                self.writes + 1 + reserve > self.budget
-                or self.per_gain.get(name, 0) + 2 > EEPROM_WRITES_PER_GAIN):  # + the revert
+        if not self._can_write(name, 1):
             return False
         self.plant.param_info(name).check(value)
         await self.plant.write_gain(name, value)
@@ -220,6 +228,13 @@ class Tuner:
         self.writes += 1
         self.per_gain[name] = self.per_gain.get(name, 0) + 1
         return True
+
+    def _can_write(self, name: str, count: int) -> bool:
+        """Whether ``count`` more writes of ``name`` fit the write budget, the revert kept."""
+        reserve = sum(1 for g, v in self.original.items() if self.written.get(g) != v)
+        return self.budget is None or (
+            self.writes + count + reserve <= self.budget
+            and self.per_gain.get(name, 0) + count + 1 <= EEPROM_WRITES_PER_GAIN)
 
     async def revert(self) -> None:
         """The kept gains back, each only where it changed."""
@@ -279,6 +294,10 @@ class Tuner:
                 gain = plant.profile.gain(role)
                 if gain is not None:
                     best = await self._search(gain, best, found)
+            if plant.source == "trace":  # polls time a step too coarsely for half steps
+                best = await self._refine(best)
+            # the verify starts at rest, not in the wake of the search's last vibrating move
+            await plant.settle(VERIFY_SETTLE_S)
             after, _ = await self._trial()
             if after.vibrates:  # the verify shakes where the search did not: one step down
                 for role in (GainRole.INTEGRAL, GainRole.POSITION):
@@ -345,6 +364,46 @@ class Tuner:
                 break
             trial, _ = await self._trial()
         return trial
+
+    def _step(self, gain: TuningGain, harder: bool, factor: float) -> int | None:
+        """``gain`` one step of ``factor`` harder or softer; None at the range's end."""
+        info = self.plant.param_info(gain.name)
+        start = self.written[gain.name]
+        up = harder != gain.inverse  # a larger register value
+        value = round(start * factor if up else start / factor)
+        value = max(info.minimum, min(info.maximum, value))
+        if gain.keep_units_digit:
+            value = keep_units(value, start, info.minimum, info.maximum)
+        return None if value == start else value
+
+    async def _refine(self, best: Trial) -> Trial:
+        """Fine tuning (module doc, 3): a step each way per gain, kept while it helps."""
+        for factor in FINE:
+            best = await self._refine_by(best, factor)
+        return best
+
+    async def _refine_by(self, best: Trial, factor: float) -> Trial:
+        for role in ORDER:
+            gain = self.plant.profile.gain(role)
+            if gain is None:
+                continue
+            for harder in (True, False):
+                moved = False
+                for _ in range(CALM_STEPS):
+                    kept = self.written[gain.name]
+                    value = self._step(gain, harder, factor)
+                    # a step and, should it not help, the step back: both or neither
+                    if value is None or not self._can_write(gain.name, 2):
+                        break
+                    await self._write(gain.name, value)
+                    trial, _ = await self._trial()
+                    if trial.vibration >= ONSET or trial.score() >= best.score():
+                        await self._write(gain.name, kept)
+                        break
+                    best, moved = trial, True
+                if moved:
+                    break  # improved this way: the other way undoes it
+        return best
 
     async def _search(self, gain: TuningGain, best: Trial, found: dict[str, int]) -> Trial:
         """Raise ``gain`` until a move vibrates, back off, keep the best (module doc)."""

@@ -205,7 +205,7 @@ def belt_steps() -> dict[int, StepTrace]:
 
 
 def test_9_a_compliant_load_shows_its_resonance_and_the_load_overshoots_more() -> None:
-    # Measured at Main Gain 40: motor overshoot 3.7 %, load 11.1 %; the twist of the belt
+    # Measured at Main Gain 40: motor overshoot 3.2 %, load 10.3 %; the twist of the belt
     # rings at 15 Hz, near the antiresonance (60 Hz / sqrt(1 + 10) = 18 Hz).
     tr = belt_steps()[40]
     motor_m, load_m = metrics(tr, QUARTER_REV), metrics(tr, QUARTER_REV, load=True)
@@ -222,7 +222,7 @@ def test_9_a_compliant_load_shows_its_resonance_and_the_load_overshoots_more() -
 def test_10_the_step_test_shows_the_main_gain_on_a_belt() -> None:
     # The GUI step test's figures (servobus.axis.step_metrics) of the drive's own move.
     # Measured Main Gain 10 / 40 / 80: motor overshoot 9.0 / 3.7 / 1.5 %, largest following
-    # error 1482 / 972 / 563 counts, load overshoot 14.6 / 11.1 / 6.8 % (docs/tuning.md).
+    # error 1320 / 900 / 525 counts, load overshoot 13.4 / 10.3 / 6.3 % (docs/tuning.md).
     runs = [belt_steps()[g] for g in (10, 40, 80)]
     motor_m = [metrics(tr, QUARTER_REV) for tr in runs]
     load_m = [metrics(tr, QUARTER_REV, load=True) for tr in runs]
@@ -256,8 +256,9 @@ def test_12_the_adaptive_inertia_estimate_converges_within_its_bounds() -> None:
         return d.mechanics()["inertia_estimate"]
 
     assert learnt(2.0) == pytest.approx(2.0, rel=0.03)
-    heavy = learnt(10.0)  # measured 2.97: at its bound of 3, not the true 10
-    assert K.ADAPT_MAX_RATIO - 1.1 < heavy <= K.ADAPT_MAX_RATIO - 1.0
+    # the benchmark's heaviest load is learnt past the old bound of 4 x rotor, more slowly
+    heavy = learnt(30.0)  # measured 10.97 after ten moves
+    assert 9.0 < heavy <= 30.0 < K.ADAPT_MAX_RATIO - 1.0
 
 
 def test_13_identical_inputs_give_bit_identical_traces() -> None:
