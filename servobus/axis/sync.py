@@ -275,6 +275,13 @@ class Axis:
         it returns None (:meth:`AsyncAxis.stream_cycles`)."""
         return self._call(self._core.stream_cycles, next_position)
 
+    def stream_cycles_together(
+            self, streams: Sequence[tuple[Axis, Callable[[], int | None]]]) -> StreamStats:
+        """Cyclic synchronous position of several axes of this axis's sync group as one
+        stream (:meth:`AsyncAxis.stream_cycles_together`)."""
+        return self._call(self._core.stream_cycles_together,
+                          [(axis.core, next_position) for axis, next_position in streams])
+
     def turn(self, rpm: int) -> None:
         """Constant speed in rpm (0 ramps down and holds)."""
         return self._call(self._core.turn, rpm)

@@ -21,13 +21,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Protocol
 
 from servobus.errors import ServobusError
 from servobus.link.stats import StreamStats
 
 if TYPE_CHECKING:
-    from servobus.hal.bridge import AxisBridge
+    from servobus.machine.axis import AsyncMachineAxis
 
 log = logging.getLogger(__name__)
 
@@ -35,13 +36,30 @@ log = logging.getLogger(__name__)
 END_S = 1.0
 
 
+class Member(Protocol):
+    """What a group needs of one of its axes (servobus.hal.bridge.AxisBridge; a protocol
+    here, so that the bridge imports the group and not the other way round)."""
+
+    axis: AsyncMachineAxis
+    latched: str | None
+    streaming: bool
+    cyclic_stats: StreamStats | None
+
+    @property
+    def fault(self) -> bool: ...
+
+    def latch(self, why: str) -> None: ...
+
+    def next_cyclic(self) -> float | None: ...
+
+
 class CyclicGroup:
     """The position axes of one group key and their one stream."""
 
     def __init__(self, key: object) -> None:
         self.key = key
-        self.members: list[AxisBridge] = []
-        self._joined: list[AxisBridge] = []
+        self.members: list[Member] = []
+        self._joined: list[Member] = []
         self.task: asyncio.Task[None] | None = None
         self.stats: StreamStats | None = None  # the last stream's figures
 
@@ -49,20 +67,20 @@ class CyclicGroup:
     def names(self) -> str:
         return ", ".join(m.axis.name for m in self.members)
 
-    def join(self, member: AxisBridge, members: list[AxisBridge]) -> bool:
+    def join(self, member: Member, members: Sequence[Member]) -> bool:
         """``member`` is enabled and ready; the stream starts once every one of
         ``members`` (the group's position axes now) is. False: the group streams without
         it (module docstring)."""
         if self.task is not None:
             return member in self.members and member in self._joined
-        self.members = members
+        self.members = list(members)
         if member not in self._joined:
             self._joined.append(member)
         if all(m in self._joined for m in self.members):
             self.task = asyncio.create_task(self._run(), name=f"hal sync group {self.names}")
         return True
 
-    async def leave(self, member: AxisBridge) -> None:
+    async def leave(self, member: Member) -> None:
         """``member`` stopped streaming: the group's stream ends (at its next cycle)."""
         if member in self._joined:
             self._joined.remove(member)
@@ -101,6 +119,6 @@ class CyclicGroup:
         await asyncio.gather(*(_stop(m) for m in members))
 
 
-async def _stop(member: AxisBridge) -> None:
+async def _stop(member: Member) -> None:
     with contextlib.suppress(ServobusError):
         await member.axis.stop()
