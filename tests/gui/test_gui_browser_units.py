@@ -13,6 +13,7 @@ missing.
 from __future__ import annotations
 
 import asyncio
+import math
 import re
 import threading
 from collections.abc import Callable, Iterator
@@ -188,12 +189,26 @@ def test_a_mm_axis_speaks_mm_and_fits_every_width(page: WebDriver, gui: Gui) -> 
     assert caught[0] == 1 and caught[1] < -5 < caught[2], caught  # in mm, through -5
     # a move from the Scope tab itself, in x's unit
     assert text(page, "#scope-move-unit") == "mm"
+    # from where x rests: the jog stopped at the soft limit where its lead ran out (near
+    # -10 mm, not exactly), and the +10 mm above was relative to that
+    def x_mm() -> float:
+        return float(text(page, '.axis-card[data-axis="1"] [data-v=position]').split()[0])
+
+    last = [math.nan]
+
+    def at_rest() -> bool:  # the same reading on two polls half a second apart
+        now = x_mm()
+        same, last[0] = now == last[0], now
+        return same
+
+    rig.wait_until(at_rest, timeout=WAIT, poll=0.5, what="x at rest after its move")
+    start = x_mm()
     page.find_element(By.ID, "scope-move-minus").click()
     wait_until(lambda: "move by -1 mm: sent to x" in text(page, "#scope-msg"),
                what="the move from the Scope tab")
     # auto (the default mode): the capture caught on another tab is held on return, paused
-    wait_until(lambda: abs(float(text(page, '.axis-card[data-axis="1"] [data-v=position]')
-                                 .split()[0]) + 1) < 0.01, timeout=WAIT, what="x at -1 mm")
+    wait_until(lambda: abs(x_mm() - (start - 1)) < 0.01, timeout=WAIT,
+               what="x 1 mm below where it rested")
     js(page, """document.querySelector('#trig-mode').value = 'auto';
                 document.querySelector('#trig-level').value = '-0.5';
                 window.servobus.scope.configure();""")
