@@ -39,9 +39,15 @@ def sim_options(*, parse_ids: Callable[[str], Any], ids_default: str | None, ids
     )
 
 
+#: ``--plant``: ``physics`` (the default: the servo loop, the motor and its load) or
+#: ``ideal`` (the shaft follows the reference, no current, no alarms from the loop; a turning
+#: drive costs next to nothing: servobus.sim.core.engine, docs/simulator.md "Plant").
+PLANTS = ("physics", "ideal")
+
 #: ``--load``, ``--inertia``, ``--resonance``, ``--load-torque``: the load every motor of the
 #: server drives (servobus.sim.core.loads, docs/tuning.md); received as ``load``,
-#: ``inertia``, ``resonance``, ``load_torque`` (None when not given), for :func:`apply_load`.
+#: ``inertia``, ``resonance``, ``load_torque`` (None when not given), for :func:`apply_load`;
+#: and ``--plant``, received as ``plant``.
 LOAD_OPTIONS = (
     Option("--load", "load", "sample load: " + ", ".join(
         f"{k} ({p.doc})" for k, p in loads.PRESETS.items()), choices=tuple(loads.PRESETS)),
@@ -54,25 +60,39 @@ LOAD_OPTIONS = (
     Option("--load-torque", "load_torque", "torque on the load side, N m, against +",
            type=float, minimum=loads.RANGES["load_torque"][0],
            maximum=loads.RANGES["load_torque"][1], metavar="NM"),
+    Option("--plant", "plant", "physics: the servo loop, motor and load; ideal: the shaft "
+           "follows the reference exactly (no current, no loop alarms, no load; a turning "
+           "drive costs next to nothing: for many drives behind a gateway or a benchmark)",
+           choices=PLANTS, default="physics", show_default=True),
 )
 
 
 def apply_load(motors: Iterable[object], *, load: str | None, inertia: float | None,
-               resonance: float | None, load_torque: float | None) -> None:
+               resonance: float | None, load_torque: float | None,
+               plant: str = "physics") -> None:
     """Set the :data:`LOAD_OPTIONS` given on every motor (a core or a front with ``drive``);
-    ArgumentRangeError for a bad combination."""
+    ArgumentRangeError for a bad combination (a load on the ideal plant, which has none)."""
     options = {"load": load, "inertia": inertia, "resonance": resonance,
                "load_torque": load_torque}
+    if plant not in PLANTS:
+        raise ArgumentRangeError(f"--plant {plant}: give one of {', '.join(PLANTS)}")
     try:
         settings = loads.load_settings(options)
     except ServobusError as exc:
         raise ArgumentRangeError(str(exc)) from None
-    if settings.empty:
+    ideal = plant == "ideal"
+    if ideal and not settings.empty:
+        raise ArgumentRangeError("--plant ideal has no mechanics: leave out --load, "
+                                 "--inertia, --resonance and --load-torque")
+    if settings.empty and not ideal:
         return
     for motor in motors:
         shaft = motor if isinstance(motor, EngineShaft) else getattr(motor, "drive", None)
         if isinstance(shaft, EngineShaft):
-            shaft.set_mechanics(settings)
+            if ideal:
+                shaft.set_ideal(True)
+            else:
+                shaft.set_mechanics(settings)
 
 
 def listen_option(flag: str, dest: str, help: str) -> Option:

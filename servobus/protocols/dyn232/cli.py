@@ -39,12 +39,12 @@ def run_sim(io: CommandIO, *, listen: tuple[str, int] | None, pty: bool,
             state: str | None, model: str, duration: float | None, max_clients: int,
             control: tuple[str, int] | None,
             load: str | None, inertia: float | None, resonance: float | None,
-            load_torque: float | None) -> None:
+            load_torque: float | None, plant: str) -> None:
     """Virtual DYN2/DC2 drives sharing one RS485 line (DYN232M protocol)."""
     log_to_stderr()
     drives = make_drives(ids if ids is not None else (FACTORY_ID,), state=state, model=model)
     apply_load(drives, load=load, inertia=inertia, resonance=resonance,
-               load_torque=load_torque)
+               load_torque=load_torque, plant=plant)
     banner = sim_banner("dyn232", len(drives), "drive", model, "ids",
                         (d.drive_id for d in drives), fast, "paced at 38400 8N1")
 

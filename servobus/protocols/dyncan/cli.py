@@ -73,13 +73,13 @@ def run_sim(io: CommandIO, *, address: tuple[str, int], bitrate: int, ids: tuple
             fast: bool, state: str | None, model: str, duration: float | None,
             max_clients: int, control: tuple[str, int] | None,
             load: str | None, inertia: float | None, resonance: float | None,
-            load_torque: float | None) -> None:
+            load_torque: float | None, plant: str) -> None:
     """Virtual DYN2/DYN4 drives on one CAN bus (DYN CAN protocol, socketcand rawmode)."""
     log_to_stderr()
     host, port = address
     drives = make_drives(ids, state=state, model=model)
     apply_load(drives, load=load, inertia=inertia, resonance=resonance,
-               load_torque=load_torque)
+               load_torque=load_torque, plant=plant)
     banner = sim_banner("dyncan", len(drives), "drive", model, "ids",
                         (d.drive_id for d in drives), fast,
                         f"{bitrate / 1e6:g} Mbit/s timing model")

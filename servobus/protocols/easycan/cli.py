@@ -64,13 +64,13 @@ async def run_socketcand_motors(motors: Sequence[YzaimMotor], host: str, port: i
 def run_sim(io: CommandIO, *, address: tuple[str, int], ids: tuple[int, ...], fast: bool,
             state: str | None, model: str, duration: float | None, max_clients: int,
             control: tuple[str, int] | None, load: str | None, inertia: float | None,
-            resonance: float | None, load_torque: float | None) -> None:
+            resonance: float | None, load_torque: float | None, plant: str) -> None:
     """Virtual YZ-AIM motors on one CAN bus (EasyCan protocol, socketcand rawmode)."""
     log_to_stderr()
     host, port = address
     motors = make_motors(ids, state=state, model=model)
     apply_load(motors, load=load, inertia=inertia, resonance=resonance,
-               load_torque=load_torque)
+               load_torque=load_torque, plant=plant)
     banner = sim_banner("easycan", len(motors), "motor", model, "addresses",
                         (m.address for m in motors), fast, "1 Mbit/s timing model")
     network = asyncio.run(run_socketcand_motors(

@@ -92,12 +92,12 @@ def checked_hosts(text: str) -> str:
 def run_sim(io: CommandIO, *, hosts: str, tcp_port: int, udp_port: int, state: str | None,
             model: str, reset_downtime: float, duration: float | None, realtime: bool,
             control: tuple[str, int] | None, load: str | None, inertia: float | None,
-            resonance: float | None, load_torque: float | None) -> None:
+            resonance: float | None, load_torque: float | None, plant: str) -> None:
     """Virtual DYN5 drives on EtherNet/IP (explicit messaging, ListIdentity, Class 1 I/O)."""
     from servobus.protocols.enip.server import parse_hosts
 
     load_options: dict[str, Any] = {"load": load, "inertia": inertia, "resonance": resonance,
-                                    "load_torque": load_torque}
+                                    "load_torque": load_torque, "plant": plant}
     apply_load([], **load_options)  # a bad load is a usage error before anything listens
     host_list = parse_hosts(hosts)
     io.echo(f"servobus sim enip: {len(host_list)} virtual DYN5 ({model}) on "

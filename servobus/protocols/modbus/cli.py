@@ -41,12 +41,12 @@ def run_sim(io: CommandIO, *, listen: tuple[str, int] | None, pty: bool,
             tap: tuple[str, int] | None, baud: int, ids: tuple[int, ...], fast: bool,
             state: str | None, model: str, duration: float | None, max_clients: int,
             control: tuple[str, int] | None, load: str | None, inertia: float | None,
-            resonance: float | None, load_torque: float | None) -> None:
+            resonance: float | None, load_torque: float | None, plant: str) -> None:
     """Virtual YZ-AIM motors sharing one Modbus RTU line (RS-485 multi-drop)."""
     log_to_stderr()
     motors = make_motors(ids, state=state, model=model)
     apply_load(motors, load=load, inertia=inertia, resonance=resonance,
-               load_torque=load_torque)
+               load_torque=load_torque, plant=plant)
     banner = sim_banner("modbus", len(motors), "motor", model, "addresses",
                         (m.address for m in motors), fast, f"paced at {baud} 8N1")
 

@@ -30,6 +30,12 @@ Per control period, in position servo mode (docs/tuning.md has the model and its
 
 A drive at rest with nothing to do reaches an exact equilibrium; ``settled`` then lets time
 pass in O(1) until any input changes (every mutator calls :meth:`wake`).
+
+The ideal plant (:meth:`set_ideal`, ``servobus sim ... --plant ideal``) leaves out steps 1,
+4 and 5 in position servo: the shaft is wherever the reference is, at the reference's speed,
+with no current, and no alarm can trip. A reference at a constant speed (a ``run_speed``
+cruising, its smoothing filter full) then advances in O(1) per call as a drive at rest does,
+so a drive that turns costs no more than one that stands (docs/simulator.md "Plant").
 """
 
 from __future__ import annotations
@@ -96,6 +102,8 @@ class ServoEngine:
         self.accel_ff = True
         self.j_hat = model.rotor_inertia_kgm2  # the drive's inertia estimate (Adaptive Tuning)
         self.blocked = False
+        #: The ideal plant (set_ideal): no mechanics, loop or alarms in position servo.
+        self.ideal = False
         self.bus_voltage = K.DEFAULT_BUS_VOLTAGE
         self.heat = 0.0  # filtered I^2, A^2 (thermal state persists like a warm motor)
         self.steps = 0
@@ -157,6 +165,15 @@ class ServoEngine:
 
     def wake(self) -> None:
         self.settled = False
+
+    def set_ideal(self, ideal: bool) -> None:
+        """The ideal plant on or off (see the module docstring): the shaft stops where it
+        is, with no torque."""
+        self.ideal = bool(ideal)
+        self._clear_torque()
+        self.w = self.wl = self.w_est = 0.0
+        self.pl = self.p
+        self.wake()
 
     def encoder_counts(self) -> float:
         """The encoder's reading in engine counts: the shaft quantised to the family's counts."""
@@ -467,6 +484,8 @@ class ServoEngine:
             return n
         s = self.servo
         if s == Servo.POSITION:
+            if self.ideal and self._cruise(n):
+                return n
             done = self._run_position(n)
         elif s == Servo.FREE:
             done = self._run_free(n)
@@ -480,6 +499,30 @@ class ServoEngine:
         i2 = self.current_a ** 2
         self.heat = i2 + (self.heat - i2) * math.exp(-n * self.heat_beta)
         self.steps += n
+
+    def _cruise(self, n: int) -> bool:
+        """Ideal plant, the generator cruising at a constant speed with no path and its
+        smoothing filter full of that speed: ``n`` periods at once, as the loop would run them
+        (up to rounding); False, with nothing changed, in any other state."""
+        if (self.ref_mode != Ref.GEN or self.gen != Gen.VEL or self.gv != self.gvc
+                or self.path is not None or self.bl_x < 1.0):
+            return False
+        d = self.gv * self.h
+        if any(b != d for b in self.buf):
+            return False
+        step = self.dsum / self.n_smooth
+        self.gp += n * d
+        self.sref += n * step
+        self.ref = self.p = self.pl = self.sref
+        self.ref_prev = self.ref - step
+        self.w = self.wl = self.vff = step / self.h
+        self.w_est = self.w
+        self.enc_prev = self.encoder_counts()
+        self.bidx = (self.bidx + n) % self.n_smooth
+        self.idle_steps = 0
+        self.heat *= math.exp(-n * self.heat_beta)
+        self.steps += n
+        return True
 
     def _settle_check(self) -> bool:
         return (self.current_a ** 2 < self.heat_trip and self.lp_t == 0.0
@@ -540,6 +583,7 @@ class ServoEngine:
                                             self.wave_center)
         ext_step, ext_left = self.ext_step, self.ext_left
         busy = self.busy
+        ideal = self.ideal
         trip = AlarmCode.NONE
         eps_t = K.SETTLED_TORQUE_NM
         settled = False
@@ -548,7 +592,9 @@ class ServoEngine:
         while k < n:
             k += 1
             # ---- mechanics over the last period, under the torque then applied
-            if blocked:
+            if ideal:
+                pass  # the ideal plant: the shaft follows the reference (after it, below)
+            elif blocked:
                 w = wl = 0.0
             elif rigid:
                 net = tq + dist
@@ -672,6 +718,14 @@ class ServoEngine:
             elif mode == 4 and ext_left > 0:  # EXT pulses
                 ref += ext_step
                 ext_left -= 1
+            if ideal:  # the shaft is at the reference: no loop, no current, no alarm
+                w = vff = (ref - p) * inv_h
+                p = ref
+                heat -= heat * beta
+                if w == 0.0 and (mode == 0 or (mode == 4 and ext_left == 0)):
+                    settled = True
+                    break
+                continue
             # ---- servo loop: position P -> speed PI -> clamp -> delay -> filter -> current
             e = ref - p
             eq = ((e * inv_q + 0.5) // 1.0) * q  # the error in encoder counts
@@ -737,7 +791,7 @@ class ServoEngine:
                     break
         tq_c = tc
         self.p, self.w, self.ref, self.ref_prev = p, w, ref, ref_prev if k else self.ref_prev
-        self.pl, self.wl = (p, w) if rigid else (pl, wl)
+        self.pl, self.wl = (p, w) if rigid or ideal else (pl, wl)
         self.integ, self.tq, self.tq_cmd, self.heat = integ, tq, tq_c, heat
         self.tq_filt, self.tq_d1, self.tq_d2 = tf, d1, d2
         self.enc_prev, self.w_est, self.j_hat = enc_prev, w_est, jh

@@ -85,6 +85,11 @@ class EngineShaft:
             self._engine.w = 0.0
         self._engine.wake()
 
+    def set_ideal(self, ideal: bool) -> None:
+        """The ideal plant (``--plant ideal``, servobus.sim.core.engine): in position servo
+        the shaft follows the reference exactly, with no current and no loop alarms."""
+        self._engine.set_ideal(ideal)
+
     def world(self) -> dict[str, float | bool]:
         """The world around the shaft as set by set_load, set_disturbance and set_blocked
         (the control channel's state readout)."""
