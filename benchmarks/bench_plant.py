@@ -3,16 +3,35 @@ plant of gateways with (issue 36, item 6).
 
 One gateway (servobus.gateway.serve.Gateway, as ``servobus serve --mqtt ... --sparkplug
 plant`` runs it) in this process, with its machine of N virtual axes on N/8 fast links
-(``servobus sim ... --fast`` servers in their own processes, 8 drives each, as in
-bench_gateway). Every axis turns at constant speed, so each of its values changes at every
+(``servobus sim ... --fast --plant ideal`` servers in their own processes, 8 drives each, as
+in bench_gateway). Every axis turns at constant speed, so each of its values changes at every
 sample: the most a gateway has to send. Sampling 50 Hz; an observer in another process
 subscribes with asyncua to every ActualPosition (publishing interval 20 ms) and with aiomqtt
 to the Sparkplug topics; MQTT JSON state and Sparkplug DDATA at ``--mqtt-rate`` (default
 here 5 Hz, the gateway's default; ``python -m benchmarks plant --mqtt-rate 50`` for the
-worst case). For N = 16, 32, 48 the CPU of this process (the gateway and its links'
-clients) over 8 s, % of one core; the axes per half core is where the straight line through
-those points crosses 50 % (the measured points are printed beside it, with the sampling
-rate each run reached: a run whose links fall below 45 Hz does not count).
+worst case). For N = 16, 32, 48 (``--axes``), over 8 s: the CPU of this process (the
+gateway and its links' clients, % of one core), the axis samples it took (counted by a
+sampler listener), the rate its slowest link reached, and the CPU of the drives' processes
+and of the observer; the load average before and after.
+
+The figure (decision): the straight line through (axis samples per second, CPU %) of the
+runs whose every link reached 45 Hz: its intercept is what the gateway spends whatever the
+rate (the OPC UA server's and MQTT clients' own upkeep), its slope what one axis sample costs,
+and the axes per half core is where it reaches 50 % at 50 samples per axis per second (with
+every link at 50 Hz, the line through (axes, CPU %)). Slower runs are printed, with their CPU
+per sample, but give no figure: on a machine too loaded for the links to keep 50 Hz the
+gateway's CPU per sample was 950 - 3,500 us (load averages 17 - 22 on 2 cores), against
+some 290 us where 32 axes kept 50 Hz (46 % of a core in bench_gateway): fewer samples per
+wake-up, caches shared with the load. A figure from such runs would plan a plant wrong.
+``--axes 16,32`` chooses the runs, ``--profile FILE`` profiles the gateway's process over the
+measured seconds (cProfile; ``python -m pstats FILE``).
+
+Why the ideal plant (decision): with their physics (4 kHz per drive, docs/virtual-drive.md)
+48 turning drives cost about a core of their own, and on a 2-core machine they starved the
+gateway: with 16 axes it sampled at 21.8 Hz and no run reached the old 45 Hz floor. ``--plant
+ideal`` drives answer the same protocol with the same readings (a turning shaft, exactly its
+reference) at next to no CPU, so the machine's cores are left to the gateway being measured.
+The drives' and the observer's CPU are printed so that a reader sees what else ran.
 """
 
 from __future__ import annotations
@@ -20,7 +39,10 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import cProfile
+import math
 import multiprocessing
+import os
 import subprocess
 import sys
 import tempfile
@@ -29,6 +51,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from benchmarks.bench_dyn232_line import cpu_seconds
 from benchmarks.bench_gateway import broker
 
 RATE_HZ = 50.0
@@ -44,13 +67,14 @@ HALF_CORE = 50.0
 
 
 @contextlib.contextmanager
-def drive_servers(links: int) -> Iterator[list[str]]:
+def drive_servers(links: int) -> Iterator[tuple[list[str], list[int]]]:
+    """``links`` drive servers of :data:`PER_LINK` ideal-plant drives: (URLs, pids)."""
     procs, urls = [], []
     try:
         for i in range(links):
             protocol, scheme, _, _ = LINKS[i % len(LINKS)]
-            args = [sys.executable, "-m", "servobus", "sim", protocol, "--fast", "--ids",
-                    ",".join(str(k) for k in range(1, PER_LINK + 1))]
+            args = [sys.executable, "-m", "servobus", "sim", protocol, "--fast", "--plant",
+                    "ideal", "--ids", ",".join(str(k) for k in range(1, PER_LINK + 1))]
             if protocol == "dyn232":
                 args += ["--listen", "127.0.0.1:0"]
             proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
@@ -59,7 +83,7 @@ def drive_servers(links: int) -> Iterator[list[str]]:
             assert proc.stdout is not None
             address = proc.stdout.readline().split()[-1].removeprefix("tcp://")
             urls.append(f"{scheme}://{address}")
-        yield urls
+        yield urls, [proc.pid for proc in procs]
     finally:
         for proc in procs:
             proc.terminate()
@@ -120,14 +144,15 @@ async def _observe(endpoint: str, mqtt_port: int, machine: str, seconds: float, 
         task.cancel()
 
 
-async def run_one(count: int, mqtt_port: int, folder: Path, mqtt_hz: float) -> dict[str, Any]:
+async def run_one(count: int, mqtt_port: int, folder: Path, mqtt_hz: float,
+                  profile: cProfile.Profile | None = None) -> dict[str, Any]:
     from servobus.gateway.mqtt import MqttOptions
     from servobus.gateway.opcua_server import OpcUaOptions
     from servobus.gateway.serve import Gateway, GatewayOptions
     from servobus.machine import open_machine_async
 
     name = f"plant-{count}"
-    with drive_servers(count // PER_LINK) as urls:
+    with drive_servers(count // PER_LINK) as (urls, pids):
         path = folder / f"{name}.toml"
         path.write_text(machine_toml(name, urls))
         machine = await open_machine_async(path)
@@ -138,6 +163,8 @@ async def run_one(count: int, mqtt_port: int, folder: Path, mqtt_hz: float) -> d
             gateway = Gateway(machine, GatewayOptions(
                 OpcUaOptions("opc.tcp://127.0.0.1:0"), mqtt=mqtt, rate_hz=RATE_HZ,
                 own_process=True, sparkplug=GROUP))
+            samples = [0]
+            gateway.sampler.listeners.append(lambda sample: _count(samples, sample.ok))
             await gateway.start()
             ctx = multiprocessing.get_context("spawn")
             out, ready = ctx.Queue(), ctx.Event()
@@ -150,59 +177,99 @@ async def run_one(count: int, mqtt_port: int, folder: Path, mqtt_hz: float) -> d
                     raise RuntimeError("the observer ended before it subscribed (its "
                                        "traceback above): a machine too loaded to measure")
                 await asyncio.sleep(0.05)
-            c0, w0 = time.process_time(), time.monotonic()
+            others = [*pids, observer.pid or 0]
+            c0, w0, n0 = time.process_time(), time.monotonic(), samples[0]
+            o0 = [cpu_seconds(pid) for pid in others]
+            if profile is not None:
+                profile.enable()
             await asyncio.sleep(MEASURE_S)
-            cpu = (time.process_time() - c0) / (time.monotonic() - w0)
+            if profile is not None:
+                profile.disable()
+            wall = time.monotonic() - w0
+            cpu = (time.process_time() - c0) / wall
+            taken = (samples[0] - n0) / wall
+            o1 = [cpu_seconds(pid) for pid in others]
+            drives = sum(b - a for a, b in zip(o0[:-1], o1[:-1], strict=True)) / wall
+            watcher = (o1[-1] - o0[-1]) / wall
             counts: dict[str, int] = await loop.run_in_executor(None, out.get, True, 30)
             await loop.run_in_executor(None, observer.join, 10)
             rates = list(gateway.sampler.achieved_hz.values())
             await gateway.close()
         finally:
             await machine.close()
-    return {"count": count, "cpu": cpu * 100, "hz": min(rates),
-            "samples": count * sum(rates) / len(rates), **counts}
+    return {"count": count, "cpu": cpu * 100, "hz": min(rates), "samples": taken,
+            "drives": drives * 100, "observer": watcher * 100, **counts}
 
 
-def per_half_core(points: list[tuple[float, float]]) -> float:
-    """Where the least-squares line through (axes, CPU %) reaches 50 %."""
+def _count(samples: list[int], ok: bool) -> None:
+    if ok:
+        samples[0] += 1
+
+
+def fit(points: list[tuple[float, float]]) -> tuple[float, float]:
+    """(intercept, slope) of the least-squares line through ``points``."""
     n = len(points)
     mx = sum(x for x, _ in points) / n
     my = sum(y for _, y in points) / n
     slope = sum((x - mx) * (y - my) for x, y in points) / sum((x - mx) ** 2 for x, _ in points)
-    return (HALF_CORE - (my - slope * mx)) / slope
+    return my - slope * mx, slope
+
+
+def per_half_core(points: list[tuple[float, float]]) -> float:
+    """Axes at :data:`RATE_HZ` within half a core, from (axis samples/s, CPU %) points: where
+    their least-squares line reaches 50 %, in axes of RATE_HZ samples per second."""
+    base, per_sample = fit(points)
+    return (HALF_CORE - base) / per_sample / RATE_HZ
 
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m benchmarks plant")
     parser.add_argument("--mqtt-rate", type=float, default=5.0)
+    parser.add_argument("--axes", default=",".join(map(str, COUNTS)), metavar="16,32,48",
+                        type=lambda text: [int(n) for n in text.split(",")],
+                        help="the runs' axis counts (multiples of 8)")
+    parser.add_argument("--profile", metavar="FILE", type=Path,
+                        help="profile the gateway's process in the measured seconds of every "
+                             "run (cProfile); the statistics go to FILE (pstats)")
     args, _ = parser.parse_known_args(sys.argv[1:] if argv is None else argv)
     print(f"plant: one gateway at {RATE_HZ:g} Hz (OPC UA + MQTT JSON + Sparkplug B at "
           f"{args.mqtt_rate:g} Hz), every axis turning; drives and observer in other "
           "processes")
+    print(f"  {os.cpu_count()} cores, load average {load_average()} before")
+    print("  axes  gateway CPU  axis samples/s  slowest link  CPU per sample  drives CPU  "
+          "observer CPU  OPC UA notif./s  DDATA/s")
     results = []
+    profile = cProfile.Profile() if args.profile else None
     with tempfile.TemporaryDirectory() as tmp, broker(Path(tmp)) as mqtt_port:
         if mqtt_port is None:
             print("  mosquitto is not installed: no figure")
             return
-        for count in COUNTS:
-            r = asyncio.run(run_one(count, mqtt_port, Path(tmp), args.mqtt_rate))
+        for count in args.axes:
+            r = asyncio.run(run_one(count, mqtt_port, Path(tmp), args.mqtt_rate, profile))
             results.append(r)
-            print(f"  {count:3d} axes: CPU {r['cpu']:5.1f} % of one core, sampling "
-                  f"{r['hz']:.1f} Hz at least ({r['samples']:.0f} axis samples/s), "
-                  f"{r['opcua'] / MEASURE_S:6.0f} OPC UA notifications/s, "
-                  f"{r['ddata'] / MEASURE_S:5.0f} DDATA/s")
-    counted: list[tuple[float, float]] = [(r["count"], r["cpu"]) for r in results
-                                          if r["hz"] >= MIN_HZ]
-    if len(counted) < 2:
-        # no estimate from slower runs (decision): on a machine too loaded for the drives'
-        # processes to answer at 50 Hz the gateway's CPU per sample was 5 times its cost on
-        # an idle one, and a figure from it would plan a plant wrong
-        print(f"  fewer than two runs reached {MIN_HZ:g} Hz (is this machine loaded?): "
-              "no figure")
+            per_sample = r["cpu"] / 100 / r["samples"] * 1e6 if r["samples"] else math.nan
+            print(f"  {count:4d}  {r['cpu']:9.1f} %  {r['samples']:14.0f}  {r['hz']:9.1f} Hz"
+                  f"  {per_sample:11.0f} us  {r['drives']:8.1f} %  {r['observer']:10.1f} %"
+                  f"  {r['opcua'] / MEASURE_S:15.0f}  {r['ddata'] / MEASURE_S:7.0f}")
+    print(f"  load average {load_average()} after")
+    if profile is not None:
+        profile.dump_stats(args.profile)
+        print(f"  profile of the gateway's process: {args.profile} (python -m pstats)")
+    points = [(r["samples"], r["cpu"]) for r in results if r["hz"] >= MIN_HZ]
+    if len(points) < 2 or len({x for x, _ in points}) < 2:
+        # no estimate from slower runs (decision, module docstring): the CPU per sample of
+        # a loaded machine is not the gateway's cost
+        print(f"  fewer than two runs reached {MIN_HZ:g} Hz on every link (the load of this "
+              "machine: see the load average and the drives' CPU): no figure")
         return
-    axes = per_half_core(counted)  # no target in the issue: the figure to plan with
-    print(f"  axes per half core at {RATE_HZ:g} Hz: {axes:.0f}  (the line through "
-          f"{', '.join(f'{x:.0f} axes {y:.1f} %' for x, y in counted)})")
+    base, slope = fit(points)
+    axes = per_half_core(points)  # no target in the issue: the figure to plan with
+    print(f"  axes per half core at {RATE_HZ:g} Hz: {axes:.0f}  (the line through the runs "
+          f"at {MIN_HZ:g} Hz or more: {base:.1f} % + {slope * 1e4:.0f} us per axis sample)")
+
+
+def load_average() -> str:
+    return " ".join(f"{x:.1f}" for x in os.getloadavg())
 
 
 if __name__ == "__main__":

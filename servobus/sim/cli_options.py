@@ -41,7 +41,8 @@ def sim_options(*, parse_ids: Callable[[str], Any], ids_default: str | None, ids
 
 #: ``--plant``: ``physics`` (the default: the servo loop, the motor and its load) or
 #: ``ideal`` (the shaft follows the reference, no current, no alarms from the loop; a turning
-#: drive costs next to nothing: servobus.sim.core.engine, docs/simulator.md "Plant").
+#: drive costs next to nothing: servobus.sim.core.engine, docs/virtual-drive.md "The ideal
+#: plant").
 PLANTS = ("physics", "ideal")
 
 #: ``--load``, ``--inertia``, ``--resonance``, ``--load-torque``: the load every motor of the

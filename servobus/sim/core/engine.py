@@ -35,7 +35,8 @@ The ideal plant (:meth:`set_ideal`, ``servobus sim ... --plant ideal``) leaves o
 4 and 5 in position servo: the shaft is wherever the reference is, at the reference's speed,
 with no current, and no alarm can trip. A reference at a constant speed (a ``run_speed``
 cruising, its smoothing filter full) then advances in O(1) per call as a drive at rest does,
-so a drive that turns costs no more than one that stands (docs/simulator.md "Plant").
+so a drive that turns costs no more than one that stands (docs/virtual-drive.md "The ideal
+plant").
 """
 
 from __future__ import annotations
