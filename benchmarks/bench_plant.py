@@ -23,8 +23,11 @@ per sample, but give no figure: on a machine too loaded for the links to keep 50
 gateway's CPU per sample was 950 - 3,500 us (load averages 17 - 22 on 2 cores), against
 some 290 us where 32 axes kept 50 Hz (46 % of a core in bench_gateway): fewer samples per
 wake-up, caches shared with the load. A figure from such runs would plan a plant wrong.
-``--axes 16,32`` chooses the runs, ``--profile FILE`` profiles the gateway's process over the
-measured seconds (cProfile; ``python -m pstats FILE``).
+``--axes 16,32`` chooses the runs, ``--per-link 4`` puts fewer drives on each link (more
+links, shorter rounds: a link's round is as long as its drives' answers one after another on
+a serial line, and on a loaded machine each answer waits for two processes to be scheduled),
+``--profile FILE`` profiles the gateway's process over the measured seconds (CPU time,
+cProfile; ``python -m pstats FILE``).
 
 Why the ideal plant (decision): with their physics (4 kHz per drive, docs/virtual-drive.md)
 48 turning drives cost about a core of their own, and on a 2-core machine they starved the
@@ -67,14 +70,15 @@ HALF_CORE = 50.0
 
 
 @contextlib.contextmanager
-def drive_servers(links: int) -> Iterator[tuple[list[str], list[int]]]:
-    """``links`` drive servers of :data:`PER_LINK` ideal-plant drives: (URLs, pids)."""
+def drive_servers(links: int, per_link: int = PER_LINK
+                  ) -> Iterator[tuple[list[str], list[int]]]:
+    """``links`` drive servers of ``per_link`` ideal-plant drives each: (URLs, pids)."""
     procs, urls = [], []
     try:
         for i in range(links):
             protocol, scheme, _, _ = LINKS[i % len(LINKS)]
             args = [sys.executable, "-m", "servobus", "sim", protocol, "--fast", "--plant",
-                    "ideal", "--ids", ",".join(str(k) for k in range(1, PER_LINK + 1))]
+                    "ideal", "--ids", ",".join(str(k) for k in range(1, per_link + 1))]
             if protocol == "dyn232":
                 args += ["--listen", "127.0.0.1:0"]
             proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
@@ -91,9 +95,9 @@ def drive_servers(links: int) -> Iterator[tuple[list[str], list[int]]]:
             proc.wait(10)
 
 
-def machine_toml(name: str, urls: list[str]) -> str:
+def machine_toml(name: str, urls: list[str], per_link: int = PER_LINK) -> str:
     lines = [f'name = "{name}"']
-    for i in range(len(urls) * PER_LINK):
+    for i in range(len(urls) * per_link):
         _, _, unit, per_rev = LINKS[(i % len(urls)) % len(LINKS)]
         lines += [f"[axes.a{i:02d}]", f'url = "{urls[i % len(urls)]}"',
                   f"id = {i // len(urls) + 1}", f'unit = "{unit}"', "continuous = true"] \
@@ -145,16 +149,17 @@ async def _observe(endpoint: str, mqtt_port: int, machine: str, seconds: float, 
 
 
 async def run_one(count: int, mqtt_port: int, folder: Path, mqtt_hz: float,
-                  profile: cProfile.Profile | None = None) -> dict[str, Any]:
+                  profile: cProfile.Profile | None = None, per_link: int = PER_LINK
+                  ) -> dict[str, Any]:
     from servobus.gateway.mqtt import MqttOptions
     from servobus.gateway.opcua_server import OpcUaOptions
     from servobus.gateway.serve import Gateway, GatewayOptions
     from servobus.machine import open_machine_async
 
     name = f"plant-{count}"
-    with drive_servers(count // PER_LINK) as (urls, pids):
+    with drive_servers(count // per_link, per_link) as (urls, pids):
         path = folder / f"{name}.toml"
-        path.write_text(machine_toml(name, urls))
+        path.write_text(machine_toml(name, urls, per_link))
         machine = await open_machine_async(path)
         try:
             for axis in machine.axes.values():
@@ -228,13 +233,15 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--axes", default=",".join(map(str, COUNTS)), metavar="16,32,48",
                         type=lambda text: [int(n) for n in text.split(",")],
                         help="the runs' axis counts (multiples of 8)")
+    parser.add_argument("--per-link", type=int, default=PER_LINK, metavar="N",
+                        help="drives per link (fewer: more links, each round shorter)")
     parser.add_argument("--profile", metavar="FILE", type=Path,
                         help="profile the gateway's process in the measured seconds of every "
                              "run (cProfile); the statistics go to FILE (pstats)")
     args, _ = parser.parse_known_args(sys.argv[1:] if argv is None else argv)
     print(f"plant: one gateway at {RATE_HZ:g} Hz (OPC UA + MQTT JSON + Sparkplug B at "
-          f"{args.mqtt_rate:g} Hz), every axis turning; drives and observer in other "
-          "processes")
+          f"{args.mqtt_rate:g} Hz), every axis turning; {args.per_link} ideal-plant drives per "
+          "link; drives and observer in other processes")
     print(f"  {os.cpu_count()} cores, load average {load_average()} before")
     print("  axes  gateway CPU  axis samples/s  slowest link  CPU per sample  drives CPU  "
           "observer CPU  OPC UA notif./s  DDATA/s")
@@ -246,7 +253,8 @@ def main(argv: list[str] | None = None) -> None:
             print("  mosquitto is not installed: no figure")
             return
         for count in args.axes:
-            r = asyncio.run(run_one(count, mqtt_port, Path(tmp), args.mqtt_rate, profile))
+            r = asyncio.run(run_one(count, mqtt_port, Path(tmp), args.mqtt_rate, profile,
+                                    args.per_link))
             results.append(r)
             per_sample = r["cpu"] / 100 / r["samples"] * 1e6 if r["samples"] else math.nan
             print(f"  {count:4d}  {r['cpu']:9.1f} %  {r['samples']:14.0f}  {r['hz']:9.1f} Hz"
