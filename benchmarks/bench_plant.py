@@ -4,15 +4,16 @@ plant of gateways with (issue 36, item 6).
 One gateway (servobus.gateway.serve.Gateway, as ``servobus serve --mqtt ... --sparkplug
 plant`` runs it) in this process, with its machine of N virtual axes on N/8 fast links
 (``servobus sim ... --fast --plant ideal`` servers in their own processes, 8 drives each, as
-in bench_gateway). Every axis turns at constant speed, so each of its values changes at every
-sample: the most a gateway has to send. Sampling 50 Hz; an observer in another process
-subscribes with asyncua to every ActualPosition (publishing interval 20 ms) and with aiomqtt
-to the Sparkplug topics; MQTT JSON state and Sparkplug DDATA at ``--mqtt-rate`` (default
-here 5 Hz, the gateway's default; ``python -m benchmarks plant --mqtt-rate 50`` for the
-worst case). For N = 16, 32, 48 (``--axes``), over 8 s: the CPU of this process (the
-gateway and its links' clients, % of one core), the axis samples it took (counted by a
-sampler listener), the rate its slowest link reached, and the CPU of the drives' processes
-and of the observer; the load average before and after.
+in bench_gateway). Every axis turns at constant speed, so its position changes at every
+sample (its speed and current too with ``--plant physics``, below). Sampling 50 Hz; an
+observer in another process subscribes with asyncua to every ActualPosition (publishing
+interval 20 ms) and with aiomqtt to the Sparkplug topics; MQTT JSON state and Sparkplug
+DDATA at ``--mqtt-rate`` (default here 5 Hz, the gateway's default; ``python -m benchmarks
+plant --mqtt-rate 50`` for the worst case). For N = 16, 32, 48 (``--axes``), over 8 s: the
+CPU of this process (the gateway and its links' clients, % of one core), the axis samples
+it took (counted by a sampler listener), the rate its slowest link reached, its CPU and
+OPC UA writes per sample, and the CPU of the drives' processes and of the observer; the
+load average before and after.
 
 The figure (decision): the straight line through (axis samples per second, CPU %) of the
 runs whose every link reached 45 Hz: its intercept is what the gateway spends whatever the
@@ -23,18 +24,25 @@ per sample, but give no figure: on a machine too loaded for the links to keep 50
 gateway's CPU per sample was 950 - 3,500 us (load averages 17 - 22 on 2 cores), against
 some 290 us where 32 axes kept 50 Hz (46 % of a core in bench_gateway): fewer samples per
 wake-up, caches shared with the load. A figure from such runs would plan a plant wrong.
-``--axes 16,32`` chooses the runs, ``--per-link 4`` puts fewer drives on each link (more
-links, shorter rounds: a link's round is as long as its drives' answers one after another on
-a serial line, and on a loaded machine each answer waits for two processes to be scheduled),
-``--profile FILE`` profiles the gateway's process over the measured seconds (CPU time,
-cProfile; ``python -m pstats FILE``).
+``--axes 16,32`` chooses the runs, ``--plant physics`` the drives' plant, ``--per-link 4``
+puts fewer drives on each link (more links, shorter rounds: a link's round is as long as its
+drives' answers one after another on a serial line, and on a loaded machine each answer
+waits for two processes to be scheduled), ``--profile FILE`` profiles the gateway's process
+over the measured seconds (CPU time, cProfile; ``python -m pstats FILE``).
 
 Why the ideal plant (decision): with their physics (4 kHz per drive, docs/virtual-drive.md)
 48 turning drives cost about a core of their own, and on a 2-core machine they starved the
 gateway: with 16 axes it sampled at 21.8 Hz and no run reached the old 45 Hz floor. ``--plant
 ideal`` drives answer the same protocol with the same readings (a turning shaft, exactly its
 reference) at next to no CPU, so the machine's cores are left to the gateway being measured.
-The drives' and the observer's CPU are printed so that a reader sees what else ran.
+The drives' and the observer's CPU are printed so that a reader sees what else ran. What it
+changes for the gateway: a cruising ideal shaft's speed is exact and its current 0, so a
+sample changes one OPC UA value (the position) where a physical drive's jittering speed and
+current change three, and Sparkplug's DDATA by exception carries one metric where it would
+carry three. The table counts the OPC UA writes per sample; ``--plant physics`` runs the
+drives with their physics (``--axes 16`` where the machine has room for them) to measure
+what the other writes cost. The figure from ideal drives is therefore the upper bound of a
+plant whose drives report a steady speed and current.
 """
 
 from __future__ import annotations
@@ -70,15 +78,15 @@ HALF_CORE = 50.0
 
 
 @contextlib.contextmanager
-def drive_servers(links: int, per_link: int = PER_LINK
+def drive_servers(links: int, per_link: int = PER_LINK, plant: str = "ideal"
                   ) -> Iterator[tuple[list[str], list[int]]]:
-    """``links`` drive servers of ``per_link`` ideal-plant drives each: (URLs, pids)."""
+    """``links`` drive servers of ``per_link`` drives each (``--plant``): (URLs, pids)."""
     procs, urls = [], []
     try:
         for i in range(links):
             protocol, scheme, _, _ = LINKS[i % len(LINKS)]
             args = [sys.executable, "-m", "servobus", "sim", protocol, "--fast", "--plant",
-                    "ideal", "--ids", ",".join(str(k) for k in range(1, per_link + 1))]
+                    plant, "--ids", ",".join(str(k) for k in range(1, per_link + 1))]
             if protocol == "dyn232":
                 args += ["--listen", "127.0.0.1:0"]
             proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
@@ -91,8 +99,12 @@ def drive_servers(links: int, per_link: int = PER_LINK
     finally:
         for proc in procs:
             proc.terminate()
-        for proc in procs:
-            proc.wait(10)
+        for proc in procs:  # a loaded machine may take its time: none is left running
+            try:
+                proc.wait(30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
 
 
 def machine_toml(name: str, urls: list[str], per_link: int = PER_LINK) -> str:
@@ -149,15 +161,15 @@ async def _observe(endpoint: str, mqtt_port: int, machine: str, seconds: float, 
 
 
 async def run_one(count: int, mqtt_port: int, folder: Path, mqtt_hz: float,
-                  profile: cProfile.Profile | None = None, per_link: int = PER_LINK
-                  ) -> dict[str, Any]:
+                  profile: cProfile.Profile | None = None, per_link: int = PER_LINK,
+                  plant: str = "ideal") -> dict[str, Any]:
     from servobus.gateway.mqtt import MqttOptions
     from servobus.gateway.opcua_server import OpcUaOptions
     from servobus.gateway.serve import Gateway, GatewayOptions
     from servobus.machine import open_machine_async
 
     name = f"plant-{count}"
-    with drive_servers(count // per_link, per_link) as (urls, pids):
+    with drive_servers(count // per_link, per_link, plant) as (urls, pids):
         path = folder / f"{name}.toml"
         path.write_text(machine_toml(name, urls, per_link))
         machine = await open_machine_async(path)
@@ -184,6 +196,7 @@ async def run_one(count: int, mqtt_port: int, folder: Path, mqtt_hz: float,
                 await asyncio.sleep(0.05)
             others = [*pids, observer.pid or 0]
             c0, w0, n0 = time.process_time(), time.monotonic(), samples[0]
+            writes0 = gateway.opcua.notifications
             o0 = [cpu_seconds(pid) for pid in others]
             if profile is not None:
                 profile.enable()
@@ -193,6 +206,7 @@ async def run_one(count: int, mqtt_port: int, folder: Path, mqtt_hz: float,
             wall = time.monotonic() - w0
             cpu = (time.process_time() - c0) / wall
             taken = (samples[0] - n0) / wall
+            writes = gateway.opcua.notifications - writes0
             o1 = [cpu_seconds(pid) for pid in others]
             drives = sum(b - a for a, b in zip(o0[:-1], o1[:-1], strict=True)) / wall
             watcher = (o1[-1] - o0[-1]) / wall
@@ -203,6 +217,7 @@ async def run_one(count: int, mqtt_port: int, folder: Path, mqtt_hz: float,
         finally:
             await machine.close()
     return {"count": count, "cpu": cpu * 100, "hz": min(rates), "samples": taken,
+            "writes": writes / (taken * wall) if taken else math.nan,
             "drives": drives * 100, "observer": watcher * 100, **counts}
 
 
@@ -235,16 +250,18 @@ def main(argv: list[str] | None = None) -> None:
                         help="the runs' axis counts (multiples of 8)")
     parser.add_argument("--per-link", type=int, default=PER_LINK, metavar="N",
                         help="drives per link (fewer: more links, each round shorter)")
+    parser.add_argument("--plant", choices=("ideal", "physics"), default="ideal",
+                        help="the drives' plant (servobus sim --plant)")
     parser.add_argument("--profile", metavar="FILE", type=Path,
                         help="profile the gateway's process in the measured seconds of every "
                              "run (cProfile); the statistics go to FILE (pstats)")
     args, _ = parser.parse_known_args(sys.argv[1:] if argv is None else argv)
     print(f"plant: one gateway at {RATE_HZ:g} Hz (OPC UA + MQTT JSON + Sparkplug B at "
-          f"{args.mqtt_rate:g} Hz), every axis turning; {args.per_link} ideal-plant drives per "
-          "link; drives and observer in other processes")
+          f"{args.mqtt_rate:g} Hz), every axis turning; {args.per_link} drives per link, "
+          f"--plant {args.plant}; drives and observer in other processes")
     print(f"  {os.cpu_count()} cores, load average {load_average()} before")
-    print("  axes  gateway CPU  axis samples/s  slowest link  CPU per sample  drives CPU  "
-          "observer CPU  OPC UA notif./s  DDATA/s")
+    print("  axes  gateway CPU  axis samples/s  slowest link  CPU per sample  OPC UA writes "
+          "per sample  drives CPU  observer CPU  OPC UA notif./s  DDATA/s")
     results = []
     # CPU time, not wall time: the waits in epoll are not the gateway's cost
     profile = cProfile.Profile(time.process_time) if args.profile else None
@@ -254,11 +271,12 @@ def main(argv: list[str] | None = None) -> None:
             return
         for count in args.axes:
             r = asyncio.run(run_one(count, mqtt_port, Path(tmp), args.mqtt_rate, profile,
-                                    args.per_link))
+                                    args.per_link, args.plant))
             results.append(r)
             per_sample = r["cpu"] / 100 / r["samples"] * 1e6 if r["samples"] else math.nan
             print(f"  {count:4d}  {r['cpu']:9.1f} %  {r['samples']:14.0f}  {r['hz']:9.1f} Hz"
-                  f"  {per_sample:11.0f} us  {r['drives']:8.1f} %  {r['observer']:10.1f} %"
+                  f"  {per_sample:11.0f} us  {r['writes']:24.1f}"
+                  f"  {r['drives']:8.1f} %  {r['observer']:10.1f} %"
                   f"  {r['opcua'] / MEASURE_S:15.0f}  {r['ddata'] / MEASURE_S:7.0f}")
     print(f"  load average {load_average()} after")
     if profile is not None:
