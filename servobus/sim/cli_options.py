@@ -9,6 +9,7 @@ from typing import Any
 from servobus.axis.cli_spec import Option
 from servobus.errors import ArgumentRangeError, ServobusError
 from servobus.sim.core import loads
+from servobus.sim.core.loads import PLANTS
 from servobus.sim.core.motor import EngineShaft
 from servobus.sim.line_server import parse_listen_url
 from servobus.sim.server_limits import DEFAULT_MAX_CLIENTS
@@ -38,12 +39,6 @@ def sim_options(*, parse_ids: Callable[[str], Any], ids_default: str | None, ids
         *LOAD_OPTIONS,
     )
 
-
-#: ``--plant``: ``physics`` (the default: the servo loop, the motor and its load) or
-#: ``ideal`` (the shaft follows the reference, no current, no alarms from the loop; a turning
-#: drive costs next to nothing: servobus.sim.core.engine, docs/virtual-drive.md "The ideal
-#: plant").
-PLANTS = ("physics", "ideal")
 
 #: ``--load``, ``--inertia``, ``--resonance``, ``--load-torque``: the load every motor of the
 #: server drives (servobus.sim.core.loads, docs/tuning.md); received as ``load``,

@@ -26,7 +26,7 @@ from servobus.axis import registry
 from servobus.axis.url import DriveUrl
 from servobus.errors import ArgumentRangeError
 from servobus.sim.core import capture
-from servobus.sim.core.loads import split_load_options
+from servobus.sim.core.loads import PLANTS, split_load_options
 from servobus.sim.core.motor import EngineShaft
 from servobus.sim.dmm import virtual_io
 from servobus.sim.dmm.drive import VirtualDrive
@@ -50,13 +50,22 @@ async def open_axis(url: DriveUrl, *, drive_id: int | None = None, **keywords: A
             f"no virtual drive {name!r} in {url.raw!r}; known: sim://"
             + ", sim://".join(sorted(sim_protocols())))
     options, load = split_load_options(url.options)
+    plant = options.pop("plant", "physics")
+    if plant not in PLANTS:
+        raise ArgumentRangeError(f"plant={plant} in {url.raw!r}: give one of "
+                                 f"{', '.join(PLANTS)}")
+    ideal = plant == "ideal"
+    if ideal and not load.empty:
+        raise ArgumentRangeError(f"plant=ideal has no mechanics: no load keys in {url.raw!r}")
     url = dataclasses.replace(url, options=MappingProxyType(options))
     opener = registry.load(target)
     with capture.collecting() as traced:  # the virtual drives (or motors) this axis talks to
         axis: AsyncAxis = await opener(url, drive_id=drive_id, **keywords)
-    if not load.empty:
-        for made in traced:
-            if isinstance(made.drive, EngineShaft):
+    for made in traced:
+        if isinstance(made.drive, EngineShaft):
+            if ideal:
+                made.drive.set_ideal(True)
+            elif not load.empty:
                 made.drive.set_mechanics(load)
     if traced and axis.capture_source is None:
         axis.capture_source = capture.SimCapture(traced)  # trace_buffer(): their 4 kHz trace

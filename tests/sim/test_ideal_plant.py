@@ -6,13 +6,16 @@ from __future__ import annotations
 from typing import Any
 
 import pytest
+from rig import wait_until_async
 
+from servobus.axis.connect import connect_async
 from servobus.cli.main import main
 from servobus.errors import ArgumentRangeError
 from servobus.families.dmm import units as U
 from servobus.protocols.dyn232 import cli as dyn232_cli
 from servobus.sim.cli_options import apply_load
 from servobus.sim.core import constants as K
+from servobus.sim.core.capture import SimCapture
 from servobus.sim.core.motor import Motor
 from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.yzaim.motor import YzaimMotor
@@ -127,3 +130,22 @@ def test_servobus_sim_plant_ideal_reaches_the_drives(monkeypatch: pytest.MonkeyP
               "--plant", "ideal"])
     assert done.value.code in (0, None)
     assert len(made) == 2 and all(d._engine.ideal for d in made)
+
+
+async def test_a_sim_url_turns_an_ideal_drive_and_refuses_a_load_with_it() -> None:
+    axis = await connect_async("sim://dyn232?fast=1&plant=ideal", drive_id=1)
+    try:
+        source = axis.capture_source
+        assert isinstance(source, SimCapture)
+        drive = source.traced[0].drive
+        assert isinstance(drive, VirtualDrive) and drive._engine.ideal
+        await axis.enable()
+        await axis.turn(60)
+        await wait_until_async(lambda: drive.speed_rpm == pytest.approx(60.0), timeout=30.0)
+        assert drive.current_a == 0.0 and drive.position_error == 0.0
+        await axis.stop()
+    finally:
+        await axis.close()
+    for url in ("sim://dyn232?fast=1&plant=ideal&load=belt", "sim://dyn232?plant=kinematic"):
+        with pytest.raises(ArgumentRangeError, match="plant="):
+            await connect_async(url, drive_id=1)

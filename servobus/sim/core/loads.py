@@ -58,6 +58,13 @@ class LoadSettings:
         return self == LoadSettings()
 
 
+#: ``--plant`` / ``sim://...?plant=``: ``physics`` (the default: the servo loop, the motor and
+#: its load) or ``ideal`` (the shaft follows the reference, no current, no alarms from the
+#: loop, no load; a turning drive costs next to nothing: servobus.sim.core.engine,
+#: docs/virtual-drive.md "The ideal plant").
+PLANTS = ("physics", "ideal")
+
+
 def load_settings(values: Mapping[str, object]) -> LoadSettings:
     """Check and combine the keys of :data:`KEYS` (values as text or numbers; others ignored).
     Raises InvalidValue naming the key at fault."""
