@@ -247,7 +247,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--mqtt-rate", type=float, default=5.0)
     parser.add_argument("--axes", default=",".join(map(str, COUNTS)), metavar="16,32,48",
                         type=lambda text: [int(n) for n in text.split(",")],
-                        help="the runs' axis counts (multiples of 8)")
+                        help="the runs' axis counts (multiples of --per-link)")
     parser.add_argument("--per-link", type=int, default=PER_LINK, metavar="N",
                         help="drives per link (fewer: more links, each round shorter)")
     parser.add_argument("--plant", choices=("ideal", "physics"), default="ideal",
@@ -256,6 +256,8 @@ def main(argv: list[str] | None = None) -> None:
                         help="profile the gateway's process in the measured seconds of every "
                              "run (cProfile); the statistics go to FILE (pstats)")
     args, _ = parser.parse_known_args(sys.argv[1:] if argv is None else argv)
+    if args.per_link < 1 or any(n <= 0 or n % args.per_link for n in args.axes):
+        parser.error(f"--axes {args.axes}: give multiples of --per-link {args.per_link}")
     print(f"plant: one gateway at {RATE_HZ:g} Hz (OPC UA + MQTT JSON + Sparkplug B at "
           f"{args.mqtt_rate:g} Hz), every axis turning; {args.per_link} drives per link, "
           f"--plant {args.plant}; drives and observer in other processes")
