@@ -90,6 +90,8 @@ class Trial:
     rise_s: float | None
     following_error: float | None
     vibration: float
+    #: The step of the procedure the move belongs to (:attr:`Tuner.phase`).
+    phase: str = ""
 
     @property
     def vibrates(self) -> bool:
@@ -103,7 +105,8 @@ class Trial:
     def as_dict(self) -> dict[str, object]:
         return {"gains": self.gains, "overshoot_pct": self.overshoot_pct,
                 "settling_s": self.settling_s, "rise_s": self.rise_s,
-                "following_error": self.following_error, "vibration": self.vibration}
+                "following_error": self.following_error, "vibration": self.vibration,
+                "phase": self.phase}
 
 
 @dataclass
@@ -209,6 +212,8 @@ class Tuner:
         self.writes = 0
         self.per_gain: dict[str, int] = {}
         self.trials = 0
+        #: Where the run is: before, calm, search <gain>, refine, verify (progress shown).
+        self.phase = "before"
         self.origin: int | None = None
         self.outward = False
         eeprom = plant.profile.persistence is Persistence.EEPROM_EACH_WRITE
@@ -267,7 +272,7 @@ class Tuner:
         self.trials += 1
         m = record.metrics()
         trial = Trial(dict(self.written), m.overshoot_pct, m.settling_time_s, m.rise_time_s,
-                      m.following_error_max, vibration(record))
+                      m.following_error_max, vibration(record), self.phase)
         if self.on_trial is not None:
             self.on_trial(trial)
         if record.alarm_code:
@@ -289,14 +294,18 @@ class Tuner:
             ratio, per_accel = inertia_ratio(record, plant.rotor_amps_per_accel(),
                                              self.counts_per_rev)
             found: dict[str, int] = {}
+            self.phase = "calm"
             best = await self._calm(before, ratio)
             for role in ORDER:
                 gain = plant.profile.gain(role)
                 if gain is not None:
+                    self.phase = f"search {gain.name}"
                     best = await self._search(gain, best, found)
             if plant.source == "trace":  # polls time a step too coarsely for half steps
+                self.phase = "refine"
                 best = await self._refine(best)
             # the verify starts at rest, not in the wake of the search's last vibrating move
+            self.phase = "verify"
             await plant.settle(VERIFY_SETTLE_S)
             after, _ = await self._trial()
             if after.vibrates:  # the verify shakes where the search did not: one step down
