@@ -3,7 +3,8 @@
 ``POST /api/axes/N/tuning/auto`` {distance, unit, page, save, confirmed}: without
 ``confirmed`` the checks and the question (nothing moves), with it the run starts, owned by
 ``page`` (its WebSocket's ``hello`` owner, which must be connected: it renews the run).
-``GET`` gives the axis's run (progress, then the table); ``/cancel`` aborts it (any page:
+``GET`` gives the axis's run (progress, then the table) and whether its family saves
+gains on request (the page's save box); ``/cancel`` aborts it (any page:
 Stop always wins), ``/revert`` writes the last run's kept gains back.
 """
 
@@ -15,6 +16,7 @@ from starlette.routing import Route
 
 from servobus.errors import ArgumentRangeError
 from servobus.gui.http_util import api, body, handle, integer, number, ok, state
+from servobus.tune import plan
 
 
 def _page(request: Request, doc: dict[str, object]) -> int:
@@ -30,7 +32,10 @@ async def auto_state(request: Request) -> Response:
     h = handle(request)
     gui = state(request)
     page = int(request.query_params.get("page", "0") or 0)
-    return JSONResponse(gui.autotune.views(page).get(str(h.id)) or {})
+    profile = h.axis.family.tuning
+    return JSONResponse({"run": gui.autotune.views(page).get(str(h.id)),
+                         "can_save": plan.saves_with_command(profile),
+                         "save_hint": profile.save_hint if profile is not None else ""})
 
 
 @api

@@ -160,8 +160,10 @@ def test_the_confirmation_names_the_axis_and_the_distance_and_moves_nothing(
         yz = post(client, f"/api/axes/{C}/tuning/auto",
                   {"distance": 90.0, "unit": "deg", "page": page.owner, "save": True})
         assert yz["can_save"] is True and "90 deg" in yz["question"]
+        assert client.get(f"/api/axes/{C}/tuning/auto").json()["can_save"] is True
+        assert client.get(f"/api/axes/{E}/tuning/auto").json()["can_save"] is False
         assert status(client)["position"] == before
-        assert client.get(f"/api/axes/{X}/tuning/auto").json() == {}
+        assert client.get(f"/api/axes/{X}/tuning/auto").json()["run"] is None
 
 
 def test_another_page_is_refused_and_cancel_stops_the_motor_and_reverts(
@@ -197,7 +199,7 @@ def test_a_page_that_goes_away_aborts_its_run(client: TestClient) -> None:
         start(client, page)
         page.until(lambda: (r := page.run()) is not None and r["trials"] >= 1 and r,
                    "a test move")
-    run = client.get(f"/api/axes/{X}/tuning/auto").json()
+    run = client.get(f"/api/axes/{X}/tuning/auto").json()["run"]
     assert run["state"] == "stopped" and "went away" in run["message"]
     assert gains(client) == kept
     at_rest(client)
@@ -228,4 +230,4 @@ def test_a_run_to_completion_shows_the_table_and_reverts(client: TestClient) -> 
     assert gains(client, T) == tuned and "EEPROM" in table["save_hint"]
     restored = post(client, f"/api/axes/{T}/tuning/auto/revert", {})["restored"]
     assert restored and gains(client, T) == kept
-    assert client.get(f"/api/axes/{T}/tuning/auto").json()["reverted"] is True
+    assert client.get(f"/api/axes/{T}/tuning/auto").json()["run"]["reverted"] is True
