@@ -186,6 +186,7 @@ def test_another_page_is_refused_and_cancel_stops_the_motor_and_reverts(
                     {"values": kept}, 409)["kind"] == "OwnerError"
         b.send({"type": "tune_renew", "axis": X})  # not its run: refused
         b.until(lambda: len(b.errors) >= 2, "the renewal's refusal")
+        assert "not this page's" in b.errors[-1]["message"]
         cancelled = post(client, f"/api/axes/{X}/tuning/auto/cancel", {})["run"]
         assert cancelled["state"] == "stopped" and "kept gains" in cancelled["message"]
         assert gains(client) == kept
@@ -210,6 +211,20 @@ def test_a_page_that_goes_away_aborts_its_run(client: TestClient) -> None:
         ended = frozen.until_ended("the run's end without renewals")
         assert ended["state"] == "stopped" and "renewing" in ended["message"]
     assert gains(client) == kept
+
+
+def test_stop_all_cancels_a_run(client: TestClient) -> None:
+    kept = gains(client)
+    with client.websocket_connect(WS) as ws:
+        page = Page(ws)
+        start(client, page)
+        page.until(lambda: (r := page.run()) is not None and r["trials"] >= 1 and r,
+                   "a test move")
+        post(client, "/api/stop_all", {})
+        ended = page.until_ended("the run's end after STOP ALL")
+    assert ended["state"] == "stopped" and "kept gains" in ended["message"]
+    assert gains(client) == kept
+    at_rest(client)
 
 
 @pytest.mark.slow  # a whole run: about 23 test moves of wall-clock motion
