@@ -47,7 +47,7 @@ async def auto_start(request: Request) -> Response:
     value, unit = number(doc, "distance"), str(doc.get("unit", h.units().position))
     save = bool(doc.get("save", False))
     if not doc.get("confirmed"):
-        return ok(started=False, **await gui.autotune.plan(h, page, value, unit, save))
+        return ok(started=False, **await gui.autotune.ask(h, page, value, unit, save))
     run = await gui.autotune.start(h, page, value, unit, save)
     return ok(started=True, run=run.view(run.owner))
 

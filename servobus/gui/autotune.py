@@ -28,7 +28,7 @@ import time
 from dataclasses import dataclass, field
 
 from servobus.errors import ArgumentRangeError, ConnectionLost, OwnerError, ServobusError
-from servobus.gui.fleet import AxisHandle, Fleet
+from servobus.gui.fleet import AxisHandle
 from servobus.gui.jog import LEASE_S, page_owner
 from servobus.machine.axis import AsyncMachineAxis
 from servobus.tune import plan
@@ -107,8 +107,7 @@ def _finite(value: object) -> object:
 class AutoTune:
     """Every axis's Auto run (the last one is kept for its table and Revert)."""
 
-    def __init__(self, fleet: Fleet, lease_s: float = LEASE_S) -> None:
-        self.fleet = fleet
+    def __init__(self, lease_s: float = LEASE_S) -> None:
         self.lease_s = lease_s
         self.runs: dict[int, AutoRun] = {}
         self.closed = False
@@ -122,10 +121,7 @@ class AutoTune:
         m = self._machine_axis(handle)
         if self.closed:
             raise ConnectionLost("the GUI is shutting down: every axis is being stopped")
-        run = self.runs.get(handle.id)
-        if run is not None and run.state == "running":
-            raise OwnerError(f"{handle.label}: {run.owner} is auto-tuning it; one run per "
-                             "axis, nothing was moved", owner=run.owner)
+        self._check_one_run(handle)
         units = handle.units()
         if unit != units.position:
             raise ArgumentRangeError(f"{handle.label}: the distance is in {units.position}, "
@@ -141,8 +137,8 @@ class AutoTune:
         m.check_target(m.to_user(here + counts))  # LimitError in the axis's unit
         return counts, handle.label, f"{value:g} {units.position}"
 
-    async def plan(self, handle: AxisHandle, page: int, value: float, unit: str,
-                   save: bool) -> dict[str, object]:
+    async def ask(self, handle: AxisHandle, page: int, value: float, unit: str,
+                  save: bool) -> dict[str, object]:
         """The confirmation (nothing moves): the question, the EEPROM note, the save hint."""
         _counts, who, shown = await self.check(handle, page, value, unit, save)
         profile = handle.axis.family.tuning
@@ -155,10 +151,7 @@ class AutoTune:
         counts, who, shown = await self.check(handle, page, value, unit, save)
         m = self._machine_axis(handle)
         owner = page_owner(page)
-        other = self.runs.get(handle.id)
-        if other is not None and other.state == "running":  # started while this one checked
-            raise OwnerError(f"{handle.label}: {other.owner} is auto-tuning it; one run per "
-                             "axis, nothing was moved", owner=other.owner)
+        self._check_one_run(handle)  # again: another may have started while this one checked
         units = handle.units()
         run = AutoRun(handle.id, owner, who, shown, units.per_count, units.position,
                       time.monotonic() + self.lease_s)
@@ -219,6 +212,12 @@ class AutoTune:
         return {str(k): r.view(mine) for k, r in self.runs.items()}
 
     # ------------------------------------------------------------- inside
+    def _check_one_run(self, handle: AxisHandle) -> None:
+        run = self.runs.get(handle.id)
+        if run is not None and run.state == "running":
+            raise OwnerError(f"{handle.label}: {run.owner} is auto-tuning it; one run per "
+                             "axis, nothing was moved", owner=run.owner)
+
     def _machine_axis(self, handle: AxisHandle) -> AsyncMachineAxis:
         m = handle.machine_axis
         if m is None:

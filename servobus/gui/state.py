@@ -42,7 +42,7 @@ class GuiState:
                    jog=JogControl(fleet, jog_lease_s),
                    samplers={i: AxisSampler(h) for i, h in fleet.handles.items()},
                    tuning={i: TuningState() for i in fleet.handles},
-                   autotune=AutoTune(fleet, jog_lease_s))
+                   autotune=AutoTune(jog_lease_s))
 
     @property
     def closed(self) -> bool:
