@@ -616,8 +616,9 @@ class AsyncMachineAxis:
             soft = (min(map(self.to_counts, self.limits)), max(map(self.to_counts, self.limits)))
         self.check_target(self.to_user(here + distance))  # LimitError: nothing moved
         limit = ABORT_VIBRATION if vibration_limit is None else vibration_limit
-        tuner = Tuner(AxisPlant(core, trace=trace), Limits(distance, soft, limit),
-                      core.counts_per_rev, on_trial=on_trial, save=save)
+        limits = Limits(distance, soft, limit, to_user=self.to_user, unit=self.unit)
+        tuner = Tuner(AxisPlant(core, trace=trace), limits, core.counts_per_rev,
+                      on_trial=on_trial, save=save)
         self._commanded()
         self._tuning = (owner, asyncio.current_task())
         try:

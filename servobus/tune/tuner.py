@@ -74,12 +74,20 @@ class TuneAborted(ServobusError):
 @dataclass(frozen=True)
 class Limits:
     """Where test moves may go: ``distance`` counts from the start (its sign the first
-    move's direction), inside ``soft_limits`` (counts) when the axis has them."""
+    move's direction), inside ``soft_limits`` (counts) when the axis has them. Messages give
+    positions in ``unit`` through ``to_user`` (a machine axis's mm, deg ...), else counts."""
 
     distance: int
     soft_limits: tuple[int, int] | None = None
     vibration_limit: float = ABORT_VIBRATION
     record_s: float = RECORD_S
+    to_user: Callable[[int], float] | None = None
+    unit: str = "counts"
+
+    def at(self, *counts: int) -> str:
+        """Positions in counts as the user reads them, lowest first: ``-10 .. 300 mm``."""
+        values = sorted(c if self.to_user is None else self.to_user(c) for c in counts)
+        return f"{' .. '.join(f'{v:g}' for v in values)} {self.unit}"
 
 
 @dataclass(frozen=True)
@@ -260,11 +268,12 @@ class Tuner:
         end = self.origin + self.limits.distance if self.outward else self.origin
         soft = self.limits.soft_limits
         if soft is not None and not soft[0] <= end <= soft[1]:
-            raise TuneAborted(f"a test move to {end} counts would leave the soft limits "
-                              f"{soft[0]} .. {soft[1]}; nothing was moved")
+            raise TuneAborted(f"a test move to {self.limits.at(end)} would leave the soft "
+                              f"limits {self.limits.at(*soft)}; nothing was moved")
         if abs(end - here) > 2 * abs(self.limits.distance):
-            raise TuneAborted(f"the motor stands at {here} counts, beyond the test span "
-                              f"{self.origin} .. {self.origin + self.limits.distance}")
+            span = self.limits.at(self.origin, self.origin + self.limits.distance)
+            raise TuneAborted(f"the motor stands at {self.limits.at(here)}, beyond the test "
+                              f"span {span}")
         return await self.plant.test_move(end, self.limits.record_s)
 
     async def _trial(self) -> tuple[Trial, Record]:
