@@ -10,9 +10,9 @@ Decisions (docs/gui.md, "Auto-tune"):
   before it are :mod:`servobus.tune.plan`'s, the CLI's.
 * The owner is the page (``page N``, as a jog, servobus.gui.jog). One run per axis. The page
   renews the run over its WebSocket (``tune_renew`` every 150 ms, like a jog); a run not
-  renewed for :data:`servobus.gui.jog.LEASE_S` is cancelled, and so is every run of a page
-  whose WebSocket closes (:meth:`AutoTune.release`): the tuner's abort stops the motor at
-  once and writes the kept gains back.
+  renewed for the GUI's lease (:data:`servobus.gui.jog.LEASE_S`, 0.5 s) is cancelled, and
+  so is every run of a page whose WebSocket closes (:meth:`AutoTune.release`): the tuner's
+  abort stops the motor at once and writes the kept gains back.
 * Start is two requests: ``confirmed: false`` checks everything and returns the question
   naming the axis and the distance in the axis's unit (nothing moves), ``confirmed: true``
   starts. Figures and errors are shown in the axis's unit.
@@ -248,8 +248,13 @@ class AutoTune:
         log.info("%s: auto-tune %s: %s", run.who, run.state, run.message)
 
     async def _watch(self, run: AutoRun) -> None:
-        """Cancel the run when its page stops renewing it (a frozen tab)."""
+        """Cancel the run when its page stops renewing it (a frozen tab). A lapse is looked
+        at again one period later: a loop that was busy reads the renewals queued meanwhile
+        first (at most ``lease_s`` + 2 periods from the last renewal to the stop)."""
         while True:
+            await asyncio.sleep(WATCH_S)
+            if time.monotonic() <= run.deadline:
+                continue
             await asyncio.sleep(WATCH_S)
             if time.monotonic() > run.deadline and run.task is not None:
                 run.why_cancelled = "the page stopped renewing the run"

@@ -95,9 +95,11 @@ def test_auto_asks_naming_the_axis_in_mm_then_shows_the_table_and_reverts(url: s
         gains_before = text(page, "#gains-table")
         page.find_element(By.ID, "auto-go").click()
         wait_until(lambda: "test move" in text(page, "#auto-progress"), what="the progress")
-        wait_until(lambda: page.find_elements(By.CSS_SELECTOR, '#auto-table tr[data-row=after]'),
-                   what="the before/after table")
+        wait_until(lambda: page.execute_script(
+            "return document.querySelector('#auto-progress').dataset.state") != "running",
+                   what="the run's end")
         assert "done" in text(page, "#auto-progress"), text(page, "#auto-progress")
+        assert page.find_elements(By.CSS_SELECTOR, "#auto-table tr[data-row=after]")
         after = text(page, "#auto-table tr[data-row=after]")
         assert "mm" in after and "%" in after
         assert "EEPROM" in text(page, "#auto-hint")

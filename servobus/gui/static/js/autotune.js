@@ -2,10 +2,11 @@
 // (the server's question, naming the axis and the distance in its unit), then shows the
 // run's progress from the WebSocket status, the before/after table when done; Cancel
 // aborts (stop, kept gains back), Revert writes the kept gains back after a finished run.
-// The page renews its run on every status it receives: a page that closes or freezes ends it.
+// The page renews its runs every 150 ms (as a jog): a page that closes or freezes ends them.
 import { api } from "./net.js";
 import { $, el, fmt, ms, message, readField } from "./util.js";
 
+const RENEW_MS = 150;
 const FIGURES = [
   ["rise_s", "rise", ms], ["overshoot_pct", "overshoot", (v) => `${fmt(v)} %`],
   ["settling_s", "settling", (v) => (v === null ? "not settled" : ms(v))],
@@ -22,6 +23,8 @@ export class AutoTune {
     this.msg = msg;
     this.runs = {};  // axis -> the server's view of its last run
     this.saves = {};  // axis -> its family saves tuned gains only on request
+    this.renewing = new Set();  // axes whose run this page started and that still run
+    this.renewTimer = null;
     this.shownAxis = null;
     $("#auto-start").addEventListener("click", () => this.ask());
     $("#auto-go").addEventListener("click", () => this.go());
@@ -86,6 +89,7 @@ export class AutoTune {
     try {
       const doc = await api(this.url(), { ...pending.body, confirmed: true });
       this.runs[this.ctx.selected] = doc.run;
+      this.renew(this.ctx.selected, true);
       message(this.msg, `auto-tune of ${doc.run.who} started`, "ok");
       this.render();
     } catch (err) {
@@ -114,10 +118,23 @@ export class AutoTune {
     }
   }
 
+  // Keep renewing ``axis``'s run while ``on``; the timer runs while any run is renewed.
+  renew(axis, on) {
+    if (on) this.renewing.add(axis); else this.renewing.delete(axis);
+    if (this.renewing.size && this.renewTimer === null) {
+      this.renewTimer = setInterval(() => {
+        for (const a of this.renewing) this.ctx.link.send({ type: "tune_renew", axis: a });
+      }, RENEW_MS);
+    } else if (!this.renewing.size && this.renewTimer !== null) {
+      clearInterval(this.renewTimer);
+      this.renewTimer = null;
+    }
+  }
+
   onStatus(doc) {
     const runs = doc.tune || {};
     for (const [axis, run] of Object.entries(runs)) {
-      if (run.state === "running" && run.mine) this.ctx.link.send({ type: "tune_renew", axis: Number(axis) });
+      this.renew(Number(axis), run.state === "running" && run.mine);
       const before = this.runs[axis];
       this.runs[axis] = run;
       if (before && before.state === "running" && run.state !== "running" && Number(axis) === this.ctx.selected) {
