@@ -30,6 +30,7 @@ BASE = "http://127.0.0.1:8080"
 WS = "ws://127.0.0.1:8080/ws"
 X, T, E, C = 1, 2, 3, 4
 MM = 1.25  # a quarter turn
+LEASE_S = 30.0
 MACHINE = """\
 name = "tune-cell"
 
@@ -62,6 +63,9 @@ unit = "deg"
 def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
     path = write_machine(tmp_path_factory.mktemp("autotune"), MACHINE)
     with TestClient(create_app(machine=path, jog_lease_s=1.0), base_url=BASE) as c:
+        # A run's lease, generous: this thread renews between blocking requests, on a
+        # loaded host too (the test of a lapse sets its own).
+        c.app.state.gui.autotune.lease_s = LEASE_S  # type: ignore[attr-defined]
         yield c
 
 
@@ -100,6 +104,15 @@ class Page:
         """This page's run of its axis (an earlier page's shows until this one starts)."""
         run: dict[str, Any] | None = self.status.get("tune", {}).get(str(self.axis))
         return run if run is not None and run["mine"] else None
+
+    def moves(self, n: int) -> dict[str, Any]:
+        """This page's run once it made ``n`` test moves; it must not have ended before."""
+        run: dict[str, Any] = self.until(
+            lambda: (r := self.run()) is not None and (r["trials"] >= n
+                                                       or r["state"] != "running") and r,
+            f"{n} test moves")
+        assert run["state"] == "running", run["message"]
+        return run
 
     def until_ended(self, what: str) -> dict[str, Any]:
         run: dict[str, Any] = self.until(
@@ -172,7 +185,7 @@ def test_another_page_is_refused_and_cancel_stops_the_motor_and_reverts(
     with client.websocket_connect(WS) as ws_a, client.websocket_connect(WS) as ws_b:
         a, b = Page(ws_a), Page(ws_b, renew=False)
         start(client, a)
-        a.until(lambda: (r := a.run()) is not None and r["trials"] >= 2 and r, "two moves")
+        a.moves(2)
         # another page: no second run, no jog, no step test, no gains written
         other = post(client, f"/api/axes/{X}/tuning/auto",
                      {"distance": MM, "unit": "mm", "page": b.owner, "confirmed": True}, 409)
@@ -198,18 +211,27 @@ def test_a_page_that_goes_away_aborts_its_run(client: TestClient) -> None:
     with client.websocket_connect(WS) as ws:
         page = Page(ws)
         start(client, page)
-        page.until(lambda: (r := page.run()) is not None and r["trials"] >= 1 and r,
-                   "a test move")
-    run = client.get(f"/api/axes/{X}/tuning/auto").json()["run"]
+        page.moves(1)
+
+    def run_ended() -> dict[str, Any] | None:  # the server ends the page after the socket closed
+        run: dict[str, Any] = client.get(f"/api/axes/{X}/tuning/auto").json()["run"]
+        return run if run["state"] != "running" else None
+
+    run = wait_until(run_ended, timeout=30, what="the run's end after the page went away")
     assert run["state"] == "stopped" and "went away" in run["message"]
     assert gains(client) == kept
     at_rest(client)
     # a page still connected that stops renewing (a frozen tab): the run ends too
-    with client.websocket_connect(WS) as ws:
-        frozen = Page(ws, renew=False)
-        start(client, frozen)
-        ended = frozen.until_ended("the run's end without renewals")
-        assert ended["state"] == "stopped" and "renewing" in ended["message"]
+    autotune = client.app.state.gui.autotune  # type: ignore[attr-defined]
+    autotune.lease_s = 1.0
+    try:
+        with client.websocket_connect(WS) as ws:
+            frozen = Page(ws, renew=False)
+            start(client, frozen)
+            ended = frozen.until_ended("the run's end without renewals")
+    finally:
+        autotune.lease_s = LEASE_S
+    assert ended["state"] == "stopped" and "renewing" in ended["message"]
     assert gains(client) == kept
 
 
@@ -218,8 +240,7 @@ def test_stop_all_cancels_a_run(client: TestClient) -> None:
     with client.websocket_connect(WS) as ws:
         page = Page(ws)
         start(client, page)
-        page.until(lambda: (r := page.run()) is not None and r["trials"] >= 1 and r,
-                   "a test move")
+        page.moves(1)
         post(client, "/api/stop_all", {})
         ended = page.until_ended("the run's end after STOP ALL")
     assert ended["state"] == "stopped" and "kept gains" in ended["message"]

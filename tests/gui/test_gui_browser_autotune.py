@@ -94,10 +94,10 @@ def test_auto_asks_naming_the_axis_in_mm_then_shows_the_table_and_reverts(url: s
         assert "EEPROM" in text(page, "#auto-note")
         gains_before = text(page, "#gains-table")
         page.find_element(By.ID, "auto-go").click()
-        wait_until(lambda: "test move" in text(page, "#auto-progress"), what="the progress")
-        wait_until(lambda: page.execute_script(
-            "return document.querySelector('#auto-progress').dataset.state") != "running",
-                   what="the run's end")
+        state = "return document.querySelector('#auto-progress').dataset.state"
+        wait_until(lambda: page.execute_script(state) == "running", what="the run")
+        wait_until(lambda: "test move 1" in text(page, "#auto-progress"), what="the progress")
+        wait_until(lambda: page.execute_script(state) != "running", what="the run's end")
         assert "done" in text(page, "#auto-progress"), text(page, "#auto-progress")
         assert page.find_elements(By.CSS_SELECTOR, "#auto-table tr[data-row=after]")
         after = text(page, "#auto-table tr[data-row=after]")
