@@ -16,7 +16,6 @@ import click
 from rich.console import Console
 from rich.table import Table
 
-from servobus.axis.types import Persistence
 from servobus.axis.units import to_counts
 from servobus.cli import machine_cli
 from servobus.cli.command_class import ServobusCommand
@@ -26,6 +25,8 @@ from servobus.cli.failures import CliError
 from servobus.cli.motion_guard import stop_on_interrupt
 from servobus.cli.open_axis import open_drive_machine
 from servobus.cli.output import emit, note
+from servobus.errors import ArgumentRangeError
+from servobus.tune import plan
 from servobus.tune.tuner import Trial, TuneResult
 
 
@@ -117,24 +118,20 @@ def tune_cmd(ctx: CliContext, distance: str, yes: bool, save: bool, revert: bool
             raise click.BadParameter("the distance must not be zero", param_hint="'--distance'")
         axis.check_target(axis.to_user(axis.counts() + counts))  # LimitError: nothing moved
         profile = core.family.tuning
-        if save and (profile is None or profile.persistence is not Persistence.RAM_SAVE_COMMAND):
-            hint = profile.save_hint if profile is not None else "no tuning gains"
-            raise click.UsageError(f"--save: {core.family.title} gains are not saved with a "
-                                   f"command ({hint}); nothing was moved")
-        if not yes and not click.confirm(
-                f"tune {who}: test moves between here and {shown} away, gains raised until "
-                f"the motor vibrates; go?", default=False, err=True):
+        try:
+            plan.check_save(profile, core.family.title, save)
+        except ArgumentRangeError as exc:
+            raise click.UsageError(f"--save: {exc}") from None
+        if not yes and not click.confirm(plan.question(who, shown), default=False, err=True):
             raise CliError("not tuned: the question was declined", "nothing was moved or "
                            "written; --yes skips the question")
-        if profile is not None and profile.persistence is Persistence.EEPROM_EACH_WRITE:
-            note("note: every gain write goes to the drive's EEPROM (at most 40 this run)")
+        if (text := plan.write_note(profile)) is not None:
+            note(text)
         with stop_on_interrupt(core):
             result = axis.tune(counts, owner="cli", vibration_limit=vibration_limit,
                                trace=not poll, save=save)
             if revert:
-                for name, value in result.original.items():
-                    if core.read_param(name) != value:
-                        core.write_param(name, value)
+                axis.revert_gains(result.original)
     record = {"axis": who, "distance": shown, **result.as_dict(), "reverted": revert}
 
     def render(con: Console) -> None:

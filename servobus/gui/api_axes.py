@@ -18,7 +18,8 @@ from servobus.gui.signals import SIGNALS
 from servobus.gui.soft_limits import check_wave
 
 ACTIONS = ("enable", "disable", "stop", "set_origin", "reset")
-#: Actions that end a running jog or constant speed first (whoever holds it: Stop wins).
+#: Actions that end a running jog, constant speed or tuning run first (whoever holds it:
+#: Stop wins).
 ENDS_LEASE = ("disable", "stop", "set_origin", "reset")
 WAVES = ("square", "sine", "off")
 
@@ -60,8 +61,9 @@ async def command(request: Request) -> Response:
     if action not in ACTIONS:
         raise ArgumentRangeError(f"action {action!r}: one of {', '.join(ACTIONS)}")
     m = h.machine_axis
-    if m is not None and (action == "stop" or (action in ENDS_LEASE and m.lease is not None)):
-        await h.call(m.stop())  # ends the lease first: no target update after the stop
+    busy = m is not None and (m.lease is not None or m.tuning_owner is not None)
+    if m is not None and (action == "stop" or (action in ENDS_LEASE and busy)):
+        await h.call(m.stop())  # ends the lease or tuning run first: no target update after
     if action != "stop" or m is None:
         await h.call(getattr(h.axis, str(action))())
     return ok(status=await _refresh(request, h.id))

@@ -20,6 +20,7 @@ from servobus.families import params_file as PF
 from servobus.gui import tuning
 from servobus.gui.fleet import AxisHandle
 from servobus.gui.http_util import api, body, handle, integer, number, ok, state
+from servobus.gui.soft_limits import check_not_tuning
 
 
 def describe(p: ParamInfo) -> dict[str, object]:
@@ -57,6 +58,7 @@ async def params(request: Request) -> Response:
 async def write_params(request: Request) -> Response:
     h = handle(request)
     values = _values(await body(request))
+    check_not_tuning(h, "writing parameters")
     for name, value in values.items():
         h.axis.param_info(name).check(value)  # all checked before the first write
     await h.call(h.axis.write_params(values))

@@ -20,7 +20,7 @@ from starlette.responses import FileResponse, Response
 from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 
-from servobus.gui import api_axes, api_io, api_params, ws
+from servobus.gui import api_autotune, api_axes, api_io, api_params, ws
 from servobus.gui.auth import Guard
 from servobus.gui.boundary import ErrorBoundary
 from servobus.gui.fair import RequestCaps
@@ -69,6 +69,7 @@ def create_app(url: str | None = None, ids: Sequence[int] | None = None, *,
         Route("/favicon.ico", favicon),
         *api_axes.ROUTES,
         *api_params.ROUTES,
+        *api_autotune.ROUTES,
         *api_io.ROUTES,
         WebSocketRoute("/ws", ws.endpoint),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),

@@ -10,9 +10,10 @@ which covers the DMM manual's reading and the simulator's half-swing). Waves are
 leased: the drive runs them until the host stops them (Off, Stop, STOP ALL, the GUI's
 shutdown); docs/safety.md.
 
-Either motion is refused (OwnerError) while a lease of any owner runs on the axis: it
-would fight the streamed targets. Stop it first. Both are refused (PowerLostError) while
-the machine axis's possible power loss is not acknowledged (issue 29).
+Either motion is refused (OwnerError) while a lease of any owner or an auto-tune run holds
+the axis: it would fight the streamed targets or the tuner's test moves. Stop it first.
+Both are refused (PowerLostError) while the machine axis's possible power loss is not
+acknowledged (issue 29).
 """
 
 from __future__ import annotations
@@ -30,11 +31,22 @@ def check_free(handle: AxisHandle, what: str) -> None:
         raise PowerLostError(f"axis {m.name}: {what} refused: the drive may have lost power "
                              f"({m.power_lost_reason}); acknowledge it first, nothing was "
                              "sent")
+    check_not_tuning(handle, what)
     lease = m.lease if m is not None else None
     if m is not None and lease is not None:
         raise OwnerError(f"axis {m.name}: {what} refused: {lease.owner} holds the axis "
                          "(jog or constant speed); stop it first, nothing was sent",
                          owner=lease.owner)
+
+
+def check_not_tuning(handle: AxisHandle, what: str) -> None:
+    """OwnerError while an auto-tune run (servobus.gui.autotune) moves the axis and writes
+    its gains."""
+    m = handle.machine_axis
+    tuning = m.tuning_owner if m is not None else None
+    if m is not None and tuning is not None:
+        raise OwnerError(f"axis {m.name}: {what} refused: {tuning} is auto-tuning the axis; "
+                         "cancel it first, nothing was sent", owner=tuning)
 
 
 def check_travel(handle: AxisHandle, low: float, high: float, what: str) -> None:

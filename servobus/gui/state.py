@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 
 from servobus.axis.base import AsyncAxis
 from servobus.axis.halt import halt
+from servobus.gui.autotune import AutoTune
 from servobus.gui.fleet import Fleet
 from servobus.gui.jog import JogControl
 from servobus.gui.monitor import StatusMonitor
@@ -29,6 +30,7 @@ class GuiState:
     jog: JogControl
     samplers: dict[int, AxisSampler]
     tuning: dict[int, TuningState]
+    autotune: AutoTune
     sessions: set[ScopeSession] = field(default_factory=set)
     #: What the shutdown's stop gave per axis (None: stopped); None before the shutdown.
     halted: dict[int, BaseException | None] | None = None
@@ -39,7 +41,8 @@ class GuiState:
         return cls(fleet=fleet, monitor=StatusMonitor(fleet),
                    jog=JogControl(fleet, jog_lease_s),
                    samplers={i: AxisSampler(h) for i, h in fleet.handles.items()},
-                   tuning={i: TuningState() for i in fleet.handles})
+                   tuning={i: TuningState() for i in fleet.handles},
+                   autotune=AutoTune(jog_lease_s))
 
     @property
     def closed(self) -> bool:
@@ -87,11 +90,13 @@ class GuiState:
             return
         self._closed = True
         self.jog.close()  # no page can start a jog from here on
+        self.autotune.closed = True  # nor an auto-tune run
         try:
             self.halted = await self._halt()
         finally:
             steps: list[tuple[str, Callable[[], Awaitable[None]]]] = [
-                ("page motions", self.jog.stop), ("status monitor", self.monitor.stop),
+                ("page motions", self.jog.stop), ("auto-tune runs", self.autotune.stop),
+                ("status monitor", self.monitor.stop),
                 *((f"sampler of axis {i}", s.stop) for i, s in self.samplers.items()),
                 ("connection", self.fleet.close)]
             await _each(steps)

@@ -24,7 +24,7 @@ from servobus.axis.step_metrics import step_metrics
 from servobus.errors import ArgumentRangeError, DriveTimeout, ServobusError
 from servobus.gui.fleet import AxisHandle
 from servobus.gui.sampler import AxisSampler
-from servobus.gui.soft_limits import check_step, has_limits
+from servobus.gui.soft_limits import check_not_tuning, check_step, has_limits
 
 #: A parameter is a tuning gain when its name contains one of these.
 GAIN_NAME_HINTS = ("gain", "kp", "integration", "feedforward", "trq_cons")
@@ -152,6 +152,7 @@ async def apply_gains(handle: AxisHandle, state: TuningState,
     """Write gains (checked first); remember what they were for :func:`revert_gains`."""
     if not values:
         raise ArgumentRangeError("no gains to apply")
+    check_not_tuning(handle, "writing gains")
     for name, value in values.items():
         handle.axis.param_info(name).check(value)
     before = await handle.call(handle.axis.read_params(list(values)))
@@ -163,6 +164,7 @@ async def apply_gains(handle: AxisHandle, state: TuningState,
 async def revert_gains(handle: AxisHandle, state: TuningState) -> dict[str, int]:
     if not state.previous:
         raise ArgumentRangeError("nothing to revert: no gains were applied")
+    check_not_tuning(handle, "writing gains")
     values, state.previous = state.previous, None
     await handle.call(handle.axis.write_params(values))
     return values

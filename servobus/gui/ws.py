@@ -4,7 +4,8 @@ Messages from the page (JSON): ``jog`` {axis, speed} (``speed`` in the axis's sp
 unit, servobus.gui.fleet.Units; ``rpm`` instead is still taken; repeated while the button is held),
 ``jog_stop`` {axis}, ``turn`` {axis, speed} (renews the constant speed the page started with
 ``POST /api/axes/N/turn`` {speed, page}, repeated while it is on), ``turn_stop`` {axis},
-``stop_all``, ``scope`` {settings}, ``scope_run`` {running},
+``tune_renew`` {axis} (keeps the page's auto-tune run alive, servobus.gui.autotune;
+repeated every 150 ms while it runs), ``stop_all``, ``scope`` {settings}, ``scope_run`` {running},
 ``scope_arm``, ``scope_csv``, ``ack`` {seq}, ``io_watch`` {axis or null}. To the page:
 ``hello``, ``status`` (every :data:`STATUS_PERIOD_S`; each axis as StatusMonitor.view
 gives it: its last values with their age and the machine's live link state, issue 29),
@@ -16,8 +17,9 @@ Message sizes and JSON nesting are bounded (servobus.gui.limits).
 The page owns its jogs and constant speeds as ``page N`` (N: ``hello``'s ``owner``;
 servobus.gui.jog). ``status`` carries ``jog`` (axis -> rpm of every running lease),
 ``leases`` (axis -> owner, rpm, at_limit, mine) and ``ended`` (axis -> why this page's
-motion ended without it letting go). When the WebSocket closes, for whatever reason, every
-motion of this page stops first.
+motion ended without it letting go), ``tune`` (axis -> its auto-tune run: progress, then
+the table). When the WebSocket closes, for whatever reason, every motion of this page
+stops first, and its auto-tune runs abort.
 """
 
 from __future__ import annotations
@@ -79,6 +81,7 @@ class PageLink:
                            for k, v in active.items()},
                 "ended": {str(k): v for k, v in gui.jog.ended(self.owner).items()},
                 "alarms": len(gui.monitor.log),
+                "tune": gui.autotune.views(self.owner),
             })
             await asyncio.sleep(STATUS_PERIOD_S)
 
@@ -109,6 +112,8 @@ class PageLink:
         elif kind == "turn":
             axis = _int(doc, "axis")
             await gui.jog.turn(axis, _speed(gui, doc, axis), page=self.owner, start=False)
+        elif kind == "tune_renew":
+            gui.autotune.renew(self.owner, _int(doc, "axis"))
         elif kind in ("jog_stop", "turn_stop"):
             await gui.jog.release(self.owner, _int(doc, "axis"))
         elif kind == "stop_all":
@@ -211,6 +216,7 @@ class PageLink:
         finally:
             gui.jog.pages.discard(self.owner)  # no Run names it any more
             await gui.jog.release(self.owner)  # first: a jog never outlives its page
+            await gui.autotune.release(self.owner)  # nor an auto-tune run
             for task in tasks:
                 task.cancel()
             for task in tasks:

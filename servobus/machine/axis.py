@@ -31,7 +31,7 @@ import contextlib
 import logging
 import math
 import time
-from collections.abc import Awaitable, Callable, Iterator, Sequence
+from collections.abc import Awaitable, Callable, Iterator, Mapping, Sequence
 from typing import TYPE_CHECKING
 
 from servobus.axis.capabilities import Capability
@@ -102,6 +102,8 @@ class AsyncMachineAxis:
         self._silent_since = 0.0  # time.monotonic() of the first of them
         self._interrupted: str | None = None
         self._power_lost: str | None = None
+        #: The tuning run on this axis: its owner and the task it runs in (Stop cancels it).
+        self._tuning: tuple[str, asyncio.Task[object] | None] | None = None
         self._origin_pending = False
         self._is_closed = False
         self.checking = False  # set by the machine while it checks a reopened link
@@ -334,6 +336,9 @@ class AsyncMachineAxis:
         if self.checking:
             raise MachineLinkError(f"axis {self.name}: its link is back and being checked for "
                                    "a power loss; nothing was sent, try again")
+        if self._tuning is not None:
+            raise OwnerError(f"axis {self.name} is being tuned by {self._tuning[0]}; Stop "
+                             "ends the run, nothing was sent", owner=self._tuning[0])
         self._interrupted = None
         return core
 
@@ -593,12 +598,17 @@ class AsyncMachineAxis:
         """The manuals' tuning procedure (servobus.tune, docs/tuning.md): test moves between
         here and ``distance`` counts away, inside the soft limits (checked before anything
         moves); the kept gains come back on an abort, a failure or a cancel. Refused while
-        another owner's lease runs. ``trace=False`` polls where a trace exists; ``save``
-        keeps the gains where the family saves with a command. Takes seconds."""
+        another owner's lease or tuning run holds the axis; while it runs, other motion is
+        refused and :meth:`stop` cancels it (Stop always wins). ``trace=False`` polls where
+        a trace exists; ``save`` keeps the gains where the family saves with a command.
+        Takes seconds."""
         from servobus.tune.axis_plant import AxisPlant
         from servobus.tune.tuner import ABORT_VIBRATION, Limits, Tuner
 
         self.check_owner(owner)
+        if self._tuning is not None:
+            raise OwnerError(f"axis {self.name} is being tuned by {self._tuning[0]}; one "
+                             "run at a time", owner=self._tuning[0])
         core = self._motion()
         here = await self.counts()
         soft = None
@@ -606,11 +616,36 @@ class AsyncMachineAxis:
             soft = (min(map(self.to_counts, self.limits)), max(map(self.to_counts, self.limits)))
         self.check_target(self.to_user(here + distance))  # LimitError: nothing moved
         limit = ABORT_VIBRATION if vibration_limit is None else vibration_limit
-        tuner = Tuner(AxisPlant(core, trace=trace), Limits(distance, soft, limit),
-                      core.counts_per_rev, on_trial=on_trial, save=save)
+        limits = Limits(distance, soft, limit, to_user=self.to_user, unit=self.unit)
+        tuner = Tuner(AxisPlant(core, trace=trace), limits, core.counts_per_rev,
+                      on_trial=on_trial, save=save)
         self._commanded()
-        with self._watch():
-            return await tuner.run()
+        self._tuning = (owner, asyncio.current_task())
+        try:
+            with self._watch():
+                return await tuner.run()
+        finally:
+            self._tuning = None
+
+    @property
+    def tuning_owner(self) -> str | None:
+        """Who runs a tuning run on this axis now, or None."""
+        return self._tuning[0] if self._tuning is not None else None
+
+    async def revert_gains(self, original: Mapping[str, int]) -> dict[str, int]:
+        """A tuning run's kept gains (``TuneResult.original``) back, each written only
+        where the drive holds another value now; returns what was written."""
+        if self._tuning is not None:
+            raise OwnerError(f"axis {self.name} is being tuned by {self._tuning[0]}; the "
+                             "run reverts by itself when stopped", owner=self._tuning[0])
+        core = self.core()
+        written: dict[str, int] = {}
+        for name, value in original.items():
+            with self._watch():
+                if await core.read_param(name) != value:
+                    await core.write_param(name, value)
+                    written[name] = value
+        return written
 
     def check_owner(self, owner: str) -> None:
         """OwnerError (nothing sent) when another owner's lease runs on this axis."""
@@ -618,6 +653,10 @@ class AsyncMachineAxis:
         if lease is not None and lease.owner != owner:
             raise OwnerError(f"axis {self.name} is held by {lease.owner}; stop it first "
                              "(Stop and STOP ALL always win)", owner=lease.owner)
+        tuning = self.tuning_owner
+        if tuning is not None and tuning != owner:
+            raise OwnerError(f"axis {self.name} is being tuned by {tuning}; stop it first "
+                             "(Stop and STOP ALL always win)", owner=tuning)
 
     def _checked_speed(self, speed: float | None) -> float:
         if speed is None:
@@ -697,8 +736,11 @@ class AsyncMachineAxis:
             await asyncio.sleep(period)
 
     async def stop(self) -> None:
-        """Stop whatever runs (a lease of any owner too: Stop always wins)."""
+        """Stop whatever runs (a lease of any owner, a tuning run: Stop always wins)."""
         await self._end_lease("stopped")
+        tuning = self._tuning
+        if tuning is not None and tuning[1] is not None and tuning[1] is not asyncio.current_task():
+            tuning[1].cancel()  # its abort path stops the motor again and reverts the gains
         with self._watch():
             await self.core().stop()
         self._moving = False

@@ -140,6 +140,10 @@ class MachineAxis:
                                                 vibration_limit=vibration_limit, trace=trace,
                                                 save=save, on_trial=on_trial))
 
+    def revert_gains(self, original: Mapping[str, int]) -> dict[str, int]:
+        """A tuning run's kept gains back (MachineAxis.revert_gains)."""
+        return self._runner.run(self._core.revert_gains(original))
+
     def move_to(self, target: float, *, wait: bool = False, timeout: float | None = None) -> None:
         self._runner.run(self._core.move_to(target, wait=wait, timeout=timeout))
 

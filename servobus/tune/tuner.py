@@ -74,12 +74,20 @@ class TuneAborted(ServobusError):
 @dataclass(frozen=True)
 class Limits:
     """Where test moves may go: ``distance`` counts from the start (its sign the first
-    move's direction), inside ``soft_limits`` (counts) when the axis has them."""
+    move's direction), inside ``soft_limits`` (counts) when the axis has them. Messages give
+    positions in ``unit`` through ``to_user`` (a machine axis's mm, deg ...), else counts."""
 
     distance: int
     soft_limits: tuple[int, int] | None = None
     vibration_limit: float = ABORT_VIBRATION
     record_s: float = RECORD_S
+    to_user: Callable[[int], float] | None = None
+    unit: str = "counts"
+
+    def at(self, *counts: int) -> str:
+        """Positions in counts as the user reads them, lowest first: ``-10 .. 300 mm``."""
+        values = sorted(c if self.to_user is None else self.to_user(c) for c in counts)
+        return f"{' .. '.join(f'{v:g}' for v in values)} {self.unit}"
 
 
 @dataclass(frozen=True)
@@ -90,6 +98,8 @@ class Trial:
     rise_s: float | None
     following_error: float | None
     vibration: float
+    #: The step of the procedure the move belongs to (:attr:`Tuner.phase`).
+    phase: str = ""
 
     @property
     def vibrates(self) -> bool:
@@ -103,7 +113,8 @@ class Trial:
     def as_dict(self) -> dict[str, object]:
         return {"gains": self.gains, "overshoot_pct": self.overshoot_pct,
                 "settling_s": self.settling_s, "rise_s": self.rise_s,
-                "following_error": self.following_error, "vibration": self.vibration}
+                "following_error": self.following_error, "vibration": self.vibration,
+                "phase": self.phase}
 
 
 @dataclass
@@ -209,6 +220,8 @@ class Tuner:
         self.writes = 0
         self.per_gain: dict[str, int] = {}
         self.trials = 0
+        #: Where the run is: before, calm, search <gain>, refine, verify (progress shown).
+        self.phase = "before"
         self.origin: int | None = None
         self.outward = False
         eeprom = plant.profile.persistence is Persistence.EEPROM_EACH_WRITE
@@ -255,11 +268,12 @@ class Tuner:
         end = self.origin + self.limits.distance if self.outward else self.origin
         soft = self.limits.soft_limits
         if soft is not None and not soft[0] <= end <= soft[1]:
-            raise TuneAborted(f"a test move to {end} counts would leave the soft limits "
-                              f"{soft[0]} .. {soft[1]}; nothing was moved")
+            raise TuneAborted(f"a test move to {self.limits.at(end)} would leave the soft "
+                              f"limits {self.limits.at(*soft)}; nothing was moved")
         if abs(end - here) > 2 * abs(self.limits.distance):
-            raise TuneAborted(f"the motor stands at {here} counts, beyond the test span "
-                              f"{self.origin} .. {self.origin + self.limits.distance}")
+            span = self.limits.at(self.origin, self.origin + self.limits.distance)
+            raise TuneAborted(f"the motor stands at {self.limits.at(here)}, beyond the test "
+                              f"span {span}")
         return await self.plant.test_move(end, self.limits.record_s)
 
     async def _trial(self) -> tuple[Trial, Record]:
@@ -267,7 +281,7 @@ class Tuner:
         self.trials += 1
         m = record.metrics()
         trial = Trial(dict(self.written), m.overshoot_pct, m.settling_time_s, m.rise_time_s,
-                      m.following_error_max, vibration(record))
+                      m.following_error_max, vibration(record), self.phase)
         if self.on_trial is not None:
             self.on_trial(trial)
         if record.alarm_code:
@@ -289,14 +303,18 @@ class Tuner:
             ratio, per_accel = inertia_ratio(record, plant.rotor_amps_per_accel(),
                                              self.counts_per_rev)
             found: dict[str, int] = {}
+            self.phase = "calm"
             best = await self._calm(before, ratio)
             for role in ORDER:
                 gain = plant.profile.gain(role)
                 if gain is not None:
+                    self.phase = f"search {gain.name}"
                     best = await self._search(gain, best, found)
             if plant.source == "trace":  # polls time a step too coarsely for half steps
+                self.phase = "refine"
                 best = await self._refine(best)
             # the verify starts at rest, not in the wake of the search's last vibrating move
+            self.phase = "verify"
             await plant.settle(VERIFY_SETTLE_S)
             after, _ = await self._trial()
             if after.vibrates:  # the verify shakes where the search did not: one step down

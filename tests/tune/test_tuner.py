@@ -101,9 +101,13 @@ def test_vibration_beyond_the_limit_aborts_and_reverts() -> None:
 def test_a_move_beyond_the_soft_limits_is_refused_before_anything_moves() -> None:
     plant = dmm()
     here = asyncio.run(plant.position())
-    with pytest.raises(TuneAborted, match="soft limits"):
+    with pytest.raises(TuneAborted, match="soft limits") as refused:
         tune(plant, soft_limits=(here - 100, here + 1000))
     assert plant.moves == 0 and plant.gain_writes == []
+    assert f"limits {here - 100} .. {here + 1000} counts" in str(refused.value)
+    # a machine axis's messages are in its unit (mm here: 1,000 counts a mm, reversed)
+    with pytest.raises(TuneAborted, match=r"limits -1\.1 .. -0\.1 mm"):
+        tune(plant, soft_limits=(100, 1100), to_user=lambda c: -c / 1000, unit="mm")
 
 
 def test_ctrl_c_during_a_move_stops_and_reverts() -> None:

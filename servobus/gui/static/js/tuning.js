@@ -1,4 +1,5 @@
 // Tuning panel: step test with its figures, before/after comparison, gains apply/revert.
+import { AutoTune } from "./autotune.js";
 import { api } from "./net.js";
 import { $, axisLabel, el, fieldError, fmt, ms, message, readField, readFields, COLORS } from "./util.js";
 
@@ -21,6 +22,7 @@ export class TuningPanel {
     this.selected = new Set();
     this.plot = null;
     this.visible = false;
+    this.auto = new AutoTune(ctx, this.msg);
     $("#step-plus").addEventListener("click", () => this.step(1));
     $("#step-minus").addEventListener("click", () => this.step(-1));
     $("#gains-apply").addEventListener("click", () => this.apply());
@@ -39,7 +41,7 @@ export class TuningPanel {
     sel.replaceChildren(...units.map((u) => el("option", { value: u, text: u })));
     sel.value = units[0];
   }
-  show() { this.visible = true; this.load(); }
+  show() { this.visible = true; this.load(); this.auto.load(); }
   hide() { this.visible = false; }
   url(path = "") { return `/api/axes/${this.ctx.selected}/tuning${path}`; }
 
