@@ -5,7 +5,8 @@ For DMM (DYN2-TL) and YZ-AIM virtual drives, each load preset at inertia ratios 
 a quarter-turn test distance; a grid of hand-picked gains (:data:`GRIDS`) is stepped the
 same way and its best case kept (calm, overshoot <= 10 %, fastest to settle). A case meets
 the target when the tuned gains end calm, with overshoot <= 10 % and settling no slower
-than 1.25 x the grid's best. Run: ``python -m benchmarks tune`` (about 2.5 min on 2 cores).
+than 1.25 x the grid's best. Run: ``python -m benchmarks tune`` (6 min on 2 shared cores
+at a load average of 20).
 
 Fairness (decision): each grid point moves a copy of the drive the tuner leaves behind,
 after the same wait for rest as the tuner's verify move. A DMM drive's Adaptive Tuning
