@@ -13,9 +13,10 @@ after the same wait for rest as the tuner's verify move. A DMM drive's Adaptive 
 learns the load over the tuner's some 30 moves, whatever the gains (it learns from the
 reference's acceleration); a fresh drive's estimate is the rotor's, so a grid point on a
 fresh drive fed forward a fraction of the load's torque and overshot where the tuner's
-verify did not. Both now start from the same learnt drive. The grid's best is still the
-fastest of its single moves, not re-measured (the tuner's figure is its verify, a move of
-its own): that bias is the grid's favour, a harder bar, and is kept.
+verify did not. Both now start from the same learnt drive. The other way round, the grid's
+best is the fastest of many single moves while the tuner's figure is a verify move of its
+pick: the grid's best is re-measured the same way, one more move after the wait for rest
+(the table gives both: *grid settling* the verify, *grid pick* the selection move).
 """
 
 from __future__ import annotations
