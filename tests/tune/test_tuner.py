@@ -139,6 +139,7 @@ def test_a_yzaim_belt_at_10_is_tuned_as_fast_as_the_grid_finds() -> None:
     assert not result.after.vibrates and result.after.overshoot_pct <= 10.0
 
 
+@pytest.mark.slow  # some 60 test moves of a two-mass plant: 3 - 6 s of CPU
 def test_a_yzaim_belt_at_30_gets_a_softer_integral_than_raising_finds() -> None:
     # Issue 35's miss: the integral search only raised from the calm phase's Ti 77 and the
     # run ended at 231 ms (the grid's best: 141 ms). Stepping softer where raising does not
