@@ -130,6 +130,7 @@ def test_poll_only_sees_no_position_error_and_still_tunes_calm() -> None:
     assert not result.after.vibrates and result.after.overshoot_pct <= 10.0
 
 
+@pytest.mark.slow  # some 50 test moves of a two-mass plant: 3 - 7 s of CPU
 def test_a_yzaim_belt_at_10_is_tuned_as_fast_as_the_grid_finds() -> None:
     # Measured: position kp 740, speed kp 2,420, Ti 151 ms (the integral found softer than
     # the search's start), settling 95 ms, calm; the benchmark grid's best settles in 95 ms.
