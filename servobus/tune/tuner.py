@@ -4,17 +4,22 @@ Procedure (docs/tuning.md, "The tuner"):
 
 1. read and keep the gains; a test move at them (the *before* figures) doubles as the
    inertia test: the current over the acceleration gives the load's inertia ratio where
-   the plant knows its rotor (:func:`inertia_ratio`);
-2. for each gain role in :data:`ORDER` (speed, position, integral, filter): raise it along
+   the plant knows its rotor (:func:`inertia_ratio`); where they vibrate, calm them first;
+2. at the first calm gains, let the drive learn (:meth:`Tuner._learn`): test moves until
+   :data:`LEARN_AGREE` in a row are :func:`alike` (DMM Adaptive Tuning learns the load
+   over the moves; gains compared while it learns are compared on different machines);
+3. for each gain role in :data:`ORDER` (speed, position, integral, filter): raise it along
    :func:`candidates` with a test move each, until the move vibrates or rings
    (:data:`DETECT`); back off: only values within :data:`MARGIN` of the first vibrating
-   one count; keep the one of those that settles fastest within :data:`MAX_OVERSHOOT_PCT`;
-3. fine tuning (5.2: "make the motor harder ... or softer"), on a drive trace only: each
-   gain in turn one :data:`FINE` step harder, else softer, kept while the move gets better
-   (within the overshoot, faster to settle) and stays below the onset of vibration; half
+   one count; keep the one of those that settles fastest within :data:`MAX_OVERSHOOT_PCT`
+   (:func:`pick`: ties within :data:`SETTLE_NOISE` go to the value nearest the start).
+   Where that is the start itself, or it vibrates or overshoots, try the other way too;
+4. fine tuning (5.2: "make the motor harder ... or softer"), on a drive trace only: each
+   gain in turn one :data:`FINE` step harder, else softer, kept while the move gets clearly
+   better (:meth:`Trial.improves_on`) and stays below the onset of vibration; half
    steps, then quarter steps. Its margin is that step, not :data:`MARGIN`: a kept value
    may lie one half step below one that vibrated at other gains;
-4. a last test move at the tuned gains (the *after* figures).
+5. a last test move at the tuned gains (the *after* figures).
 
 Safety: the first move beyond the :class:`Limits` (soft limits, the distance the user gave)
 is refused before anything moves; an alarm, a vibration beyond ``vibration_limit``, a
@@ -63,6 +68,16 @@ VERIFY_SETTLE_S = 2.0
 #: Steps a gain is lowered by at most while the kept gains vibrate (the calm phase) and
 #: while the best raised value still overshoots (the search's way down).
 CALM_STEPS = 4
+#: Settling times within this fraction of each other are a tie: one move's settling time
+#: varies by a few per cent with the state the move starts from (measured: 228 - 234 ms
+#: over six moves at the same gains, YZ-AIM belt at inertia 30).
+SETTLE_NOISE = 0.05
+#: The drive has learnt (its response stopped changing) when this many test moves in a row
+#: at the same gains are :func:`alike`; it gets at most LEARN_MOVES moves for it (measured:
+#: a DMM drive's Adaptive Tuning learns the screw at inertia 30 in some 18 quarter turns).
+LEARN_AGREE = 3
+LEARN_MOVES = 24
+LEARN_OVERSHOOT_PP = 1.0
 #: Polled samples time a step coarsely: the tuner backs off further from what it cannot see.
 POLL_MARGIN = 0.6
 
@@ -109,6 +124,18 @@ class Trial:
         """Smaller is better: calm, within the overshoot, fast to settle, little overshoot."""
         return (self.vibrates, self.overshoot_pct > MAX_OVERSHOOT_PCT,
                 math.inf if self.settling_s is None else self.settling_s, self.overshoot_pct)
+
+    def improves_on(self, other: Trial) -> bool:
+        """Clearly better than ``other``: calmer or newly within the overshoot, else faster
+        to settle by more than :data:`SETTLE_NOISE` (a tie keeps ``other``)."""
+        mine, theirs = self.score(), other.score()
+        if mine[:2] != theirs[:2]:
+            return mine[:2] < theirs[:2]
+        if self.settling_s is None:
+            return False
+        if other.settling_s is None:
+            return True
+        return self.settling_s < other.settling_s * (1.0 - SETTLE_NOISE)
 
     def as_dict(self) -> dict[str, object]:
         return {"gains": self.gains, "overshoot_pct": self.overshoot_pct,
@@ -199,6 +226,21 @@ def inertia_ratio(record: Record, rotor_amps_per_accel: float | None,
     return max(0.0, per_accel / rotor_amps_per_accel - 1.0), per_accel
 
 
+def alike(a: Trial, b: Trial) -> bool:
+    """Two moves at the same gains that tell the same: neither clearly better, the same
+    overshoot within :data:`LEARN_OVERSHOOT_PP`."""
+    return (not a.improves_on(b) and not b.improves_on(a)
+            and abs(a.overshoot_pct - b.overshoot_pct) <= LEARN_OVERSHOOT_PP)
+
+
+def pick(tried: list[tuple[int, Trial]], start: int) -> tuple[int, Trial]:
+    """The best of a search's ``tried`` values; of those tied with it (within
+    :data:`SETTLE_NOISE`), the one nearest ``start``: a gain moves only as far as helps."""
+    best = min(tried, key=lambda vt: vt[1].score())[1]
+    tied = [vt for vt in tried if not best.improves_on(vt[1])]
+    return min(tied, key=lambda vt: abs(math.log(max(vt[0], 1) / max(start, 1))))
+
+
 class Tuner:
     """One tuning run on ``plant`` within ``limits``; ``on_trial`` sees every test move."""
 
@@ -244,7 +286,9 @@ class Tuner:
 
     def _can_write(self, name: str, count: int) -> bool:
         """Whether ``count`` more writes of ``name`` fit the write budget, the revert kept."""
-        reserve = sum(1 for g, v in self.original.items() if self.written.get(g) != v)
+        # the revert of every gain that differs, and of ``name``, which may differ after
+        reserve = sum(1 for g, v in self.original.items()
+                      if g == name or self.written.get(g) != v)
         return self.budget is None or (
             self.writes + count + reserve <= self.budget
             and self.per_gain.get(name, 0) + count + 1 <= EEPROM_WRITES_PER_GAIN)
@@ -305,7 +349,10 @@ class Tuner:
             found: dict[str, int] = {}
             self.phase = "calm"
             best = await self._calm(before, ratio)
+            learnt = False
             for role in ORDER:
+                if not learnt and not best.vibrates:  # learning moves only at calm gains
+                    best, learnt = await self._learn(best), True
                 gain = plant.profile.gain(role)
                 if gain is not None:
                     self.phase = f"search {gain.name}"
@@ -368,6 +415,19 @@ class Tuner:
                 trial = await self._lower_until_calm(gain, trial)
         return trial
 
+    async def _learn(self, trial: Trial) -> Trial:
+        """Test moves at the gains held until the drive's response stops changing: a drive
+        that adapts to its load (DMM Adaptive Tuning, 5.2) moves differently while it learns,
+        and gains compared across that would be compared on different machines."""
+        recent = [trial]
+        for _ in range(LEARN_MOVES):
+            if len(recent) >= LEARN_AGREE and all(
+                    alike(recent[-1], t) for t in recent[-LEARN_AGREE:-1]):
+                break
+            trial, _ = await self._trial()
+            recent.append(trial)
+        return trial
+
     async def _lower_until_calm(self, gain: TuningGain, trial: Trial) -> Trial:
         info = self.plant.param_info(gain.name)
         for _ in range(CALM_STEPS):
@@ -415,7 +475,7 @@ class Tuner:
                         break
                     await self._write(gain.name, value)
                     trial, _ = await self._trial()
-                    if trial.vibration >= ONSET or trial.score() >= best.score():
+                    if trial.vibration >= ONSET or not trial.improves_on(best):
                         await self._write(gain.name, kept)
                         break
                     best, moved = trial, True
@@ -430,7 +490,8 @@ class Tuner:
         tried: list[tuple[int, Trial]] = [(start, best)]
         limit: int | None = None
         for value in candidates(gain, start, info.minimum, info.maximum):
-            if not await self._write(gain.name, value):
+            # room for this value, the write back to calm and the value kept at the end
+            if not self._can_write(gain.name, 3) or not await self._write(gain.name, value):
                 break  # the write budget is spent: keep what was found so far
             trial, _ = await self._trial()
             if trial.vibration >= ONSET:
@@ -444,18 +505,23 @@ class Tuner:
                 tried = [(v, t) for v, t in tried if v == start or v * self.margin >= limit]
             else:
                 tried = [(v, t) for v, t in tried if v == start or v <= limit * self.margin]
-        value, chosen = min(tried, key=lambda vt: vt[1].score())
-        if chosen.vibrates or chosen.overshoot_pct > MAX_OVERSHOOT_PCT:
+        value, chosen = pick(tried, start)
+        if chosen.vibrates or chosen.overshoot_pct > MAX_OVERSHOOT_PCT or value == start:
             # raising did not help: the other way (5.2: a lower Integration Gain on a big
-            # inertia; a softer position loop on a compliant load)
+            # inertia; a softer position loop on a compliant load; YZ-AIM belt at 30: Ti
+            # 77 -> 296 ms, settling 244 -> 140 ms)
             down = candidates(TuningGain(gain.role, gain.name, not gain.inverse,
                                          gain.keep_units_digit), start, info.minimum,
                               info.maximum)[:CALM_STEPS]
+            calm_start = not chosen.vibrates
             for lower in down:
-                if not await self._write(gain.name, lower):
+                if not self._can_write(gain.name, 2) or not await self._write(gain.name, lower):
                     break
                 trial, _ = await self._trial()
                 tried.append((lower, trial))
-            value, chosen = min(tried, key=lambda vt: vt[1].score())
-        await self._write(gain.name, value)
+                if calm_start and trial.vibration >= ONSET:
+                    break  # from calm gains, the first shaking step ends the way down too
+            value, chosen = pick(tried, start)
+        if not await self._write(gain.name, value):  # not expected: the writes were kept
+            raise TuneAborted(f"the write budget left no write to keep {gain.name}={value}")
         return chosen

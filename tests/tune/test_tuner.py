@@ -134,13 +134,25 @@ def test_poll_only_sees_no_position_error_and_still_tunes_calm() -> None:
     assert not result.after.vibrates and result.after.overshoot_pct <= 10.0
 
 
-def test_fine_tuning_finds_gains_between_the_search_steps_on_a_yzaim_belt() -> None:
-    # Measured: the search alone ends at speed kp 2,420 (3,390 vibrates), settling 140 ms;
-    # fine tuning's half step 2,860 with a softer position loop settles in 92 ms, calm.
+@pytest.mark.slow  # some 50 test moves of a two-mass plant: 3 - 7 s of CPU
+def test_a_yzaim_belt_at_10_is_tuned_as_fast_as_the_grid_finds() -> None:
+    # Measured: position kp 740, speed kp 2,420, Ti 151 ms (the integral found softer than
+    # the search's start), settling 95 ms, calm; the benchmark grid's best settles in 95 ms.
     plant = SteppedPlant.yzaim(load_settings({"load": "belt", "inertia": 10}))
     result = tune(plant)
-    assert 2420 < result.tuned["speed_loop_kp"] < 3390
     assert result.after.settling_s is not None and result.after.settling_s < 0.12
+    assert not result.after.vibrates and result.after.overshoot_pct <= 10.0
+
+
+@pytest.mark.slow  # some 60 test moves of a two-mass plant: 3 - 6 s of CPU
+def test_a_yzaim_belt_at_30_gets_a_softer_integral_than_raising_finds() -> None:
+    # Issue 35's miss: the integral search only raised from the calm phase's Ti 77 and the
+    # run ended at 231 ms (the grid's best: 141 ms). Stepping softer where raising does not
+    # help finds Ti 296 ms; measured: settling 140 ms, overshoot 1.2 %, calm.
+    plant = SteppedPlant.yzaim(load_settings({"load": "belt", "inertia": 30}))
+    result = tune(plant)
+    assert result.tuned["speed_loop_integration_time"] > 150
+    assert result.after.settling_s is not None and result.after.settling_s < 0.176
     assert not result.after.vibrates and result.after.overshoot_pct <= 10.0
 
 
