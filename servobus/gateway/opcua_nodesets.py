@@ -59,6 +59,8 @@ class NodeSetIds:
 
 #: Seconds the last :func:`import_nodesets` took (None before any).
 import_seconds: float | None = None
+#: Whether the last :func:`import_nodesets` was served from the cache (None before any).
+served_from_cache: bool | None = None
 
 
 def cache_path() -> Path:
@@ -74,13 +76,14 @@ async def import_nodesets(server: Server, cache: Path | None = None) -> bool:
     """Import the three NodeSets into ``server`` (after ``init`` and the ApplicationUri, so
     namespace 1 stays the gateway's own), from ``cache`` (default :func:`cache_path`) when
     it holds them; True when the cache served."""
-    global import_seconds
+    global import_seconds, served_from_cache
     start = time.perf_counter()
     path = cache if cache is not None else cache_path()
     served = await _from_cache(server, path)
     if not served:
         await _import(server, path)
     import_seconds = time.perf_counter() - start
+    served_from_cache = served
     log.info("OPC UA NodeSets DI, IA and Robotics %s in %.2f s",
              "from the cache" if served else "imported", import_seconds)
     return served
