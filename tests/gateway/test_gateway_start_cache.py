@@ -22,15 +22,14 @@ from servobus.gateway.commands import Commander
 from servobus.gateway.opcua_nodesets import DI_URI, ROBOTICS_URI, NodeSetIds
 from servobus.gateway.opcua_server import OpcUaGateway, OpcUaOptions
 
-Snapshot = dict[ua.NodeId, list[tuple[object, ...]]]
+Snapshot = dict[ua.NodeId, tuple[list[tuple[object, ...]], dict[int, object]]]
 
 
 def snapshot(nodes: dict[ua.NodeId, NodeData]) -> Snapshot:
     """Every node's references and attribute values."""
-    return {nodeid: [*sorted((str(r.ReferenceTypeId), str(r.NodeId), r.IsForward)
-                             for r in data.references),
-                     *sorted((int(key), repr(value.value))
-                             for key, value in data.attributes.items())]
+    return {nodeid: (sorted((str(r.ReferenceTypeId), str(r.NodeId), r.IsForward)
+                            for r in data.references),
+                     {int(key): value.value for key, value in data.attributes.items()})
             for nodeid, data in nodes.items()}
 
 
