@@ -42,9 +42,9 @@ from collections.abc import Iterator
 
 @contextlib.contextmanager
 def collector_off() -> Iterator[None]:
-    """The collector off (for the start of the process's own gateway) until
-    :func:`freeze_startup_heap` turns it on, and at the latest when the block ends (as it
-    was before)."""
+    """The collector off for the block (the start of the process's own gateway; the
+    unpickling of a start-up cache), then as it was before; :func:`freeze_startup_heap`
+    turns it on sooner."""
     was_on = gc.isenabled()
     gc.disable()
     try:

@@ -183,6 +183,7 @@ class GatewayServer(InternalServer):  # type: ignore[misc]
         (servobus.gateway.opcua_cache); asyncua's shelf option is not used."""
         build = super().load_standard_address_space
         self.standard_from_cache = await load_standard(self, build)
+
     def create_session(self, name: str, user: User | None = None,
                        external: bool = False) -> InternalSession:
         if external:  # MaxSessions, in all and per client address

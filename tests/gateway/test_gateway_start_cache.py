@@ -5,8 +5,11 @@ again; the files are per user and named by what they depend on."""
 
 from __future__ import annotations
 
+import json
 import logging
 import pickle
+import subprocess
+import sys
 from collections.abc import Awaitable, Callable
 from pathlib import Path
 
@@ -150,3 +153,27 @@ def test_a_file_is_written_whole_or_not_at_all(tmp_path: Path,
         opcua_cache.write(blocked, [1])
     assert "not written" in caplog.text
     assert opcua_cache.read(blocked) is None
+
+
+PLAIN_SERVE = """
+import json, sys
+from servobus.cli.main import cli
+serve = cli.get_command(None, "serve")
+import servobus.gateway.serve
+loaded = sorted(m for m in ("aiomqtt", "paho", "google.protobuf", "servobus.cli.tune_cmd",
+                            "servobus.cli.protocol_cmds", "servobus.gateway.mqtt")
+                if m in sys.modules)
+print(json.dumps({"serve": serve is not None, "loaded": loaded,
+                  "all": "tune" in cli.commands and cli.get_command(None, "serve") is serve}))
+"""
+
+
+@pytest.mark.slow  # a Python process that imports asyncua
+def test_a_plain_serve_imports_neither_mqtt_nor_the_other_commands() -> None:
+    """Start-up time (docs/gateway.md): ``servobus serve`` loads its own command module,
+    and MQTT's libraries only with --mqtt; listing the commands loads them all."""
+    proc = subprocess.run([sys.executable, "-c", PLAIN_SERVE], capture_output=True,
+                          text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout.strip().splitlines()[-1]) == {
+        "serve": True, "loaded": [], "all": True}
