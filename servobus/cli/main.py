@@ -48,6 +48,11 @@ COMMAND_MODULES: list[str] = [
     "servobus.cli.shell_cmd",
 ]
 
+#: Commands loaded on their own when they are what runs (the rest stay unimported):
+#: ``serve`` is a long-running process whose time to ``ready`` counts (issue 36,
+#: docs/gateway.md "Start-up time"); the others' modules cost it a third of a second.
+ALONE: dict[str, str] = {"serve": "servobus.cli.serve_cmd"}
+
 DEBUG_ENV = "SERVOBUS_DEBUG"
 COMPLETE_ENV = "_SERVOBUS_COMPLETE"
 #: Loggers whose chatter never reaches the terminal without --debug (python-can's socketcand
@@ -55,7 +60,46 @@ COMPLETE_ENV = "_SERVOBUS_COMPLETE"
 QUIET_LOGGERS = ("can",)
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class LazyGroup(click.Group):
+    """A group whose command modules are imported when first needed: every one of them
+    as soon as its commands are listed or looked up, except that looking up a command of
+    :data:`ALONE` imports that command's module only."""
+
+    _loading = False
+    _loaded = False
+
+    @property  # type: ignore[override]
+    def commands(self) -> dict[str, click.Command]:
+        if not (self._loading or self._loaded):
+            self._load(COMMAND_MODULES, protocols=True)
+            self._loaded = True
+        return self._commands
+
+    @commands.setter
+    def commands(self, value: dict[str, click.Command]) -> None:
+        self._commands = value
+
+    def _load(self, modules: list[str], protocols: bool = False) -> None:
+        self._loading = True
+        try:
+            for name in modules:
+                importlib.import_module(name).register(self)
+            if protocols:  # built from the protocol registry, after the sim group
+                from servobus.cli import protocol_cmds
+
+                protocol_cmds.register(self)
+        finally:
+            self._loading = False
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        if not self._loaded and cmd_name in ALONE:
+            if cmd_name not in self._commands:
+                self._load([ALONE[cmd_name]])
+            return self._commands.get(cmd_name)
+        return super().get_command(ctx, cmd_name)
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.option("--url", "url", metavar="URL", default=None,
               help="the drive: dyn232:///dev/ttyUSB0, dyncan+pcan://PCAN_USBBUS1, sim://dyncan "
                    f"... (docs/axis.md; or {URL_ENV}). Default: the built-in virtual drive.")
@@ -92,17 +136,6 @@ def cli(ctx: click.Context, url: str | None, port: str | None, can: str | None,
     ctx.obj = CliContext(url_option=url, port=port, can=can, drive_id_option=drive_id,
                          baud=baud, json=as_json, timeout=timeout, machine_option=machine,
                          axis_option=axis)
-
-
-def _register_commands() -> None:
-    from servobus.cli import protocol_cmds
-
-    for name in COMMAND_MODULES:
-        importlib.import_module(name).register(cli)
-    protocol_cmds.register(cli)
-
-
-_register_commands()
 
 
 def debug_requested(args: list[str]) -> bool:

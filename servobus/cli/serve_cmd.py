@@ -94,11 +94,13 @@ def serve(ctx: CliContext, machine_path: Path | None, endpoint: str, users_path:
     need a user of --users. Ctrl-C or SIGTERM stops every axis, then the gateway.
     """
     try:
-        from servobus.gateway.mqtt import MqttOptions, parse_broker
+        from servobus.gateway.heap import collector_off
         from servobus.gateway.opcua_server import OpcUaOptions, parse_endpoint
         from servobus.gateway.serve import GatewayOptions, open_and_serve
         from servobus.gateway.users import Users
 
+        if mqtt_url is not None:  # MQTT's libraries only when served (faster start)
+            from servobus.gateway.mqtt import MqttOptions, parse_broker
         if sparkplug is not None:
             import servobus.gateway.sparkplug.node  # noqa: F401  (protobuf: said here)
     except ModuleNotFoundError as exc:
@@ -137,8 +139,9 @@ def serve(ctx: CliContext, machine_path: Path | None, endpoint: str, users_path:
                              gui_port=gui_port if gui else None, own_process=True,
                              sparkplug=sparkplug)
     _log_events()
-    name = asyncio.run(open_and_serve(
-        machine_path, options, lambda line: click.echo(line, err=line.startswith("warning:"))))
+    with collector_off():  # on again at "ready" (servobus.gateway.heap)
+        name = asyncio.run(open_and_serve(
+            machine_path, options, lambda line: click.echo(line, err=line.startswith("warning:"))))
     raise Interrupted("Ctrl-C" if name == "SIGINT" else name, SHUTDOWN_NOTE)
 
 

@@ -10,32 +10,25 @@ of 1.05 is used. A faithful subset was the fallback; not needed.
 
 What it costs, and the cache (decision): importing takes asyncua seconds on a slow PC (about
 800 nodes; most of it adding references, not parsing). The first import therefore keeps
-what it added as a pickle in the user's cache folder (``$XDG_CACHE_HOME/servobus``, else
-``~/.cache/servobus``): the new nodes and the references it added to the standard ones,
-keyed by a hash of the NodeSet files, asyncua's and Python's versions. A later start with
-the same key and the same namespace indexes puts them into the address space directly.
-The file is written atomically (a rename), so gateways that start together do not read a
-half-written one; one that cannot be read or written is a one-line notice and a plain
-import. asyncua's own shelf cache of the standard address space was measured slower than
-its generated code here and is not used. :data:`import_seconds` holds the last import's
-time and the log names it (docs/gateway.md gives the figures). The cache folder is the
-user's own, as trusted as the installed code (pickle runs what it loads).
+what it added in the user's cache (servobus.gateway.opcua_cache: keyed, atomic, rebuilt
+when unreadable): the new nodes and the references it added to the standard ones, keyed
+by the NodeSet files too. A later start with the same namespace indexes puts them into
+the address space directly. :data:`import_seconds` holds the last import's time and the
+log names it (docs/gateway.md "Start-up time" gives the figures).
 """
 
 from __future__ import annotations
 
-import hashlib
+import asyncio
 import logging
-import os
-import pickle
-import sys
-import tempfile
 import time
-from importlib import metadata, resources
+from importlib import resources
 from pathlib import Path
-from typing import Any
 
-from asyncua import Server
+from asyncua import Server, ua
+from asyncua.server.address_space import NodeData
+
+from servobus.gateway.opcua_cache import cache_file, read, write
 
 log = logging.getLogger(__name__)
 
@@ -66,20 +59,16 @@ class NodeSetIds:
 
 #: Seconds the last :func:`import_nodesets` took (None before any).
 import_seconds: float | None = None
+#: Whether the last :func:`import_nodesets` was served from the cache (None before any).
+served_from_cache: bool | None = None
 
 
 def cache_path() -> Path:
     """Where the import is kept: named by what it depends on."""
-    digest = hashlib.sha256()
-    digest.update(f"{metadata.version('asyncua')} {sys.version} {CACHE_FORMAT}".encode())
     folder = resources.files("servobus.gateway") / "nodesets"
-    for name in FILES:
-        digest.update((folder / name).read_bytes())
-    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "servobus"
-    return base / f"opcua-nodesets-{digest.hexdigest()[:16]}.pickle"
+    return cache_file("nodesets", *((folder / name).read_bytes() for name in FILES))
 
 
-CACHE_FORMAT = 1
 URIS = (DI_URI, IA_URI, ROBOTICS_URI)
 
 
@@ -87,35 +76,50 @@ async def import_nodesets(server: Server, cache: Path | None = None) -> bool:
     """Import the three NodeSets into ``server`` (after ``init`` and the ApplicationUri, so
     namespace 1 stays the gateway's own), from ``cache`` (default :func:`cache_path`) when
     it holds them; True when the cache served."""
-    global import_seconds
+    global import_seconds, served_from_cache
     start = time.perf_counter()
     path = cache if cache is not None else cache_path()
     served = await _from_cache(server, path)
     if not served:
         await _import(server, path)
     import_seconds = time.perf_counter() - start
+    served_from_cache = served
     log.info("OPC UA NodeSets DI, IA and Robotics %s in %.2f s",
              "from the cache" if served else "imported", import_seconds)
     return served
 
 
 async def _from_cache(server: Server, path: Path) -> bool:
-    try:
-        with path.open("rb") as f:
-            kept: dict[str, Any] = pickle.load(f)
-    except FileNotFoundError:
+    kept = await asyncio.to_thread(read, path)
+    if kept is None:
         return False
-    except Exception as exc:  # any unreadable cache: import instead
-        log.warning("OPC UA NodeSet cache %s unreadable (%s): importing", path, exc)
+    nodes = server.iserver.aspace._nodes
+    if not _fits(kept, nodes):
+        log.warning("OPC UA cache %s holds no NodeSet import for this address space: "
+                    "importing again", path)
         return False
     indexes = [await server.register_namespace(uri) for uri in URIS]
     if indexes != kept["indexes"]:
         return False  # another namespace layout: the ids in the cache do not fit
-    nodes = server.iserver.aspace._nodes
     nodes.update(kept["nodes"])
     for nodeid, refs in kept["references"].items():
         nodes[nodeid].references.extend(refs)
     return True
+
+
+def _fits(kept: object, nodes: dict[ua.NodeId, NodeData]) -> bool:
+    """``kept`` is an import's record that applies to ``nodes``: checked whole before any
+    of it goes in, so a damaged cache never leaves half an import behind."""
+    if not isinstance(kept, dict) or not isinstance(kept.get("indexes"), list):
+        return False
+    added, references = kept.get("nodes"), kept.get("references")
+    if not isinstance(added, dict) or not isinstance(references, dict):
+        return False
+    return (all(isinstance(key, ua.NodeId) and isinstance(data, NodeData)
+                and key not in nodes for key, data in added.items())
+            and all(key in nodes and isinstance(refs, list)
+                    and all(isinstance(r, ua.ReferenceDescription) for r in refs)
+                    for key, refs in references.items()))
 
 
 async def _import(server: Server, path: Path) -> None:
@@ -138,14 +142,4 @@ async def _import(server: Server, path: Path) -> None:
                        for nodeid, count in before.items()
                        if len(nodes[nodeid].references) > count},
     }
-    temporary: str | None = None
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile("wb", dir=path.parent, delete=False) as f:
-            temporary = f.name
-            pickle.dump(kept, f, pickle.HIGHEST_PROTOCOL)
-        os.replace(temporary, path)
-    except Exception as exc:  # no cache: the next start imports again
-        log.warning("OPC UA NodeSet cache %s not written (%s)", path, exc)
-        if temporary is not None:
-            Path(temporary).unlink(missing_ok=True)
+    await asyncio.to_thread(write, path, kept)

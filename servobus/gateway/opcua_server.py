@@ -60,6 +60,7 @@ from servobus.gateway.commands import Command, Commander, Refused
 from servobus.gateway.identity import application_uri, gateway_id
 from servobus.gateway.link_events import LinkEvent
 from servobus.gateway.opcua_alarms import AxisAlarms
+from servobus.gateway.opcua_cache import load_standard
 from servobus.gateway.opcua_cert import ensure_certificate
 from servobus.gateway.opcua_limits import LimitedSession, SessionRoom, apply_limits
 from servobus.gateway.opcua_model import SERVOBUS_URI, AxisNodes, build_model
@@ -174,6 +175,14 @@ class GatewayServer(InternalServer):  # type: ignore[misc]
         self.bind_condition_methods = True  # ConditionRefresh for the axes' alarms
         self.on_session_close = on_close
         self.session_room = SessionRoom()
+        #: True when the last start loaded the standard nodes from the cache
+        self.standard_from_cache = False
+
+    async def load_standard_address_space(self, shelf_file: Path | None = None) -> None:
+        """asyncua's standard nodes, from the user's cache when it holds them
+        (servobus.gateway.opcua_cache); asyncua's shelf option is not used."""
+        build = super().load_standard_address_space
+        self.standard_from_cache = await load_standard(self, build)
 
     def create_session(self, name: str, user: User | None = None,
                        external: bool = False) -> InternalSession:

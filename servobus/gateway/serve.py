@@ -20,14 +20,17 @@ import signal
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from servobus.errors import InvalidValue
 from servobus.gateway.commands import Commander
 from servobus.gateway.heap import freeze_startup_heap
-from servobus.gateway.mqtt import MqttGateway, MqttOptions, check_topics_free
 from servobus.gateway.opcua_server import OpcUaGateway, OpcUaOptions
 from servobus.gateway.sampler import DEFAULT_RATE_HZ, Sampler
 from servobus.gateway.source import Machine
+
+if TYPE_CHECKING:  # MQTT is imported only when it is served (docs/gateway.md "Start-up time")
+    from servobus.gateway.mqtt import MqttGateway, MqttOptions
 
 log = logging.getLogger(__name__)
 Say = Callable[[str], None]
@@ -59,8 +62,11 @@ class Gateway:
                                   options.rate_hz)
         self.sampler.listeners.append(self.opcua.on_sample)
         self.sampler.link_listeners.append(self.opcua.on_link)
-        self.mqtt = (MqttGateway(machine, self.sampler, self.commander, options.mqtt)
-                     if options.mqtt else None)
+        self.mqtt: MqttGateway | None = None
+        if options.mqtt is not None:
+            from servobus.gateway.mqtt import MqttGateway
+
+            self.mqtt = MqttGateway(machine, self.sampler, self.commander, options.mqtt)
         self.sparkplug = None
         if options.sparkplug is not None:
             if options.mqtt is None:
@@ -182,6 +188,8 @@ async def open_and_serve(path: Path | None, options: GatewayOptions, say: Say) -
     from servobus.machine import open_machine_async
 
     if options.mqtt is not None:  # a live gateway on these topics: refuse before any link opens
+        from servobus.gateway.mqtt import check_topics_free
+
         await check_topics_free(options.mqtt, machine_name(path))
     machine = await open_machine_async(path, retry=True)
     source = str(path) if path is not None else "built-in virtual machine"

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-from asyncua import Client, Node
+from asyncua import Client, Node, ua
 from rig import free_port
 from subprocess_rig import Process, read_line, stop_process
 
@@ -96,6 +96,29 @@ async def axes_of(client: Client, machine: str) -> dict[str, Node]:
     for child in await axes.get_children():
         out[(await child.read_browse_name()).Name] = child
     return out
+
+
+async def typedef(node: Node) -> ua.NodeId:
+    return (await node.read_type_definition())  # type: ignore[no-any-return]
+
+
+async def find_by_type(root: Node, wanted: ua.NodeId,
+                       nodeclass: ua.NodeClass = ua.NodeClass.Object) -> list[Node]:
+    """Every node of ``nodeclass`` below ``root`` (hierarchical references) whose
+    TypeDefinition is ``wanted``: a client that knows the type and no browse name."""
+    found, todo, seen = [], [root], {root.nodeid}
+    while todo:
+        node = todo.pop()
+        for child in await node.get_children():
+            if child.nodeid in seen:
+                continue
+            seen.add(child.nodeid)
+            kind = await child.read_node_class()
+            if kind == nodeclass and await typedef(child) == wanted:
+                found.append(child)
+            if kind in (ua.NodeClass.Object, ua.NodeClass.Variable):
+                todo.append(child)
+    return found
 
 
 async def parameter(client: Client, axis: Node, name: str) -> Node:

@@ -14,8 +14,15 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from asyncua import Client, Node, ua
-from gateway_rig import RunningGateway, start_gateway, user_client, users_file
+from asyncua import Client, ua
+from gateway_rig import (
+    RunningGateway,
+    find_by_type,
+    start_gateway,
+    typedef,
+    user_client,
+    users_file,
+)
 from rig import free_port, wait_until_async
 from subprocess_rig import read_line, stop_process
 
@@ -72,29 +79,6 @@ def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[RunningGate
             gateway.stop()
     finally:
         stop_process(sim)
-
-
-async def typedef(node: Node) -> ua.NodeId:
-    return (await node.read_type_definition())  # type: ignore[no-any-return]
-
-
-async def find_by_type(root: Node, wanted: ua.NodeId,
-                       nodeclass: ua.NodeClass = ua.NodeClass.Object) -> list[Node]:
-    """Every node of ``nodeclass`` below ``root`` (hierarchical references) whose
-    TypeDefinition is ``wanted``: a client that knows the type and no browse name."""
-    found, todo, seen = [], [root], {root.nodeid}
-    while todo:
-        node = todo.pop()
-        for child in await node.get_children():
-            if child.nodeid in seen:
-                continue
-            seen.add(child.nodeid)
-            kind = await child.read_node_class()
-            if kind == nodeclass and await typedef(child) == wanted:
-                found.append(child)
-            if kind in (ua.NodeClass.Object, ua.NodeClass.Variable):
-                todo.append(child)
-    return found
 
 
 async def test_every_axis_is_found_by_its_type_with_the_mandatory_members(
