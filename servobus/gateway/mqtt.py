@@ -46,6 +46,7 @@ import logging
 import math
 import ssl
 from collections import deque
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import unquote, urlparse
@@ -161,11 +162,8 @@ class MqttGateway:
         self.commander = commander
         self.options = options
         self.broker = parse_broker(options.url)
-        self.username = options.username or self.broker.username
+        self.username = broker_user(options, self.broker, "--mqtt-commands")
         self.password = options.password or self.broker.password
-        if options.commands and not (self.username and self.password):
-            raise InvalidValue("--mqtt-commands needs the broker's authentication: "
-                                     "give --mqtt-user and a password")
         self.gate = CommandGate(options.max_age_s)
         self.base = f"{check_prefix(options.prefix)}/{machine.name}"
         self.presence = Presence(self.base, gateway_id(machine.name, options.gateway_id))
@@ -222,17 +220,7 @@ class MqttGateway:
             tasks.append(asyncio.create_task(self._command_loop(client)))
         tasks.append(asyncio.create_task(self.presence.beat(client)))
         self.connected.set()
-        try:
-            done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_EXCEPTION)
-            for task in done:
-                task.result()
-        finally:
-            for task in tasks:
-                task.cancel()
-            await asyncio.gather(*tasks, return_exceptions=True)
-            with contextlib.suppress(Exception):  # a clean stop sends no will: say it
-                async with asyncio.timeout(1.0):
-                    await self.say_offline(client)
+        await run_session(tasks, lambda: self.say_offline(client))
 
     async def say_offline(self, client: aiomqtt.Client) -> None:
         await client.publish(f"{self.base}/status", b"offline", qos=1, retain=True)
@@ -364,6 +352,33 @@ class MqttGateway:
             self._rival_told = True
             log.error("%s; checking again every %g s", conflict, RECONNECT_S)
         return False
+
+
+def broker_user(options: MqttOptions, broker: Broker, commands_option: str) -> str | None:
+    """The gateway's broker login name; InvalidValue when commands are on without a login
+    (``commands_option`` names what turned them on)."""
+    username = options.username or broker.username
+    if options.commands and not (username and (options.password or broker.password)):
+        raise InvalidValue(f"{commands_option} needs the broker's authentication: "
+                           "give --mqtt-user and a password")
+    return username
+
+
+async def run_session(tasks: list[asyncio.Task[None]],
+                      farewell: Callable[[], Awaitable[None]]) -> None:
+    """A connection's tasks until one fails (a lost broker ends the session); then all are
+    cancelled and ``farewell`` (the offline message: a clean stop sends no will) gets 1 s."""
+    try:
+        done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_EXCEPTION)
+        for task in done:
+            task.result()
+    finally:
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        with contextlib.suppress(Exception):
+            async with asyncio.timeout(1.0):
+                await farewell()
 
 
 def tls_context(o: MqttOptions, broker: Broker) -> ssl.SSLContext | None:
