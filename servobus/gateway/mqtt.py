@@ -49,6 +49,7 @@ from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NoReturn
 from urllib.parse import unquote, urlparse
 
 import aiomqtt
@@ -192,18 +193,14 @@ class MqttGateway:
     async def run(self) -> None:
         """Publish until cancelled; reconnects after a lost broker. GatewayConflict when a
         live gateway serves the topics before this one ever did."""
-        while True:
-            try:
-                if not await self.claim():
-                    await asyncio.sleep(RECONNECT_S)
-                    continue
-                async with self.client() as client:
-                    await self._session(client)
-            except aiomqtt.MqttError as exc:
-                self.connected.clear()
-                log.warning("MQTT broker %s:%s: %s; retrying in %g s", self.broker.host,
-                            self.broker.port, exc, RECONNECT_S)
-                await asyncio.sleep(RECONNECT_S)
+        await keep_connected(self._connect, self.connected, "MQTT broker", self.broker, log)
+
+    async def _connect(self) -> None:
+        if not await self.claim():
+            await asyncio.sleep(RECONNECT_S)
+            return
+        async with self.client() as client:
+            await self._session(client)
 
     async def _session(self, client: aiomqtt.Client) -> None:
         await self.presence.birth(client)
@@ -362,6 +359,20 @@ def broker_user(options: MqttOptions, broker: Broker, commands_option: str) -> s
         raise InvalidValue(f"{commands_option} needs the broker's authentication: "
                            "give --mqtt-user and a password")
     return username
+
+
+async def keep_connected(connect: Callable[[], Awaitable[None]], connected: asyncio.Event,
+                         who: str, broker: Broker, logger: logging.Logger) -> NoReturn:
+    """``connect`` (one session) again RECONNECT_S after each lost broker, one warning on
+    ``logger`` for each loss (``who`` begins it)."""
+    while True:
+        try:
+            await connect()
+        except aiomqtt.MqttError as exc:
+            connected.clear()
+            logger.warning("%s %s:%s: %s; retrying in %g s", who, broker.host, broker.port,
+                           exc, RECONNECT_S)
+            await asyncio.sleep(RECONNECT_S)
 
 
 async def run_session(tasks: list[asyncio.Task[None]],

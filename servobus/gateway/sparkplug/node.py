@@ -32,12 +32,12 @@ from servobus.errors import InvalidValue
 from servobus.gateway.commands import Commander, Refused
 from servobus.gateway.identity import client_id, gateway_id
 from servobus.gateway.mqtt import (
-    RECONNECT_S,
     MqttGateway,
     MqttOptions,
     broker_client,
     broker_user,
     check_topic_name,
+    keep_connected,
     paho_of,
     parse_broker,
     run_session,
@@ -103,18 +103,14 @@ class SparkplugNode:
 
     async def run(self) -> None:
         """Serve until cancelled; a new connection (and bdSeq) after a lost broker."""
-        while True:
-            self.bd_seq = (self.bd_seq + 1) % SEQ_MODULO
-            will = aiomqtt.Will(self.topic("NDEATH"), node_death(self.bd_seq), qos=1,
-                                retain=False)
-            try:
-                async with broker_client(self.options, self.client_id, will) as client:
-                    await self._session(client)
-            except aiomqtt.MqttError as exc:
-                self.connected.clear()
-                log.warning("Sparkplug: broker %s:%s: %s; retrying in %g s", self.broker.host,
-                            self.broker.port, exc, RECONNECT_S)
-                await asyncio.sleep(RECONNECT_S)
+        await keep_connected(self._connect, self.connected, "Sparkplug: broker", self.broker,
+                             log)
+
+    async def _connect(self) -> None:
+        self.bd_seq = (self.bd_seq + 1) % SEQ_MODULO
+        will = aiomqtt.Will(self.topic("NDEATH"), node_death(self.bd_seq), qos=1, retain=False)
+        async with broker_client(self.options, self.client_id, will) as client:
+            await self._session(client)
 
     async def _session(self, client: aiomqtt.Client) -> None:
         self._paho = paho_of(client)
