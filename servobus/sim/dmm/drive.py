@@ -400,6 +400,9 @@ class VirtualDrive(EngineShaft):
         self._engine._trip(code)
         self._latch(code)
 
+    def _tripped(self, code: AlarmCode) -> None:
+        self._latch(code)
+
     def _latch(self, code: AlarmCode) -> None:
         self._alarm = code
         self._engine.trip_code = AlarmCode.NONE
@@ -865,17 +868,6 @@ class VirtualDrive(EngineShaft):
             return
         self._check_faults()
         rev0 = math.floor(eng.p / U.COUNTS_PER_REV)
-        while n > 0:
-            before = eng.steps
-            observer = self.period_observer
-            if observer is None:
-                eng.run(n)
-            elif eng.run(1):
-                observer(self)
-            n -= eng.steps - before
-            if eng.trip_code is not AlarmCode.NONE:
-                self._latch(eng.trip_code)
-            elif eng.steps == before:
-                break
+        self._run_periods(n)
         self._update_homing()
         self.zri_count += abs(math.floor(eng.p / U.COUNTS_PER_REV) - rev0)
