@@ -64,6 +64,19 @@ class EngineShaft:
             elif eng.steps == before:
                 break
 
+    def _switch_servo(self, mode: Servo) -> bool:
+        """The engine's servo in ``mode``; a change holds the shaft where it is (no torque
+        when free, the speed reference reset). True when it changed."""
+        eng = self._engine
+        if mode == eng.servo:
+            return False
+        eng.servo = mode
+        eng.hold_here()
+        if mode == Servo.FREE:
+            eng.tq = eng.tq_cmd = 0.0
+        eng.speed_ref = 0.0
+        return True
+
     def _tripped(self, code: AlarmCode) -> None:
         """The engine tripped ``code``: only with its protections on (the DMM drive)."""
 
@@ -241,15 +254,8 @@ class Motor(EngineShaft):
         self._apply_servo()
 
     def _apply_servo(self) -> None:
-        eng = self._engine
-        mode = Servo.FREE if self._free else Servo.POSITION
-        if mode != eng.servo:
-            eng.servo = mode
-            eng.hold_here()
-            if mode == Servo.FREE:
-                eng.tq = eng.tq_cmd = 0.0
-            eng.speed_ref = 0.0
-        eng.wake()
+        self._switch_servo(Servo.FREE if self._free else Servo.POSITION)
+        self._engine.wake()
 
     # ---------------------------------------------------------------- motion
     def move_to_counts(self, counts: float) -> bool:

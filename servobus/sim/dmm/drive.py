@@ -417,17 +417,10 @@ class VirtualDrive(EngineShaft):
             self._config.servo_mode, Servo.POSITION)
 
     def _apply_servo(self) -> None:
-        eng = self._engine
-        mode = self._servo_mode()
-        if mode != eng.servo:
-            eng.servo = mode
-            eng.hold_here()
-            if mode == Servo.FREE:
-                eng.tq = eng.tq_cmd = 0.0
-            eng.speed_ref = 0.0
+        if self._switch_servo(self._servo_mode()):
             self._update_homing()
             self._apply_analog()
-        eng.wake()
+        self._engine.wake()
 
     # ---------------------------------------------------------------- motion
     def _accepts_motion(self) -> bool:
