@@ -7,14 +7,13 @@ mistake or a missing ``hal`` module.
 from __future__ import annotations
 
 import asyncio
-import logging
-import sys
 from pathlib import Path
 
 import click
 
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
+from servobus.cli.event_log import log_events
 from servobus.cli.failures import CliError, Interrupted
 
 EXISTING = click.Path(dir_okay=False, exists=True, path_type=Path)
@@ -52,13 +51,7 @@ def hal(ctx: CliContext, name: str, machine_path: Path | None, watchdog_s: float
         hal_module = import_hal()
     except NotSupported as exc:
         raise CliError(str(exc), "docs/linuxcnc.md says how the hal module is found") from None
-    handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
-    for logger_name in ("servobus.hal", "servobus.machine"):
-        logger = logging.getLogger(logger_name)
-        logger.setLevel(logging.INFO)
-        logger.addHandler(handler)
-        logger.propagate = False
+    log_events("servobus.hal", "servobus.machine")
     caught = asyncio.run(serve(hal_module, machine_path, name, watchdog_s))
     raise Interrupted("Ctrl-C" if caught == "SIGINT" else caught,
                       "every position axis was stopped and the component exited")

@@ -85,6 +85,20 @@ def chosen_axis(ctx: CliContext) -> str:
 
 
 @contextmanager
+def closed_without_stop(machine: Machine) -> Iterator[None]:
+    """``machine`` closed without a stop on the way out: the command stops what it
+    started itself. After a failure the close's own errors are dropped (the failure keeps
+    its one stderr line)."""
+    try:
+        yield
+    except BaseException:
+        with suppress(Exception):
+            machine.close(stop=False)
+        raise
+    machine.close(stop=False)
+
+
+@contextmanager
 def open_machine_cli(ctx: CliContext, only: list[str] | None) -> Iterator[Machine]:
     """Open the machine (only the links of ``only``); close it without a stop on the way out
     (a failure keeps its one stderr line)."""
@@ -92,13 +106,8 @@ def open_machine_cli(ctx: CliContext, only: list[str] | None) -> Iterator[Machin
 
     machine = open_machine(ctx.machine_path, only=only, origins=False)
     note_origins_skipped(machine)
-    try:
+    with closed_without_stop(machine):
         yield machine
-    except BaseException:
-        with suppress(Exception):
-            machine.close(stop=False)
-        raise
-    machine.close(stop=False)
     if ctx.machine_path is None:
         note_builtin_machine_once()
 

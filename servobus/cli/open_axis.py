@@ -71,6 +71,7 @@ def open_drive_machine(ctx: CliContext) -> Iterator[MachineAxis]:
     runs through the machine's leases, on a loop thread of their own. Opening fails as in
     :func:`open_axis`, in one line. The machine closes without a stop: the command stops
     what it started itself (a ``continuous`` speed is left turning on purpose)."""
+    from servobus.cli.machine_cli import closed_without_stop
     from servobus.machine import open_url_machine
 
     url = parse_url(ctx.url)
@@ -85,17 +86,12 @@ def open_drive_machine(ctx: CliContext) -> Iterator[MachineAxis]:
         if isinstance(cause, ArgumentRangeError | NotSupported):
             raise cause from None
         raise open_failure(url, cause) from exc
-    try:
+    with closed_without_stop(machine):
         axis = next(iter(machine.axes.values()))
         core = axis.axis
         if core is not None:
             _note_id_address(ctx, ctx.drive_id, core.id_address, core.protocol)
         yield axis
-    except BaseException:
-        with suppress(Exception):
-            machine.close(stop=False)
-        raise
-    machine.close(stop=False)
     if not ctx.url_given:
         note_builtin_once()
 

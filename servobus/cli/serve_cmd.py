@@ -7,7 +7,6 @@ problem (a port in use, a users file that cannot be read, a machine file mistake
 from __future__ import annotations
 
 import asyncio
-import logging
 import os
 import sys
 from pathlib import Path
@@ -16,6 +15,7 @@ import click
 
 from servobus.cli.command_class import ServobusCommand
 from servobus.cli.context import CliContext, pass_cli
+from servobus.cli.event_log import log_events
 from servobus.cli.failures import CliError, Interrupted
 
 GATEWAY_LIBRARIES = ("asyncua", "aiomqtt", "protobuf")
@@ -166,13 +166,7 @@ def check_identity(prefix: str, ident: str | None, group: str | None = None) -> 
 def _log_events() -> None:
     """The gateway's and the machine's events, one line each, on stderr (library chatter
     stays with servobus.cli.main's rule: only with --debug)."""
-    handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
-    for name in ("servobus.gateway", "servobus.machine"):
-        logger = logging.getLogger(name)
-        logger.setLevel(logging.INFO)
-        logger.addHandler(handler)
-        logger.propagate = False
+    log_events("servobus.gateway", "servobus.machine")
 
 
 def register(group: click.Group) -> None:

@@ -46,8 +46,10 @@ import logging
 import math
 import ssl
 from collections import deque
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NoReturn
 from urllib.parse import unquote, urlparse
 
 import aiomqtt
@@ -161,11 +163,8 @@ class MqttGateway:
         self.commander = commander
         self.options = options
         self.broker = parse_broker(options.url)
-        self.username = options.username or self.broker.username
+        self.username = broker_user(options, self.broker, "--mqtt-commands")
         self.password = options.password or self.broker.password
-        if options.commands and not (self.username and self.password):
-            raise InvalidValue("--mqtt-commands needs the broker's authentication: "
-                                     "give --mqtt-user and a password")
         self.gate = CommandGate(options.max_age_s)
         self.base = f"{check_prefix(options.prefix)}/{machine.name}"
         self.presence = Presence(self.base, gateway_id(machine.name, options.gateway_id))
@@ -194,18 +193,14 @@ class MqttGateway:
     async def run(self) -> None:
         """Publish until cancelled; reconnects after a lost broker. GatewayConflict when a
         live gateway serves the topics before this one ever did."""
-        while True:
-            try:
-                if not await self.claim():
-                    await asyncio.sleep(RECONNECT_S)
-                    continue
-                async with self.client() as client:
-                    await self._session(client)
-            except aiomqtt.MqttError as exc:
-                self.connected.clear()
-                log.warning("MQTT broker %s:%s: %s; retrying in %g s", self.broker.host,
-                            self.broker.port, exc, RECONNECT_S)
-                await asyncio.sleep(RECONNECT_S)
+        await keep_connected(self._connect, self.connected, "MQTT broker", self.broker, log)
+
+    async def _connect(self) -> None:
+        if not await self.claim():
+            await asyncio.sleep(RECONNECT_S)
+            return
+        async with self.client() as client:
+            await self._session(client)
 
     async def _session(self, client: aiomqtt.Client) -> None:
         await self.presence.birth(client)
@@ -222,17 +217,7 @@ class MqttGateway:
             tasks.append(asyncio.create_task(self._command_loop(client)))
         tasks.append(asyncio.create_task(self.presence.beat(client)))
         self.connected.set()
-        try:
-            done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_EXCEPTION)
-            for task in done:
-                task.result()
-        finally:
-            for task in tasks:
-                task.cancel()
-            await asyncio.gather(*tasks, return_exceptions=True)
-            with contextlib.suppress(Exception):  # a clean stop sends no will: say it
-                async with asyncio.timeout(1.0):
-                    await self.say_offline(client)
+        await run_session(tasks, lambda: self.say_offline(client))
 
     async def say_offline(self, client: aiomqtt.Client) -> None:
         await client.publish(f"{self.base}/status", b"offline", qos=1, retain=True)
@@ -364,6 +349,47 @@ class MqttGateway:
             self._rival_told = True
             log.error("%s; checking again every %g s", conflict, RECONNECT_S)
         return False
+
+
+def broker_user(options: MqttOptions, broker: Broker, commands_option: str) -> str | None:
+    """The gateway's broker login name; InvalidValue when commands are on without a login
+    (``commands_option`` names what turned them on)."""
+    username = options.username or broker.username
+    if options.commands and not (username and (options.password or broker.password)):
+        raise InvalidValue(f"{commands_option} needs the broker's authentication: "
+                           "give --mqtt-user and a password")
+    return username
+
+
+async def keep_connected(connect: Callable[[], Awaitable[None]], connected: asyncio.Event,
+                         who: str, broker: Broker, logger: logging.Logger) -> NoReturn:
+    """``connect`` (one session) again RECONNECT_S after each lost broker, one warning on
+    ``logger`` for each loss (``who`` begins it)."""
+    while True:
+        try:
+            await connect()
+        except aiomqtt.MqttError as exc:
+            connected.clear()
+            logger.warning("%s %s:%s: %s; retrying in %g s", who, broker.host, broker.port,
+                           exc, RECONNECT_S)
+            await asyncio.sleep(RECONNECT_S)
+
+
+async def run_session(tasks: list[asyncio.Task[None]],
+                      farewell: Callable[[], Awaitable[None]]) -> None:
+    """A connection's tasks until one fails (a lost broker ends the session); then all are
+    cancelled and ``farewell`` (the offline message: a clean stop sends no will) gets 1 s."""
+    try:
+        done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_EXCEPTION)
+        for task in done:
+            task.result()
+    finally:
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        with contextlib.suppress(Exception):
+            async with asyncio.timeout(1.0):
+                await farewell()
 
 
 def tls_context(o: MqttOptions, broker: Broker) -> ssl.SSLContext | None:

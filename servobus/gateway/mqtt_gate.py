@@ -16,6 +16,9 @@ run, and answered on ``.../reply``:
 * a payload that is not such an object, or larger than :data:`MAX_PAYLOAD` bytes, nested
   deeper than 32 levels or holding a number beyond a double's range (servobus.bounded_json).
 
+The retained, size, age and seen-before checks are servobus.gateway.gate_core, shared with
+the Sparkplug DCMD writes; this module decodes and checks the JSON.
+
 ``set_speed`` is a lease (docs/gateway.md "MQTT commands"): it takes ``ttl`` (seconds,
 default 0.5, above 0 and at most 1; BadOutOfRange beyond, checked with the OPC UA
 arguments in servobus.gateway.commands) and ends that long after the last ``set_speed``
@@ -29,18 +32,18 @@ from __future__ import annotations
 
 import math
 import time
-from collections import OrderedDict
 from dataclasses import dataclass
 
 from servobus import bounded_json
 from servobus.errors import JsonRefused
 from servobus.gateway.commands import AXIS_COMMANDS, MOTION, Command, Refused
+from servobus.gateway.gate_core import DEFAULT_MAX_AGE_S as DEFAULT_MAX_AGE_S
+from servobus.gateway.gate_core import MAX_FUTURE_S as MAX_FUTURE_S
+from servobus.gateway.gate_core import MAX_IDS as MAX_IDS
+from servobus.gateway.gate_core import MAX_PAYLOAD as MAX_PAYLOAD
+from servobus.gateway.gate_core import GateCore
 from servobus.machine.lease import DEFAULT_TTL_S
 
-MAX_PAYLOAD = 4096
-MAX_IDS = 10_000
-MAX_FUTURE_S = 2.0
-DEFAULT_MAX_AGE_S = 5.0
 MAX_CLIENT = 64
 
 
@@ -53,17 +56,13 @@ class Accepted:
 
 class CommandGate:
     def __init__(self, max_age_s: float = DEFAULT_MAX_AGE_S) -> None:
-        self.max_age_s = max_age_s
-        self._seen: OrderedDict[str, float] = OrderedDict()
+        self.core = GateCore("command", max_age_s)
 
     def admit(self, axis: str, payload: bytes, retained: bool,
               now: float | None = None) -> Accepted:
         """The command to run, or Refused with the reason."""
         now = time.time() if now is None else now
-        if retained:
-            raise Refused("BadRequestNotAllowed", "a retained command is never run")
-        if len(payload) > MAX_PAYLOAD:
-            raise Refused("BadRequestTooLarge", f"a command has at most {MAX_PAYLOAD} bytes")
+        self.core.check_frame(payload, retained)
         try:  # nesting and numbers bounded (servobus.bounded_json): nothing here can overflow
             data = bounded_json.loads(payload)
         except JsonRefused as exc:
@@ -82,12 +81,7 @@ class CommandGate:
         if ts is not None:
             if isinstance(ts, bool) or not isinstance(ts, int | float) or not math.isfinite(ts):
                 raise Refused("BadInvalidArgument", "ts is a number: unix time in seconds")
-            if now - ts > self.max_age_s:
-                raise Refused("BadInvalidTimestamp",
-                              f"stale: sent {now - ts:.1f} s ago (at most {self.max_age_s:g} s)")
-            if ts - now > MAX_FUTURE_S:
-                raise Refused("BadInvalidTimestamp",
-                              f"ts is {ts - now:.1f} s in the future: check the sender's clock")
+            self.core.check_age(ts, now, "ts is")
         value = data.get("value")
         if AXIS_COMMANDS[name] and (isinstance(value, bool) or not isinstance(value, int | float)):
             raise Refused("BadInvalidArgument", f"{name} needs a number value")
@@ -102,22 +96,9 @@ class CommandGate:
             raise Refused("BadInvalidArgument",
                           f"client is a string of 1..{MAX_CLIENT} characters")
         if ident is not None:
-            self._expire(now)
-            if ident in self._seen:
-                raise Refused("BadRequestNotAllowed", f"id {ident!r} was seen before: not re-run")
-            if len(self._seen) >= MAX_IDS:
-                raise Refused("BadTooManyOperations", "too many commands: try again later")
-            self._seen[ident] = now
+            self.core.remember(ident, now, f"id {ident!r}")
         # a value on a command that takes none is ignored: a stop runs whatever it carries
         number = float(value) if AXIS_COMMANDS[name] and value is not None else None
         command = Command(axis, name, number,
                           None if ttl is None else float(ttl))
         return Accepted(command, ident, "mqtt" if client is None else f"mqtt:{client}")
-
-    def _expire(self, now: float) -> None:
-        horizon = now - 2 * self.max_age_s
-        while self._seen:
-            oldest, when = next(iter(self._seen.items()))
-            if when >= horizon:
-                break
-            del self._seen[oldest]

@@ -30,7 +30,7 @@ from servobus.sim.core.control import ChannelControl, Reply
 from servobus.sim.dmm.control import DriveControl
 from servobus.sim.dmm.drive import VirtualDrive
 from servobus.sim.line_server import DEFAULT_HOST, format_tcp_url
-from servobus.sim.wall_clock import RealtimeClock
+from servobus.sim.wall_clock import RealtimeClock, cancel_and_wait
 
 MAX_LINE = 4096  # bytes of one request line
 DEFAULT_MAX_CLIENTS = 16
@@ -101,9 +101,7 @@ class ControlServer:
     async def close(self) -> None:
         task, self._task = self._task, None
         if task is not None:
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
+            await cancel_and_wait(task)
         elif self._sock is not None:
             self._sock.close()
 

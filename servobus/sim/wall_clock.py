@@ -14,7 +14,7 @@ import asyncio
 import contextlib
 import time
 from collections.abc import Sequence
-from typing import Protocol
+from typing import Any, Protocol
 
 DEFAULT_TICK_S = 0.004
 
@@ -27,6 +27,15 @@ class Clocked(Protocol):
 
     def advance_to(self, t: float) -> None: ...
   # background advance period (2-5 ms keeps each step short)
+
+
+async def cancel_and_wait(task: asyncio.Task[Any] | None) -> None:
+    """Cancel ``task`` (None: nothing to do) and wait until it has ended (a sim server's
+    background task at close)."""
+    if task is not None:
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
 
 
 class RealtimeClock:
@@ -61,7 +70,4 @@ class RealtimeClock:
 
     async def stop(self) -> None:
         task, self._task = self._task, None
-        if task is not None:
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
+        await cancel_and_wait(task)

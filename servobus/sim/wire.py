@@ -26,7 +26,6 @@ memory. Replies still pending for a port that closes are dropped (``close_port``
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import heapq
 import itertools
 import time
@@ -34,7 +33,7 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Generic, TypeVar
 
-from servobus.sim.wall_clock import Clocked, RealtimeClock
+from servobus.sim.wall_clock import Clocked, RealtimeClock, cancel_and_wait
 from servobus.transport.base import Direction, TraceHook
 
 COARSE_S = 0.0015  # epoll-based loops round timeouts up to 1 ms (+ wake-up jitter)
@@ -97,10 +96,7 @@ class TimedReleases:
 
     async def close(self) -> None:
         task, self._task = self._task, None
-        if task is not None:
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
+        await cancel_and_wait(task)
         self._heap.clear()
 
     async def _run(self) -> None:

@@ -22,7 +22,6 @@ Decisions (docs/gateway.md "Sparkplug B"):
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 from typing import Any
 
@@ -33,13 +32,15 @@ from servobus.errors import InvalidValue
 from servobus.gateway.commands import Commander, Refused
 from servobus.gateway.identity import client_id, gateway_id
 from servobus.gateway.mqtt import (
-    RECONNECT_S,
     MqttGateway,
     MqttOptions,
     broker_client,
+    broker_user,
     check_topic_name,
+    keep_connected,
     paho_of,
     parse_broker,
+    run_session,
 )
 from servobus.gateway.sampler import Sampler
 from servobus.gateway.source import Machine
@@ -87,11 +88,7 @@ class SparkplugNode:
         self.node = gateway_id(machine.name, options.gateway_id)
         self.client_id = f"{client_id(self.node)}-spb"
         self.broker = parse_broker(options.url)
-        user = options.username or self.broker.username
-        if options.commands and not (user and (options.password or self.broker.password)):
-            raise InvalidValue("DCMD (--mqtt-commands) needs the broker's authentication: "
-                               "give --mqtt-user and a password")
-        self.user = f"mqtt:{user}"
+        self.user = f"mqtt:{broker_user(options, self.broker, 'DCMD (--mqtt-commands)')}"
         self.gate = DcmdGate(options.max_age_s)
         self.bd_seq = -1  # the first connection takes 0
         self.seq = 0
@@ -106,18 +103,14 @@ class SparkplugNode:
 
     async def run(self) -> None:
         """Serve until cancelled; a new connection (and bdSeq) after a lost broker."""
-        while True:
-            self.bd_seq = (self.bd_seq + 1) % SEQ_MODULO
-            will = aiomqtt.Will(self.topic("NDEATH"), node_death(self.bd_seq), qos=1,
-                                retain=False)
-            try:
-                async with broker_client(self.options, self.client_id, will) as client:
-                    await self._session(client)
-            except aiomqtt.MqttError as exc:
-                self.connected.clear()
-                log.warning("Sparkplug: broker %s:%s: %s; retrying in %g s", self.broker.host,
-                            self.broker.port, exc, RECONNECT_S)
-                await asyncio.sleep(RECONNECT_S)
+        await keep_connected(self._connect, self.connected, "Sparkplug: broker", self.broker,
+                             log)
+
+    async def _connect(self) -> None:
+        self.bd_seq = (self.bd_seq + 1) % SEQ_MODULO
+        will = aiomqtt.Will(self.topic("NDEATH"), node_death(self.bd_seq), qos=1, retain=False)
+        async with broker_client(self.options, self.client_id, will) as client:
+            await self._session(client)
 
     async def _session(self, client: aiomqtt.Client) -> None:
         self._paho = paho_of(client)
@@ -132,17 +125,8 @@ class SparkplugNode:
         self.connected.set()
         tasks = [asyncio.create_task(self._data_loop(client)),
                  asyncio.create_task(self._message_loop(client))]
-        try:
-            done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_EXCEPTION)
-            for task in done:
-                task.result()
-        finally:
-            for task in tasks:
-                task.cancel()
-            await asyncio.gather(*tasks, return_exceptions=True)
-            with contextlib.suppress(Exception):  # a clean stop sends no will: say it
-                async with asyncio.timeout(1.0):
-                    await client.publish(self.topic("NDEATH"), node_death(self.bd_seq), qos=1)
+        await run_session(tasks, lambda: client.publish(self.topic("NDEATH"),
+                                                         node_death(self.bd_seq), qos=1))
 
     async def _send(self, client: aiomqtt.Client, kind: str, device: str | None,
                     message: Any) -> None:

@@ -53,6 +53,20 @@ class Clocked(Protocol):
     def periods(self) -> int: ...
 
 
+class Readouts(Protocol):
+    """A core's readouts each period, as a trace and a step record take them (the DMM
+    drive, the protocol-free Motor)."""
+
+    @property
+    def position_error(self) -> float: ...
+
+    @property
+    def speed_rpm(self) -> float: ...
+
+    @property
+    def current_a(self) -> float: ...
+
+
 class Traced(Protocol):
     """What a trace records every control period of its core :attr:`drive`."""
 

@@ -257,3 +257,68 @@ def load_request(args: Mapping[str, Any]) -> loads.LoadSettings:
         return loads.load_settings({a.name: args.get(a.name) for a in LOAD_ARGS})
     except ServobusError as exc:
         raise ControlError("bad_argument", str(exc)) from None
+
+
+# ---------------------------------------------------------------------- the shaft's world
+def ok(**extra: Any) -> Reply:
+    """A command's reply: ``{"ok": true}`` and what it reports."""
+    return {"ok": True, **extra}
+
+
+class Shaft(Protocol):
+    """What the world commands (``load``, ``block``) act on: a family's drive or motor."""
+
+    def set_load(self, *, inertia: float | None = None,
+                 friction: float | None = None) -> None: ...
+
+    def set_disturbance(self, torque_nm: float) -> None: ...
+
+    def set_blocked(self, blocked: bool) -> None: ...
+
+    def world(self) -> dict[str, float | bool]: ...
+
+
+ShaftT = TypeVar("ShaftT", bound=Shaft)
+
+
+class Mechanics(Protocol):
+    """The load model (servobus.sim.core.motor.Motor) a ``load`` request sets."""
+
+    def set_mechanics(self, settings: loads.LoadSettings) -> None: ...
+
+    def mechanics(self) -> dict[str, float]: ...
+
+
+def apply_load(shaft: Shaft, mechanics: Mechanics, a: dict[str, Any]) -> Reply:
+    """The ``load`` command: friction, external torque and the load (:data:`LOAD_ARGS`);
+    replies with the world and the mechanics now."""
+    settings = load_request(a)
+    shaft.set_load(friction=a["friction"])
+    if a["torque_nm"] is not None:
+        shaft.set_disturbance(a["torque_nm"])
+    if not settings.empty:
+        mechanics.set_mechanics(settings)
+    return ok(world=shaft.world(), mechanics=mechanics.mechanics())
+
+
+def block(ctl: object, shaft: Shaft, a: dict[str, Any]) -> Reply:
+    """The ``block`` command: the shaft blocked or free."""
+    shaft.set_blocked(a["blocked"])
+    return ok()
+
+
+def world_commands(
+        faults: Mapping[str, object],
+        load: Callable[[Any, ShaftT, dict[str, Any]], Reply],
+        fault: Callable[[Any, ShaftT, dict[str, Any]], Reply]) -> tuple[Command[ShaftT], ...]:
+    """The ``load``, ``block`` and ``fault`` commands every family's channel takes, run by
+    the family's ``load`` and ``fault`` handlers (``faults`` names the faults it injects)."""
+    return (
+        Command("load", (Arg("torque_nm", float, -100.0, 100.0, default=None),
+                         Arg("friction", float, 0.0, 100.0, default=None, doc="N m, Coulomb"),
+                         *LOAD_ARGS),
+                load, "external torque, friction and the load: preset, inertia ratio, "
+                      "resonance, load torque (docs/tuning.md)"),
+        Command("block", (Arg("blocked", bool),), block, "block or free the shaft"),
+        Command("fault", (Arg("fault", str, choices=tuple(faults)),), fault, "inject a fault"),
+    )

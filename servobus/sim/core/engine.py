@@ -53,6 +53,24 @@ TWO_PI = 2.0 * math.pi
 RAD_PER_COUNT = TWO_PI / U.COUNTS_PER_REV
 
 
+def friction_step(w: float, net: float, fc: float, fb: float, inv_j: float, h: float) -> float:
+    """One mass's speed after a period under ``net`` N m: Coulomb friction ``fc`` holds it
+    at rest up to fc and stops a sliding mass dead rather than reversing it; ``fb`` is the
+    viscous friction per counts/s (0 on the load side), ``inv_j`` counts/s^2 per N m.
+
+    The one copy every hot loop calls (rigid shaft, and motor and load of the two masses):
+    a call costs less than the copies cost to keep in step. The arithmetic's order is the
+    traces' (bit-identical runs, tests/sim/test_tuning.py)."""
+    if w == 0.0:
+        if net > fc:
+            return (net - fc) * inv_j * h
+        if net < -fc:
+            return (net + fc) * inv_j * h
+        return w
+    wn = w + (net - (fc if w > 0.0 else -fc) - fb * w) * inv_j * h
+    return wn if (wn > 0.0) == (w > 0.0) else 0.0
+
+
 class Servo(IntEnum):
     FREE = 0
     POSITION = 1
@@ -598,36 +616,12 @@ class ServoEngine:
             elif blocked:
                 w = wl = 0.0
             elif rigid:
-                net = tq + dist
-                if w == 0.0:  # at rest: static friction holds up to fc
-                    if net > fc:
-                        w = (net - fc) * inv_j * h
-                    elif net < -fc:
-                        w = (net + fc) * inv_j * h
-                else:  # sliding: friction stops it dead rather than reversing it
-                    wn = w + (net - (fc if w > 0.0 else -fc) - fb * w) * inv_j * h
-                    w = wn if (wn > 0.0) == (w > 0.0) else 0.0
+                w = friction_step(w, tq + dist, fc, fb, inv_j, h)
                 p += w * h
             else:  # two-mass: motor -- spring kc, damper cc -- load
                 tw = kc * (p - pl) + cc * (w - wl)
-                net = tq - tw
-                if w == 0.0:
-                    if net > fc_m:
-                        w = (net - fc_m) * inv_jm * h
-                    elif net < -fc_m:
-                        w = (net + fc_m) * inv_jm * h
-                else:
-                    wn = w + (net - (fc_m if w > 0.0 else -fc_m) - fb * w) * inv_jm * h
-                    w = wn if (wn > 0.0) == (w > 0.0) else 0.0
-                net = tw + dist
-                if wl == 0.0:
-                    if net > fc_l:
-                        wl = (net - fc_l) * inv_jl * h
-                    elif net < -fc_l:
-                        wl = (net + fc_l) * inv_jl * h
-                else:
-                    wn = wl + (net - (fc_l if wl > 0.0 else -fc_l)) * inv_jl * h
-                    wl = wn if (wn > 0.0) == (wl > 0.0) else 0.0
+                w = friction_step(w, tq - tw, fc_m, fb, inv_jm, h)
+                wl = friction_step(wl, tw + dist, fc_l, 0.0, inv_jl, h)  # no viscous term
                 p += w * h
                 pl += wl * h
             # ---- feedback: the encoder now, speed from counts per period
@@ -835,36 +829,12 @@ class ServoEngine:
             if blocked:
                 w = wl = 0.0
             elif rigid:
-                net = tq + dist
-                if w == 0.0:  # at rest: static friction holds up to fc
-                    if net > fc:
-                        w = (net - fc) * inv_j * h
-                    elif net < -fc:
-                        w = (net + fc) * inv_j * h
-                else:  # sliding: friction stops it dead rather than reversing it
-                    wn = w + (net - (fc if w > 0.0 else -fc) - fb * w) * inv_j * h
-                    w = wn if (wn > 0.0) == (w > 0.0) else 0.0
+                w = friction_step(w, tq + dist, fc, fb, inv_j, h)
                 p += w * h
             else:  # two-mass: motor -- spring kc, damper cc -- load
                 tw = kc * (p - pl) + cc * (w - wl)
-                net = tq - tw
-                if w == 0.0:
-                    if net > fc_m:
-                        w = (net - fc_m) * inv_jm * h
-                    elif net < -fc_m:
-                        w = (net + fc_m) * inv_jm * h
-                else:
-                    wn = w + (net - (fc_m if w > 0.0 else -fc_m) - fb * w) * inv_jm * h
-                    w = wn if (wn > 0.0) == (w > 0.0) else 0.0
-                net = tw + dist
-                if wl == 0.0:
-                    if net > fc_l:
-                        wl = (net - fc_l) * inv_jl * h
-                    elif net < -fc_l:
-                        wl = (net + fc_l) * inv_jl * h
-                else:
-                    wn = wl + (net - (fc_l if wl > 0.0 else -fc_l)) * inv_jl * h
-                    wl = wn if (wn > 0.0) == (wl > 0.0) else 0.0
+                w = friction_step(w, tq - tw, fc_m, fb, inv_jm, h)
+                wl = friction_step(wl, tw + dist, fc_l, 0.0, inv_jl, h)  # no viscous term
                 p += w * h
                 pl += wl * h
             heat -= heat * beta
@@ -952,36 +922,12 @@ class ServoEngine:
             if blocked:
                 w = wl = 0.0
             elif rigid:
-                net = tq + dist
-                if w == 0.0:  # at rest: static friction holds up to fc
-                    if net > fc:
-                        w = (net - fc) * inv_j * h
-                    elif net < -fc:
-                        w = (net + fc) * inv_j * h
-                else:  # sliding: friction stops it dead rather than reversing it
-                    wn = w + (net - (fc if w > 0.0 else -fc) - fb * w) * inv_j * h
-                    w = wn if (wn > 0.0) == (w > 0.0) else 0.0
+                w = friction_step(w, tq + dist, fc, fb, inv_j, h)
                 p += w * h
             else:  # two-mass: motor -- spring kc, damper cc -- load
                 tw = kc * (p - pl) + cc * (w - wl)
-                net = tq - tw
-                if w == 0.0:
-                    if net > fc_m:
-                        w = (net - fc_m) * inv_jm * h
-                    elif net < -fc_m:
-                        w = (net + fc_m) * inv_jm * h
-                else:
-                    wn = w + (net - (fc_m if w > 0.0 else -fc_m) - fb * w) * inv_jm * h
-                    w = wn if (wn > 0.0) == (w > 0.0) else 0.0
-                net = tw + dist
-                if wl == 0.0:
-                    if net > fc_l:
-                        wl = (net - fc_l) * inv_jl * h
-                    elif net < -fc_l:
-                        wl = (net + fc_l) * inv_jl * h
-                else:
-                    wn = wl + (net - (fc_l if wl > 0.0 else -fc_l)) * inv_jl * h
-                    wl = wn if (wn > 0.0) == (wl > 0.0) else 0.0
+                w = friction_step(w, tq - tw, fc_m, fb, inv_jm, h)
+                wl = friction_step(wl, tw + dist, fc_l, 0.0, inv_jl, h)  # no viscous term
                 p += w * h
                 pl += wl * h
             i = tq * inv_kt

@@ -15,8 +15,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import Any
 
 from servobus.families.dmm import units as U
+from servobus.families.dmm.registers import AlarmCode
 from servobus.sim.core import constants as K
 from servobus.sim.core.engine import Ref, Servo, ServoEngine
 from servobus.sim.core.loads import LoadSettings
@@ -37,9 +39,46 @@ class EngineShaft:
 
     _engine: ServoEngine
     _origin: float
+    #: Called with the shaft after each control period while set (a trace's capture); each
+    #: subclass types it with itself.
+    period_observer: Any
 
     def _apply_load(self) -> None:
         raise NotImplementedError
+
+    def _run_periods(self, n: int) -> None:
+        """Run ``n`` control periods: all at once, or one by one under the period observer
+        (read again every period: it may stop itself). A DMM alarm the engine trips ends
+        its run early; :meth:`_tripped` is told and the periods go on."""
+        eng = self._engine
+        while n > 0:
+            before = eng.steps
+            observer = self.period_observer
+            if observer is None:
+                eng.run(n)
+            elif eng.run(1):
+                observer(self)
+            n -= eng.steps - before
+            if eng.trip_code is not AlarmCode.NONE:
+                self._tripped(eng.trip_code)
+            elif eng.steps == before:
+                break
+
+    def _switch_servo(self, mode: Servo) -> bool:
+        """The engine's servo in ``mode``; a change holds the shaft where it is (no torque
+        when free, the speed reference reset). True when it changed."""
+        eng = self._engine
+        if mode == eng.servo:
+            return False
+        eng.servo = mode
+        eng.hold_here()
+        if mode == Servo.FREE:
+            eng.tq = eng.tq_cmd = 0.0
+        eng.speed_ref = 0.0
+        return True
+
+    def _tripped(self, code: AlarmCode) -> None:
+        """The engine tripped ``code``: only with its protections on (the DMM drive)."""
 
     # ---------------------------------------------------------------- world
     def set_load(self, *, inertia: float | None = None, friction: float | None = None) -> None:
@@ -220,15 +259,8 @@ class Motor(EngineShaft):
         self._apply_servo()
 
     def _apply_servo(self) -> None:
-        eng = self._engine
-        mode = Servo.FREE if self._free else Servo.POSITION
-        if mode != eng.servo:
-            eng.servo = mode
-            eng.hold_here()
-            if mode == Servo.FREE:
-                eng.tq = eng.tq_cmd = 0.0
-            eng.speed_ref = 0.0
-        eng.wake()
+        self._switch_servo(Servo.FREE if self._free else Servo.POSITION)
+        self._engine.wake()
 
     # ---------------------------------------------------------------- motion
     def move_to_counts(self, counts: float) -> bool:
@@ -282,16 +314,5 @@ class Motor(EngineShaft):
         if t <= self.time:
             return
         self.time = t
-        eng = self._engine
-        n = math.floor(t * K.CONTROL_HZ + 1e-6) - eng.steps
-        while n > 0:
-            before = eng.steps
-            observer = self.period_observer
-            if observer is None:
-                eng.run(n)
-            elif eng.run(1):
-                observer(self)
-            n -= eng.steps - before
-            if eng.steps == before:
-                break
+        self._run_periods(math.floor(t * K.CONTROL_HZ + 1e-6) - self._engine.steps)
 

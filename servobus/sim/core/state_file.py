@@ -290,3 +290,30 @@ def checked_int(value: object, what: str, low: int, high: int) -> int:
     if not low <= value <= high:
         raise ValueError(f"{what} {value} is outside {low}..{high}")
     return value
+
+
+class RecordStore:
+    """One drive's record in a shared state file (none without ``path``), under ``key``.
+
+    A family's store sets its defaults, then calls this ``__init__``, which takes the stored
+    record back through :meth:`_restore` when there is one; :meth:`save` writes what
+    :meth:`_record` says the record holds (servobus.sim.dmm.eeprom, servobus.sim.yzaim.store).
+    """
+
+    def __init__(self, path: str | Path | None, key: str, kind: StateKind) -> None:
+        self.path = Path(path) if path is not None else None
+        self.key = key
+        self._file = StateFile.shared(self.path, kind) if self.path is not None else None
+        rec = self._file.records.get(key) if self._file is not None else None
+        if rec is not None:
+            self._restore(rec)
+
+    def _record(self) -> dict[str, Any]:
+        raise NotImplementedError
+
+    def _restore(self, rec: dict[str, Any]) -> None:
+        raise NotImplementedError
+
+    def save(self) -> None:
+        if self._file is not None:
+            self._file.save(self.key, self._record())

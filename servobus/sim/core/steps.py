@@ -12,9 +12,10 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from servobus.sim.core import constants as K
+from servobus.sim.core.capture import Readouts
 
 
-class SteppedShaft(Protocol):
+class SteppedShaft(Readouts, Protocol):
     """A simulated core with its readouts (the DMM drive, the protocol-free Motor)."""
 
     time: float
@@ -26,15 +27,6 @@ class SteppedShaft(Protocol):
 
     @property
     def load_position(self) -> float: ...
-
-    @property
-    def position_error(self) -> float: ...
-
-    @property
-    def speed_rpm(self) -> float: ...
-
-    @property
-    def current_a(self) -> float: ...
 
 
 @dataclass

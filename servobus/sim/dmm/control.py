@@ -31,14 +31,7 @@ from servobus.families.dmm import units as U
 from servobus.families.dmm.registers import AlarmCode, CommandMode
 from servobus.sim.core import constants as K
 from servobus.sim.core import control as channel
-from servobus.sim.core.control import (
-    LOAD_ARGS,
-    Arg,
-    ChannelControl,
-    ControlError,
-    Reply,
-    load_request,
-)
+from servobus.sim.core.control import Arg, ChannelControl, ControlError, Reply, apply_load, ok
 from servobus.sim.core.io import PulseFormat
 from servobus.sim.dmm.drive import VirtualDrive
 
@@ -124,13 +117,9 @@ def _decoded_format(d: VirtualDrive) -> PulseFormat:
 
 
 # ---------------------------------------------------------------------- commands
-def _ok(**extra: Any) -> Reply:
-    return {"ok": True, **extra}
-
-
 def _analog(ctl: DriveControl, d: VirtualDrive, a: dict[str, Any]) -> Reply:
     d.set_analog_input(a["volts"])
-    return _ok()
+    return ok()
 
 
 def _pulses(ctl: DriveControl, d: VirtualDrive, a: dict[str, Any]) -> Reply:
@@ -147,38 +136,27 @@ def _pulses(ctl: DriveControl, d: VirtualDrive, a: dict[str, Any]) -> Reply:
         seconds = abs(count) / (a["rate"] or K.PULSE_RATE_MAX_HZ)
     fmt = PulseFormat(a["format"]) if a["format"] else _decoded_format(d)
     taken = d.input_pulse_train(fmt, count, seconds)
-    return _ok(format=fmt.value, seconds=seconds, taken=taken, ignored=taken == 0 and count != 0)
+    return ok(format=fmt.value, seconds=seconds, taken=taken, ignored=taken == 0 and count != 0)
 
 
 def _ena(ctl: DriveControl, d: VirtualDrive, a: dict[str, Any]) -> Reply:
     d.set_enable_input(a["enabled"])
-    return _ok()
+    return ok()
 
 
 def _bus(ctl: DriveControl, d: VirtualDrive, a: dict[str, Any]) -> Reply:
     d.set_bus_voltage(a["volts"])
-    return _ok(alarm=d.alarm.name.lower())
+    return ok(alarm=d.alarm.name.lower())
 
 
 def _load(ctl: DriveControl, d: VirtualDrive, a: dict[str, Any]) -> Reply:
-    settings = load_request(a)
-    d.set_load(friction=a["friction"])
-    if a["torque_nm"] is not None:
-        d.set_disturbance(a["torque_nm"])
-    if not settings.empty:
-        d.set_mechanics(settings)
-    return _ok(world=d.world(), mechanics=d.mechanics())
-
-
-def _block(ctl: DriveControl, d: VirtualDrive, a: dict[str, Any]) -> Reply:
-    d.set_blocked(a["blocked"])
-    return _ok()
+    return apply_load(d, d, a)
 
 
 def _fault(ctl: DriveControl, d: VirtualDrive, a: dict[str, Any]) -> Reply:
     fault = FAULTS[a["fault"]]
     fault.inject(d, a)
-    return _ok(fault=fault.name, alarm=d.alarm.name.lower(), alarm_code=int(d.alarm))
+    return ok(fault=fault.name, alarm=d.alarm.name.lower(), alarm_code=int(d.alarm))
 
 
 def _clear(ctl: DriveControl, d: VirtualDrive, a: dict[str, Any]) -> Reply:
@@ -187,20 +165,20 @@ def _clear(ctl: DriveControl, d: VirtualDrive, a: dict[str, Any]) -> Reply:
     d.set_blocked(False)
     d.set_disturbance(0.0)
     d.set_bus_voltage(K.RATED_BUS_VOLTAGE)
-    return _ok(alarm=d.alarm.name.lower(), alarm_code=int(d.alarm))
+    return ok(alarm=d.alarm.name.lower(), alarm_code=int(d.alarm))
 
 
 def _power_cycle(ctl: DriveControl, d: VirtualDrive, a: dict[str, Any]) -> Reply:
     d.power_cycle(a["off_s"])
-    return _ok(powered=d.powered)
+    return ok(powered=d.powered)
 
 
 def _state(ctl: DriveControl, d: VirtualDrive, a: dict[str, Any]) -> Reply:
-    return _ok(**drive_state(d))
+    return ok(**drive_state(d))
 
 
 def _outputs(ctl: DriveControl, d: VirtualDrive, a: dict[str, Any]) -> Reply:
-    return _ok(**drive_outputs(d))
+    return ok(**drive_outputs(d))
 
 
 # ---------------------------------------------------------------------- faults
@@ -274,13 +252,7 @@ COMMANDS: dict[str, Command] = {c.name: c for c in (
             _ena, "the ENA input"),
     Command("bus", (Arg("volts", float, 0.0, 200.0, doc="DC bus (over voltage above 80 V)"),),
             _bus, "set the supply / bus voltage"),
-    Command("load", (Arg("torque_nm", float, -100.0, 100.0, default=None),
-                     Arg("friction", float, 0.0, 100.0, default=None, doc="N m, Coulomb"),
-                     *LOAD_ARGS),
-            _load, "external torque, friction and the load: preset, inertia ratio, "
-                   "resonance, load torque (docs/tuning.md)"),
-    Command("block", (Arg("blocked", bool),), _block, "block or free the shaft"),
-    Command("fault", (Arg("fault", str, choices=tuple(FAULTS)),), _fault, "inject a fault"),
+    *channel.world_commands(FAULTS, _load, _fault),
     Command("clear", (), _clear, "remove every fault cause (not the alarm)"),
     Command("power_cycle", (Arg("off_s", float, 0.0, 3600.0, default=0.0),), _power_cycle,
             "power off for off_s, then on (0: at once); clears a latched alarm (6.1)"),

@@ -400,6 +400,9 @@ class VirtualDrive(EngineShaft):
         self._engine._trip(code)
         self._latch(code)
 
+    def _tripped(self, code: AlarmCode) -> None:
+        self._latch(code)
+
     def _latch(self, code: AlarmCode) -> None:
         self._alarm = code
         self._engine.trip_code = AlarmCode.NONE
@@ -414,17 +417,10 @@ class VirtualDrive(EngineShaft):
             self._config.servo_mode, Servo.POSITION)
 
     def _apply_servo(self) -> None:
-        eng = self._engine
-        mode = self._servo_mode()
-        if mode != eng.servo:
-            eng.servo = mode
-            eng.hold_here()
-            if mode == Servo.FREE:
-                eng.tq = eng.tq_cmd = 0.0
-            eng.speed_ref = 0.0
+        if self._switch_servo(self._servo_mode()):
             self._update_homing()
             self._apply_analog()
-        eng.wake()
+        self._engine.wake()
 
     # ---------------------------------------------------------------- motion
     def _accepts_motion(self) -> bool:
@@ -865,17 +861,6 @@ class VirtualDrive(EngineShaft):
             return
         self._check_faults()
         rev0 = math.floor(eng.p / U.COUNTS_PER_REV)
-        while n > 0:
-            before = eng.steps
-            observer = self.period_observer
-            if observer is None:
-                eng.run(n)
-            elif eng.run(1):
-                observer(self)
-            n -= eng.steps - before
-            if eng.trip_code is not AlarmCode.NONE:
-                self._latch(eng.trip_code)
-            elif eng.steps == before:
-                break
+        self._run_periods(n)
         self._update_homing()
         self.zri_count += abs(math.floor(eng.p / U.COUNTS_PER_REV) - rev0)

@@ -29,7 +29,7 @@ from servobus.families.dmm import params as P
 from servobus.families.dmm.registers import CONFIG_DEFINED_MASK
 from servobus.families.dmm.units import COUNTS_PER_REV
 from servobus.families.dmm.vocabulary import MAX_DRIVE_ID
-from servobus.sim.core.state_file import StateFile, StateKind, checked_int, describe
+from servobus.sim.core.state_file import RecordStore, StateKind, checked_int, describe
 
 EEPROM_CYCLE_LIMIT = 1_000_000
 _FIELDS = frozenset({"drive_id", "params", "config", "origin", "writes"})
@@ -82,20 +82,16 @@ DMM_STATE = StateKind("drive records", check_record)
 
 
 # ---------------------------------------------------------------- the store
-class EepromStore:
+class EepromStore(RecordStore):
     def __init__(self, path: str | Path | None = None, key: str = "0",
                  kind: StateKind = DMM_STATE) -> None:
-        self.path = Path(path) if path is not None else None
-        self.key = key
         self.params: dict[str, int] = P.defaults()
         self.config = 0
         self.drive_id = 0
         self.origin = 0  # stored absolute zero: encoder angle within one revolution (counts)
         self.writes: dict[str, int] = {}
         self._initialised = False
-        self._file = StateFile.shared(self.path, kind) if self.path is not None else None
-        if self._file is not None:
-            self._load(self._file)
+        super().__init__(path, key, kind)
 
     def setdefault_drive(self, drive_id: int) -> None:
         """Factory id for a fresh EEPROM (ignored when a stored state was loaded)."""
@@ -138,14 +134,7 @@ class EepromStore:
         return {"params": dict(self.params), "config": self.config, "drive_id": self.drive_id,
                 "origin": self.origin, "writes": dict(self.writes)}
 
-    def save(self) -> None:
-        if self._file is not None:
-            self._file.save(self.key, self._record())
-
-    def _load(self, state: StateFile) -> None:
-        rec = state.records.get(self.key)
-        if rec is None:
-            return
+    def _restore(self, rec: dict[str, Any]) -> None:
         self.params.update(rec["params"])
         self.config = rec["config"]
         self.drive_id = rec["drive_id"]

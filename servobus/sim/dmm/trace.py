@@ -8,22 +8,16 @@ from typing import Protocol
 from servobus.axis.capture import status_bits
 from servobus.axis.types import motion_state
 from servobus.families.dmm import units as U
-from servobus.sim.core.capture import Clocked
+from servobus.sim.core.capture import Clocked, Readouts
 
 
-class TracedDrive(Clocked, Protocol):
+class TracedDrive(Clocked, Readouts, Protocol):
     """What the trace reads of a DMM VirtualDrive (typed here: the drive imports this)."""
 
     @property
     def drive_id(self) -> int: ...
     @property
     def position(self) -> int: ...
-    @property
-    def position_error(self) -> float: ...
-    @property
-    def speed_rpm(self) -> float: ...
-    @property
-    def current_a(self) -> float: ...
     def trace_flags(self) -> tuple[bool, bool, bool, bool]:
         """enabled, motion busy, on position, alarm."""
         ...

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from servobus.sim.core import control as channel
-from servobus.sim.core.control import LOAD_ARGS, Arg, ChannelControl, Reply, load_request
+from servobus.sim.core.control import Arg, ChannelControl, Reply, apply_load, ok
 from servobus.sim.yzaim import physics as phys
 from servobus.sim.yzaim.motor import OVER_VOLTAGE_MARGIN, YzaimMotor
 
@@ -54,12 +54,8 @@ def motor_state(m: YzaimMotor) -> Reply:
     }
 
 
-def _ok(**extra: Any) -> Reply:
-    return {"ok": True, **extra}
-
-
 def _alarm(m: YzaimMotor) -> Reply:
-    return _ok(alarm=m.alarm.name, alarm_code=m.alarm.code)
+    return ok(alarm=m.alarm.name, alarm_code=m.alarm.code)
 
 
 def nominal_supply_v(m: YzaimMotor) -> float:
@@ -69,7 +65,7 @@ def nominal_supply_v(m: YzaimMotor) -> float:
 
 
 def _state(ctl: MotorControl, m: YzaimMotor, a: dict[str, Any]) -> Reply:
-    return _ok(**motor_state(m))
+    return ok(**motor_state(m))
 
 
 def _bus(ctl: MotorControl, m: YzaimMotor, a: dict[str, Any]) -> Reply:
@@ -83,24 +79,13 @@ def _battery(ctl: MotorControl, m: YzaimMotor, a: dict[str, Any]) -> Reply:
 
 
 def _load(ctl: MotorControl, m: YzaimMotor, a: dict[str, Any]) -> Reply:
-    settings = load_request(a)
-    m.set_load(friction=a["friction"])
-    if a["torque_nm"] is not None:
-        m.set_disturbance(a["torque_nm"])
-    if not settings.empty:
-        m.drive.set_mechanics(settings)
-    return _ok(world=m.world(), mechanics=m.drive.mechanics())
-
-
-def _block(ctl: MotorControl, m: YzaimMotor, a: dict[str, Any]) -> Reply:
-    m.set_blocked(a["blocked"])
-    return _ok()
+    return apply_load(m, m.drive, a)
 
 
 def _fault(ctl: MotorControl, m: YzaimMotor, a: dict[str, Any]) -> Reply:
     fault = FAULTS[a["fault"]]
     fault.inject(m, a)
-    return _ok(fault=fault.name, alarm=m.alarm.name, alarm_code=m.alarm.code)
+    return ok(fault=fault.name, alarm=m.alarm.name, alarm_code=m.alarm.code)
 
 
 def _clear(ctl: MotorControl, m: YzaimMotor, a: dict[str, Any]) -> Reply:
@@ -114,7 +99,7 @@ def _clear(ctl: MotorControl, m: YzaimMotor, a: dict[str, Any]) -> Reply:
 
 def _power_cycle(ctl: MotorControl, m: YzaimMotor, a: dict[str, Any]) -> Reply:
     m.power_cycle()
-    return _ok(position=m.position, alarm=m.alarm.name)
+    return ok(position=m.position, alarm=m.alarm.name)
 
 
 def _over_voltage(m: YzaimMotor, a: dict[str, Any]) -> None:
@@ -153,13 +138,7 @@ COMMANDS: dict[str, Command] = {c.name: c for c in (
             _bus, "set the supply voltage"),
     Command("battery", (Arg("ok", bool, doc="false: the multi-turn battery is flat"),),
             _battery, "the multi-turn backup battery (warning 0x13 when flat)"),
-    Command("load", (Arg("torque_nm", float, -100.0, 100.0, default=None),
-                     Arg("friction", float, 0.0, 100.0, default=None, doc="N m, Coulomb"),
-                     *LOAD_ARGS),
-            _load, "external torque, friction and the load: preset, inertia ratio, "
-                   "resonance, load torque (docs/tuning.md)"),
-    Command("block", (Arg("blocked", bool),), _block, "block or free the shaft"),
-    Command("fault", (Arg("fault", str, choices=tuple(FAULTS)),), _fault, "inject a fault"),
+    *channel.world_commands(FAULTS, _load, _fault),
     Command("clear", (), _clear, "remove every fault cause (not a latched alarm)"),
     Command("power_cycle", (Arg("off_s", float, 0.0, 0.0, default=0.0,
                                 doc="0 only: the motor powers off and on at once"),),

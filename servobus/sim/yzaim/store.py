@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from servobus.families.yzaim import registers as yzaim
-from servobus.sim.core.state_file import StateFile, StateKind, checked_int, describe
+from servobus.sim.core.state_file import RecordStore, StateKind, checked_int, describe
 
 _FIELDS = frozenset({"registers", "position", "saves"})
 _ADDRESS = yzaim.BY_NAME["device_address"]
@@ -65,19 +65,14 @@ def check_yzaim_record(key: str, rec: object) -> dict[str, Any]:
 YZAIM_STATE = StateKind("motor records", check_yzaim_record)
 
 
-class YzaimStore:
+class YzaimStore(RecordStore):
     def __init__(self, path: str | Path | None = None, key: str = "1") -> None:
-        self.path = Path(path) if path is not None else None
-        self.key = key
         self.registers: dict[str, int] = {
             r.name: r.default for r in yzaim.SAVED if r.default is not None}
         self.position: int | None = None  # counts recorded at the last power-off
         self.saves = 0
         self.loaded = False
-        self._file = (StateFile.shared(self.path, YZAIM_STATE)
-                      if self.path is not None else None)
-        if self._file is not None:
-            self._load(self._file)
+        super().__init__(path, key, YZAIM_STATE)
 
     def save_registers(self, values: dict[str, int]) -> None:
         """The save flag: every saved register of ``values`` goes to EEPROM at once."""
@@ -95,14 +90,7 @@ class YzaimStore:
         return {"registers": dict(self.registers), "position": self.position,
                 "saves": self.saves}
 
-    def save(self) -> None:
-        if self._file is not None:
-            self._file.save(self.key, self._record())
-
-    def _load(self, state: StateFile) -> None:
-        rec = state.records.get(self.key)
-        if rec is None:
-            return
+    def _restore(self, rec: dict[str, Any]) -> None:
         self.registers.update(rec["registers"])
         self.position = rec["position"]
         self.saves = rec["saves"]
