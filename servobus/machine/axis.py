@@ -22,6 +22,14 @@ Every motion is checked against the limits before anything reaches the wire
   Nothing is resumed: a motion that ran is reported in ``interrupted``, its lease ends.
   A drive that may have lost power is flagged (``power_lost``) until :meth:`acknowledge`;
   until then motion commands raise PowerLostError (stop, enable, reset ... still work).
+* Motion seen to end (docs/machine.md, "Power loss"): a motion runs from the moment its
+  command is counted until a stop, a waited move's return, or a status read that says the
+  drive stands; a status read that sees the drive moving (whoever moved it) marks one as
+  running. Only a read begun after the last motion command or stop returned, and answered
+  before the next one started, counts: a read under way meanwhile may have reached the
+  drive before the command did. (Decision, a red CI run of the GUI's recovery test: a
+  poll begun while the first move read GEAR_NUM answered "not moving", and a drive
+  restarted just after the move, near its start, came back unflagged.)
 """
 
 from __future__ import annotations
@@ -94,10 +102,12 @@ class AsyncMachineAxis:
         #: The last position read before the link dropped, kept for the power check until it
         #: ran (reads on the reopened link - a GUI's poll - must not replace it first).
         self._counts_at_drop: int | None = None
-        self._moving = False  # a motion was commanded and not yet seen to end
-        #: Motion commands sent so far: a status read that began before the last one may
-        #: be answered before the drive starts it, so its "not moving" clears nothing.
-        self._commands = 0
+        #: A motion runs, not yet seen to end (why, for ``interrupted``); None: none known.
+        self._moving: str | None = None
+        #: Bumped when a motion command (or a stop) starts and when it returns: a status
+        #: read applies (``_seen``) only if no command started or returned while it was
+        #: under way (module docstring, "Motion seen to end").
+        self._epoch = 0
         self._silent = 0  # calls in a row that timed out
         self._silent_since = 0.0  # time.monotonic() of the first of them
         self._interrupted: str | None = None
@@ -267,9 +277,9 @@ class AsyncMachineAxis:
                 lease.task.cancel()  # its own task ends by itself on the failed read
             interrupted = f"the {lease.owner} motion at {lease.speed:g} " \
                           f"{self.speed_unit} (lease) stopped being sent"
-        elif self._moving:
-            interrupted = "a commanded motion may not have finished"
-        self._moving = False
+        elif self._moving is not None:
+            interrupted = self._moving
+        self._moving = None
         if interrupted is not None:  # one line when it happens, not at every later drop
             self._interrupted = interrupted
             log.warning("axis %s: motion interrupted by the link drop: %s; it is not "
@@ -344,19 +354,33 @@ class AsyncMachineAxis:
 
     def _seen(self, counts: int | None = None, status: AxisStatus | None = None,
               since: int | None = None) -> None:
-        """A read's result; ``since``: ``_commands`` when the read began. A status read
-        that was in flight while a motion command went out (a front end polls while it
-        moves the axis) says nothing of that motion: it must not clear ``_moving``, or a
-        drop right after the command would not count as an interrupted motion."""
+        """A read's result; ``since``: ``_epoch`` when the read began. A status read under
+        way while a motion command (or a stop) started or returned (a front end polls while
+        it moves the axis) says nothing of that command: it may have reached the drive
+        before the command did (a DMM axis's first move reads GEAR_NUM before it sends),
+        so its "not moving" must not end the motion, or a drop right after the command
+        would not count as an interrupted motion. A read that applies and sees the drive
+        moving marks a motion as running, whoever started it (a wave, another program)."""
         if counts is not None:
             self._last_counts = counts
-        if status is not None and not status.moving and since == self._commands:
-            self._moving = False
+        if status is None or since != self._epoch:
+            return
+        if not status.moving:
+            self._moving = None
+        elif self._moving is None:
+            self._moving = "the drive was seen moving and not yet seen to stop"
 
-    def _commanded(self) -> None:
-        """A motion command goes out now."""
-        self._commands += 1
-        self._moving = True
+    @contextlib.contextmanager
+    def _commanding(self, moves: bool = True) -> Iterator[None]:
+        """Around a motion command (``moves``) or a stop, from before it is sent until it
+        returns: reads under way meanwhile are not applied (``_seen``)."""
+        self._epoch += 1
+        if moves:
+            self._moving = "a commanded motion may not have finished"
+        try:
+            yield
+        finally:
+            self._epoch += 1
 
     @property
     def scale(self) -> Scale:
@@ -401,7 +425,7 @@ class AsyncMachineAxis:
             return self.scale.from_rpm(await self.core().speed())
 
     async def status(self) -> AxisStatus:
-        since = self._commands
+        since = self._epoch
         with self._watch():
             status = await self.core().status()
         self._seen(status=status, since=since)
@@ -409,7 +433,7 @@ class AsyncMachineAxis:
 
     async def readings(self) -> tuple[float, float, AxisStatus]:
         """Position and speed in user units and the status (see ``AsyncAxis.readings``)."""
-        since = self._commands
+        since = self._epoch
         with self._watch():
             position, speed, status = await self.core().readings()
         self._seen(position, status, since)
@@ -442,8 +466,7 @@ class AsyncMachineAxis:
         self.check_owner("stream")
         counts = self.to_counts(target)
         rpm = abs(self.scale.to_rpm(speed))
-        self._commanded()
-        with self._watch():
+        with self._commanding(), self._watch():
             await core.stream_to(counts, rpm)
 
     async def stream_cycles(self, next_target: Callable[[], float | None]) -> StreamStats:
@@ -455,8 +478,7 @@ class AsyncMachineAxis:
         core.require(Capability.CYCLIC_POSITION)
         self.check_owner("stream")
         next_position = self._counts_of(next_target)
-        self._commanded()
-        with self._watch():
+        with self._commanding(), self._watch():
             return await core.stream_cycles(next_position)
 
     def cyclic_group(self) -> object | None:
@@ -482,10 +504,11 @@ class AsyncMachineAxis:
             core.require(Capability.CYCLIC_GROUP)
             axis.check_owner("stream")
             cores.append((core, axis._counts_of(next_target)))
-        for axis, _ in streams:
-            axis._commanded()
-        with self._watch():
-            return await self._motion().stream_cycles_together(cores)
+        with contextlib.ExitStack() as commanding:
+            for axis, _ in streams:
+                commanding.enter_context(axis._commanding())
+            with self._watch():
+                return await self._motion().stream_cycles_together(cores)
 
     def _counts_of(self, next_target: Callable[[], float | None],
                    ) -> Callable[[], int | None]:
@@ -527,11 +550,10 @@ class AsyncMachineAxis:
         """A motion command, sent once (never re-sent, whatever happens to the link);
         ``waited``: ``send`` returns once the motion ended (a later drop interrupts nothing)."""
         core = self._motion()
-        self._commanded()
-        with self._watch():
+        with self._commanding(), self._watch():
             await send(core)
-        if waited:
-            self._moving = False
+            if waited:
+                self._moving = None
 
     async def turn(self, speed: float | None = None, *, owner: str = "api",
                    ttl: float = DEFAULT_TTL_S) -> None:
@@ -619,10 +641,9 @@ class AsyncMachineAxis:
         limits = Limits(distance, soft, limit, to_user=self.to_user, unit=self.unit)
         tuner = Tuner(AxisPlant(core, trace=trace), limits, core.counts_per_rev,
                       on_trial=on_trial, save=save)
-        self._commanded()
         self._tuning = (owner, asyncio.current_task())
         try:
-            with self._watch():
+            with self._commanding(), self._watch():
                 return await tuner.run()
         finally:
             self._tuning = None
@@ -685,8 +706,7 @@ class AsyncMachineAxis:
             return self.to_user(counts)
 
         async def send(target: float) -> None:
-            self._commanded()
-            with self._watch():
+            with self._commanding(), self._watch():
                 await core.stream_to(self.to_counts(target), abs(self.scale.to_rpm(lease.speed)))
 
         await stream(lease, self.name, read, send, core.stop)
@@ -741,9 +761,9 @@ class AsyncMachineAxis:
         tuning = self._tuning
         if tuning is not None and tuning[1] is not None and tuning[1] is not asyncio.current_task():
             tuning[1].cancel()  # its abort path stops the motor again and reverts the gains
-        with self._watch():
+        with self._commanding(moves=False), self._watch():
             await self.core().stop()
-        self._moving = False
+            self._moving = None
 
     async def _end_lease(self, why: str) -> None:
         lease, self._lease = self._lease, None
@@ -774,8 +794,7 @@ class AsyncMachineAxis:
         family has none); returns once it is started, :meth:`wait_idle` waits for its end.
         A motion: refused while a power loss is unacknowledged."""
         core = self._motion()
-        self._moving = True
-        with self._watch():
+        with self._commanding(), self._watch():
             await core.home()
 
     async def apply_profile(self) -> dict[str, int]:
@@ -807,7 +826,7 @@ class AsyncMachineAxis:
 
     async def wait_idle(self, timeout: float | None = None) -> AxisStatus:
         core = self.core()
-        since = self._commands
+        since = self._epoch
         with self._watch():
             status = await (core.wait_idle() if timeout is None else core.wait_idle(timeout))
         self._seen(status=status, since=since)

@@ -394,10 +394,12 @@ class AsyncMachine:
 
         async def start_group(members: list[AsyncMachineAxis]) -> float:
             lead = members[0]
-            for m in members:
-                m._commanded()
-            with lead._watch():
-                await lead.core().sync_move_to([(m.core(), counts[m.name]) for m in members])
+            with contextlib.ExitStack() as commanding:
+                for m in members:
+                    commanding.enter_context(m._commanding())
+                with lead._watch():
+                    await lead.core().sync_move_to([(m.core(), counts[m.name])
+                                                    for m in members])
             return time.perf_counter()
 
         async def start_one(axis: AsyncMachineAxis) -> float:
