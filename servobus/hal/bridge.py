@@ -181,9 +181,14 @@ class AxisBridge:
         """Stop a position axis (nothing for a monitor axis: step/dir drives it); a cyclic
         stream ends first (its next cycle sees ``streaming`` off)."""
         self.streaming = False
-        group, self._group = self._group, None
+        group = self._group
         if group is not None:
-            await group.leave(self)  # every axis of the group stops (cyclic_group)
+            # every axis of the group stops (cyclic_group); the group is forgotten only once
+            # its stream has ended and its axes stopped, so that a stop cancelled meanwhile
+            # (SIGTERM while the enable's fall stops the axis) is followed by one that waits
+            # for that stream again instead of racing it
+            await group.leave(self)
+            self._group = None
         cyclic, self._cyclic = self._cyclic, None
         if cyclic is not None and cyclic is not asyncio.current_task():
             try:
