@@ -44,6 +44,7 @@ class Member(Protocol):
     axis: AsyncMachineAxis
     latched: str | None
     streaming: bool
+    moved: bool  # streamed since its last completed stop
     cyclic_stats: StreamStats | None
 
     @property
@@ -130,3 +131,4 @@ class CyclicGroup:
 async def _stop(member: Member) -> None:
     with contextlib.suppress(ServobusError):
         await member.axis.stop()
+        member.moved = False
