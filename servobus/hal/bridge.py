@@ -60,6 +60,11 @@ class AxisBridge:
         self._clock = clock
         self.latched: str | None = None  # a fault that holds until fault-reset
         self.streaming = False
+        #: Streamed (so possibly moving) since its last completed stop: a stop of an axis
+        #: already stopped and not streamed since sends nothing (the exit after the enable's
+        #: fall; servobus.hal.cyclic_group stops its axes too). True at start: the first
+        #: stop always goes out.
+        self.moved = True
         self._enable = False
         self._reset = False
         self._alarm = False
@@ -145,7 +150,7 @@ class AxisBridge:
             await self._refuse(exc)
             return
         self._target = None
-        self.streaming = True
+        self.streaming = self.moved = True
         core = self.axis.axis
         grouped = self._group_of(self)
         if grouped is not None:
@@ -181,9 +186,14 @@ class AxisBridge:
         """Stop a position axis (nothing for a monitor axis: step/dir drives it); a cyclic
         stream ends first (its next cycle sees ``streaming`` off)."""
         self.streaming = False
-        group, self._group = self._group, None
+        group = self._group
         if group is not None:
-            await group.leave(self)  # every axis of the group stops (cyclic_group)
+            # every axis of the group stops (cyclic_group); the group is forgotten only once
+            # its stream has ended and its axes stopped, so that a stop cancelled meanwhile
+            # (SIGTERM while the enable's fall stops the axis) is followed by one that waits
+            # for that stream again instead of racing it
+            await group.leave(self)
+            self._group = None
         cyclic, self._cyclic = self._cyclic, None
         if cyclic is not None and cyclic is not asyncio.current_task():
             try:
@@ -191,9 +201,10 @@ class AxisBridge:
             except TimeoutError:
                 log.warning("axis %s: the cyclic stream did not end within %g s: cancelled",
                             self.axis.name, CYCLIC_END_S)
-        if self.position_mode:
+        if self.position_mode and self.moved:
             with contextlib.suppress(ServobusError):
                 await self.axis.stop()
+                self.moved = False
 
     async def _run_cyclic(self) -> None:
         """The drive's cyclic stream, fed by :meth:`_next_cyclic` until it returns None."""

@@ -32,7 +32,8 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-#: How long a stop waits for the group's stream to end (it ends at its next cycle: 2 ms).
+#: How long a stop waits for the group's stream to end and its axes to stop (the stream
+#: ends at its next cycle, 2 ms; each stop is four register writes).
 END_S = 1.0
 
 
@@ -43,6 +44,7 @@ class Member(Protocol):
     axis: AsyncMachineAxis
     latched: str | None
     streaming: bool
+    moved: bool  # streamed since its last completed stop
     cyclic_stats: StreamStats | None
 
     @property
@@ -94,7 +96,16 @@ class CyclicGroup:
                 task.cancel()
 
     async def _run(self) -> None:
-        members = list(self.members)
+        """The stream, then the stop of every axis; ``task`` stays set until both are done,
+        so that :meth:`leave` (the component's exit too) waits for the stops and never
+        stops a motor at the same time as they do."""
+        try:
+            await self._stream_and_stop(list(self.members))
+        finally:
+            self.task = None
+            self._joined.clear()
+
+    async def _stream_and_stop(self, members: list[Member]) -> None:
         log.info("sync group %s: streaming position-cmd every cycle, one sync signal",
                  self.names)
         lead = members[0]
@@ -104,9 +115,7 @@ class CyclicGroup:
         except ServobusError as exc:
             for m in members:
                 m.latch(f"the sync group's cyclic stream failed: {exc}")
-        finally:
-            self.task = None
-            self._joined.clear()
+        self._joined.clear()  # the stream is over: an enable now joins no stream
         for m in members:
             m.cyclic_stats = self.stats
         cause = next((m for m in members if m.fault), None)
@@ -122,3 +131,4 @@ class CyclicGroup:
 async def _stop(member: Member) -> None:
     with contextlib.suppress(ServobusError):
         await member.axis.stop()
+        member.moved = False

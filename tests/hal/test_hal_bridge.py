@@ -100,6 +100,9 @@ async def test_a_step_beyond_speed_is_refused_and_faults(machine: AsyncMachine) 
         await wait_until_async(lambda: pins["c.fault"] and pins["fault"], what="fault")
         await wait_until_async(lambda: not pins["c.moving"], what="at rest")
         assert abs(await machine["c"].position()) < 1.0  # nothing was sent
+        # position-fb is the drive's position read back, not the command (which says 180)
+        await cycles(bridge.axes[0], 2)
+        assert abs(float(pins["c.position-fb"]) - await machine["c"].position()) < 0.1
         pins["c.fault-reset"] = True
         await wait_until_async(lambda: not pins["c.fault"] and not pins["fault"],
                                what="fault cleared")

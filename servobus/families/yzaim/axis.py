@@ -27,6 +27,14 @@ YZ-AIM registers lives here once (YZ-AIM manual sections; docs/easycan.md, docs/
   replaced; else 0x02 as read in position mode; else, when the axis finds the motor in
   speed mode left by another program (the cruise it replaced is lost with that program),
   the table's power-on value 1000 rpm (:data:`FALLBACK_CRUISE_RPM`, logged).
+* **One mode sequence at a time** (decision, the HAL stop defect): a stop, a turn, a
+  position move and a stream target each write 0x02 and 0x19 in several steps; an axis
+  runs them one after the other (a lock), never interleaved. Two stops that interleaved
+  (``servobus hal``'s sync group and its SIGTERM both stopping the motor) could write
+  0x19 = 3 after the other stop had restored 0x02 to the cruise speed: speed mode at 1000
+  rpm until the next write, the motor turning after it had been stopped. A sequence cut
+  short by a cancellation leaves the next one safe: it writes 0x02 = 0 again before 0x19
+  = 3.
 * A position move whose cruise speed would be 0 is refused before anything is written
   (:class:`~servobus.errors.MotionRefused`): the motor would never get there. The axis
   knows 0x02 from its own writes and reads; it reads 0x19 and 0x02 once when it does not
@@ -49,6 +57,7 @@ YZ-AIM registers lives here once (YZ-AIM manual sections; docs/easycan.md, docs/
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import math
 from abc import abstractmethod
@@ -110,6 +119,8 @@ class YzaimAxis(ClientAxis[C]):
         self._speed_word: int | None = None  # what 0x02 holds, as last written or read here
         self._stream_rpm: int | None = None  # 0x02 a lease runs at (stream_to)
         self._stream_cruise: int | None = None  # the cruise speed the lease replaced
+        #: Held by every sequence that writes 0x02/0x19 (module docstring: one at a time).
+        self._sequence = asyncio.Lock()
 
     # ------------------------------------------------------------- primitives
     @abstractmethod
@@ -212,6 +223,7 @@ class YzaimAxis(ClientAxis[C]):
     async def _position_mode(self) -> None:
         if self._speed_mode is False:
             return
+        self._speed_mode = None  # unknown until the write is answered (a cancel)
         await self._write("special_function", Y.SpecialFunction.PULSE_DIRECTION)
         if self._cruise_rpm is not None:
             await self._write_speed(self._cruise_rpm)
@@ -220,6 +232,10 @@ class YzaimAxis(ClientAxis[C]):
 
     async def _send_move_to(self, position: int) -> None:
         self._check_move(position, relative=False)
+        async with self._sequence:
+            await self._move_to_sequence(position)
+
+    async def _move_to_sequence(self, position: int) -> None:
         await self._end_stream()
         await self._check_cruise()
         await self._position_mode()
@@ -232,6 +248,10 @@ class YzaimAxis(ClientAxis[C]):
         self._check_move(distance, relative=True)
         if distance == 0:
             return  # 0 would be the emergency stop at gear numerator 0 (4.7)
+        async with self._sequence:
+            await self._move_by_sequence(distance)
+
+    async def _move_by_sequence(self, distance: int) -> None:
         await self._end_stream()
         await self._check_cruise()
         await self._position_mode()
@@ -255,6 +275,10 @@ class YzaimAxis(ClientAxis[C]):
         cruise = checks.positive("rpm", abs(rpm) if isinstance(rpm, int | float) else rpm,
                                  "rpm")
         wanted = min(_SPEED.maximum, max(1, math.ceil(cruise)))
+        async with self._sequence:
+            await self._stream_to_sequence(counts, wanted)
+
+    async def _stream_to_sequence(self, counts: int, wanted: int) -> None:
         await self._position_mode()
         if self._stream_rpm is None:
             self._stream_cruise = await self._cruise()
@@ -275,6 +299,16 @@ class YzaimAxis(ClientAxis[C]):
 
     async def turn(self, rpm: int) -> None:
         rpm = check_int("rpm", rpm)
+        async with self._sequence:
+            await self._turn_sequence(rpm)
+
+    async def position_mode_alone(self) -> None:
+        """Position mode, as one sequence (module docstring): what a cyclic stream or a
+        synchronised move of several motors asks of each motor first."""
+        async with self._sequence:
+            await self._position_mode()
+
+    async def _turn_sequence(self, rpm: int) -> None:
         if self._stream_rpm is not None:  # a stop after a lease restores what it replaced
             self._stream_rpm = None
             if self._cruise_rpm is None and self._stream_cruise:
@@ -291,6 +325,7 @@ class YzaimAxis(ClientAxis[C]):
         await self._write("dir_polarity", 1 if rpm < 0 else 0)
         await self._write_speed(abs(rpm))
         if self._speed_mode is not True:
+            self._speed_mode = None
             await self._write("special_function", _SPEED_MODE)
             self._speed_mode = True
 
@@ -303,8 +338,10 @@ class YzaimAxis(ClientAxis[C]):
         self._target = None
         await self._write_speed(0)
         if self._speed_mode is not True:
+            self._speed_mode = None  # unknown until the write is answered (a cancel)
             await self._write("special_function", _SPEED_MODE)
             self._speed_mode = True
+        self._speed_mode = None
         await self._write("special_function", Y.SpecialFunction.PULSE_DIRECTION)
         self._speed_mode = False
         await self._write_speed(cruise)
@@ -407,6 +444,10 @@ class YzaimAxis(ClientAxis[C]):
         return value
 
     async def write_param(self, name: str, value: int) -> None:
+        async with self._sequence:  # 0x02 and 0x19 belong to the mode sequences
+            await self._write_param(name, value)
+
+    async def _write_param(self, name: str, value: int) -> None:
         checked = self._check_param(name, value)
         if name == "target_speed" and checked and self._speed_mode is None \
                 and not self.continuous:

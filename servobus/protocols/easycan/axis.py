@@ -97,7 +97,7 @@ class EasyCanAxis(YzaimAxis[AsyncEasyCanClient]):
             assert isinstance(axis, EasyCanAxis)
             motors.append((axis, counts))
         for axis, _ in motors:
-            await axis._position_mode()
+            await axis.position_mode_alone()
             axis._target = None
         group = SyncGroup(self.client, [a.drive_id for a, _ in motors])
         await group.move({a.drive_id: counts for a, counts in motors})
@@ -124,7 +124,7 @@ class EasyCanAxis(YzaimAxis[AsyncEasyCanClient]):
                 raise ArgumentRangeError(f"{axis!r} does not stream together with {self!r}")
             motors.append((axis, next_position))
         for axis, _ in motors:
-            await axis._position_mode()
+            await axis.position_mode_alone()
             axis._target = None
         group = SyncGroup(self.client, [a.drive_id for a, _ in motors])
         await group.move({a.drive_id: await a.position() for a, _ in motors})
