@@ -209,13 +209,15 @@ def test_a_mm_axis_speaks_mm_and_fits_every_width(page: WebDriver, gui: Gui) -> 
     # auto (the default mode): the capture caught on another tab is held on return, paused
     wait_until(lambda: abs(x_mm() - (start - 1)) < 0.01, timeout=WAIT,
                what="x 1 mm below where it rested")
-    js(page, """document.querySelector('#trig-mode').value = 'auto';
-                document.querySelector('#trig-level').value = '-0.5';
+    # the level half-way up the next move, from where x is now (a fixed -0.5 mm was never
+    # crossed when the jog had rested more than 0.5 mm short of -10 mm: one red run)
+    js(page, f"""document.querySelector('#trig-mode').value = 'auto';
+                document.querySelector('#trig-level').value = '{start - 0.5:.3f}';
                 window.servobus.scope.configure();""")
     before = js(page, "return window.servobus.scope.lastTriggered?.seq ?? 0")
     tab(page, "motion")
     js(page, """document.querySelector('#move-value').value = '1';
-                document.querySelector('#move-rel').click();""")  # -1 mm up through -0.5
+                document.querySelector('#move-rel').click();""")  # 1 mm up through the level
     wait_until(lambda: js(page, "return window.servobus.scope.lastTriggered?.seq ?? 0") != before,
                timeout=WAIT, what="the move caught in auto mode while Motion shows")
     tab(page, "scope")

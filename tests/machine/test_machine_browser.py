@@ -118,9 +118,12 @@ def test_mixed_machine_named_in_its_units_and_stop_all(page: WebDriver, server: 
     # WebSocket), y's and c's a REST client's, renewed by posting again while it waits;
     # turning is seen on the position (a streamed lease's speed reading varies)
     start = {a: status(server, a)["position"] for a in (1, 2, 3)}
+    # the page's speed field is in x's unit since issue 33: 10 mm/s is 120 rpm at 5 mm/rev
+    # (typed as 120, it was 120 mm/s: x reached its soft limit at 300 mm before a loaded
+    # machine saw y and c turn, and said "stopped at soft limit": one red run)
     rpm = page.find_element(By.ID, "turn-rpm")
     rpm.clear()
-    rpm.send_keys("120")
+    rpm.send_keys("10")
     run = page.find_element(By.ID, "turn-run")
     run.click()
 
