@@ -5,8 +5,8 @@ For DMM (DYN2-TL) and YZ-AIM virtual drives, each load preset at inertia ratios 
 a quarter-turn test distance; a grid of hand-picked gains (:data:`GRIDS`) is stepped the
 same way and its best case kept (calm, overshoot <= 10 %, fastest to settle). A case meets
 the target when the tuned gains end calm, with overshoot <= 10 % and settling no slower
-than 1.25 x the grid's best. Run: ``python -m benchmarks tune`` (6 min on 2 shared cores
-at a load average of 20).
+than 1.25 x the grid's best. Run: ``python -m benchmarks tune [--goal stiffness]`` (3 - 6
+min on 2 shared cores at a load average of 9 - 20).
 
 Fairness (decision): each grid point moves a copy of the drive the tuner leaves behind,
 after the same wait for rest as the tuner's verify move. A DMM drive's Adaptive Tuning
@@ -27,10 +27,12 @@ it for settling on a drive that learns its load; ``--goal stiffness`` does not.
 
 from __future__ import annotations
 
+import argparse
 import asyncio
 import copy
 import itertools
 import math
+import sys
 from concurrent.futures import ProcessPoolExecutor
 
 from benchmarks import verdict
@@ -40,6 +42,7 @@ from servobus.sim.tune_plant import SteppedPlant
 from servobus.tune.record import vibration
 from servobus.tune.tuner import (
     DETECT,
+    GOALS,
     MAX_OVERSHOOT_PCT,
     RECORD_S,
     VERIFY_SETTLE_S,
@@ -100,12 +103,12 @@ def give(plant: SteppedPlant) -> tuple[int, int]:
     return peak, abs(core.position - held)
 
 
-def _case(args: tuple[str, str, int]) -> dict[str, object]:
-    family, load, inertia = args
+def _case(args: tuple[str, str, int, str]) -> dict[str, object]:
+    family, load, inertia, goal = args
     plant = _plant(family, load, inertia)
     try:
         result = asyncio.run(Tuner(plant, Limits(plant.counts_per_rev // 4),
-                                   plant.counts_per_rev).run())
+                                   plant.counts_per_rev, goal=goal).run())
         tuned: Trial | None = result.after
         error = ""
         tuned_give: tuple[int, int] | None = give(plant)
@@ -145,12 +148,16 @@ def _ms(s: float | None) -> str:
     return "-" if s is None else f"{s * 1000:.1f}"
 
 
-def main() -> None:
-    cases = [(f, load, i) for f in FAMILIES for load in LOADS for i in INERTIAS]
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks tune")
+    parser.add_argument("--goal", choices=GOALS, default=GOALS[0],
+                        help="the tuner's goal (servobus tune --goal)")
+    options, _ = parser.parse_known_args(sys.argv[1:] if argv is None else argv)
+    cases = [(f, load, i, options.goal) for f in FAMILIES for load in LOADS for i in INERTIAS]
     with ProcessPoolExecutor(max_workers=2) as pool:
         rows = list(pool.map(_case, cases))
-    print("tune: tuned from defaults vs the grid's best (quarter-turn test move, "
-          f"vibration detected at {DETECT})")
+    print(f"tune: tuned from defaults (goal {options.goal}) vs the grid's best (quarter-turn "
+          f"test move, vibration detected at {DETECT})")
     print("| family | load | inertia | overshoot % | settling ms | vibration | gains | "
           "grid overshoot % | grid settling ms | grid pick ms | grid vibration | grid gains "
           "| meets | give | grid give |")
