@@ -278,7 +278,7 @@ class Tuner:
         self.writes = 0
         self.per_gain: dict[str, int] = {}
         self.trials = 0
-        #: Where the run is: before, calm, search <gain>, refine, verify (progress shown).
+        #: Where the run is: before, calm, soften, search <gain>, refine, verify (progress shown).
         self.phase = "before"
         self.origin: int | None = None
         self.outward = False
