@@ -5,8 +5,8 @@ For DMM (DYN2-TL) and YZ-AIM virtual drives, each load preset at inertia ratios 
 a quarter-turn test distance; a grid of hand-picked gains (:data:`GRIDS`) is stepped the
 same way and its best case kept (calm, overshoot <= 10 %, fastest to settle). A case meets
 the target when the tuned gains end calm, with overshoot <= 10 % and settling no slower
-than 1.25 x the grid's best. Run: ``python -m benchmarks tune`` (6 min on 2 shared cores
-at a load average of 20).
+than 1.25 x the grid's best. Run: ``python -m benchmarks tune [--goal stiffness]`` (3 - 6
+min on 2 shared cores at a load average of 9 - 20).
 
 Fairness (decision): each grid point moves a copy of the drive the tuner leaves behind,
 after the same wait for rest as the tuner's verify move. A DMM drive's Adaptive Tuning
@@ -17,22 +17,32 @@ verify did not. Both now start from the same learnt drive. The other way round, 
 best is the fastest of many single moves while the tuner's figure is a verify move of its
 pick: the grid's best is re-measured the same way, one more move after the wait for rest
 (the table gives both: *grid settling* the verify, *grid pick* the selection move).
+
+Stiffness (not scored): the step does not show how far a load pushes the motor off its
+target, so each side's gains are also given a load step at rest on a copy of the drive
+(:func:`give`): :data:`LOAD_STEP_NM` on the shaft, the motor's largest excursion and what is
+left after :data:`GIVE_S`, in counts. The tuner's default goal ("settling") trades some of
+it for settling on a drive that learns its load; ``--goal stiffness`` does not.
 """
 
 from __future__ import annotations
 
+import argparse
 import asyncio
 import copy
 import itertools
 import math
+import sys
 from concurrent.futures import ProcessPoolExecutor
 
 from benchmarks import verdict
+from servobus.sim.core import constants as K
 from servobus.sim.core.loads import load_settings
 from servobus.sim.tune_plant import SteppedPlant
 from servobus.tune.record import vibration
 from servobus.tune.tuner import (
     DETECT,
+    GOALS,
     MAX_OVERSHOOT_PCT,
     RECORD_S,
     VERIFY_SETTLE_S,
@@ -51,6 +61,9 @@ GRIDS: dict[str, dict[str, tuple[int, ...]]] = {
               "speed_loop_integration_time": (20, 100)},
 }
 SETTLE_FACTOR = 1.25
+#: The stiffness column's load step (N·m on the shaft, against +) and its record.
+LOAD_STEP_NM = 0.1
+GIVE_S = 0.6
 
 
 def _plant(family: str, load: str, inertia: int) -> SteppedPlant:
@@ -77,28 +90,48 @@ async def _grid_point(learnt: SteppedPlant,
     return await _step(plant, plant.counts_per_rev // 4, gains), plant
 
 
-def _case(args: tuple[str, str, int]) -> dict[str, object]:
-    family, load, inertia = args
+def give(plant: SteppedPlant) -> tuple[int, int]:
+    """(largest excursion, excursion left after :data:`GIVE_S`) in counts of a copy of
+    ``plant``, at rest at its gains, under a :data:`LOAD_STEP_NM` load step."""
+    core = copy.deepcopy(plant).core
+    asyncio.run(SteppedPlant(core).settle(VERIFY_SETTLE_S))
+    held, t0, peak = core.position, core.time, 0
+    core.set_disturbance(LOAD_STEP_NM)
+    for k in range(1, round(GIVE_S * K.CONTROL_HZ) + 1):
+        core.advance_to(t0 + k * K.CONTROL_DT)
+        peak = max(peak, abs(core.position - held))
+    return peak, abs(core.position - held)
+
+
+def _case(args: tuple[str, str, int, str]) -> dict[str, object]:
+    family, load, inertia, goal = args
     plant = _plant(family, load, inertia)
     try:
         result = asyncio.run(Tuner(plant, Limits(plant.counts_per_rev // 4),
-                                   plant.counts_per_rev).run())
+                                   plant.counts_per_rev, goal=goal).run())
         tuned: Trial | None = result.after
         error = ""
+        tuned_give: tuple[int, int] | None = give(plant)
     except Exception as exc:  # a failed case is a row of the table, not a crash
-        tuned, error = None, str(exc)
+        tuned, error, tuned_give = None, str(exc), None
     grid = GRIDS[family]
     best: tuple[Trial, SteppedPlant] | None = None
     for values in itertools.product(*grid.values()):
         point = asyncio.run(_grid_point(plant, dict(zip(grid, values, strict=True))))
         if best is None or point[0].score() < best[0].score():
             best = point
-    picked = verified = None
+    picked = verified = grid_give = None
     if best is not None:  # its verify: one more move, back, as the tuner verifies its pick
         picked, moved = best
         verified = asyncio.run(_step(moved, -moved.counts_per_rev // 4, picked.gains))
+        grid_give = give(moved)
     return {"family": family, "load": load, "inertia": inertia, "tuned": tuned,
-            "grid": verified, "grid_pick": picked, "error": error}
+            "grid": verified, "grid_pick": picked, "error": error, "give": tuned_give,
+            "grid_give": grid_give}
+
+
+def _give_text(value: object) -> str:
+    return f"{value[0]} / {value[1]}" if isinstance(value, tuple) else "-"
 
 
 def _meets(tuned: Trial | None, grid: Trial | None) -> bool:
@@ -115,17 +148,21 @@ def _ms(s: float | None) -> str:
     return "-" if s is None else f"{s * 1000:.1f}"
 
 
-def main() -> None:
-    cases = [(f, load, i) for f in FAMILIES for load in LOADS for i in INERTIAS]
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks tune")
+    parser.add_argument("--goal", choices=GOALS, default=GOALS[0],
+                        help="the tuner's goal (servobus tune --goal)")
+    options, _ = parser.parse_known_args(sys.argv[1:] if argv is None else argv)
+    cases = [(f, load, i, options.goal) for f in FAMILIES for load in LOADS for i in INERTIAS]
     with ProcessPoolExecutor(max_workers=2) as pool:
         rows = list(pool.map(_case, cases))
-    print("tune: tuned from defaults vs the grid's best (quarter-turn test move, "
-          f"vibration detected at {DETECT})")
+    print(f"tune: tuned from defaults (goal {options.goal}) vs the grid's best (quarter-turn "
+          f"test move, vibration detected at {DETECT})")
     print("| family | load | inertia | overshoot % | settling ms | vibration | gains | "
           "grid overshoot % | grid settling ms | grid pick ms | grid vibration | grid gains "
-          "| meets |")
+          "| meets | give | grid give |")
     print("| --- | --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: | --- "
-          "| --- |")
+          "| --- | ---: | ---: |")
     met = 0
     for r in rows:
         tuned, grid = r["tuned"], r["grid"]
@@ -142,8 +179,11 @@ def main() -> None:
              f"{_ms(pick.settling_s if pick else None)} | {grid.vibration:.3f} | "
              f"{' '.join(map(str, grid.gains.values()))}") if grid else "| | | |"
         print(f"| {r['family']} | {r['load']} | {r['inertia']} | {t} | {g} | "
-              f"{'yes' if ok else 'no'} |")
+              f"{'yes' if ok else 'no'} | {_give_text(r['give'])} | "
+              f"{_give_text(r['grid_give'])} |")
     share = met / len(rows) if rows else math.nan
     mark = verdict.mark("tune: cases meeting the target", share, at_least=1.0,
                         show=verdict.percent)
     print(f"tune: {met} of {len(rows)} cases meet the target  {mark}")
+    print(f"give: counts the motor gives way under a {LOAD_STEP_NM:g} N·m load step at rest, "
+          f"largest / left after {GIVE_S:g} s (not scored)")

@@ -180,6 +180,9 @@ class TuningProfile:
     gains: tuple[TuningGain, ...]
     persistence: Persistence
     save_hint: str = ""
+    #: The drive learns its load and feeds the move's torque forward (DMM Adaptive Tuning,
+    #: DYN2 5.2): a softer loop may settle faster there (the tuner's goal "settling").
+    learns_load: bool = False
 
     def gain(self, role: GainRole) -> TuningGain | None:
         return next((g for g in self.gains if g.role is role), None)

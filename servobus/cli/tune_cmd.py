@@ -6,7 +6,8 @@ far away, in the axis's unit with ``move``'s suffixes (a drive: counts, ``rev``,
 machine axis: its unit), inside the machine's soft limits or the drive's reach, checked
 before anything moves. It asks first, naming the axis and the distance (``--yes`` skips).
 Ctrl-C stops the motor and writes the kept gains back (the tuner's abort path); so do an
-alarm and a vibration beyond ``--vibration-limit``. The figures before and after print as a
+alarm and a vibration beyond ``--vibration-limit``. ``--goal`` settling (default) or
+stiffness (docs/tuning.md, "The procedure", step 3a). The figures before and after print as a
 table (``--json``: the whole result).
 """
 
@@ -27,7 +28,7 @@ from servobus.cli.open_axis import open_drive_machine
 from servobus.cli.output import emit, note
 from servobus.errors import ArgumentRangeError
 from servobus.tune import plan
-from servobus.tune.tuner import Trial, TuneResult
+from servobus.tune.tuner import GOALS, Trial, TuneResult
 
 
 def _ms(s: float | None) -> str:
@@ -63,6 +64,9 @@ def render_result(con: Console, who: str, result: TuneResult) -> None:
         con.print(f"inertia test: {result.amps_per_accel:.3g} A per rev/s^2 (the motor "
                   "model is not known here: no ratio)")
     con.print(f"gains {result.save_hint}" + ("; saved" if result.saved else ""))
+    if result.goal == "settling":
+        con.print("goal settling: on a drive that learns its load the loop may be softer "
+                  "than the search found (--goal stiffness keeps the stiffer gains)")
 
 
 @click.command("tune", cls=ServobusCommand)
@@ -78,9 +82,13 @@ def render_result(con: Console, who: str, result: TuneResult) -> None:
               help="measure by polling the link even where the drive keeps a trace")
 @click.option("--vibration-limit", type=float, default=None, metavar="X",
               help="abort beyond this vibration (hold current RMS / move peak; default 1.5)")
+@click.option("--goal", type=click.Choice(GOALS), default="settling", show_default=True,
+              help="settling: on a drive that learns its load (DMM), also try the whole "
+                   "loop softer where that settles faster; stiffness: keep the stiff gains "
+                   "(less give under a load step)")
 @pass_cli
 def tune_cmd(ctx: CliContext, distance: str, yes: bool, save: bool, revert: bool, poll: bool,
-             vibration_limit: float | None) -> None:
+             vibration_limit: float | None, goal: str) -> None:
     """Tune the axis's gains: raise them until the motor vibrates, back off, verify."""
     if save and revert:
         raise click.UsageError("--save and --revert contradict each other")
@@ -129,7 +137,7 @@ def tune_cmd(ctx: CliContext, distance: str, yes: bool, save: bool, revert: bool
             note(text)
         with stop_on_interrupt(core):
             result = axis.tune(counts, owner="cli", vibration_limit=vibration_limit,
-                               trace=not poll, save=save)
+                               trace=not poll, save=save, goal=goal)
             if revert:
                 axis.revert_gains(result.original)
     record = {"axis": who, "distance": shown, **result.as_dict(), "reverted": revert}

@@ -615,15 +615,16 @@ class AsyncMachineAxis:
 
     async def tune(self, distance: int, *, owner: str = "api",
                    vibration_limit: float | None = None, trace: bool = True,
-                   save: bool = False,
+                   save: bool = False, goal: str = "settling",
                    on_trial: Callable[[Trial], None] | None = None) -> TuneResult:
         """The manuals' tuning procedure (servobus.tune, docs/tuning.md): test moves between
         here and ``distance`` counts away, inside the soft limits (checked before anything
         moves); the kept gains come back on an abort, a failure or a cancel. Refused while
         another owner's lease or tuning run holds the axis; while it runs, other motion is
         refused and :meth:`stop` cancels it (Stop always wins). ``trace=False`` polls where
-        a trace exists; ``save`` keeps the gains where the family saves with a command.
-        Takes seconds."""
+        a trace exists; ``save`` keeps the gains where the family saves with a command;
+        ``goal`` "settling" (default) or "stiffness" (servobus.tune.tuner.GOALS). Takes
+        seconds."""
         from servobus.tune.axis_plant import AxisPlant
         from servobus.tune.tuner import ABORT_VIBRATION, Limits, Tuner
 
@@ -640,7 +641,7 @@ class AsyncMachineAxis:
         limit = ABORT_VIBRATION if vibration_limit is None else vibration_limit
         limits = Limits(distance, soft, limit, to_user=self.to_user, unit=self.unit)
         tuner = Tuner(AxisPlant(core, trace=trace), limits, core.counts_per_rev,
-                      on_trial=on_trial, save=save)
+                      on_trial=on_trial, save=save, goal=goal)
         self._tuning = (owner, asyncio.current_task())
         try:
             with self._commanding(), self._watch():

@@ -133,12 +133,13 @@ class MachineAxis:
         return self._runner.run(self._core.status())
 
     def tune(self, distance: int, *, owner: str = "api", vibration_limit: float | None = None,
-             trace: bool = True, save: bool = False,
+             trace: bool = True, save: bool = False, goal: str = "settling",
              on_trial: Callable[[Trial], None] | None = None) -> TuneResult:
         """A tuning run (:meth:`servobus.machine.axis.MachineAxis.tune`)."""
         return self._runner.run(self._core.tune(distance, owner=owner,
                                                 vibration_limit=vibration_limit, trace=trace,
-                                                save=save, on_trial=on_trial))
+                                                save=save, goal=goal,
+                                                on_trial=on_trial))
 
     def revert_gains(self, original: Mapping[str, int]) -> dict[str, int]:
         """A tuning run's kept gains back (MachineAxis.revert_gains)."""

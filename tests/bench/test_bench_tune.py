@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import asyncio
 
-from benchmarks.bench_tune import _grid_point, _meets, _plant
+from benchmarks.bench_tune import _grid_point, _meets, _plant, give
 from servobus.tune.tuner import RECORD_S, Trial
 
 
@@ -38,3 +38,19 @@ def test_each_grid_point_moves_a_copy_of_the_drive_the_tuner_left() -> None:
     taught, moved = asyncio.run(_grid_point(learnt, gains))
     assert taught.overshoot_pct < fresh.overshoot_pct / 2
     assert asyncio.run(learnt.position()) == held != asyncio.run(moved.position())
+
+
+def test_the_give_column_tells_a_stiff_loop_from_a_soft_one() -> None:
+    # A 0.1 N·m load step at rest on a copy of the drive (docs/tuning.md, the give columns):
+    # measured on the direct load at 3, 40/40/20 gives 62 counts (none left after 0.6 s),
+    # 5/40/1 519 (81 left).
+    gives = []
+    for main, integral in ((40, 20), (5, 1)):
+        plant = _plant("dmm", "direct", 3)
+        for name, value in (("main_gain", main), ("int_gain", integral)):
+            asyncio.run(plant.write_gain(name, value))
+        held = asyncio.run(plant.position())
+        gives.append(give(plant))
+        assert asyncio.run(plant.position()) == held  # the copy moved, not the plant
+    (stiff_peak, _), (soft_peak, _) = gives
+    assert 0 < stiff_peak < soft_peak / 2

@@ -8,7 +8,7 @@ import asyncio
 
 import pytest
 
-from servobus.errors import OwnerError
+from servobus.errors import OwnerError, ServobusError
 from servobus.machine import open_url_machine_async
 from servobus.tune.tuner import Trial
 
@@ -43,3 +43,7 @@ async def test_a_tuned_axis_refuses_other_motion_and_stop_cancels_the_run() -> N
         await axis.core().write_param("speed_gain", kept["speed_gain"] + 10)
         assert await axis.revert_gains(kept) == {"speed_gain": kept["speed_gain"]}
         assert await axis.revert_gains(kept) == {}
+        # the goal reaches the tuner: an unknown one is refused before anything moves
+        with pytest.raises(ServobusError, match="goal 'fast'"):
+            await axis.tune(8192, goal="fast")
+        assert axis.tuning_owner is None

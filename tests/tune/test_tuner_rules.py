@@ -16,7 +16,13 @@ from servobus.axis.types import (
     TuningProfile,
 )
 from servobus.tune.record import Record
-from servobus.tune.tuner import EEPROM_WRITES_PER_GAIN, LEARN_AGREE, Limits, Tuner
+from servobus.tune.tuner import (
+    EEPROM_WRITE_BUDGET,
+    EEPROM_WRITES_PER_GAIN,
+    LEARN_AGREE,
+    Limits,
+    Tuner,
+)
 
 GAIN = "gain"
 STEP = 1000
@@ -134,3 +140,47 @@ def test_fine_tuning_lands_between_the_search_steps_on_a_trace_only() -> None:
     polled = SyntheticPlant(response)
     polled.source = "poll"  # timed to a poll: no half steps, the search's margin (0.6)
     assert run(polled)[GAIN] <= 0.6 * 109
+
+
+class CascadePlant(SyntheticPlant):
+    """Position, speed and integral gains (from 40, 40, 20) of a drive that feeds forward a
+    load it learnt: a move settles in 50 ms once the position gain is 5 or less, in 75 ms
+    above; it shakes where the position loop is not well below the speed loop (position >
+    speed / 2) or the integral's zero not below it (integral > speed / 2)."""
+
+    def __init__(self, learns_load: bool = True) -> None:
+        super().__init__(lambda v, n: (0.0, False))
+        names = (GainRole.POSITION, "main"), (GainRole.SPEED, "speed"), (GainRole.INTEGRAL,
+                                                                          "integral")
+        self.profile = TuningProfile(tuple(TuningGain(r, n) for r, n in names),
+                                     Persistence.EEPROM_EACH_WRITE, learns_load=learns_load)
+        self.gains = {"main": 40, "speed": 127, "integral": 20}
+        self.response = self._cascade
+
+    def _cascade(self, _: int, __: int) -> tuple[float, bool]:
+        g = self.gains
+        shakes = g["main"] > g["speed"] / 2 or g["integral"] > g["speed"] / 2
+        return (0.05 if g["main"] <= 5 else 0.075), shakes
+
+    async def read_gain(self, name: str) -> int:
+        return self.gains[name]
+
+    async def write_gain(self, name: str, value: int) -> None:
+        self.gains[name] = value
+        self.writes.append(value)
+
+
+def tune_cascade(plant: CascadePlant, goal: str) -> dict[str, int]:
+    return asyncio.run(Tuner(plant, Limits(STEP), STEP, goal=goal).run()).tuned
+
+
+def test_on_a_learnt_feed_forward_the_whole_loop_is_tried_softer() -> None:
+    # One gain at a time the position gain goes down four steps at most (40 -> 10) and a
+    # softer speed gain shakes at a stiff position gain; the loop softened as a whole (÷2
+    # a step, the cascade's order kept) reaches Main 5, within the EEPROM write budget.
+    plant = CascadePlant()
+    assert tune_cascade(plant, "settling")["main"] <= 5
+    assert len(plant.writes) <= EEPROM_WRITE_BUDGET
+    # not where the user asks for stiffness, nor on a drive that does not learn its load
+    assert tune_cascade(CascadePlant(), "stiffness")["main"] > 5
+    assert tune_cascade(CascadePlant(learns_load=False), "settling")["main"] > 5

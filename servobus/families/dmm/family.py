@@ -47,6 +47,7 @@ TUNING = TuningProfile(
            TuningGain(GainRole.INTEGRAL, "int_gain"), TuningGain(GainRole.FILTER, "trq_cons")),
     persistence=Persistence.EEPROM_EACH_WRITE,
     save_hint="written to the drive's EEPROM as they were set (manual 5.1)",
+    learns_load=True,  # Adaptive Tuning (5.2)
 )
 
 DYN2 = Family(
