@@ -1,6 +1,6 @@
 """``servobus hal``: the LinuxCNC userspace HAL component (docs/linuxcnc.md).
 
-Exit: 130 after SIGTERM/SIGINT (every position axis stopped first), 2 for a machine file
+Exit: 130 after SIGTERM/SIGINT/SIGHUP (every position axis stopped first), 2 for a machine file
 mistake or a missing ``hal`` module.
 """
 

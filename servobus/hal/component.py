@@ -5,8 +5,9 @@ HAL is touched), then the pins are made, then the links open (an axis whose link
 open starts offline, its ``fault`` set, and comes online when the link does), then the
 component is ready (``loadusr -W`` waits for that: the next HAL line finds the axes
 online). SIGTERM (``halrun``'s unload, the
-end of LinuxCNC) or SIGINT stops every position axis, then closes the machine without
-stopping the monitor axes (step/dir from elsewhere drives them).
+end of LinuxCNC), SIGINT or SIGHUP (the terminal LinuxCNC was started from closes while the
+component runs) stops every position axis, then closes the machine without stopping the
+monitor axes (step/dir from elsewhere drives them).
 """
 
 from __future__ import annotations
@@ -25,6 +26,10 @@ from servobus.machine.config import MachineSpec, load_machine_file
 from servobus.machine.machine import open_machine_async
 
 log = logging.getLogger(__name__)
+
+#: Each stops every position axis, then ends the component (SIGHUP's default would kill it
+#: without stopping a motor that streams).
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
 
 
 def make_pins(hal: ModuleType, name: str, spec: MachineSpec) -> Any:
@@ -47,7 +52,7 @@ def _new_pin(hal: ModuleType, component: Any, name: str, pin: Pin) -> None:
 
 
 async def serve(hal: ModuleType, machine_path: Path, name: str, watchdog_s: float) -> str:
-    """Run the component until SIGTERM or SIGINT; returns the signal's name."""
+    """Run the component until SIGTERM, SIGINT or SIGHUP; returns the signal's name."""
     spec = load_machine_file(machine_path)
     component = make_pins(hal, name, spec)
     pins: Pins = component
@@ -59,7 +64,7 @@ async def serve(hal: ModuleType, machine_path: Path, name: str, watchdog_s: floa
         caught.append(sig.name)
         stopped.set()
 
-    for sig in (signal.SIGTERM, signal.SIGINT):
+    for sig in STOP_SIGNALS:
         loop.add_signal_handler(sig, on_signal, sig)
     try:
         machine = await open_machine_async(machine_path, retry=True)

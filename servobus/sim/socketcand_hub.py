@@ -17,9 +17,12 @@ A client's frame is stamped when its TCP data reaches the hub (``timestamp`` wal
 ``arrived`` monotonic), every frame of one TCP read with the same instant: frames a client
 writes at once reach the bus together, whenever the hub's event loop gets round to parsing
 them, so a node judges them by that instant (EasyCan's 2 ms cache cycle) and not by the
-simulator's load. A remote (RTR) frame - python-can sends ``< send ID DLC >`` with DLC > 0
-and no data bytes - is dropped with one log line and no reply, as socketcand does (its
-rawmode has no remote frames; it logs "Syntax error in send command" and answers nothing):
+simulator's load; a shared instant also tells a node that frames came in one read, whose
+own arrival times are unknown (a loaded hub reads several cycles' frames at once: the
+EasyCan motor queues such cache frames one per cycle, servobus/sim/yzaim/motor.py). A
+remote (RTR) frame - python-can sends ``< send ID DLC >`` with DLC > 0 and no data bytes -
+is dropped with one log line and no reply, as socketcand does (its rawmode has no remote
+frames; it logs "Syntax error in send command" and answers nothing):
 an ``< error ... >`` line would break python-can's session, which parses it as a frame. A
 client starts receiving 20 ms after its rawmode ``< ok >``: python-can's handshake reads
 with a single recv() and would fail if a frame were glued to that ``< ok >``. ``< echo >``

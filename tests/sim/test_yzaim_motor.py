@@ -417,3 +417,40 @@ def test_motor_sized_from_the_manuals_table() -> None:
     assert read(m, "output_pwm") == pytest.approx(0.609 * 32767, rel=0.02)
     assert read(m, "system_current") > 0
     assert read(m, "drive_temperature") >= 25
+
+
+def test_cache_frames_read_together_are_taken_one_per_cycle_in_order() -> None:
+    """Frames the simulator received together (one ``batch`` key: the socketcand hub's stamp
+    of one TCP read) may have reached the bus in different cycles: their cache values are
+    queued and taken one per 2 ms tick, in order (before: all but the first refused as
+    written twice within one cycle). Frames of different batches are judged as before."""
+    m = YzaimMotor()
+    write(m, "sync_control", 1)  # ticks at 2, 4, ... ms
+    m.advance(0.0105)
+    start = read(m, "absolute_position")
+    for k in (1, 2, 3):
+        m.write_position_cache(start + 100 * k, at=0.0103, batch=0.0103)
+    assert m.refused_cache == 0
+    taken = []
+    for _ in range(3):
+        m.advance(Y.SYNC_CYCLE_S)
+        taken.append(m.target - start)
+    assert taken == [100, 200, 300]
+    m.write_position_cache(start + 400, batch="one read")
+    with pytest.raises(MotorRefused):
+        m.write_position_cache(start + 500, batch="another read")
+    assert m.refused_cache == 1
+
+
+def test_a_sync_control_write_first_takes_the_queued_cache_values() -> None:
+    """The 0x1C write reached the bus after the queued frames, each of which had its cycle
+    before it: they are taken at once, in order, so sync off leaves the motor at the last."""
+    m = YzaimMotor()
+    write(m, "sync_control", 1)
+    start = read(m, "absolute_position")
+    for k in (1, 2, 3):
+        m.write_position_cache(start + 100 * k, batch=1)
+    write(m, "sync_control", 0)
+    assert m.target - start == 300 and m.refused_cache == 0
+    m.advance(0.01)
+    assert m.target - start == 300

@@ -22,12 +22,15 @@ maps frames. Decisions where the manual is silent:
 * Motors answer on their power-on address (register 0x15 takes effect after a power cycle).
 * Timing: a frame is executed as of the instant it reached the bus (its receive timestamp),
   not when this process got round to it, so the 2 ms cycle a cache frame belongs to does not
-  depend on the simulator's own scheduling delays.
+  depend on the simulator's own scheduling delays. Frames that reached the simulator
+  together (``batch``: the socketcand hub's stamp of one TCP read) carry no such instant
+  each; the motor queues their cache values one per cycle instead of refusing them (the
+  motor's module doc).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Hashable, Sequence
 from dataclasses import dataclass
 
 from servobus.errors import FramingError
@@ -90,11 +93,12 @@ class EasyCanNetwork:
                 return m
         return None
 
-    def handle_raw(self, arbitration_id: int, data: bytes,
-                   now: float | None = None) -> list[tuple[int, bytes]]:
+    def handle_raw(self, arbitration_id: int, data: bytes, now: float | None = None,
+                   batch: Hashable | None = None) -> list[tuple[int, bytes]]:
         """Execute one frame that reached the bus at simulated time ``now``: it first
         advances the motor it addresses (only that one: O(1) per frame however many motors
-        share the bus); a motor already past ``now`` executes it as of ``now``."""
+        share the bus); a motor already past ``now`` executes it as of ``now``. ``batch``:
+        a key shared by frames received together (module doc)."""
         self.stats.frames += 1
         try:
             request = codec.decode_request(arbitration_id, data)
@@ -112,7 +116,7 @@ class EasyCanNetwork:
             return []
         if now is not None and now > motor.time:
             motor.advance_to(now)
-        return self._out(self.execute(motor, request, now))
+        return self._out(self.execute(motor, request, now, batch))
 
     def _out(self, reply: Reply | None) -> list[tuple[int, bytes]]:
         if reply is None:
@@ -122,10 +126,10 @@ class EasyCanNetwork:
             self.stats.errors += 1
         return [codec.encode(reply)]
 
-    def execute(self, motor: YzaimMotor, request: Request,
-                at: float | None = None) -> Reply | None:
+    def execute(self, motor: YzaimMotor, request: Request, at: float | None = None,
+                batch: Hashable | None = None) -> Reply | None:
         try:
-            return _execute(motor, request, at)
+            return _execute(motor, request, at, batch)
         except MotorRefused as exc:
             code = _CODES[exc.reason]
             if not isinstance(request, PositionCacheWrite):
@@ -136,7 +140,8 @@ class EasyCanNetwork:
             return ErrorReply(request.slave, int(CACHE_ERROR_FUNCTION), code)
 
 
-def _execute(motor: YzaimMotor, request: Request, at: float | None) -> Reply | None:
+def _execute(motor: YzaimMotor, request: Request, at: float | None,
+             batch: Hashable | None) -> Reply | None:
     match request:
         case ReadRequest():
             if not 1 <= request.count <= MAX_READ_WORDS:
@@ -161,6 +166,6 @@ def _execute(motor: YzaimMotor, request: Request, at: float | None) -> Reply | N
             words = tuple(motor.read_word(a) for a in request.addresses)
             return ReadMultipleReply(request.slave, words, request.host)
         case PositionCacheWrite():
-            position = motor.write_position_cache(request.position, at=at)
+            position = motor.write_position_cache(request.position, at=at, batch=batch)
             return PositionReply(position) if request.reply else None
     return None  # pragma: no cover

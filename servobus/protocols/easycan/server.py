@@ -38,7 +38,9 @@ async def serve(network: EasyCanNetwork, port: FramePort, *,
     try:
         async for raw in requests(port, stop):
             now = None if clock is None else clock.sim_time(arrival(raw))
-            for arbitration_id, data in network.handle_raw(raw.arbitration_id, raw.data, now):
+            # the hub's stamp is one per TCP read: frames sharing it came together
+            for arbitration_id, data in network.handle_raw(raw.arbitration_id, raw.data, now,
+                                                           raw.arrived):
                 await port.send(arbitration_id, data)
     finally:
         if clock is not None:

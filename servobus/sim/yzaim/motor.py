@@ -56,6 +56,19 @@ Behaviour, with the manual's sections (docs/yzaim.md) and servobus decisions whe
   is taken at once. Frames are judged by when they reached the bus (``at=``): a second
   frame that arrived before the tick that takes the first is refused, also when the motor
   handles both after that tick.
+* **Cache frames read together** (servobus decision, ``batch=``): the socketcand hub reads
+  a client's TCP data in chunks and stamps every frame of one chunk with the chunk's
+  instant; when the simulator is loaded, one chunk holds frames the host sent in several
+  2 ms cycles, and nothing tells when each reached the bus (on a real bus no two frames
+  arrive at one instant: each takes ~100 us on the wire). A cache frame with the same
+  ``batch`` key as this motor's previous cache frame is therefore not refused as a
+  second write within one cycle (0x1C not 255): it is queued, and the queue is taken one
+  value per 2 ms tick, in order; a cache frame that comes while the queue is not empty
+  joins it (it reached the bus after them). At most ``MAX_QUEUED_CACHE`` wait (more: TOO_FAST). A
+  write to 0x1C first takes the queued values at once, in order (they reached the bus
+  before it). The price: a host that really writes two cache frames for one motor in one
+  TCP write within one cycle is not refused over socketcand (other buses, and frames of
+  different chunks, are judged by arrival as above).
 * **Save** (0x14): 1 stores every saved register at once (reads 2 afterwards), 3 also the
   single-turn origin (reads 2); 0 and 2 are only stored. The write's reply carries the value
   written (5.4a: ``FF 06 14 01 01 00`` is answered ``01 06 14 01 01 00``; 1 = "saving
@@ -72,7 +85,8 @@ Behaviour, with the manual's sections (docs/yzaim.md) and servobus decisions whe
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections import deque
+from collections.abc import Hashable, Sequence
 from enum import IntEnum
 
 from servobus.axis.capture import status_bits
@@ -92,6 +106,7 @@ DUTY_FLOOR = 0.1
 AMBIENT_C = 25.0
 RATED_RISE_C = 45.0
 THERMAL_TAU_S = 60.0
+MAX_QUEUED_CACHE = 64  # cache frames read together waiting (the hub's receive FIFO size)
 OVER_VOLTAGE_MARGIN = 1.1
 PWM_FULL_SCALE = 32767
 
@@ -162,6 +177,8 @@ class YzaimMotor:
         self._torque_param = 0
         self._speed_mode = False
         self._cache_pending = False
+        self._cache_queue: deque[int] = deque()  # cache frames read together, one per tick
+        self._cache_batch: Hashable | None = None  # the batch key of the last cache frame
         self._cache_due = -math.inf  # when the last cache value is (was) taken, by arrival
         self._next_tick = self.drive.time + TICK_S
         self._at = self.drive.time  # arrival time of the frame being executed
@@ -351,6 +368,8 @@ class YzaimMotor:
             self._save(value)
             self._save_reply = word
             return
+        if name == "sync_control":
+            self._take_queued_cache()
         self._ram[name] = value
         if name == "output_enable":
             self._set_output(bool(value))
@@ -384,20 +403,30 @@ class YzaimMotor:
         self._offset -= self.position
         return True
 
-    def write_position_cache(self, position: int, *, at: float | None = None) -> int:
+    def write_position_cache(self, position: int, *, at: float | None = None,
+                             batch: Hashable | None = None) -> int:
         """A position-cache frame (5.3c): store ``position``; returns the current position.
 
         MotorRefused(TOO_FAST) when the previous cache value was not taken yet. ``at`` as for
-        :meth:`write_words`."""
+        :meth:`write_words`; ``batch``: a key shared by frames the simulator received
+        together, whose order is known but not when each reached the bus (module doc)."""
         if not yzaim.INT32_MIN <= position <= yzaim.INT32_MAX:
             raise ValueError(f"cache position {position} is not a signed 32-bit value")
         self._at = self.time if at is None else min(at, self.time)
-        if self._ram["modbus_enable"]:
+        if not self._ram["modbus_enable"]:
+            self.refused_writes += 1
+            return self.position
+        together = batch is not None and batch == self._cache_batch
+        if self._cache_queue or (together and self._sync_internal()
+                                 and self._cache_is_pending()):
+            if len(self._cache_queue) >= MAX_QUEUED_CACHE:
+                self._refuse_cache()
+            self._cache_queue.append(position)
+        else:
             if self._cache_is_pending():
                 self._refuse_cache()
             self._store_cache(position)
-        else:
-            self.refused_writes += 1
+        self._cache_batch = batch
         return self.position
 
     def dir_edge(self) -> None:
@@ -442,8 +471,11 @@ class YzaimMotor:
         self.drive.advance_to(t)
 
     def _tick(self) -> None:
-        if self._cache_pending and self._sync_internal():
-            self._take_cache()
+        if self._sync_internal():
+            if self._cache_queue and not self._cache_pending:
+                self._set_cache(self._cache_queue.popleft())
+            if self._cache_pending:
+                self._take_cache()
         current = self.current_a
         self._i2 += (current * current - self._i2) * (TICK_S / THERMAL_TAU_S)
         standstill = abs(self.speed_rpm) < STANDSTILL_RPM
@@ -566,10 +598,24 @@ class YzaimMotor:
         raise MotorRefused(Refusal.TOO_FAST,
                            "position cache written twice within one 2 ms cycle")
 
-    def _store_cache(self, position: int) -> None:
+    def _set_cache(self, position: int) -> None:
         low, high = yzaim.split32(position)
         self._ram["position_cache_low"], self._ram["position_cache_high"] = low, high
         self._cache_pending = True
+
+    def _take_queued_cache(self) -> None:
+        """Take the pending value and every queued one at once, in order (a 0x1C write
+        came after them on the bus, so each had its cycle before it)."""
+        if not self._cache_queue:
+            return
+        while self._cache_queue:
+            if self._cache_pending:
+                self._take_cache()
+            self._set_cache(self._cache_queue.popleft())
+        self._take_cache()
+
+    def _store_cache(self, position: int) -> None:
+        self._set_cache(position)
         if not self._sync_internal():
             self._cache_due = -math.inf  # waits for a signal or a DIR edge (pending flag)
             return

@@ -3,7 +3,6 @@ socketcand client raw, ``connect()`` with an easycan+socketcand URL, and the CLI
 
 from __future__ import annotations
 
-import asyncio
 import json
 import re
 import socket
@@ -20,18 +19,13 @@ from sim_abuse_rig import can_session, readable
 from servobus.axis import connect
 from servobus.families.yzaim import registers as Y
 from servobus.protocols.easycan import codec
-from servobus.protocols.easycan.device import EasyCanNetwork
 from servobus.protocols.easycan.messages import (
     ErrorReply,
     PositionReply,
     ReadReply,
     ReadRequest,
 )
-from servobus.protocols.easycan.server import serve
 from servobus.sim.control_client import ControlClient
-from servobus.sim.socketcand_hub import SocketcandHub
-from servobus.sim.wall_clock import RealtimeClock
-from servobus.sim.yzaim.motor import YzaimMotor
 
 pytestmark = [pytest.mark.timeout(90), pytest.mark.slow]
 SERVER_S = 600.0  # a safety net (the fixture stops it): a loaded module takes minutes
@@ -226,56 +220,17 @@ def cache_pairs(sock: socket.socket, pairs: int = 20) -> tuple[int, int]:
     return errors, positions
 
 
-def test_two_cache_frames_in_one_tcp_write_are_too_fast_over_socketcand(server: int) -> None:
-    """5.5 error 0x05: two 0x301 frames written in one TCP write reach the bus together, so
-    the second comes within the same 2 ms cycle: 20 pairs give 20 errors and 20 positions
-    (issue 18.3; before: 13 errors in one run, 7 pairs both accepted)."""
+def test_two_cache_frames_in_one_tcp_write_are_taken_one_per_cycle(server: int) -> None:
+    """Two 0x301 frames the hub reads together carry one stamp: when each reached the bus
+    is unknown (a loaded simulator reads several cycles' frames at once), so the motor
+    takes them one per 2 ms cycle instead of refusing the second (5.5 error 0x05 is judged
+    by arrival for frames of different reads: test_easycan_read_together.py). 20 pairs
+    give 40 positions and no error (before: 20 errors, issue 18.3's rule)."""
     sock = can_session(server)
     try:
-        assert cache_pairs(sock) == (20, 20)
+        assert cache_pairs(sock) == (0, 40)
     finally:
         sock.close()
-
-
-class LoadedNetwork(EasyCanNetwork):
-    """A simulator too busy to keep up: every frame is handled 2.5 ms after it reached the
-    bus, and the clock has advanced the motors to that moment meanwhile."""
-
-    clock: RealtimeClock
-
-    def handle_raw(self, arbitration_id: int, data: bytes,
-                   now: float | None = None) -> list[tuple[int, bytes]]:
-        time.sleep(0.0025)  # blocking on purpose: the load this test is about
-        self.clock.sync()
-        return super().handle_raw(arbitration_id, data, now)
-
-
-async def test_the_cache_rule_holds_whatever_the_simulators_load() -> None:
-    """The same 20 pairs through the socketcand hub to a simulator that handles each frame
-    2.5 ms late (after the tick of the cycle the frame arrived in): the node judges each
-    frame by the instant the hub received it, so still 20 errors (before: 0 - the first
-    frame of each pair, handled late, was taken at once and the second accepted)."""
-    hub = SocketcandHub()
-    _, port = await hub.start()
-    network = LoadedNetwork([YzaimMotor(1)])
-    network.clock = RealtimeClock(network.motors)
-    stop = asyncio.Event()
-    node = asyncio.create_task(serve(network, hub.open_port(gate=True), clock=network.clock,
-                                     stop=stop))
-
-    def client() -> tuple[int, int]:
-        sock = can_session(port)
-        try:
-            return cache_pairs(sock)
-        finally:
-            sock.close()
-
-    try:
-        assert await asyncio.to_thread(client) == (20, 20)
-    finally:
-        stop.set()
-        await node
-        await hub.close()
 
 
 def test_a_remote_frame_keeps_the_python_can_session(server: int) -> None:
