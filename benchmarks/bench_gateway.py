@@ -16,7 +16,10 @@ per second. Figures over 10 s:
 * p99 delay from a step move's command to the observer's first notification of that axis:
   the command on the link, the drive starting (within a servo cycle), sampling, queueing,
   publishing and the network; target <= 100 ms;
-* MQTT state messages per second through Mosquitto (skipped when mosquitto is missing).
+* MQTT state messages per second through Mosquitto (skipped when mosquitto is missing);
+* the sampling rate each link achieved, the axis samples taken per second and the CPU per
+  sample taken: the CPU share is that of the samples actually taken, which on this 2-core
+  machine is far fewer than 32 x 50 (docs/gateway.md "Benchmark").
 """
 
 from __future__ import annotations
@@ -288,6 +291,23 @@ def main() -> None:
     print("  slowest delays: " + ", ".join(f"{x * 1000:.0f}" for x in d[-6:]) + " ms")
     print("  achieved sampling rate per link: "
           + ", ".join(f"{url} {hz:.1f} Hz" for url, hz in r["rates"].items()))
+    taken = samples_taken(r["rates"])
+    print(f"  axis samples taken: {taken:.0f} /s (asked: {AXES} x {RATE_HZ:g} = "
+          f"{AXES * RATE_HZ:g} /s); gateway CPU per sample taken: "
+          f"{per_sample_us(share, taken):.0f} us (MQTT's {AXES} x {MQTT_HZ:g} /s included)")
+
+
+def samples_taken(rates: dict[str, float]) -> float:
+    """Axis samples per second the links took: each link's achieved rate (Hz, per axis)
+    times its axes."""
+    return sum(rates.values()) * PER_LINK
+
+
+def per_sample_us(cpu_share: float, samples_per_s: float) -> float:
+    """The gateway's CPU per axis sample it actually took, us: the CPU share alone says
+    nothing per sample when the links fall short of the asked rate (docs/gateway.md
+    "Benchmark": 32 axes here took 5-15 Hz per link, not 50, on the loaded 2-core machine)."""
+    return cpu_share / samples_per_s * 1e6 if samples_per_s > 0 else float("inf")
 
 
 if __name__ == "__main__":
