@@ -98,11 +98,20 @@ class Page:
                                         if m["type"] == "error"), None))  # type: ignore[no-any-return]
 
 
-def settle_at(client: TestClient, rev: float) -> None:
+def settle_at(client: TestClient, rev: float, *, exact: bool = False) -> None:
+    """Moved to ``rev`` and at rest; ``exact``: on its very count (``rev`` a whole count),
+    not just in position: a servo in its in-position window (a few counts) still settles by
+    a count or two, which a "0 counts moved" check would take for motion."""
     r = client.post("/api/axes/1/move", json={"value": rev, "unit": "rev"})
     assert r.status_code == 200, r.text
-    wait_until(lambda: abs(status(client)["user_position"] - rev) < 1e-4
-               and not status(client)["moving"], timeout=10, what=f"t at {rev} rev")
+
+    def there() -> bool:
+        now = status(client)
+        near = (now["position"] == rev * REV if exact
+                else abs(now["user_position"] - rev) < 1e-4)
+        return near and not now["moving"]
+
+    wait_until(there, timeout=30, what=f"t at {rev} rev")
 
 
 def test_jogs_at_a_limit_move_zero_counts_and_the_page_is_told(client: TestClient) -> None:
@@ -122,7 +131,7 @@ def test_jogs_at_a_limit_move_zero_counts_and_the_page_is_told(client: TestClien
         # the target stood at the limit; the servo rests within its in-position window
         # (1/1024 rev on DMM, about 7e-5 rev measured) of it
         assert status(client)["user_position"] <= 1.0 + 1 / 1024
-        settle_at(client, 1.0)  # exactly at the limit
+        settle_at(client, 1.0, exact=True)  # exactly at the limit
         before = status(client)["position"]
         mark = last_seq(client)
         for _ in range(5):  # every press further out: refused, nothing moves
