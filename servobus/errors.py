@@ -120,6 +120,17 @@ class PowerLostError(ServobusError):
     sent."""
 
 
+class TuningInterrupted(ServobusError):
+    """An earlier tuning run of this drive ended without writing its kept gains back (its
+    process was killed): the drive may still hold gains under test. ``path`` is the record
+    that keeps them; ``servobus tune --restore`` writes them back (servobus.tune.kept).
+    Nothing was moved or written."""
+
+    def __init__(self, message: str, path: object = None) -> None:
+        super().__init__(message)
+        self.path = path
+
+
 class ClosedError(ServobusError, RuntimeError):
     """A call on an Axis or a machine after its ``close()`` (or from the wrong thread):
     nothing was sent. Also a ``RuntimeError``, as before it had a type of its own."""

@@ -6,6 +6,7 @@ modules (never ``from conftest import``: docs/testing.md).
 * Hypothesis runs the same examples every time, without its per-example deadline.
 * Ctrl-C reaches the processes tests start, even from a run in the background.
 * The processes tests start reuse compiled bytecode (``share_bytecode``).
+* Tuning runs record their kept gains in a folder of the run's own (``own_state_folder``).
 * At the end of a run (of each xdist worker) ``no_child_left_behind`` fails if a process
   started by a test is still running, naming it.
 """
@@ -50,6 +51,17 @@ def share_bytecode() -> None:
 
 
 share_bytecode()
+
+
+def own_state_folder() -> None:
+    """Tuning runs record the kept gains in the user's state folder (servobus.tune.kept):
+    the suite's runs, and the processes it starts, record in a folder of its own instead,
+    so that a test killed mid-run never leaves a record in the user's home that refuses
+    the user's next tuning run (or the next test run's)."""
+    os.environ["XDG_STATE_HOME"] = tempfile.mkdtemp(prefix="servobus-state-")
+
+
+own_state_folder()
 
 
 def pytest_configure(config: pytest.Config) -> None:

@@ -6,7 +6,9 @@ far away, in the axis's unit with ``move``'s suffixes (a drive: counts, ``rev``,
 machine axis: its unit), inside the machine's soft limits or the drive's reach, checked
 before anything moves. It asks first, naming the axis and the distance (``--yes`` skips).
 Ctrl-C stops the motor and writes the kept gains back (the tuner's abort path); so do an
-alarm and a vibration beyond ``--vibration-limit``. ``--goal`` settling (default) or
+alarm and a vibration beyond ``--vibration-limit``. A run that is killed cannot: its kept
+gains stay recorded (servobus.tune.kept), the next run on that drive is refused, and
+``--restore`` writes them back. ``--goal`` settling (default) or
 stiffness (docs/tuning.md, "The procedure", step 3a). The figures before and after print as a
 table (``--json``: the whole result).
 """
@@ -70,9 +72,9 @@ def render_result(con: Console, who: str, result: TuneResult) -> None:
 
 
 @click.command("tune", cls=ServobusCommand)
-@click.option("--distance", required=True, metavar="D",
+@click.option("--distance", metavar="D",
               help="test moves between here and D away (move's units; a machine axis: its "
-                   "unit)")
+                   "unit); required unless --restore")
 @click.option("--yes", is_flag=True, help="do not ask before moving")
 @click.option("--save", is_flag=True,
               help="save the tuned gains where the drive saves with a command (YZ-AIM 0x14)")
@@ -86,10 +88,21 @@ def render_result(con: Console, who: str, result: TuneResult) -> None:
               help="settling: on a drive that learns its load (DMM), also try the whole "
                    "loop softer where that settles faster; stiffness: keep the stiff gains "
                    "(less give under a load step)")
+@click.option("--restore", is_flag=True,
+              help="no run: write back the kept gains of a run that was killed before it "
+                   "could (nothing moves)")
 @pass_cli
-def tune_cmd(ctx: CliContext, distance: str, yes: bool, save: bool, revert: bool, poll: bool,
-             vibration_limit: float | None, goal: str) -> None:
+def tune_cmd(ctx: CliContext, distance: str | None, yes: bool, save: bool, revert: bool,
+             poll: bool, vibration_limit: float | None, goal: str, restore: bool) -> None:
     """Tune the axis's gains: raise them until the motor vibrates, back off, verify."""
+    if restore:
+        if distance is not None or save or revert:
+            raise click.UsageError("--restore runs no test moves: no --distance, --save or "
+                                   "--revert")
+        _restore(ctx)
+        return
+    if distance is None:
+        raise click.UsageError("Missing option '--distance' (or --restore)")
     if save and revert:
         raise click.UsageError("--save and --revert contradict each other")
     if ctx.machine_mode:
@@ -148,6 +161,21 @@ def tune_cmd(ctx: CliContext, distance: str, yes: bool, save: bool, revert: bool
             con.print("reverted: the kept gains are back")
 
     emit(ctx, record, render)
+
+
+def _restore(ctx: CliContext) -> None:
+    """``--restore``: a killed run's kept gains back (servobus.tune.kept)."""
+    opened = machine_cli.open_machine_axis(ctx) if ctx.machine_mode else open_drive_machine(ctx)
+    with opened as axis:
+        written = axis.restore_gains()
+
+    def render(con: Console) -> None:
+        if written:
+            con.print("restored: " + ", ".join(f"{k} = {v}" for k, v in written.items()))
+        else:
+            con.print("restored: the drive already held the kept gains")
+
+    emit(ctx, {"restored": written}, render)
 
 
 def register(group: click.Group) -> None:

@@ -27,7 +27,13 @@ import math
 import time
 from dataclasses import dataclass, field
 
-from servobus.errors import ArgumentRangeError, ConnectionLost, OwnerError, ServobusError
+from servobus.errors import (
+    ArgumentRangeError,
+    ConnectionLost,
+    OwnerError,
+    ServobusError,
+    TuningInterrupted,
+)
 from servobus.gui.fleet import AxisHandle
 from servobus.gui.jog import LEASE_S, page_owner
 from servobus.machine.axis import AsyncMachineAxis
@@ -58,6 +64,9 @@ class AutoRun:
     trials: list[Trial] = field(default_factory=list)
     result: TuneResult | None = None
     reverted: bool = False
+    #: Refused because a killed run left its kept gains (servobus.tune.kept): Revert
+    #: writes those back.
+    restorable: bool = False
     task: asyncio.Task[None] | None = None
     why_cancelled: str = ""
 
@@ -85,7 +94,7 @@ class AutoRun:
                        "vibration": _finite(t.vibration),
                        "overshoot_pct": _finite(t.overshoot_pct)} for t in self.trials[-8:]],
             "max_vibration": _finite(max((t.vibration for t in self.trials), default=0.0)),
-            "reverted": self.reverted}
+            "reverted": self.reverted, "restorable": self.restorable}
         r = self.result
         if r is not None:
             doc["result"] = {
@@ -191,11 +200,19 @@ class AutoTune:
                 await self.cancel(axis_id, "the page that ran it went away")
 
     async def revert(self, handle: AxisHandle) -> dict[str, int]:
-        """The last run's kept gains back (the machine axis writes only what differs)."""
+        """The last run's kept gains back (the machine axis writes only what differs); after
+        a run refused for a killed run's record, that run's kept gains (restore_gains)."""
         run = self.runs.get(handle.id)
+        m = self._machine_axis(handle)
+        if run is not None and run.restorable and run.state != "running":
+            written = await handle.call(m.restore_gains())
+            run.restorable = False
+            run.reverted = True
+            log.info("%s: a killed run's kept gains restored (%d written)", run.who,
+                     len(written))
+            return written
         if run is None or run.result is None:
             raise ArgumentRangeError(f"{handle.label}: no finished auto-tune run to revert")
-        m = self._machine_axis(handle)
         written = await handle.call(m.revert_gains(run.result.original))
         run.reverted = True
         log.info("%s: auto-tuned gains reverted (%d written)", run.who, len(written))
@@ -239,6 +256,9 @@ class AutoTune:
         except ServobusError as exc:
             run.state = "failed"
             run.message = f"{type(exc).__name__}: {exc}"
+            if isinstance(exc, TuningInterrupted):
+                run.restorable = True
+                run.message += " (Revert writes them back)"
         except Exception as exc:  # this run's boundary: a bug ends the run, not the GUI
             run.state = "failed"
             run.message = f"internal error ({type(exc).__name__}): {exc}"

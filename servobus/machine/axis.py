@@ -625,6 +625,7 @@ class AsyncMachineAxis:
         a trace exists; ``save`` keeps the gains where the family saves with a command;
         ``goal`` "settling" (default) or "stiffness" (servobus.tune.tuner.GOALS). Takes
         seconds."""
+        from servobus.tune import kept
         from servobus.tune.axis_plant import AxisPlant
         from servobus.tune.tuner import ABORT_VIBRATION, Limits, Tuner
 
@@ -640,14 +641,42 @@ class AsyncMachineAxis:
         self.check_target(self.to_user(here + distance))  # LimitError: nothing moved
         limit = ABORT_VIBRATION if vibration_limit is None else vibration_limit
         limits = Limits(distance, soft, limit, to_user=self.to_user, unit=self.unit)
+        record = kept.record_for(self.spec.url, core.drive_id, f"axis {self.name}")
+        if record is not None:
+            record.check_free()  # another process's run, or a killed one's gains: refused
         tuner = Tuner(AxisPlant(core, trace=trace), limits, core.counts_per_rev,
-                      on_trial=on_trial, save=save, goal=goal)
+                      on_trial=on_trial, save=save, goal=goal,
+                      on_kept=None if record is None else record.write)
         self._tuning = (owner, asyncio.current_task())
         try:
             with self._commanding(), self._watch():
-                return await tuner.run()
+                result = await tuner.run()
+        except BaseException:
+            # the record goes once the drive holds the kept gains again (the abort wrote
+            # them back, or nothing was written); a failed write back leaves it for --restore
+            if record is not None and tuner.written == tuner.original:
+                record.remove()
+            raise
         finally:
             self._tuning = None
+        if record is not None:
+            record.remove()  # the tuned gains are what the run meant to leave
+        return result
+
+    async def restore_gains(self) -> dict[str, int]:
+        """The kept gains of a tuning run that was killed before it could write them back
+        (servobus.tune.kept), each written where the drive holds another value; the record
+        goes once they are back. Returns what was written. ServobusError when no run is
+        recorded (an in-process virtual drive never is), OwnerError while it still runs."""
+        from servobus.tune import kept
+
+        record = kept.record_for(self.spec.url, self.core().drive_id, f"axis {self.name}")
+        if record is None:
+            raise ServobusError(f"axis {self.name}: an in-process virtual drive ends with "
+                                "its process: no tuning run is recorded for it")
+        written = await self.revert_gains(record.take())
+        record.drop()
+        return written
 
     @property
     def tuning_owner(self) -> str | None:

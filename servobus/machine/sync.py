@@ -145,6 +145,10 @@ class MachineAxis:
         """A tuning run's kept gains back (MachineAxis.revert_gains)."""
         return self._runner.run(self._core.revert_gains(original))
 
+    def restore_gains(self) -> dict[str, int]:
+        """A killed tuning run's kept gains back (MachineAxis.restore_gains)."""
+        return self._runner.run(self._core.restore_gains())
+
     def move_to(self, target: float, *, wait: bool = False, timeout: float | None = None) -> None:
         self._runner.run(self._core.move_to(target, wait=wait, timeout=timeout))
 

@@ -259,7 +259,8 @@ class Tuner:
 
     def __init__(self, plant: Plant, limits: Limits, counts_per_rev: int,
                  on_trial: Callable[[Trial], None] | None = None, *,
-                 save: bool = False, goal: str = "settling") -> None:
+                 save: bool = False, goal: str = "settling",
+                 on_kept: Callable[[dict[str, int]], None] | None = None) -> None:
         if limits.distance == 0:
             raise ServobusError("the test distance must not be zero")
         if goal not in GOALS:
@@ -269,6 +270,9 @@ class Tuner:
         self.limits = limits
         self.counts_per_rev = counts_per_rev
         self.on_trial = on_trial
+        #: Sees the kept gains before the first gain write (servobus.tune.kept records them
+        #: for a run whose process is killed); what it raises ends the run, nothing written.
+        self.on_kept = on_kept
         self.save = save
         if save and plant.profile.persistence is not Persistence.RAM_SAVE_COMMAND:
             raise ServobusError("these gains are not saved with a command: "
@@ -367,6 +371,8 @@ class Tuner:
         for g in plant.profile.gains:
             self.original[g.name] = await plant.read_gain(g.name)
         self.written = dict(self.original)
+        if self.on_kept is not None:
+            self.on_kept(dict(self.original))
         try:
             before, record = await self._trial()
             ratio, per_accel = inertia_ratio(record, plant.rotor_amps_per_accel(),

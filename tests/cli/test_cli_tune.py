@@ -57,3 +57,14 @@ def test_save_is_refused_where_the_family_saves_no_other_way(
     code, _out, err = run(capsys, "--url", LOADED, "tune", "--distance", "1000", "--save",
                           "--yes")
     assert code == 2 and "EEPROM" in err and "nothing was moved" in err
+
+
+def test_restore_takes_no_run_options_and_a_run_needs_a_distance(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    code, _out, err = run(capsys, "--url", LOADED, "tune", "--restore", "--distance", "1000")
+    assert code == 2 and "--restore runs no test moves" in err
+    code, _out, err = run(capsys, "--url", LOADED, "tune", "--yes")
+    assert code == 2 and "--distance" in err and "--restore" in err
+    # an in-process virtual drive ends with its process: nothing is ever recorded for it
+    code, _out, err = run(capsys, "--url", LOADED, "tune", "--restore")
+    assert code == 2 and "no tuning run is recorded" in err, err

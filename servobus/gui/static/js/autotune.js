@@ -150,7 +150,8 @@ export class AutoTune {
     const running = Boolean(run && run.state === "running");
     $("#auto-start").disabled = running;
     $("#auto-cancel").disabled = !running;
-    $("#auto-revert").disabled = !(run && run.result && !run.reverted && !running);
+    // a finished run's kept gains, or those a killed run left (run.restorable)
+    $("#auto-revert").disabled = !(run && !running && ((run.result && !run.reverted) || run.restorable));
     $("#auto-save-label").classList.toggle("hidden", !this.canSave());
     const progress = $("#auto-progress");
     if (!run) { this.renderTable({ result: null }); return; }
