@@ -13,8 +13,10 @@ modules (never ``from conftest import``: docs/testing.md).
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import os
+import shutil
 import signal
 import sys
 import tempfile
@@ -58,7 +60,9 @@ def own_state_folder() -> None:
     the suite's runs, and the processes it starts, record in a folder of its own instead,
     so that a test killed mid-run never leaves a record in the user's home that refuses
     the user's next tuning run (or the next test run's)."""
-    os.environ["XDG_STATE_HOME"] = tempfile.mkdtemp(prefix="servobus-state-")
+    folder = tempfile.mkdtemp(prefix="servobus-state-")
+    os.environ["XDG_STATE_HOME"] = folder
+    atexit.register(shutil.rmtree, folder, ignore_errors=True)
 
 
 own_state_folder()
