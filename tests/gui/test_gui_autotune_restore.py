@@ -19,11 +19,15 @@ from machine.machine_rig import write_machine
 from rig import free_port, wait_until
 from starlette.testclient import TestClient
 
+from servobus.families.dmm.vocabulary import DmmFunction as F
 from servobus.gui.app import create_app
+from servobus.transport.base import Direction
 from servobus.tune import kept
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 BASE = "http://127.0.0.1:8080"
+MOTION = {F.GO_ABSOLUTE_POS, F.MAKE_LINEAR_LINE, F.GO_RELATIVE_POS, F.MAKE_CIRCULAR_ARC,
+          F.TURN_CONST_SPEED, F.SQUARE_WAVE, F.SIN_WAVE, F.SS_FREQUENCY}
 
 
 @pytest.fixture
@@ -43,6 +47,20 @@ def client(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
 def status(client: TestClient) -> dict[str, Any]:
     doc: dict[str, Any] = client.get("/api/axes").json()[0]["status"]
     return doc
+
+
+def motion_sent(client: TestClient, after: int) -> list[object]:
+    """Motion commands (DYN232M 7.2.4) the GUI's trace hook saw sent since entry ``after``
+    (the position would not do: a gain just written settles the shaft by a count)."""
+    traffic = client.app.state.gui.fleet.traffic  # type: ignore[attr-defined]
+    return [e.item for e in list(traffic.entries)
+            if e.seq > after and e.direction is Direction.TX
+            and getattr(e.item, "function", None) in MOTION]
+
+
+def last_seq(client: TestClient) -> int:
+    entries = client.app.state.gui.fleet.traffic.entries  # type: ignore[attr-defined]
+    return int(entries[-1].seq) if entries else 0
 
 
 def gains(client: TestClient) -> dict[str, int]:
@@ -65,7 +83,7 @@ def test_a_killed_runs_record_refuses_auto_and_revert_writes_its_gains_back(
     under_test = {"speed_gain": factory["speed_gain"] + 10}
     r = c.post("/api/axes/1/tuning/apply", json={"values": under_test})
     assert r.status_code == 200, r.text
-    before = status(c)["position"]
+    mark = last_seq(c)
 
     with c.websocket_connect("ws://127.0.0.1:8080/ws") as ws:
         page = wait_until(lambda: (m := json.loads(ws.receive_text()))["type"] == "hello"
@@ -81,7 +99,7 @@ def test_a_killed_runs_record_refuses_auto_and_revert_writes_its_gains_back(
         run = wait_until(ended_run, timeout=30, what="the run refused")  # the page still open
     assert run["state"] == "failed" and run["restorable"] is True
     assert "TuningInterrupted" in run["message"] and "Revert" in run["message"]
-    assert run["trials"] == 0 and status(c)["position"] == before
+    assert run["trials"] == 0 and motion_sent(c, mark) == []
     assert gains(c) == {**factory, **under_test}  # nothing written
 
     r = c.post("/api/axes/1/tuning/auto/revert", json={})
