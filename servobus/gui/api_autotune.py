@@ -17,6 +17,7 @@ from starlette.routing import Route
 from servobus.errors import ArgumentRangeError
 from servobus.gui.http_util import api, body, handle, integer, number, ok, state
 from servobus.tune import plan
+from servobus.tune.tuner import GOALS
 
 
 def _page(request: Request, doc: dict[str, object]) -> int:
@@ -46,9 +47,13 @@ async def auto_start(request: Request) -> Response:
     page = _page(request, doc)
     value, unit = number(doc, "distance"), str(doc.get("unit", h.units().position))
     save = bool(doc.get("save", False))
+    goal = doc.get("goal", "settling")
+    if goal not in GOALS:
+        raise ArgumentRangeError(f"goal {goal!r}: one of {', '.join(GOALS)}; nothing was "
+                                 "moved")
     if not doc.get("confirmed"):
         return ok(started=False, **await gui.autotune.ask(h, page, value, unit, save))
-    run = await gui.autotune.start(h, page, value, unit, save)
+    run = await gui.autotune.start(h, page, value, unit, save, goal=str(goal))
     return ok(started=True, run=run.view(run.owner))
 
 

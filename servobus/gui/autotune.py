@@ -59,6 +59,7 @@ class AutoRun:
     per_count: float  # the axis's shown unit per count (following errors)
     unit: str
     deadline: float
+    goal: str = "settling"  # servobus.tune.tuner.GOALS
     state: str = "running"  # running, done, stopped, failed
     message: str = ""
     trials: list[Trial] = field(default_factory=list)
@@ -87,7 +88,7 @@ class AutoRun:
         doc: dict[str, object] = {
             "axis": self.axis, "owner": self.owner, "mine": self.owner == mine,
             "who": self.who, "distance": self.distance, "unit": self.unit,
-            "state": self.state, "message": self.message,
+            "state": self.state, "message": self.message, "goal": self.goal,
             "phase": last.phase if last is not None else "starting",
             "trials": len(self.trials),
             "tried": [{"phase": t.phase, "gains": t.gains,
@@ -156,16 +157,16 @@ class AutoTune:
                 "can_save": plan.saves_with_command(profile), "distance": shown}
 
     async def start(self, handle: AxisHandle, page: int, value: float, unit: str,
-                    save: bool) -> AutoRun:
+                    save: bool, *, goal: str = "settling") -> AutoRun:
         counts, who, shown = await self.check(handle, page, value, unit, save)
         m = self._machine_axis(handle)
         owner = page_owner(page)
         self._check_one_run(handle)  # again: another may have started while this one checked
         units = handle.units()
         run = AutoRun(handle.id, owner, who, shown, units.per_count, units.position,
-                      time.monotonic() + self.lease_s)
+                      time.monotonic() + self.lease_s, goal=goal)
         self.runs[handle.id] = run
-        run.task = asyncio.create_task(self._run(run, handle, m, counts, save),
+        run.task = asyncio.create_task(self._run(run, handle, m, counts, save, goal),
                                        name=f"auto-tune {handle.label}")
         log.info("%s: auto-tune started by %s (test moves of %s)", who, owner, shown)
         return run
@@ -242,11 +243,11 @@ class AutoTune:
         return m
 
     async def _run(self, run: AutoRun, handle: AxisHandle, m: AsyncMachineAxis, counts: int,
-                   save: bool) -> None:
+                   save: bool, goal: str) -> None:
         watchdog = asyncio.create_task(self._watch(run))
         try:
             run.result = await handle.call(m.tune(counts, owner=run.owner, save=save,
-                                                  on_trial=run.add))
+                                                  goal=goal, on_trial=run.add))
             run.state = "done"
             run.message = "tuned" + ("; saved" if run.result.saved else "")
         except asyncio.CancelledError:

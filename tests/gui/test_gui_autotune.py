@@ -141,8 +141,9 @@ def at_rest(client: TestClient) -> None:
     wait_until(lambda: status(client)["speed"] == 0, timeout=20, what="x at rest")
 
 
-def start(client: TestClient, page: Page, mm: float = MM) -> dict[str, Any]:
-    doc = {"distance": mm, "unit": "mm", "page": page.owner}
+def start(client: TestClient, page: Page, mm: float = MM,
+          goal: str = "settling") -> dict[str, Any]:
+    doc = {"distance": mm, "unit": "mm", "page": page.owner, "goal": goal}
     asked = post(client, f"/api/axes/{page.axis}/tuning/auto", doc)
     assert asked["started"] is False
     return post(client, f"/api/axes/{page.axis}/tuning/auto", {**doc, "confirmed": True})
@@ -164,6 +165,10 @@ def test_the_confirmation_names_the_axis_and_the_distance_and_moves_nothing(
                         "confirmed": True}, 400)
         assert "soft limits" in refused["error"] and "mm" in refused["error"]
         assert refused["kind"] == "LimitError"
+        goal = post(client, f"/api/axes/{X}/tuning/auto",
+                    {"distance": MM, "unit": "mm", "page": page.owner, "goal": "fast",
+                     "confirmed": True}, 400)
+        assert "goal 'fast'" in goal["error"] and goal["kind"] == "ArgumentRangeError"
         dyn5 = post(client, f"/api/axes/{E}/tuning/auto",
                     {"distance": 90.0, "unit": "deg", "page": page.owner})
         assert "DMMDRV5" in dyn5["save_hint"] and dyn5["note"] is None
@@ -184,7 +189,7 @@ def test_another_page_is_refused_and_cancel_stops_the_motor_and_reverts(
     kept = gains(client)
     with client.websocket_connect(WS) as ws_a, client.websocket_connect(WS) as ws_b:
         a, b = Page(ws_a), Page(ws_b, renew=False)
-        start(client, a)
+        assert start(client, a, goal="stiffness")["run"]["goal"] == "stiffness"
         a.moves(2)
         # another page: no second run, no jog, no step test, no gains written
         other = post(client, f"/api/axes/{X}/tuning/auto",

@@ -59,7 +59,7 @@ export class AutoTune {
   body(confirmed) {
     const distance = readField($("#auto-distance"));
     if (distance === null) return null;
-    return { distance, unit: this.unit(), page: this.ctx.owner, save: $("#auto-save").checked, confirmed };
+    return { distance, unit: this.unit(), page: this.ctx.owner, save: $("#auto-save").checked, goal: $("#auto-goal").value, confirmed };
   }
 
   async ask() {
