@@ -60,13 +60,20 @@ def sim(*args: str, duration: float = 20.0) -> Iterator[SimProcess]:
         p.stop()
 
 
-def transact(port: serial.SerialBase, request: bytes) -> list[c.Packet]:
-    """Write one packet and collect the complete reply packets until the read times out."""
+REPLY_S = 10.0  # a reply ends the read at once
+SILENCE_S = 0.3  # how long nothing must come
+
+
+def transact(port: serial.SerialBase, request: bytes, timeout: float = REPLY_S,
+             ) -> list[c.Packet]:
+    """Write one packet and collect its reply: bytes one at a time (a read of more waits for
+    all of them or the timeout) until a whole packet came, or none within ``timeout``."""
+    port.timeout = timeout
     port.reset_input_buffer()
     port.write(request)
     got = b""
     while True:
-        chunk = port.read(64)
+        chunk = port.read(1)
         if not chunk:
             break
         got += chunk
@@ -95,13 +102,16 @@ def round_trip_s(sock: socket.socket, request: bytes, reply_len: int) -> float:
 def test_tcp_line_with_pyserial_socket_url() -> None:
     with sim("--ids", "1,2,3", "--fast", "--listen", "tcp://127.0.0.1:0") as p:
         port = p.tcp_port()
-        ser = serial.serial_for_url(f"socket://127.0.0.1:{port}", timeout=0.3)
+        # a reply ends a read at once: its deadline is generous (a loaded machine answered
+        # later than 0.3 s); a silence is a window (it waits that long either way)
+        ser = serial.serial_for_url(f"socket://127.0.0.1:{port}")
         try:
             for drive_id in (1, 2, 3):
                 (reply,) = transact(ser, c.encode(drive_id, DF.READ_DRIVE_ID))
                 assert (reply.drive_id, reply.function, reply.reply_value()) == (
                     drive_id, D.IS_DRIVE_ID, drive_id)
-            assert transact(ser, c.encode(5, DF.READ_DRIVE_ID)) == []  # absent: silent
+            assert transact(ser, c.encode(5, DF.READ_DRIVE_ID), SILENCE_S) == []  # absent
+            ser.timeout = SILENCE_S
             ser.write(c.encode(2, DF.GO_RELATIVE_POS, 100))
             assert ser.read(16) == b""  # motion commands get no reply
             (pos,) = transact(ser, c.encode(2, DF.GENERAL_READ, GR.POSITION))
@@ -134,12 +144,12 @@ def test_pty_line_with_pyserial() -> None:
     with sim("--pty", "--ids", "7", "--fast") as p:
         text = p.line()
         assert text.startswith("pty /dev/"), text
-        ser = serial.Serial(text.split(" ", 1)[1], 38400, timeout=0.5)
+        ser = serial.Serial(text.split(" ", 1)[1], 38400)
         try:
             (reply,) = transact(ser, c.encode(7, H.READ_GEAR_NUMBER))
             assert (reply.drive_id, reply.function, reply.reply_value()) == (
                 7, D.IS_GEAR_NUMBER, 4096)
-            assert transact(ser, c.encode(0, H.READ_GEAR_NUMBER)) == []
+            assert transact(ser, c.encode(0, H.READ_GEAR_NUMBER), SILENCE_S) == []
         finally:
             ser.close()
 
@@ -152,9 +162,9 @@ def test_state_file_keeps_id_and_parameters_across_restart(tmp_path: Path) -> No
             round_trip_s(sock, c.encode(9, DF.READ_DRIVE_ID), 4)  # both writes executed
         assert p.stop() == 0
     with sim("--ids", "1", "--fast", "--state", state) as p:
-        ser = serial.serial_for_url(f"socket://127.0.0.1:{p.tcp_port()}", timeout=0.3)
+        ser = serial.serial_for_url(f"socket://127.0.0.1:{p.tcp_port()}")
         try:
-            assert transact(ser, c.encode(1, DF.READ_DRIVE_ID)) == []
+            assert transact(ser, c.encode(1, DF.READ_DRIVE_ID), SILENCE_S) == []
             (gain,) = transact(ser, c.encode(9, H.READ_MAIN_GAIN))
             assert (gain.drive_id, gain.reply_value()) == (9, 55)
         finally:
