@@ -177,6 +177,14 @@ def test_a_mm_axis_speaks_mm_and_fits_every_width(page: WebDriver, gui: Gui) -> 
                what="the trigger armed")
     tab(page, "motion")
     card(page, "x")  # channel 1 is pinned to x; channel 2 follows
+    # the move goes over HTTP, the new channels over the WebSocket: a loaded server applied
+    # the move first and the re-armed trigger missed its crossing; so, the server's scope
+    # on x alone and armed before the move
+    wait_until(lambda: js(page, channel_axes) == ["1", "1"], what="channel 2 follows x")
+    wait_until(lambda: js(page, """const s = window.servobus.scope.stats.state;
+                                   return Boolean(s && s.waiting && s.sources
+                                       .map((x) => x.axis).join() === '1');"""),
+               what="the server's scope on x alone, armed")
     js(page, """document.querySelector('#move-value').value = '10';
                 document.querySelector('#move-unit').value = 'mm';
                 document.querySelector('#move-rel').click();""")  # -10 mm up through -5 mm
