@@ -40,7 +40,10 @@ from servobus.gateway.serve import Gateway, GatewayOptions
 from servobus.gateway.users import Users
 from servobus.machine import AsyncMachine, open_machine_async
 
-pytestmark = [pytest.mark.slow, pytest.mark.asyncio(loop_scope="module")]
+# timeout: a hang guard above the waits' own deadlines; the first test also carries the
+# module's set-up (five sims started at once, drive_process_rig.START_S, and the gateway)
+pytestmark = [pytest.mark.slow, pytest.mark.asyncio(loop_scope="module"),
+              pytest.mark.timeout(300)]
 
 
 @dataclass
