@@ -33,9 +33,8 @@ def sim_url(protocol: str, port: int) -> str:
 
 #: How long a virtual drive may take to say it listens. Generous: a Python start and
 #: servobus's imports are about 1 s of CPU, and took over 20 s of wall time (read_line's
-#: default) beside two CPU-bound processes with other starts at once (the restart tests'
-#: five sims at once; a sim restarted mid-test there is the likely cause of one CI failure
-#: of test_gateway_restart[dyncan]).
+#: default) beside two CPU-bound processes with other starts at once (test_gateway_restart
+#: starts five at once: its set-up failed so in 2 of 4 runs).
 START_S = 90.0
 
 
