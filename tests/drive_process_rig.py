@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 
 import pytest
@@ -30,6 +31,13 @@ def sim_url(protocol: str, port: int) -> str:
     return SIMS[protocol][1].format(port=port)
 
 
+#: How long a virtual drive may take to say it listens. Generous: a Python start and
+#: servobus's imports are about 1 s of CPU, and took over 20 s of wall time (read_line's
+#: default) beside two CPU-bound processes with other starts at once (test_gateway_restart
+#: starts five at once: its set-up failed so in 2 of 4 runs).
+START_S = 90.0
+
+
 def start_sim(protocol: str, port: int) -> subprocess.Popen[str]:
     """``servobus sim PROTOCOL`` on ``port``, once it says it listens."""
     args = [a.format(port=port) for a in SIMS[protocol][0]]
@@ -37,7 +45,8 @@ def start_sim(protocol: str, port: int) -> subprocess.Popen[str]:
                              "--duration", "300"],  # a safety net only
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        while "listening on" not in read_line(proc):
+        end = time.monotonic() + START_S
+        while "listening on" not in read_line(proc, timeout=max(0.0, end - time.monotonic())):
             pass
     except BaseException:
         stop_process(proc)

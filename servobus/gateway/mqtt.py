@@ -57,6 +57,7 @@ from paho.mqtt.subscribeoptions import SubscribeOptions
 
 from servobus import bounded_json
 from servobus.errors import InvalidValue, JsonRefused
+from servobus.gateway.cancelling import cancel_and_wait, check_not_cancelled
 from servobus.gateway.commands import Commander, Refused
 from servobus.gateway.identity import DEFAULT_PREFIX, check_prefix, gateway_id
 from servobus.gateway.link_events import LinkEvent
@@ -366,6 +367,7 @@ async def keep_connected(connect: Callable[[], Awaitable[None]], connected: asyn
     """``connect`` (one session) again RECONNECT_S after each lost broker, one warning on
     ``logger`` for each loss (``who`` begins it)."""
     while True:
+        check_not_cancelled()  # a stop swallowed by the last session's aiomqtt call
         try:
             await connect()
         except aiomqtt.MqttError as exc:
@@ -378,15 +380,16 @@ async def keep_connected(connect: Callable[[], Awaitable[None]], connected: asyn
 async def run_session(tasks: list[asyncio.Task[None]],
                       farewell: Callable[[], Awaitable[None]]) -> None:
     """A connection's tasks until one fails (a lost broker ends the session); then all are
-    cancelled and ``farewell`` (the offline message: a clean stop sends no will) gets 1 s."""
+    cancelled and ``farewell`` (the offline message: a clean stop sends no will) gets 1 s.
+    The tasks are cancelled until they end, and a stop that the connection's set-up
+    swallowed ends the session before it waits (servobus.gateway.cancelling)."""
     try:
+        check_not_cancelled()
         done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_EXCEPTION)
         for task in done:
             task.result()
     finally:
-        for task in tasks:
-            task.cancel()
-        await asyncio.gather(*tasks, return_exceptions=True)
+        await cancel_and_wait(tasks)
         with contextlib.suppress(Exception):
             async with asyncio.timeout(1.0):
                 await farewell()

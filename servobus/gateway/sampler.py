@@ -148,6 +148,7 @@ class Sampler:
         self.achieved_hz: dict[str, float] = dict.fromkeys(self.links, 0.0)
         self._no_current: set[str] = set()
         self._failures: dict[str, int] = {}
+        self._told_bad: set[str] = set()  # axes whose "no readings" line stands (_log_change)
         self.first_round = asyncio.Event()
         self._first_pending = set(self.links)
         self.watch = LinkWatch()
@@ -199,14 +200,33 @@ class Sampler:
             failures = self._failures[sample.axis] = self._failures.get(sample.axis, 0) + 1
             if before is not None and before.ok and failures < BAD_AFTER and not offline:
                 return  # a lost answer: the last good sample stands
-        if before is None or before.ok != sample.ok:
-            _log_change(before, sample)
+        self._log_change(before, sample)
         self.latest[sample.axis] = sample
         for listener in self.listeners:
             try:
                 listener(sample)
             except Exception:
                 log.exception("sample listener failed")
+
+    def _log_change(self, before: Sample | None, sample: Sample) -> None:
+        """One line when an axis's readings turn Bad while its link is online, and one
+        when they are back after that line; a spell that goes offline is the machine's to
+        tell (its own lines about the link), and no line of ours ends it.
+
+        Decision: "readings are back" answers a "no readings" line, never stands alone. It
+        was keyed on the last Bad sample being online: a read that timed out just after the
+        link came back (a spell that began offline) added an unpaired "back" line
+        (test_gateway_restart[dyncan], one run in six beside two CPU hogs)."""
+        name = sample.axis
+        if sample.ok:
+            if name in self._told_bad:
+                log.info("axis %s: readings are back", name)
+            self._told_bad.discard(name)
+        elif not sample.health.online:
+            self._told_bad.discard(name)  # from here the machine's link lines say it
+        elif before is None or before.ok:
+            log.warning("axis %s: no readings: %s", name, sample.error)
+            self._told_bad.add(name)
 
     def _watch_link(self, url: str, axes: list[MachineAxis]) -> None:
         for event in self.watch.observe(url, axes):
@@ -247,11 +267,3 @@ def _failed(axis: MachineAxis, error: str, code: str) -> Sample:
     return Sample(axis.name, time.time(), False, error, health=health_of(axis), code=code)
 
 
-def _log_change(before: Sample | None, sample: Sample) -> None:
-    """One line when an axis's readings turn Bad or Good, unless the axis went offline or
-    came back online: the machine's own line about its link says that."""
-    if sample.ok:
-        if before is not None and before.health.online:
-            log.info("axis %s: readings are back", sample.axis)
-    elif sample.health.online:
-        log.warning("axis %s: no readings: %s", sample.axis, sample.error)

@@ -45,7 +45,7 @@ from pathlib import Path
 from types import MappingProxyType, TracebackType
 
 from servobus.axis.base import AsyncAxis
-from servobus.axis.halt import halt
+from servobus.axis.halt import DEFAULT_HALT_TIMEOUT_S, halt
 from servobus.errors import (
     ArgumentRangeError,
     ClosedError,
@@ -345,13 +345,16 @@ class AsyncMachine:
         if self._closed:
             raise ClosedError(f"the machine {self.name} is closed")
 
-    async def stop_all(self) -> dict[str, BaseException | None]:
-        """Stop every online axis at once (servobus.axis.halt.halt); None per stopped axis,
-        the error otherwise (offline axes: their MachineLinkError). Never raises per axis."""
+    async def stop_all(self, *, timeout_s: float = DEFAULT_HALT_TIMEOUT_S,
+                       ) -> dict[str, BaseException | None]:
+        """Stop every online axis at once (servobus.axis.halt.halt), each stop bounded by
+        ``timeout_s``; None per stopped axis, the error otherwise (offline axes: their
+        MachineLinkError). Never raises per axis."""
         self._check_open()
         for axis in self._axes.values():
             await axis._end_lease("stopped")
-        out: dict[str, BaseException | None] = dict(await halt(self.online_cores()))
+        out: dict[str, BaseException | None] = dict(
+            await halt(self.online_cores(), timeout_s=timeout_s))
         for name, axis in self._axes.items():
             if name not in out:
                 try:
