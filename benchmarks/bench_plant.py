@@ -84,18 +84,18 @@ def drive_servers(links: int, per_link: int = PER_LINK, plant: str = "ideal"
     """``links`` drive servers of ``per_link`` drives each (``--plant``): (URLs, pids)."""
     procs, urls = [], []
     try:
-        for i in range(links):
-            protocol, scheme, _, _ = LINKS[i % len(LINKS)]
+        for i in range(links):  # all started before any is waited for: they start together
+            protocol, _, _, _ = LINKS[i % len(LINKS)]
             args = [sys.executable, "-m", "servobus", "sim", protocol, "--fast", "--plant",
                     plant, "--ids", ",".join(str(k) for k in range(1, per_link + 1))]
             if protocol == "dyn232":
                 args += ["--listen", "127.0.0.1:0"]
-            proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                                    text=True)
-            procs.append(proc)
+            procs.append(subprocess.Popen(args, stdout=subprocess.PIPE,
+                                          stderr=subprocess.DEVNULL, text=True))
+        for i, proc in enumerate(procs):
             assert proc.stdout is not None
             address = proc.stdout.readline().split()[-1].removeprefix("tcp://")
-            urls.append(f"{scheme}://{address}")
+            urls.append(f"{LINKS[i % len(LINKS)][1]}://{address}")
         yield urls, [proc.pid for proc in procs]
     finally:
         for proc in procs:
@@ -181,8 +181,8 @@ async def run_one(count: int, mqtt_port: int, folder: Path, mqtt_hz: float,
             gateway = Gateway(machine, GatewayOptions(
                 OpcUaOptions("opc.tcp://127.0.0.1:0"), mqtt=mqtt, rate_hz=RATE_HZ,
                 own_process=True, sparkplug=GROUP))
-            samples = [0]
-            gateway.sampler.listeners.append(lambda sample: _count(samples, sample.ok))
+            samples: dict[str, int] = dict.fromkeys(machine.axes, 0)
+            gateway.sampler.listeners.append(lambda sample: _count(samples, sample))
             await gateway.start()
             ctx = multiprocessing.get_context("spawn")
             out, ready = ctx.Queue(), ctx.Event()
@@ -196,7 +196,7 @@ async def run_one(count: int, mqtt_port: int, folder: Path, mqtt_hz: float,
                                        "traceback above): a machine too loaded to measure")
                 await asyncio.sleep(0.05)
             others = [*pids, observer.pid or 0]
-            c0, w0, n0 = time.process_time(), time.monotonic(), samples[0]
+            c0, w0, n0 = time.process_time(), time.monotonic(), dict(samples)
             writes0 = gateway.opcua.notifications
             o0 = [cpu_seconds(pid) for pid in others]
             if profile is not None:
@@ -206,25 +206,27 @@ async def run_one(count: int, mqtt_port: int, folder: Path, mqtt_hz: float,
                 profile.disable()
             wall = time.monotonic() - w0
             cpu = (time.process_time() - c0) / wall
-            taken = (samples[0] - n0) / wall
+            per_axis = [samples[a] - n0[a] for a in samples]
+            taken = sum(per_axis) / wall
             writes = gateway.opcua.notifications - writes0
             o1 = [cpu_seconds(pid) for pid in others]
             drives = sum(b - a for a, b in zip(o0[:-1], o1[:-1], strict=True)) / wall
             watcher = (o1[-1] - o0[-1]) / wall
             counts: dict[str, int] = await loop.run_in_executor(None, out.get, True, 30)
             await loop.run_in_executor(None, observer.join, 10)
-            rates = list(gateway.sampler.achieved_hz.values())
             await gateway.close()
         finally:
             await machine.close()
-    return {"count": count, "cpu": cpu * 100, "hz": min(rates), "samples": taken,
+    # every axis of a link has a sample per round: the slowest axis is the slowest link
+    return {"count": count, "cpu": cpu * 100, "hz": min(per_axis) / wall, "samples": taken,
+            "load": os.getloadavg()[0],
             "writes": writes / (taken * wall) if taken else math.nan,
             "drives": drives * 100, "observer": watcher * 100, **counts}
 
 
-def _count(samples: list[int], ok: bool) -> None:
-    if ok:
-        samples[0] += 1
+def _count(samples: dict[str, int], sample: Any) -> None:
+    if sample.ok:
+        samples[sample.axis] += 1
 
 
 def fit(points: list[tuple[float, float]]) -> tuple[float, float]:
@@ -264,7 +266,7 @@ def main(argv: list[str] | None = None) -> None:
           f"--plant {args.plant}; drives and observer in other processes")
     print(f"  {os.cpu_count()} cores, load average {load_average()} before")
     print("  axes  gateway CPU  axis samples/s  slowest link  CPU per sample  OPC UA writes "
-          "per sample  drives CPU  observer CPU  OPC UA notif./s  DDATA/s")
+          "per sample  drives CPU  observer CPU  OPC UA notif./s  DDATA/s  load")
     results = []
     # CPU time, not wall time: the waits in epoll are not the gateway's cost
     profile = cProfile.Profile(time.process_time) if args.profile else None
@@ -280,22 +282,36 @@ def main(argv: list[str] | None = None) -> None:
             print(f"  {count:4d}  {r['cpu']:9.1f} %  {r['samples']:14.0f}  {r['hz']:9.1f} Hz"
                   f"  {per_sample:11.0f} us  {r['writes']:24.1f}"
                   f"  {r['drives']:8.1f} %  {r['observer']:10.1f} %"
-                  f"  {r['opcua'] / MEASURE_S:15.0f}  {r['ddata'] / MEASURE_S:7.0f}")
+                  f"  {r['opcua'] / MEASURE_S:15.0f}  {r['ddata'] / MEASURE_S:7.0f}"
+                  f"  {r['load']:4.1f}")
     print(f"  load average {load_average()} after")
     if profile is not None:
         profile.dump_stats(args.profile)
         print(f"  profile of the gateway's process: {args.profile} (python -m pstats)")
-    points = [(r["samples"], r["cpu"]) for r in results if r["hz"] >= MIN_HZ]
+    print(figure(results, f"{args.per_link} drives per link, --plant {args.plant}, MQTT and "
+                          f"Sparkplug at {args.mqtt_rate:g} Hz"))
+
+
+def figure(results: list[dict[str, Any]], conditions: str) -> str:
+    """The figure's line: from the runs whose slowest link reached :data:`MIN_HZ` (never
+    from slower ones, module docstring), with its conditions and the load it was taken at."""
+    kept = [r for r in results if r["hz"] >= MIN_HZ]
+    points = [(r["samples"], r["cpu"]) for r in kept]
     if len(points) < 2 or len({x for x, _ in points}) < 2:
         # no estimate from slower runs (decision, module docstring): the CPU per sample of
         # a loaded machine is not the gateway's cost
-        print(f"  fewer than two runs reached {MIN_HZ:g} Hz on every link (the load of this "
-              "machine: see the load average and the drives' CPU): no figure")
-        return
+        return (f"  fewer than two runs reached {MIN_HZ:g} Hz on every link (the load of "
+                "this machine: see the load average and the drives' CPU): no figure")
     base, slope = fit(points)
     axes = per_half_core(points)  # no target in the issue: the figure to plan with
-    print(f"  axes per half core at {RATE_HZ:g} Hz: {axes:.0f}  (the line through the runs "
-          f"at {MIN_HZ:g} Hz or more: {base:.1f} % + {slope * 1e4:.0f} us per axis sample)")
+    counts = sorted(r["count"] for r in kept)
+    loads = sorted(r["load"] for r in kept)
+    where = ("beyond the largest run: the line says so, no run of that size was measured"
+             if axes > counts[-1] else "within the runs measured")
+    return (f"  axes per half core at {RATE_HZ:g} Hz: {axes:.0f}  (the line through the "
+            f"{len(kept)} runs of {', '.join(map(str, counts))} axes whose every link "
+            f"reached {MIN_HZ:g} Hz: {base:.1f} % + {slope * 1e4:.0f} us per axis sample; "
+            f"{conditions}; load average {loads[0]:.1f} - {loads[-1]:.1f}; {where})")
 
 
 def load_average() -> str:
