@@ -67,8 +67,8 @@ from benchmarks.bench_dyn232_line import cpu_seconds
 from benchmarks.bench_gateway import broker
 
 RATE_HZ = 50.0
-PER_LINK = 8
-COUNTS = (16, 32, 48)
+PER_LINK = 2
+COUNTS = (8, 12, 16)
 MEASURE_S = 8.0
 GROUP = "plant"
 #: (protocol of ``servobus sim``, URL scheme, unit, per_rev), taken in turn per link
@@ -248,7 +248,7 @@ def per_half_core(points: list[tuple[float, float]]) -> float:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m benchmarks plant")
     parser.add_argument("--mqtt-rate", type=float, default=5.0)
-    parser.add_argument("--axes", default=",".join(map(str, COUNTS)), metavar="16,32,48",
+    parser.add_argument("--axes", default=",".join(map(str, COUNTS)), metavar="8,12,16",
                         type=lambda text: [int(n) for n in text.split(",")],
                         help="the runs' axis counts (multiples of --per-link)")
     parser.add_argument("--per-link", type=int, default=PER_LINK, metavar="N",
@@ -288,8 +288,9 @@ def main(argv: list[str] | None = None) -> None:
     if profile is not None:
         profile.dump_stats(args.profile)
         print(f"  profile of the gateway's process: {args.profile} (python -m pstats)")
-    print(figure(results, f"{args.per_link} drives per link, --plant {args.plant}, MQTT and "
-                          f"Sparkplug at {args.mqtt_rate:g} Hz"))
+    drives = "1 drive" if args.per_link == 1 else f"{args.per_link} drives"
+    print(figure(results, f"{drives} per link, --plant {args.plant}, MQTT and Sparkplug at "
+                          f"{args.mqtt_rate:g} Hz"))
 
 
 def figure(results: list[dict[str, Any]], conditions: str) -> str:
