@@ -2,18 +2,26 @@
 plant of gateways with (issue 36, item 6).
 
 One gateway (servobus.gateway.serve.Gateway, as ``servobus serve --mqtt ... --sparkplug
-plant`` runs it) in this process, with its machine of N virtual axes on N/8 fast links
-(``servobus sim ... --fast --plant ideal`` servers in their own processes, 8 drives each, as
-in bench_gateway). Every axis turns at constant speed, so its position changes at every
-sample (its speed and current too with ``--plant physics``, below). Sampling 50 Hz; an
-observer in another process subscribes with asyncua to every ActualPosition (publishing
-interval 20 ms) and with aiomqtt to the Sparkplug topics; MQTT JSON state and Sparkplug
-DDATA at ``--mqtt-rate`` (default here 5 Hz, the gateway's default; ``python -m benchmarks
-plant --mqtt-rate 50`` for the worst case). For N = 16, 32, 48 (``--axes``), over 8 s: the
-CPU of this process (the gateway and its links' clients, % of one core), the axis samples
-it took (counted by a sampler listener), the rate its slowest link reached, its CPU and
-OPC UA writes per sample, and the CPU of the drives' processes and of the observer; the
-load average before and after.
+plant`` runs it) in this process, with its machine of N virtual axes on N/2 fast links
+(``servobus sim ... --fast --plant ideal`` servers in their own processes, 2 drives each;
+DYN232M, DYN CAN and EasyCan links in turn). Every axis turns at constant speed, so its
+position changes at every sample (its speed and current too with ``--plant physics``,
+below). Sampling 50 Hz; an observer in another process subscribes with asyncua to every
+ActualPosition (publishing interval 20 ms) and with aiomqtt to the Sparkplug topics; MQTT
+JSON state and Sparkplug DDATA at ``--mqtt-rate`` (default here 5 Hz, the gateway's
+default; ``python -m benchmarks plant --mqtt-rate 50`` for the worst case). For N = 4, 8, 12,
+16 (``--axes``), over 8 s: the CPU of this process (the gateway and its links' clients, %
+of one core), the axis samples it took (counted per axis by a sampler listener), the rate
+its slowest link reached over those seconds (its axes' samples per second), its CPU and
+OPC UA writes per sample, the CPU of the drives' processes and of the observer, and the
+load average.
+
+Why 2 drives per link (decision): at the sampler's duty of 0.5 a link keeps 50 Hz only
+while a round of its drives takes at most 10 ms (docs/gateway.md "Sampling"). With 8
+drives a link (bench_gateway's layout, this benchmark's before) a DYN232M round is 32
+round trips to the drives' process one after another, and no run reached 45 Hz on this
+machine whatever the gateway's CPU; a plant sampled at 50 Hz puts few drives on a line or
+bus too. ``--per-link N`` measures another layout.
 
 The figure (decision): the straight line through (axis samples per second, CPU %) of the
 runs whose every link reached 45 Hz: its intercept is what the gateway spends whatever the
@@ -21,14 +29,13 @@ rate (the OPC UA server's and MQTT clients' own upkeep), its slope what one axis
 and the axes per half core is where it reaches 50 % at 50 samples per axis per second (with
 every link at 50 Hz, the line through (axes, CPU %)). Slower runs are printed, with their CPU
 per sample, but give no figure: on a machine too loaded for the links to keep 50 Hz the
-gateway's CPU per sample was 950 - 3,500 us (load averages 17 - 22 on 2 cores), against
-some 290 us where 32 axes kept 50 Hz (46 % of a core in bench_gateway): fewer samples per
-wake-up, caches shared with the load. A figure from such runs would plan a plant wrong.
-``--axes 16,32`` chooses the runs, ``--plant physics`` the drives' plant, ``--per-link 4``
-puts fewer drives on each link (more links, shorter rounds: a link's round is as long as its
-drives' answers one after another on a serial line, and on a loaded machine each answer
-waits for two processes to be scheduled), ``--profile FILE`` profiles the gateway's process
-over the measured seconds (CPU time, cProfile; ``python -m pstats FILE``).
+gateway's CPU per sample was 950 - 3,500 us (load averages 17 - 22 on 2 cores): fewer
+samples per wake-up, caches shared with the load. A figure from such runs would plan a
+plant wrong. The figure's line names the runs it comes from, their conditions and their
+load, and says when the line reaches half a core beyond the largest run.
+``--axes 8,12`` chooses the runs, ``--plant physics`` the drives' plant, ``--per-link N``
+the drives on each link, ``--profile FILE`` profiles the gateway's process over the
+measured seconds (CPU time, cProfile; ``python -m pstats FILE``).
 
 Why the ideal plant (decision): with their physics (4 kHz per drive, docs/virtual-drive.md)
 48 turning drives cost about a core of their own, and on a 2-core machine they starved the
@@ -68,7 +75,7 @@ from benchmarks.bench_gateway import broker
 
 RATE_HZ = 50.0
 PER_LINK = 2
-COUNTS = (8, 12, 16)
+COUNTS = (4, 8, 12, 16)
 MEASURE_S = 8.0
 GROUP = "plant"
 #: (protocol of ``servobus sim``, URL scheme, unit, per_rev), taken in turn per link
@@ -248,7 +255,7 @@ def per_half_core(points: list[tuple[float, float]]) -> float:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m benchmarks plant")
     parser.add_argument("--mqtt-rate", type=float, default=5.0)
-    parser.add_argument("--axes", default=",".join(map(str, COUNTS)), metavar="8,12,16",
+    parser.add_argument("--axes", default=",".join(map(str, COUNTS)), metavar="4,8,12,16",
                         type=lambda text: [int(n) for n in text.split(",")],
                         help="the runs' axis counts (multiples of --per-link)")
     parser.add_argument("--per-link", type=int, default=PER_LINK, metavar="N",
