@@ -2,26 +2,29 @@
 plant of gateways with (issue 36, item 6).
 
 One gateway (servobus.gateway.serve.Gateway, as ``servobus serve --mqtt ... --sparkplug
-plant`` runs it) in this process, with its machine of N virtual axes on N/2 fast links
-(``servobus sim ... --fast --plant ideal`` servers in their own processes, 2 drives each;
+plant`` runs it) in this process, with its machine of N virtual axes on N fast links
+(``servobus sim ... --fast --plant ideal`` servers in their own processes, one drive each;
 DYN232M, DYN CAN and EasyCan links in turn). Every axis turns at constant speed, so its
 position changes at every sample (its speed and current too with ``--plant physics``,
 below). Sampling 50 Hz; an observer in another process subscribes with asyncua to every
 ActualPosition (publishing interval 20 ms) and with aiomqtt to the Sparkplug topics; MQTT
 JSON state and Sparkplug DDATA at ``--mqtt-rate`` (default here 5 Hz, the gateway's
-default; ``python -m benchmarks plant --mqtt-rate 50`` for the worst case). For N = 4, 8, 12,
-16 (``--axes``), over 8 s: the CPU of this process (the gateway and its links' clients, %
+default; ``python -m benchmarks plant --mqtt-rate 50`` for the worst case). For N = 2, 4, 6,
+8 (``--axes``), over 8 s: the CPU of this process (the gateway and its links' clients, %
 of one core), the axis samples it took (counted per axis by a sampler listener), the rate
 its slowest link reached over those seconds (its axes' samples per second), its CPU and
 OPC UA writes per sample, the CPU of the drives' processes and of the observer, and the
 load average.
 
-Why 2 drives per link (decision): at the sampler's duty of 0.5 a link keeps 50 Hz only
+Why one drive per link (decision): at the sampler's duty of 0.5 a link keeps 50 Hz only
 while a round of its drives takes at most 10 ms (docs/gateway.md "Sampling"). With 8
 drives a link (bench_gateway's layout, this benchmark's before) a DYN232M round is 32
 round trips to the drives' process one after another, and no run reached 45 Hz on this
-machine whatever the gateway's CPU; a plant sampled at 50 Hz puts few drives on a line or
-bus too. ``--per-link N`` measures another layout.
+machine whatever the gateway's CPU; with 2 drives a link, 4 axes reached 41.5 Hz at a load
+average of 7, with one 46.9 - 50 Hz at 7 - 11 (2 and 4 axes). One drive a link (an
+EtherNet/IP drive, a bus of its own) also gives the gateway the fewest samples per
+wake-up: its CPU per sample is the dearest, the safe side to plan on. ``--per-link N``
+measures another layout.
 
 The figure (decision): the straight line through (axis samples per second, CPU %) of the
 runs whose every link reached 45 Hz: its intercept is what the gateway spends whatever the
@@ -33,7 +36,7 @@ gateway's CPU per sample was 950 - 3,500 us (load averages 17 - 22 on 2 cores): 
 samples per wake-up, caches shared with the load. A figure from such runs would plan a
 plant wrong. The figure's line names the runs it comes from, their conditions and their
 load, and says when the line reaches half a core beyond the largest run.
-``--axes 8,12`` chooses the runs, ``--plant physics`` the drives' plant, ``--per-link N``
+``--axes 2,4`` chooses the runs, ``--plant physics`` the drives' plant, ``--per-link N``
 the drives on each link, ``--profile FILE`` profiles the gateway's process over the
 measured seconds (CPU time, cProfile; ``python -m pstats FILE``).
 
@@ -74,8 +77,8 @@ from benchmarks.bench_dyn232_line import cpu_seconds
 from benchmarks.bench_gateway import broker
 
 RATE_HZ = 50.0
-PER_LINK = 2
-COUNTS = (4, 8, 12, 16)
+PER_LINK = 1
+COUNTS = (2, 4, 6, 8)
 MEASURE_S = 8.0
 GROUP = "plant"
 #: (protocol of ``servobus sim``, URL scheme, unit, per_rev), taken in turn per link
@@ -255,7 +258,7 @@ def per_half_core(points: list[tuple[float, float]]) -> float:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m benchmarks plant")
     parser.add_argument("--mqtt-rate", type=float, default=5.0)
-    parser.add_argument("--axes", default=",".join(map(str, COUNTS)), metavar="4,8,12,16",
+    parser.add_argument("--axes", default=",".join(map(str, COUNTS)), metavar="2,4,6,8",
                         type=lambda text: [int(n) for n in text.split(",")],
                         help="the runs' axis counts (multiples of --per-link)")
     parser.add_argument("--per-link", type=int, default=PER_LINK, metavar="N",
