@@ -20,8 +20,8 @@ Why one drive per link (decision): at the sampler's duty of 0.5 a link keeps 50 
 while a round of its drives takes at most 10 ms (docs/gateway.md "Sampling"). With 8
 drives a link (bench_gateway's layout, this benchmark's before) a DYN232M round is 32
 round trips to the drives' process one after another, and no run reached 45 Hz on this
-machine whatever the gateway's CPU; with 2 drives a link, 4 axes reached 41.5 Hz at a load
-average of 7, with one 46.9 - 50 Hz at 7 - 11 (2 and 4 axes). One drive a link (an
+machine whatever the gateway's CPU; with 2 drives a link, 4 axes reached 41.5 - 43 Hz at
+load averages of 7 - 8, with one 46.9 - 50 Hz at 7 - 11 (2 and 4 axes). One drive a link (an
 EtherNet/IP drive, a bus of its own) also gives the gateway the fewest samples per
 wake-up: its CPU per sample is the dearest, the safe side to plan on. ``--per-link N``
 measures another layout.
