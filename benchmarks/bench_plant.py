@@ -272,7 +272,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.per_link < 1 or any(n <= 0 or n % args.per_link for n in args.axes):
         parser.error(f"--axes {args.axes}: give multiples of --per-link {args.per_link}")
     print(f"plant: one gateway at {RATE_HZ:g} Hz (OPC UA + MQTT JSON + Sparkplug B at "
-          f"{args.mqtt_rate:g} Hz), every axis turning; {args.per_link} drives per link, "
+          f"{args.mqtt_rate:g} Hz), every axis turning; {drives_per_link(args.per_link)}, "
           f"--plant {args.plant}; drives and observer in other processes")
     print(f"  {os.cpu_count()} cores, load average {load_average()} before")
     print("  axes  gateway CPU  axis samples/s  slowest link  CPU per sample  OPC UA writes "
@@ -298,9 +298,12 @@ def main(argv: list[str] | None = None) -> None:
     if profile is not None:
         profile.dump_stats(args.profile)
         print(f"  profile of the gateway's process: {args.profile} (python -m pstats)")
-    drives = "1 drive" if args.per_link == 1 else f"{args.per_link} drives"
-    print(figure(results, f"{drives} per link, --plant {args.plant}, MQTT and Sparkplug at "
-                          f"{args.mqtt_rate:g} Hz"))
+    print(figure(results, f"{drives_per_link(args.per_link)}, --plant {args.plant}, MQTT and "
+                          f"Sparkplug at {args.mqtt_rate:g} Hz"))
+
+
+def drives_per_link(n: int) -> str:
+    return "1 drive per link" if n == 1 else f"{n} drives per link"
 
 
 def figure(results: list[dict[str, Any]], conditions: str) -> str:
