@@ -2,18 +2,29 @@
 plant of gateways with (issue 36, item 6).
 
 One gateway (servobus.gateway.serve.Gateway, as ``servobus serve --mqtt ... --sparkplug
-plant`` runs it) in this process, with its machine of N virtual axes on N/8 fast links
-(``servobus sim ... --fast --plant ideal`` servers in their own processes, 8 drives each, as
-in bench_gateway). Every axis turns at constant speed, so its position changes at every
-sample (its speed and current too with ``--plant physics``, below). Sampling 50 Hz; an
-observer in another process subscribes with asyncua to every ActualPosition (publishing
-interval 20 ms) and with aiomqtt to the Sparkplug topics; MQTT JSON state and Sparkplug
-DDATA at ``--mqtt-rate`` (default here 5 Hz, the gateway's default; ``python -m benchmarks
-plant --mqtt-rate 50`` for the worst case). For N = 16, 32, 48 (``--axes``), over 8 s: the
-CPU of this process (the gateway and its links' clients, % of one core), the axis samples
-it took (counted by a sampler listener), the rate its slowest link reached, its CPU and
-OPC UA writes per sample, and the CPU of the drives' processes and of the observer; the
-load average before and after.
+plant`` runs it) in this process, with its machine of N virtual axes on N fast links
+(``servobus sim ... --fast --plant ideal`` servers in their own processes, one drive each;
+DYN232M, DYN CAN and EasyCan links in turn). Every axis turns at constant speed, so its
+position changes at every sample (its speed and current too with ``--plant physics``,
+below). Sampling 50 Hz; an observer in another process subscribes with asyncua to every
+ActualPosition (publishing interval 20 ms) and with aiomqtt to the Sparkplug topics; MQTT
+JSON state and Sparkplug DDATA at ``--mqtt-rate`` (default here 5 Hz, the gateway's
+default; ``python -m benchmarks plant --mqtt-rate 50`` for the worst case). For N = 2, 4, 6,
+8 (``--axes``), over 8 s: the CPU of this process (the gateway and its links' clients, %
+of one core), the axis samples it took (counted per axis by a sampler listener), the rate
+its slowest link reached over those seconds (its axes' samples per second), its CPU and
+OPC UA writes per sample, the CPU of the drives' processes and of the observer, and the
+load average.
+
+Why one drive per link (decision): at the sampler's duty of 0.5 a link keeps 50 Hz only
+while a round of its drives takes at most 10 ms (docs/gateway.md "Sampling"). With 8
+drives a link (bench_gateway's layout, this benchmark's before) a DYN232M round is 32
+round trips to the drives' process one after another, and no run reached 45 Hz on this
+machine whatever the gateway's CPU; with 2 drives a link, 4 axes reached 41.5 - 43 Hz at
+load averages of 7 - 8, with one 46.9 - 50 Hz at 7 - 11 (2 and 4 axes). One drive a link (an
+EtherNet/IP drive, a bus of its own) also gives the gateway the fewest samples per
+wake-up: its CPU per sample is the dearest, the safe side to plan on. ``--per-link N``
+measures another layout.
 
 The figure (decision): the straight line through (axis samples per second, CPU %) of the
 runs whose every link reached 45 Hz: its intercept is what the gateway spends whatever the
@@ -21,14 +32,13 @@ rate (the OPC UA server's and MQTT clients' own upkeep), its slope what one axis
 and the axes per half core is where it reaches 50 % at 50 samples per axis per second (with
 every link at 50 Hz, the line through (axes, CPU %)). Slower runs are printed, with their CPU
 per sample, but give no figure: on a machine too loaded for the links to keep 50 Hz the
-gateway's CPU per sample was 950 - 3,500 us (load averages 17 - 22 on 2 cores), against
-some 290 us where 32 axes kept 50 Hz (46 % of a core in bench_gateway): fewer samples per
-wake-up, caches shared with the load. A figure from such runs would plan a plant wrong.
-``--axes 16,32`` chooses the runs, ``--plant physics`` the drives' plant, ``--per-link 4``
-puts fewer drives on each link (more links, shorter rounds: a link's round is as long as its
-drives' answers one after another on a serial line, and on a loaded machine each answer
-waits for two processes to be scheduled), ``--profile FILE`` profiles the gateway's process
-over the measured seconds (CPU time, cProfile; ``python -m pstats FILE``).
+gateway's CPU per sample was 950 - 3,500 us (load averages 17 - 22 on 2 cores): fewer
+samples per wake-up, caches shared with the load. A figure from such runs would plan a
+plant wrong. The figure's line names the runs it comes from, their conditions and their
+load, and says when the line reaches half a core beyond the largest run.
+``--axes 2,4`` chooses the runs, ``--plant physics`` the drives' plant, ``--per-link N``
+the drives on each link, ``--profile FILE`` profiles the gateway's process over the
+measured seconds (CPU time, cProfile; ``python -m pstats FILE``).
 
 Why the ideal plant (decision): with their physics (4 kHz per drive, docs/virtual-drive.md)
 48 turning drives cost about a core of their own, and on a 2-core machine they starved the
@@ -67,8 +77,8 @@ from benchmarks.bench_dyn232_line import cpu_seconds
 from benchmarks.bench_gateway import broker
 
 RATE_HZ = 50.0
-PER_LINK = 8
-COUNTS = (16, 32, 48)
+PER_LINK = 1
+COUNTS = (2, 4, 6, 8)
 MEASURE_S = 8.0
 GROUP = "plant"
 #: (protocol of ``servobus sim``, URL scheme, unit, per_rev), taken in turn per link
@@ -84,18 +94,18 @@ def drive_servers(links: int, per_link: int = PER_LINK, plant: str = "ideal"
     """``links`` drive servers of ``per_link`` drives each (``--plant``): (URLs, pids)."""
     procs, urls = [], []
     try:
-        for i in range(links):
-            protocol, scheme, _, _ = LINKS[i % len(LINKS)]
+        for i in range(links):  # all started before any is waited for: they start together
+            protocol, _, _, _ = LINKS[i % len(LINKS)]
             args = [sys.executable, "-m", "servobus", "sim", protocol, "--fast", "--plant",
                     plant, "--ids", ",".join(str(k) for k in range(1, per_link + 1))]
             if protocol == "dyn232":
                 args += ["--listen", "127.0.0.1:0"]
-            proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                                    text=True)
-            procs.append(proc)
+            procs.append(subprocess.Popen(args, stdout=subprocess.PIPE,
+                                          stderr=subprocess.DEVNULL, text=True))
+        for i, proc in enumerate(procs):
             assert proc.stdout is not None
             address = proc.stdout.readline().split()[-1].removeprefix("tcp://")
-            urls.append(f"{scheme}://{address}")
+            urls.append(f"{LINKS[i % len(LINKS)][1]}://{address}")
         yield urls, [proc.pid for proc in procs]
     finally:
         for proc in procs:
@@ -181,8 +191,8 @@ async def run_one(count: int, mqtt_port: int, folder: Path, mqtt_hz: float,
             gateway = Gateway(machine, GatewayOptions(
                 OpcUaOptions("opc.tcp://127.0.0.1:0"), mqtt=mqtt, rate_hz=RATE_HZ,
                 own_process=True, sparkplug=GROUP))
-            samples = [0]
-            gateway.sampler.listeners.append(lambda sample: _count(samples, sample.ok))
+            samples: dict[str, int] = dict.fromkeys(machine.axes, 0)
+            gateway.sampler.listeners.append(lambda sample: _count(samples, sample))
             await gateway.start()
             ctx = multiprocessing.get_context("spawn")
             out, ready = ctx.Queue(), ctx.Event()
@@ -196,7 +206,7 @@ async def run_one(count: int, mqtt_port: int, folder: Path, mqtt_hz: float,
                                        "traceback above): a machine too loaded to measure")
                 await asyncio.sleep(0.05)
             others = [*pids, observer.pid or 0]
-            c0, w0, n0 = time.process_time(), time.monotonic(), samples[0]
+            c0, w0, n0 = time.process_time(), time.monotonic(), dict(samples)
             writes0 = gateway.opcua.notifications
             o0 = [cpu_seconds(pid) for pid in others]
             if profile is not None:
@@ -206,25 +216,27 @@ async def run_one(count: int, mqtt_port: int, folder: Path, mqtt_hz: float,
                 profile.disable()
             wall = time.monotonic() - w0
             cpu = (time.process_time() - c0) / wall
-            taken = (samples[0] - n0) / wall
+            per_axis = [samples[a] - n0[a] for a in samples]
+            taken = sum(per_axis) / wall
             writes = gateway.opcua.notifications - writes0
             o1 = [cpu_seconds(pid) for pid in others]
             drives = sum(b - a for a, b in zip(o0[:-1], o1[:-1], strict=True)) / wall
             watcher = (o1[-1] - o0[-1]) / wall
             counts: dict[str, int] = await loop.run_in_executor(None, out.get, True, 30)
             await loop.run_in_executor(None, observer.join, 10)
-            rates = list(gateway.sampler.achieved_hz.values())
             await gateway.close()
         finally:
             await machine.close()
-    return {"count": count, "cpu": cpu * 100, "hz": min(rates), "samples": taken,
+    # every axis of a link has a sample per round: the slowest axis is the slowest link
+    return {"count": count, "cpu": cpu * 100, "hz": min(per_axis) / wall, "samples": taken,
+            "load": os.getloadavg()[0],
             "writes": writes / (taken * wall) if taken else math.nan,
             "drives": drives * 100, "observer": watcher * 100, **counts}
 
 
-def _count(samples: list[int], ok: bool) -> None:
-    if ok:
-        samples[0] += 1
+def _count(samples: dict[str, int], sample: Any) -> None:
+    if sample.ok:
+        samples[sample.axis] += 1
 
 
 def fit(points: list[tuple[float, float]]) -> tuple[float, float]:
@@ -246,7 +258,7 @@ def per_half_core(points: list[tuple[float, float]]) -> float:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m benchmarks plant")
     parser.add_argument("--mqtt-rate", type=float, default=5.0)
-    parser.add_argument("--axes", default=",".join(map(str, COUNTS)), metavar="16,32,48",
+    parser.add_argument("--axes", default=",".join(map(str, COUNTS)), metavar="2,4,6,8",
                         type=lambda text: [int(n) for n in text.split(",")],
                         help="the runs' axis counts (multiples of --per-link)")
     parser.add_argument("--per-link", type=int, default=PER_LINK, metavar="N",
@@ -260,11 +272,11 @@ def main(argv: list[str] | None = None) -> None:
     if args.per_link < 1 or any(n <= 0 or n % args.per_link for n in args.axes):
         parser.error(f"--axes {args.axes}: give multiples of --per-link {args.per_link}")
     print(f"plant: one gateway at {RATE_HZ:g} Hz (OPC UA + MQTT JSON + Sparkplug B at "
-          f"{args.mqtt_rate:g} Hz), every axis turning; {args.per_link} drives per link, "
+          f"{args.mqtt_rate:g} Hz), every axis turning; {drives_per_link(args.per_link)}, "
           f"--plant {args.plant}; drives and observer in other processes")
     print(f"  {os.cpu_count()} cores, load average {load_average()} before")
     print("  axes  gateway CPU  axis samples/s  slowest link  CPU per sample  OPC UA writes "
-          "per sample  drives CPU  observer CPU  OPC UA notif./s  DDATA/s")
+          "per sample  drives CPU  observer CPU  OPC UA notif./s  DDATA/s  load")
     results = []
     # CPU time, not wall time: the waits in epoll are not the gateway's cost
     profile = cProfile.Profile(time.process_time) if args.profile else None
@@ -280,22 +292,40 @@ def main(argv: list[str] | None = None) -> None:
             print(f"  {count:4d}  {r['cpu']:9.1f} %  {r['samples']:14.0f}  {r['hz']:9.1f} Hz"
                   f"  {per_sample:11.0f} us  {r['writes']:24.1f}"
                   f"  {r['drives']:8.1f} %  {r['observer']:10.1f} %"
-                  f"  {r['opcua'] / MEASURE_S:15.0f}  {r['ddata'] / MEASURE_S:7.0f}")
+                  f"  {r['opcua'] / MEASURE_S:15.0f}  {r['ddata'] / MEASURE_S:7.0f}"
+                  f"  {r['load']:4.1f}")
     print(f"  load average {load_average()} after")
     if profile is not None:
         profile.dump_stats(args.profile)
         print(f"  profile of the gateway's process: {args.profile} (python -m pstats)")
-    points = [(r["samples"], r["cpu"]) for r in results if r["hz"] >= MIN_HZ]
+    print(figure(results, f"{drives_per_link(args.per_link)}, --plant {args.plant}, MQTT and "
+                          f"Sparkplug at {args.mqtt_rate:g} Hz"))
+
+
+def drives_per_link(n: int) -> str:
+    return "1 drive per link" if n == 1 else f"{n} drives per link"
+
+
+def figure(results: list[dict[str, Any]], conditions: str) -> str:
+    """The figure's line: from the runs whose slowest link reached :data:`MIN_HZ` (never
+    from slower ones, module docstring), with its conditions and the load it was taken at."""
+    kept = [r for r in results if r["hz"] >= MIN_HZ]
+    points = [(r["samples"], r["cpu"]) for r in kept]
     if len(points) < 2 or len({x for x, _ in points}) < 2:
         # no estimate from slower runs (decision, module docstring): the CPU per sample of
         # a loaded machine is not the gateway's cost
-        print(f"  fewer than two runs reached {MIN_HZ:g} Hz on every link (the load of this "
-              "machine: see the load average and the drives' CPU): no figure")
-        return
+        return (f"  fewer than two runs reached {MIN_HZ:g} Hz on every link (the load of "
+                "this machine: see the load average and the drives' CPU): no figure")
     base, slope = fit(points)
     axes = per_half_core(points)  # no target in the issue: the figure to plan with
-    print(f"  axes per half core at {RATE_HZ:g} Hz: {axes:.0f}  (the line through the runs "
-          f"at {MIN_HZ:g} Hz or more: {base:.1f} % + {slope * 1e4:.0f} us per axis sample)")
+    counts = sorted(r["count"] for r in kept)
+    loads = sorted(r["load"] for r in kept)
+    where = ("beyond the largest run: the line says so, no run of that size was measured"
+             if axes > counts[-1] else "within the runs measured")
+    return (f"  axes per half core at {RATE_HZ:g} Hz: {axes:.0f}  (the line through the "
+            f"{len(kept)} runs of {', '.join(map(str, counts))} axes whose every link "
+            f"reached {MIN_HZ:g} Hz: {base:.1f} % + {slope * 1e4:.0f} us per axis sample; "
+            f"{conditions}; load average {loads[0]:.1f} - {loads[-1]:.1f}; {where})")
 
 
 def load_average() -> str:

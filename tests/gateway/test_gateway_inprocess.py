@@ -19,6 +19,7 @@ from servobus.gateway.sampler import (
     BAD_AFTER,
     OFFLINE,
     Health,
+    RoundClock,
     Sample,
     Sampler,
     pause_after,
@@ -135,6 +136,25 @@ def test_sampling_leaves_half_of_a_slow_link_for_commands() -> None:
     # a slow link: a round of 0.1 s is followed by 0.1 s free (duty 0.5)
     assert pause_after(0.02, 10.0, 10.1, 0.5) == pytest.approx(0.1)
     assert pause_after(0.02, 10.0, 10.1, 0.25) == pytest.approx(0.3)
+
+
+def test_late_wake_ups_do_not_slow_the_rounds_down() -> None:
+    # every round starts 4 ms after it was due (a loaded machine's wake-up) and takes 1 ms:
+    # the rounds stay one period apart on average, the lateness is not added to each
+    clock = RoundClock(0.02, 0.5, 0.0)
+    start = 0.004
+    for _ in range(50):
+        start += clock.rest(start, start + 0.001) + 0.001 + 0.004
+    assert start == pytest.approx(50 * 0.02 + 0.004)
+    # a round later than a whole period moves the schedule on: the next is due when the
+    # duty allows, the one after a period later, with no burst of rounds to catch up
+    start += 0.1
+    assert clock.rest(start, start + 0.001) == pytest.approx(0.001)
+    start += 0.002
+    assert clock.rest(start, start + 0.001) == pytest.approx(0.02 - 0.001)
+    # and the duty still rules a slow link: 30 ms rounds, 30 ms free after each
+    clock = RoundClock(0.02, 0.5, 0.0)
+    assert [clock.rest(t, t + 0.03) for t in (0.0, 0.06)] == pytest.approx([0.03, 0.03])
 
 
 def test_one_stretched_round_does_not_hold_the_next_back_by_its_length() -> None:
