@@ -11,6 +11,7 @@ module only re-exports another.
 from __future__ import annotations
 
 import ast
+import functools
 import re
 from pathlib import Path
 
@@ -32,16 +33,28 @@ FRONT_ENDS = ("cli", "gui", "machine", "gateway", "hal")
 CLIENT_MODULES = ("client.py", "opener.py", "commands.py", "codec.py")
 
 
+@functools.cache
+def parsed(path: Path) -> ast.Module:
+    """``path``'s syntax tree, parsed once per run: the rules below walk the same modules
+    many times (about half of this file's CPU was parsing them again). Read only."""
+    return ast.parse(path.read_text(encoding="utf-8"))
+
+
 def imports(path: Path) -> list[str]:
     """Every module an ``import``/``from ... import`` in ``path`` names, lazy ones included."""
+    return list(_imports(path))
+
+
+@functools.cache
+def _imports(path: Path) -> tuple[str, ...]:
     names: list[str] = []
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+    for node in ast.walk(parsed(path)):
         if isinstance(node, ast.Import):
             names += [a.name for a in node.names]
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
             names.append(node.module)
             names += [f"{node.module}.{a.name}" for a in node.names]
-    return names
+    return tuple(names)
 
 
 def protocols() -> list[str]:
@@ -239,7 +252,7 @@ def defines_an_axis(path: Path) -> list[str]:
     """Classes in ``path`` deriving AsyncAxis or one of its servobus subclasses (by name:
     ``...Axis`` bases, CommandAxis, YzaimAxis)."""
     found: list[str] = []
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+    for node in ast.walk(parsed(path)):
         if isinstance(node, ast.ClassDef):
             for base in node.bases:
                 target = base.value if isinstance(base, ast.Subscript) else base
@@ -319,7 +332,7 @@ def test_the_alias_finder_bites() -> None:
 def old_names_kept(path: Path) -> list[str]:
     """How ``path`` keeps an old name alive: it only re-exports another module, it
     star-imports (``import *``), or it has a module ``__getattr__``."""
-    tree = ast.parse(path.read_text(encoding="utf-8"))
+    tree = parsed(path)
     found = ["re-exports only"] if re_exports_only(tree) else []
     found += ["import *" for node in ast.walk(tree)
               if isinstance(node, ast.ImportFrom) and any(a.name == "*" for a in node.names)]

@@ -8,14 +8,25 @@ from pathlib import Path
 
 import pytest
 from asyncua import Server, ua
+from asyncua.server.internal_server import InternalServer
 
+from servobus.gateway.opcua_cache import load_standard
 from servobus.gateway.opcua_nodesets import import_nodesets
 
 pytestmark = pytest.mark.slow  # three asyncua address spaces: seconds of CPU
 
 
+class CachedStandard(InternalServer):  # type: ignore[misc]
+    """asyncua's server with its standard nodes from the user's cache, as every gateway's
+    start (test_gateway_start_cache: they are the built ones): 2 s of CPU less per address
+    space; the NodeSets, what this file tests, are imported or cached as in a gateway."""
+
+    async def load_standard_address_space(self, shelf_file: Path | None = None) -> None:
+        await load_standard(self, super().load_standard_address_space)
+
+
 async def address_space(cache: Path) -> tuple[bool, Server]:
-    server = Server()
+    server = Server(iserver=CachedStandard())
     await server.init()
     await server.set_application_uri("urn:servobus:gateway:cache-test")
     return await import_nodesets(server, cache), server
