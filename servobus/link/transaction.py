@@ -28,6 +28,14 @@ the rules every client must follow, in one place:
 * **Late replies** (:mod:`servobus.link.late_replies`): an attempt that timed out owes its
   reply; the next request of an owed key first waits until it came or ``late_reply_s``
   passed quiet, so a late reply never answers a later call.
+* **A stalled host is not a silent drive.** When the deadline timer fires more than
+  :data:`STALL_S` after it was due, the process (or its loop) was stalled: a reply that
+  came meanwhile may still wait a few loop turns for its delivery (a socket's bytes are
+  read in the same turn, an in-process virtual drive's reply takes several). Each attempt
+  overdue then gets :data:`GRACE_S` of running loop once before it times out. Decision:
+  seen under load, a stall of seconds timed out requests sent once (a sync signal, a move)
+  whose replies were already on their way; a drive that never answers is declared so
+  :data:`GRACE_S` later, only after a stall.
 * **Dead links**: :meth:`lost` (the medium failed or hung up) makes every waiting request and
   every later call raise ConnectionLost at once.
 
@@ -99,6 +107,12 @@ V = TypeVar("V")  # a reply as the receive path hands it over (a value, a frame,
 
 #: Default re-sends of a read after its first attempt (servobus decision, docs/axis.md).
 DEFAULT_RETRIES = 2
+#: A deadline timer firing this late means the host stalled (asyncio timers are otherwise
+#: up to about a millisecond late: epoll rounds to milliseconds).
+STALL_S = 0.02
+#: Running loop an overdue attempt gets once after a stall: delivery of a reply that came
+#: meanwhile takes a few loop turns.
+GRACE_S = 0.01
 
 
 def check_call(retries: object, timeout: object) -> None:
@@ -163,6 +177,7 @@ class TransactionManager(Generic[K, P, V]):
         self._lanes: dict[Hashable, asyncio.Lock] = {}
         self._waiting: dict[K, asyncio.Future[V]] = {}  # the attempt waiting per key
         self._deadlines: dict[K, float] = {}  # loop time, set once its request has left
+        self._graced: set[K] = set()  # attempts given GRACE_S after a stall
         self._last_query = -1e9  # time.monotonic() when the last request's write returned
         self._timer: asyncio.TimerHandle | None = None
         self._timer_at = 0.0
@@ -302,6 +317,8 @@ class TransactionManager(Generic[K, P, V]):
             del self._waiting[key]
             if self._deadlines:
                 self._deadlines.pop(key, None)
+            if self._graced:
+                self._graced.discard(key)
 
     async def _put(self, payload: P) -> None:
         if self._hooks:
@@ -342,11 +359,15 @@ class TransactionManager(Generic[K, P, V]):
     def _on_timer(self, loop: asyncio.AbstractEventLoop) -> None:
         self._timer = None
         now = loop.time()
+        stalled = now - self._timer_at > STALL_S
         nearest: float | None = None
         for key, when in list(self._deadlines.items()):
             fut = self._waiting[key]
             if fut.done():
                 continue
+            if when <= now and stalled and key not in self._graced:
+                self._graced.add(key)  # module docstring: a stalled host
+                when = self._deadlines[key] = now + GRACE_S
             if when <= now:
                 self._expire(key, fut)
             elif nearest is None or when < nearest:

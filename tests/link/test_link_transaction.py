@@ -388,3 +388,45 @@ async def test_trace_sees_requests_and_timeouts() -> None:
         await read(tm)
     assert seen[0] == (Direction.TX, "<status>")
     assert seen[1][0] is Direction.RX and isinstance(seen[1][1], DriveTimeout)
+
+
+# ---------------------------------------------------------------------- a stalled host
+def turns_then(n: int, callback: object, *args: object) -> None:
+    """``callback(*args)`` after ``n`` more loop turns (an in-process drive's reply path)."""
+    loop = asyncio.get_running_loop()
+    if n == 0:
+        callback(*args)  # type: ignore[operator]
+    else:
+        loop.call_soon(turns_then, n - 1, callback, *args)
+
+
+async def test_a_reply_on_its_way_through_a_stall_is_not_a_timeout() -> None:
+    """The whole process stalls (here: the loop blocked) past the deadline while the reply
+    is a few loop turns from delivery: the write-once request is answered, not timed out
+    (module docstring: a stalled host is not a silent drive)."""
+    m = ScriptedMedium()
+    tm = manager(m, retries=0)
+    m.script.append(Answer(1, NEVER))
+
+    async def once() -> int:
+        return await tm.request("move", "move", deadline_s=DEADLINE_S, retry_safe=False)
+
+    call = asyncio.create_task(once())
+    await wait_until_async(lambda: m.left, what="the request left")
+    turns_then(3, m.arrive, "move", 5)
+    time.sleep(3 * DEADLINE_S)  # the stall under test: the loop gets no turn
+    assert await call == 5
+    assert tm.stats.timeouts == 0
+
+
+async def test_after_a_stall_a_silent_drive_still_times_out_once_graced() -> None:
+    m = ScriptedMedium()
+    tm = manager(m, retries=0, late_reply_s=0.0)
+    m.script.append(Answer(1, NEVER))
+    call = asyncio.create_task(tm.request("move", "move", deadline_s=DEADLINE_S,
+                                          retry_safe=False))
+    await wait_until_async(lambda: m.left, what="the request left")
+    time.sleep(3 * DEADLINE_S)  # a stall, and no reply ever
+    with pytest.raises(DriveTimeout, match="after 1 attempt"):
+        await call
+    assert tm.stats.timeouts == 1
