@@ -32,10 +32,11 @@ the rules every client must follow, in one place:
   :data:`STALL_S` after it was due, the process (or its loop) was stalled: a reply that
   came meanwhile may still wait a few loop turns for its delivery (a socket's bytes are
   read in the same turn, an in-process virtual drive's reply takes several). Each attempt
-  overdue then gets :data:`GRACE_S` of running loop once before it times out. Decision:
-  seen under load, a stall of seconds timed out requests sent once (a sync signal, a move)
-  whose replies were already on their way; a drive that never answers is declared so
-  :data:`GRACE_S` later, only after a stall.
+  overdue then gets :data:`GRACE_TURNS` loop turns once before it times out (turns, not
+  time: a second stall within a grace of time would waste it). Decision: seen under load,
+  a stall of seconds timed out requests sent once (a sync signal, a move) whose replies
+  were already on their way; a drive that never answers is declared so a few loop turns
+  later, only after a stall.
 * **Dead links**: :meth:`lost` (the medium failed or hung up) makes every waiting request and
   every later call raise ConnectionLost at once.
 
@@ -110,9 +111,9 @@ DEFAULT_RETRIES = 2
 #: A deadline timer firing this late means the host stalled (asyncio timers are otherwise
 #: up to about a millisecond late: epoll rounds to milliseconds).
 STALL_S = 0.02
-#: Running loop an overdue attempt gets once after a stall: delivery of a reply that came
-#: meanwhile takes a few loop turns.
-GRACE_S = 0.01
+#: Loop turns an overdue attempt gets once after a stall: the delivery of a reply that
+#: came meanwhile takes a few (an in-process virtual drive's: three; a socket's: none).
+GRACE_TURNS = 8
 
 
 def check_call(retries: object, timeout: object) -> None:
@@ -177,7 +178,7 @@ class TransactionManager(Generic[K, P, V]):
         self._lanes: dict[Hashable, asyncio.Lock] = {}
         self._waiting: dict[K, asyncio.Future[V]] = {}  # the attempt waiting per key
         self._deadlines: dict[K, float] = {}  # loop time, set once its request has left
-        self._graced: set[K] = set()  # attempts given GRACE_S after a stall
+        self._graced: set[K] = set()  # attempts given GRACE_TURNS after a stall
         self._last_query = -1e9  # time.monotonic() when the last request's write returned
         self._timer: asyncio.TimerHandle | None = None
         self._timer_at = 0.0
@@ -367,13 +368,23 @@ class TransactionManager(Generic[K, P, V]):
                 continue
             if when <= now and stalled and key not in self._graced:
                 self._graced.add(key)  # module docstring: a stalled host
-                when = self._deadlines[key] = now + GRACE_S
-            if when <= now:
+                del self._deadlines[key]
+                loop.call_soon(self._expire_after, GRACE_TURNS, key, fut)
+            elif when <= now:
                 self._expire(key, fut)
             elif nearest is None or when < nearest:
                 nearest = when
         if nearest is not None:
             self._arm(loop, nearest)
+
+    def _expire_after(self, turns: int, key: K, fut: asyncio.Future[V]) -> None:
+        """Expire ``fut`` unless answered within ``turns`` more loop turns."""
+        if fut.done():
+            return
+        if turns > 0:
+            asyncio.get_running_loop().call_soon(self._expire_after, turns - 1, key, fut)
+        else:
+            self._expire(key, fut)
 
     def _expire(self, key: K, fut: asyncio.Future[V]) -> None:
         self.late_replies.owe(key)  # its reply may still come: never to a later call
