@@ -10,7 +10,7 @@ back in its sleep, "cancelling", after one ``cancel()``.
 
 Decisions:
 
-* :func:`cancel_and_wait` cancels again every :data:`CANCEL_AGAIN_S` until each task has
+* :func:`cancel_until_ended` cancels again every :data:`CANCEL_AGAIN_S` until each task has
   ended. Only for tasks without an awaited cleanup of their own (a session's loops): a
   repeated cancel would cut such a cleanup short.
 * :func:`check_not_cancelled` raises CancelledError where a cancellation was swallowed
@@ -28,7 +28,7 @@ from typing import Any
 CANCEL_AGAIN_S = 0.05
 
 
-async def cancel_and_wait(tasks: Iterable[asyncio.Task[Any]]) -> None:
+async def cancel_until_ended(tasks: Iterable[asyncio.Task[Any]]) -> None:
     """Cancel ``tasks`` until every one has ended (module docstring); their exceptions are
     retrieved, not raised."""
     every = list(tasks)

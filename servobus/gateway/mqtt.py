@@ -57,7 +57,7 @@ from paho.mqtt.subscribeoptions import SubscribeOptions
 
 from servobus import bounded_json
 from servobus.errors import InvalidValue, JsonRefused
-from servobus.gateway.cancelling import cancel_and_wait, check_not_cancelled
+from servobus.gateway.cancelling import cancel_until_ended, check_not_cancelled
 from servobus.gateway.commands import Commander, Refused
 from servobus.gateway.identity import DEFAULT_PREFIX, check_prefix, gateway_id
 from servobus.gateway.link_events import LinkEvent
@@ -389,7 +389,7 @@ async def run_session(tasks: list[asyncio.Task[None]],
         for task in done:
             task.result()
     finally:
-        await cancel_and_wait(tasks)
+        await cancel_until_ended(tasks)
         with contextlib.suppress(Exception):
             async with asyncio.timeout(1.0):
                 await farewell()

@@ -12,7 +12,7 @@ import logging
 
 import pytest
 
-from servobus.gateway.cancelling import cancel_and_wait
+from servobus.gateway.cancelling import cancel_until_ended
 from servobus.gateway.mqtt import Broker, keep_connected, run_session
 
 DEADLINE_S = 30.0  # a hang fails here instead of at the suite's timeout
@@ -27,12 +27,12 @@ async def swallow_first_cancel(started: asyncio.Event) -> None:
     await asyncio.sleep(3600)
 
 
-async def test_cancel_and_wait_ends_a_task_that_swallowed_its_cancellation() -> None:
+async def test_cancel_until_ended_ends_a_task_that_swallowed_its_cancellation() -> None:
     started = asyncio.Event()
     task = asyncio.create_task(swallow_first_cancel(started))
     await started.wait()
     async with asyncio.timeout(DEADLINE_S):
-        await cancel_and_wait([task])
+        await cancel_until_ended([task])
     assert task.cancelled()
 
 
